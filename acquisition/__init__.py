@@ -1,0 +1,1 @@
+"""Acquisition: runs rolling-stand campaigns over CAN into the database."""

@@ -1,0 +1,1 @@
+"""Database: schema, migrations and persistence of campaigns and observations."""

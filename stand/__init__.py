@@ -1,0 +1,1 @@
+"""Stand: CAN protocol, stand controller client and the simulated gyrocompass on a roll stand."""
