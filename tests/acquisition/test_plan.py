@@ -1,0 +1,80 @@
+"""Plan validation: the shipped paper plan is valid and matches the seed's table; every defect of
+a bad plan is reported at once with its field path."""
+
+from pathlib import Path
+
+import pytest
+
+from acquisition.plan import PlanError, load_plan, parse_plan
+
+ROOT = Path(__file__).resolve().parents[2]
+PAPER = ROOT / "examples" / "paper.toml"
+
+
+def test_paper_plan_is_the_seed_campaign() -> None:
+    plan = load_plan(PAPER)
+    rows = [(t.direction_deg, t.amplitude_cm, t.period_s, t.role) for t in plan.trials]
+    # seed 000, table of the example (A of trials 4 and 6 is 17.8 cm)
+    assert rows == [
+        (332, 24, 8, "fit"),
+        (18, 24, 6.3, "fit"),
+        (316, 23, 5.5, "fit"),
+        (346, 17.8, 3.5, "fit"),
+        (31, 23.5, 6.2, "control"),
+        (346, 17.8, 5.5, "control"),
+    ]
+    assert plan.n_obs == 5
+    assert plan.bus.simulated
+    assert (plan.instrument.lp_gcm2s2, plan.instrument.h1_gcm2s) == (6.57e6, 1.55e8)
+    assert plan.site.latitude_deg == 46.5
+    assert plan.observation.window_ms(None) == 60_000
+    assert plan.observation.window_ms(6.3) == 8 * 6300
+
+
+def _broken(text: str) -> list[str]:
+    with pytest.raises(PlanError) as info:
+        parse_plan(text)
+    return info.value.problems
+
+
+def test_every_problem_is_reported_with_its_path() -> None:
+    text = PAPER.read_text()
+    text = text.replace("period_s = 3.5", "period_s = -3.5", 1)
+    text = text.replace('role = "control"', 'role = "spare"', 1)
+    text = text.replace("n_obs = 5", "n_obs = 1")
+    text = text.replace("band_deg = 0.03", "band_deg = 0.03\nbnad = 1")
+    text = text.replace('raw_log_format = "blf"', 'raw_log_format = "mf4"')
+    text = text.replace("latitude_deg = 46.5", 'latitude_deg = "north"')
+    problems = _broken(text)
+    assert problems == [
+        "campaign.n_obs: must be >= 2",
+        "campaign.raw_log_format: must be one of 'blf', 'asc', not 'mf4'",
+        "site.latitude_deg: must be a finite number",
+        "trials[4].period_s: must be > 0",
+        "trials[5].role: must be one of 'fit', 'control', not 'spare'",
+        "settle.bnad: unknown key",
+    ]
+
+
+def test_missing_tables_and_keys() -> None:
+    problems = _broken('[campaign]\noperator = "x"\n')
+    assert "campaign.n_obs: missing" in problems
+    assert "campaign.database: missing" in problems
+    for table in ("instrument", "site", "analysis", "forecast", "trials"):
+        assert f"{table}: missing" in problems
+
+
+def test_syntax_error_is_one_problem() -> None:
+    assert _broken("[campaign\n")[0].startswith("TOML syntax:")
+
+
+def test_bus_consistency() -> None:
+    text = PAPER.read_text().replace("simulated = true", 'simulated = true\ninterface = "pcan"')
+    assert _broken(text) == ["bus.interface: must be absent when bus.simulated = true"]
+    text = PAPER.read_text().replace("simulated = true", "simulated = false")
+    assert _broken(text) == ["bus.speedup: only applies when bus.simulated = true"]
+
+
+def test_control_only_design_is_refused() -> None:
+    text = PAPER.read_text().replace('role = "fit"', 'role = "control"')
+    assert _broken(text) == ["trials: at least one trial must have role 'fit'"]
