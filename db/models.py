@@ -1,0 +1,317 @@
+"""The ORM schema (SQLAlchemy 2 typed declarative): instrument, campaign, trial, series,
+observation, acquisition event, analysis run.
+
+Units are in the column names. Stand times (`*_ms`) are milliseconds of the stand's clock, wall
+times are UTC. CHECK, UNIQUE and FOREIGN KEY constraints make impossible states unstorable; every
+constraint is named (see `NAMING`) so Alembic can alter it later, also on SQLite.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy import (
+    JSON,
+    BigInteger,
+    CheckConstraint,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    MetaData,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+CAMPAIGN_STATUSES = ("planned", "running", "paused", "completed", "failed", "stopped")
+CAMPAIGN_SOURCES = ("stand", "import", "replay")
+TRIAL_ROLES = ("fit", "control")
+TRIAL_STATUSES = ("pending", "running", "completed", "failed")
+SERIES_J = (1, 2)  # seed 000 eq 2.1: j = 1 before rocking, j = 2 while rocking
+SERIES_STATUSES = ("pending", "settling", "observing", "completed", "failed")
+EVENT_SEVERITIES = ("info", "warning", "error")
+
+NAMING = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_N_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+def utc_now() -> datetime:
+    """The current wall time in UTC (the default of every `*_at` column)."""
+    return datetime.now(UTC)
+
+
+def one_of(column: str, values: tuple[Any, ...]) -> str:
+    """SQL for `column IN (values...)`, for a CHECK constraint."""
+    return f"{column} IN ({', '.join(repr(v) for v in values)})"
+
+
+def nonnegative_or_null(column: str) -> str:
+    return f"{column} IS NULL OR {column} >= 0"
+
+
+class Base(DeclarativeBase):
+    metadata = MetaData(naming_convention=NAMING)
+
+
+class Instrument(Base):
+    """A gyrocompass under test and its known constants (B in seed 000 eq 1.1)."""
+
+    __tablename__ = "instrument"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    model: Mapped[str] = mapped_column(String(200))
+    serial: Mapped[str] = mapped_column(String(200))
+    constants_json: Mapped[dict[str, float]] = mapped_column(JSON)
+    """e.g. {"lp_gcm2s2": 6.57e6, "h1_gcm2s": 1.55e8}"""
+
+    campaigns: Mapped[list[Campaign]] = relationship(back_populates="instrument")
+
+
+class Campaign(Base):
+    """One test campaign: a plan run on the stand, imported from a file, or replayed from a log."""
+
+    __tablename__ = "campaign"
+    __table_args__ = (
+        CheckConstraint(one_of("status", CAMPAIGN_STATUSES), name="status"),
+        CheckConstraint(one_of("source", CAMPAIGN_SOURCES), name="source"),
+        CheckConstraint("n_obs >= 2", name="n_obs"),
+        CheckConstraint("latitude_deg > -90 AND latitude_deg < 90", name="latitude"),
+        CheckConstraint("earth_rate_rad_s > 0", name="earth_rate"),
+        CheckConstraint("gravity_cm_s2 > 0", name="gravity"),
+        CheckConstraint("length(plan_hash) = 64", name="plan_hash"),
+        CheckConstraint(
+            "raw_log_sha256 IS NULL OR length(raw_log_sha256) = 64", name="raw_log_sha256"
+        ),
+        CheckConstraint(
+            "finished_at IS NULL OR started_at IS NULL OR finished_at >= started_at",
+            name="finished_after_start",
+        ),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    instrument_id: Mapped[int] = mapped_column(ForeignKey("instrument.id"), index=True)
+    plan_toml: Mapped[str] = mapped_column(Text)
+    """The plan exactly as submitted."""
+    plan_hash: Mapped[str] = mapped_column(String(64))
+    """SHA-256 (hex) of `plan_toml`."""
+    operator: Mapped[str] = mapped_column(String(200))
+    latitude_deg: Mapped[float] = mapped_column(Float)
+    earth_rate_rad_s: Mapped[float] = mapped_column(Float, default=7.3e-5)  # seed 000 example
+    gravity_cm_s2: Mapped[float] = mapped_column(Float, default=981.0)
+    n_obs: Mapped[int] = mapped_column(Integer)
+    """N: observations per series (seed 000 eq 2.1)."""
+    status: Mapped[str] = mapped_column(String(16), default="planned")
+    source: Mapped[str] = mapped_column(String(16), default="stand")
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
+    started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    software_version: Mapped[str] = mapped_column(String(64))
+    raw_log_path: Mapped[str | None] = mapped_column(Text)
+    raw_log_sha256: Mapped[str | None] = mapped_column(String(64))
+
+    instrument: Mapped[Instrument] = relationship(back_populates="campaigns")
+    trials: Mapped[list[Trial]] = relationship(
+        back_populates="campaign",
+        order_by="Trial.index",
+        cascade="all, delete-orphan",
+        passive_deletes=True,
+    )
+    events: Mapped[list[Event]] = relationship(
+        back_populates="campaign",
+        order_by="Event.id",
+        cascade="all, delete-orphan",
+        passive_deletes=True,
+    )
+    analysis_runs: Mapped[list[AnalysisRun]] = relationship(
+        back_populates="campaign",
+        order_by="AnalysisRun.id",
+        cascade="all, delete-orphan",
+        passive_deletes=True,
+    )
+
+
+class Trial(Base):
+    """Experiment i of a campaign: one rocking condition K, A, tau (seed 000 eq 1.1).
+
+    `cmd_*` is what was commanded (or, for imports, what the file states); `meas_*` what the
+    stand reported doing. `summary_*` hold the per-trial values of the paper's table when they
+    were imported pre-averaged: <delta_i> (eq 2.1 difference), S^2{<delta_i>} (eq 2.3), N."""
+
+    __tablename__ = "trial"
+    __table_args__ = (
+        UniqueConstraint("campaign_id", "index"),
+        CheckConstraint('"index" >= 1', name="index"),
+        CheckConstraint(one_of("role", TRIAL_ROLES), name="role"),
+        CheckConstraint(one_of("status", TRIAL_STATUSES), name="status"),
+        CheckConstraint(
+            "status != 'failed' OR failure_reason IS NOT NULL", name="failed_has_reason"
+        ),
+        CheckConstraint("cmd_direction_deg >= 0 AND cmd_direction_deg < 360", name="cmd_direction"),
+        CheckConstraint("cmd_amplitude_cm >= 0", name="cmd_amplitude"),
+        CheckConstraint("cmd_period_s > 0", name="cmd_period"),
+        CheckConstraint(nonnegative_or_null("meas_amplitude_cm"), name="meas_amplitude"),
+        CheckConstraint("meas_period_s IS NULL OR meas_period_s > 0", name="meas_period"),
+        CheckConstraint(nonnegative_or_null("summary_delta_var_deg2"), name="summary_var"),
+        CheckConstraint("summary_n IS NULL OR summary_n >= 2", name="summary_n"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    index: Mapped[int] = mapped_column("index", Integer)
+    """i, 1-based."""
+    role: Mapped[str] = mapped_column(String(16))
+    cmd_direction_deg: Mapped[float] = mapped_column(Float)
+    cmd_amplitude_cm: Mapped[float] = mapped_column(Float)
+    cmd_period_s: Mapped[float] = mapped_column(Float)
+    meas_direction_deg: Mapped[float | None] = mapped_column(Float)
+    meas_amplitude_cm: Mapped[float | None] = mapped_column(Float)
+    meas_period_s: Mapped[float | None] = mapped_column(Float)
+    status: Mapped[str] = mapped_column(String(16), default="pending")
+    failure_reason: Mapped[str | None] = mapped_column(Text)
+    summary_delta_mean_deg: Mapped[float | None] = mapped_column(Float)
+    summary_delta_var_deg2: Mapped[float | None] = mapped_column(Float)
+    summary_n: Mapped[int | None] = mapped_column(Integer)
+
+    campaign: Mapped[Campaign] = relationship(back_populates="trials")
+    series: Mapped[list[Series]] = relationship(
+        back_populates="trial",
+        order_by="Series.j",
+        cascade="all, delete-orphan",
+        passive_deletes=True,
+    )
+
+    @property
+    def direction_deg(self) -> float:
+        """K actually applied: the stand's measurement when there is one, else the command."""
+        return (
+            self.cmd_direction_deg if self.meas_direction_deg is None else self.meas_direction_deg
+        )
+
+    @property
+    def amplitude_cm(self) -> float:
+        """A actually applied (measured, else commanded)."""
+        return self.cmd_amplitude_cm if self.meas_amplitude_cm is None else self.meas_amplitude_cm
+
+    @property
+    def period_s(self) -> float:
+        """tau actually applied (measured, else commanded)."""
+        return self.cmd_period_s if self.meas_period_s is None else self.meas_period_s
+
+
+class Series(Base):
+    """Series j of trial i: N observations before (j = 1) or during (j = 2) rocking.
+
+    `summary_*` hold an imported pre-averaged series: <delta_ji> (seed 000 eq 2.1),
+    S^2{<delta_ji>} (eq 2.2) and N."""
+
+    __tablename__ = "series"
+    __table_args__ = (
+        UniqueConstraint("trial_id", "j"),
+        CheckConstraint(one_of("j", SERIES_J), name="j"),
+        CheckConstraint(one_of("status", SERIES_STATUSES), name="status"),
+        CheckConstraint(
+            "settle_done_ms IS NULL OR settle_started_ms IS NULL"
+            " OR settle_done_ms >= settle_started_ms",
+            name="settle_order",
+        ),
+        CheckConstraint(nonnegative_or_null("summary_variance_deg2"), name="summary_variance"),
+        CheckConstraint("summary_n IS NULL OR summary_n >= 2", name="summary_n"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    trial_id: Mapped[int] = mapped_column(ForeignKey("trial.id", ondelete="CASCADE"))
+    j: Mapped[int] = mapped_column(Integer)
+    status: Mapped[str] = mapped_column(String(16), default="pending")
+    settle_started_ms: Mapped[int | None] = mapped_column(BigInteger)
+    settle_done_ms: Mapped[int | None] = mapped_column(BigInteger)
+    settle_estimate_deg: Mapped[float | None] = mapped_column(Float)
+    summary_mean_deg: Mapped[float | None] = mapped_column(Float)
+    summary_variance_deg2: Mapped[float | None] = mapped_column(Float)
+    summary_n: Mapped[int | None] = mapped_column(Integer)
+
+    trial: Mapped[Trial] = relationship(back_populates="series")
+    observations: Mapped[list[Observation]] = relationship(
+        back_populates="series",
+        order_by="Observation.k",
+        cascade="all, delete-orphan",
+        passive_deletes=True,
+    )
+
+
+class Observation(Base):
+    """Observation k of a series: the mean heading over one window (delta_jik, seed 000 eq 2.1).
+
+    Window bounds and frame counts are NULL for imported manual readings."""
+
+    __tablename__ = "observation"
+    __table_args__ = (
+        UniqueConstraint("series_id", "k"),
+        CheckConstraint("k >= 1", name="k"),
+        CheckConstraint(
+            "window_end_ms IS NULL OR window_start_ms IS NULL OR window_end_ms >= window_start_ms",
+            name="window_order",
+        ),
+        CheckConstraint(nonnegative_or_null("frames_used"), name="frames_used"),
+        CheckConstraint(nonnegative_or_null("frames_lost"), name="frames_lost"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    series_id: Mapped[int] = mapped_column(ForeignKey("series.id", ondelete="CASCADE"))
+    k: Mapped[int] = mapped_column(Integer)
+    value_deg: Mapped[float] = mapped_column(Float)
+    window_start_ms: Mapped[int | None] = mapped_column(BigInteger)
+    window_end_ms: Mapped[int | None] = mapped_column(BigInteger)
+    frames_used: Mapped[int | None] = mapped_column(Integer)
+    frames_lost: Mapped[int | None] = mapped_column(Integer)
+    flags: Mapped[str] = mapped_column(String(200), default="")
+    """Comma-separated anomaly flags (empty when clean)."""
+
+    series: Mapped[Series] = relationship(back_populates="observations")
+
+
+class Event(Base):
+    """An acquisition event: fault, warning, operator action, import."""
+
+    __tablename__ = "event"
+    __table_args__ = (CheckConstraint(one_of("severity", EVENT_SEVERITIES), name="severity"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(
+        ForeignKey("campaign.id", ondelete="CASCADE"), index=True
+    )
+    trial_id: Mapped[int | None] = mapped_column(ForeignKey("trial.id", ondelete="CASCADE"))
+    series_id: Mapped[int | None] = mapped_column(ForeignKey("series.id", ondelete="CASCADE"))
+    stand_time_ms: Mapped[int | None] = mapped_column(BigInteger)
+    wall_time: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
+    kind: Mapped[str] = mapped_column(String(64))
+    severity: Mapped[str] = mapped_column(String(16))
+    message: Mapped[str] = mapped_column(Text)
+
+    campaign: Mapped[Campaign] = relationship(back_populates="events")
+
+
+class AnalysisRun(Base):
+    """One analysis of a campaign: which inputs (hash), what came out (JSON), by which code."""
+
+    __tablename__ = "analysis_run"
+    __table_args__ = (CheckConstraint("length(inputs_hash) = 64", name="inputs_hash"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(
+        ForeignKey("campaign.id", ondelete="CASCADE"), index=True
+    )
+    inputs_hash: Mapped[str] = mapped_column(String(64))
+    """SHA-256 (hex) of the analysed inputs."""
+    results_json: Mapped[dict[str, Any]] = mapped_column(JSON)
+    software_version: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
+
+    campaign: Mapped[Campaign] = relationship(back_populates="analysis_runs")

@@ -1,0 +1,135 @@
+"""Opening a database: engine, SQLite pragmas, schema version check and Alembic upgrade.
+
+Any SQLAlchemy URL works; only `_configure_sqlite` is SQLite-specific and it is attached only for
+the SQLite dialect. The schema is owned by the Alembic migrations in `db/migrations`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from alembic import command
+from alembic.config import Config
+from alembic.runtime.migration import MigrationContext
+from alembic.script import ScriptDirectory
+from alembic.util import CommandError
+from sqlalchemy import Connection, Engine, create_engine, event, inspect
+from sqlalchemy.engine import make_url
+from sqlalchemy.orm import Session, sessionmaker
+
+MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
+BUSY_TIMEOUT_MS = 10_000
+
+
+class DatabaseVersionError(Exception):
+    """The database's schema is not the one this code uses and cannot (or may not) be upgraded."""
+
+
+def sqlite_url(path: Path) -> str:
+    """The SQLAlchemy URL of a SQLite file (absolute, so it does not depend on the cwd later)."""
+    return f"sqlite:///{Path(path).expanduser().resolve()}"
+
+
+def database_url(url_or_path: str) -> str:
+    """A SQLAlchemy URL as given (`dialect://...`), or the SQLite URL of a file path."""
+    return url_or_path if "://" in url_or_path else sqlite_url(Path(url_or_path))
+
+
+def alembic_config(script_location: Path = MIGRATIONS_DIR) -> Config:
+    """An Alembic config without an ini file; env.py takes the connection from its attributes."""
+    config = Config()
+    config.set_main_option("script_location", str(script_location))
+    return config
+
+
+def open_database(url: str, *, upgrade: bool = True) -> sessionmaker[Session]:
+    """Open (and create or upgrade) the database at `url`; return its session factory.
+
+    A SQLite file's folder is created if needed. With `upgrade=False` a database that is missing,
+    empty or behind the code is refused; a database ahead of the code, or one that has tables but
+    no Alembic version, is always refused (DatabaseVersionError)."""
+    parsed = make_url(url)
+    sqlite_file = parsed.get_backend_name() == "sqlite" and parsed.database not in (None, "")
+    if sqlite_file and parsed.database != ":memory:" and "mode=memory" not in str(parsed.query):
+        path = Path(parsed.database)
+        if not upgrade and not path.exists():
+            raise DatabaseVersionError(f"no database at {path}")
+        path.parent.mkdir(parents=True, exist_ok=True)
+    engine = create_engine(url)
+    if engine.dialect.name == "sqlite":
+        _configure_sqlite(engine)
+    try:
+        migrate(engine, upgrade=upgrade)
+    except BaseException:
+        engine.dispose()
+        raise
+    if engine.dialect.name == "sqlite":
+        _enable_wal(engine)
+    return sessionmaker(engine, expire_on_commit=False)
+
+
+def _configure_sqlite(engine: Engine) -> None:
+    """Per-connection pragmas (foreign keys, busy timeout, synchronous) and real transactions
+    (BEGIN emitted by SQLAlchemy).
+
+    pysqlite's legacy mode (Python < 3.12) does not BEGIN before DDL or SELECT; SQLAlchemy's
+    documented recipe (dialects/sqlite, "Transactions with SQLite") makes the migrations and an
+    import one atomic transaction each."""
+
+    @event.listens_for(engine, "connect")
+    def _on_connect(dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]
+        dbapi_connection.isolation_level = None
+        cursor = dbapi_connection.cursor()
+        cursor.execute("PRAGMA foreign_keys=ON")
+        cursor.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+        cursor.execute("PRAGMA synchronous=FULL")  # a committed observation survives power loss
+        cursor.close()
+
+    @event.listens_for(engine, "begin")
+    def _on_begin(connection: Connection) -> None:
+        connection.exec_driver_sql("BEGIN")
+
+
+def _enable_wal(engine: Engine) -> None:
+    """Switch the file to WAL (persistent in the file; outside any transaction, hence the raw
+    connection). Done after the version check so that a refused file is left byte-identical."""
+    raw = engine.raw_connection()
+    try:
+        raw.driver_connection.execute("PRAGMA journal_mode=WAL")  # type: ignore[union-attr]
+    finally:
+        raw.close()
+
+
+def migrate(engine: Engine, *, upgrade: bool, script_location: Path = MIGRATIONS_DIR) -> None:
+    """Bring the schema to the head revision of `script_location`, or refuse (see open_database)."""
+    config = alembic_config(script_location)
+    script = ScriptDirectory.from_config(config)
+    heads = set(script.get_heads())
+    with engine.begin() as connection:
+        current = set(MigrationContext.configure(connection).get_current_heads())
+        if current == heads:
+            return
+        where = engine.url.render_as_string(hide_password=True)
+        if not current:
+            tables = set(inspect(connection).get_table_names()) - {"alembic_version"}
+            if tables:
+                raise DatabaseVersionError(
+                    f"{where} has tables ({', '.join(sorted(tables))}) but no schema version: "
+                    "it was not created by gyrostand; refusing to touch it"
+                )
+        for revision in sorted(current):
+            try:
+                script.get_revision(revision)
+            except CommandError:
+                raise DatabaseVersionError(
+                    f"{where} has schema version {revision}, newer than this gyrostand "
+                    f"(knows up to {', '.join(sorted(heads))}): upgrade gyrostand to open it"
+                ) from None
+        if not upgrade:
+            state = "is empty" if not current else f"has old schema {', '.join(sorted(current))}"
+            raise DatabaseVersionError(
+                f"{where} {state}; schema {', '.join(sorted(heads))} is needed (open it with "
+                "upgrade allowed to migrate it)"
+            )
+        config.attributes["connection"] = connection
+        command.upgrade(config, "heads")

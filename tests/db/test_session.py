@@ -1,0 +1,150 @@
+"""Opening databases: pragmas, schema creation, version refusal and upgrade via Alembic."""
+
+import shutil
+import sqlite3
+from pathlib import Path
+
+import pytest
+from alembic.autogenerate import compare_metadata
+from alembic.migration import MigrationContext
+from sqlalchemy import create_engine, text
+from sqlalchemy.orm import Session, sessionmaker
+
+from db.models import Base
+from db.session import (
+    MIGRATIONS_DIR,
+    DatabaseVersionError,
+    _configure_sqlite,
+    database_url,
+    migrate,
+    open_database,
+    sqlite_url,
+)
+
+
+def version_of(path: Path) -> list[str]:
+    with sqlite3.connect(path) as conn:
+        return [row[0] for row in conn.execute("SELECT version_num FROM alembic_version")]
+
+
+def test_pragmas_are_set_on_every_connection(sessions: sessionmaker[Session]) -> None:
+    for _ in range(2):
+        with sessions() as session:
+            assert session.execute(text("PRAGMA journal_mode")).scalar() == "wal"
+            assert session.execute(text("PRAGMA foreign_keys")).scalar() == 1
+            assert session.execute(text("PRAGMA busy_timeout")).scalar() == 10_000
+            assert session.execute(text("PRAGMA synchronous")).scalar() == 2  # FULL
+
+
+def test_empty_file_is_created_at_head(db_path: Path) -> None:
+    assert not db_path.parent.exists()
+    open_database(sqlite_url(db_path))
+    assert version_of(db_path) == ["0001"]
+    with sqlite3.connect(db_path) as conn:
+        tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+    assert {"instrument", "campaign", "trial", "series", "observation", "event"} <= tables
+    assert "analysis_run" in tables
+
+
+def test_orm_metadata_matches_the_migrations(sessions: sessionmaker[Session]) -> None:
+    with sessions() as session:
+        context = MigrationContext.configure(session.connection(), opts={"compare_type": True})
+        assert compare_metadata(context, Base.metadata) == []
+
+
+def test_without_upgrade_a_missing_or_empty_database_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(DatabaseVersionError, match="no database at"):
+        open_database(sqlite_url(tmp_path / "none.sqlite"), upgrade=False)
+    assert not (tmp_path / "none.sqlite").exists()
+    sqlite3.connect(tmp_path / "empty.sqlite").close()
+    with pytest.raises(DatabaseVersionError, match="is empty; schema 0001 is needed"):
+        open_database(sqlite_url(tmp_path / "empty.sqlite"), upgrade=False)
+
+
+def test_unversioned_database_is_refused_and_left_alone(tmp_path: Path) -> None:
+    path = tmp_path / "foreign.sqlite"
+    with sqlite3.connect(path) as conn:
+        conn.execute("CREATE TABLE notes (x)")
+    before = path.read_bytes()
+    with pytest.raises(DatabaseVersionError, match=r"has tables \(notes\) but no schema version"):
+        open_database(sqlite_url(path))
+    assert path.read_bytes() == before
+
+
+def test_database_ahead_of_the_code_is_refused(db_path: Path) -> None:
+    open_database(sqlite_url(db_path))
+    with sqlite3.connect(db_path) as conn:
+        conn.execute("UPDATE alembic_version SET version_num = '9999'")
+    with pytest.raises(DatabaseVersionError, match="schema version 9999, newer than this"):
+        open_database(sqlite_url(db_path))
+    assert version_of(db_path) == ["9999"]
+
+
+SECOND_REVISION = '''"""Test-only revision: adds a table."""
+import sqlalchemy as sa
+from alembic import op
+
+revision = "0002"
+down_revision = "0001"
+branch_labels = None
+depends_on = None
+
+
+def upgrade() -> None:
+    op.create_table("probe", sa.Column("id", sa.Integer(), primary_key=True))
+
+
+def downgrade() -> None:
+    op.drop_table("probe")
+'''
+
+
+@pytest.fixture
+def newer_migrations(tmp_path: Path) -> Path:
+    """A copy of the shipped migrations plus a second revision, as a future release would have."""
+    location = tmp_path / "migrations"
+    shutil.copytree(MIGRATIONS_DIR, location, ignore=shutil.ignore_patterns("__pycache__"))
+    (location / "versions" / "0002_probe.py").write_text(SECOND_REVISION)
+    return location
+
+
+def test_older_database_is_upgraded_on_open(db_path: Path, newer_migrations: Path) -> None:
+    open_database(sqlite_url(db_path))  # written by "this" release, at 0001
+    engine = create_engine(sqlite_url(db_path))
+    with pytest.raises(DatabaseVersionError, match="has old schema 0001; schema 0002 is needed"):
+        migrate(engine, upgrade=False, script_location=newer_migrations)
+    assert version_of(db_path) == ["0001"]
+    migrate(engine, upgrade=True, script_location=newer_migrations)
+    engine.dispose()
+    assert version_of(db_path) == ["0002"]
+    with sqlite3.connect(db_path) as conn:
+        assert conn.execute("SELECT count(*) FROM probe").fetchone() == (0,)
+    # and the released code (which only knows 0001) now refuses the upgraded file
+    with pytest.raises(DatabaseVersionError, match="0002, newer than this gyrostand"):
+        open_database(sqlite_url(db_path))
+
+
+def test_failed_migration_leaves_the_database_unchanged(
+    db_path: Path, newer_migrations: Path
+) -> None:
+    open_database(sqlite_url(db_path))
+    broken = SECOND_REVISION.replace(
+        'op.create_table("probe", sa.Column("id", sa.Integer(), primary_key=True))',
+        'op.create_table("probe", sa.Column("id", sa.Integer(), primary_key=True))\n'
+        '    op.execute("SELECT no_such_function()")',
+    )
+    (newer_migrations / "versions" / "0002_probe.py").write_text(broken)
+    engine = create_engine(sqlite_url(db_path))
+    _configure_sqlite(engine)
+    with pytest.raises(Exception, match="no_such_function"):
+        migrate(engine, upgrade=True, script_location=newer_migrations)
+    engine.dispose()
+    assert version_of(db_path) == ["0001"]
+    with sqlite3.connect(db_path) as conn:
+        tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+    assert "probe" not in tables
+
+
+def test_database_url_accepts_paths_and_urls(tmp_path: Path) -> None:
+    assert database_url("postgresql+psycopg://lab/gyro") == "postgresql+psycopg://lab/gyro"
+    assert database_url(str(tmp_path / "a.sqlite")) == f"sqlite:///{tmp_path / 'a.sqlite'}"
