@@ -1,0 +1,397 @@
+"""General nonlinear least squares: Gauss-Newton exactly as seed 000 (eqs 1.2-1.10), with an
+automatic bounded trust-region fallback (`scipy.optimize.least_squares`).
+
+Entry point::
+
+    fit_nonlinear(model, x, y, theta0, *, jacobian=None, bounds=None, x_scale=None,
+                  eps=None, eps_se=1e-8, max_iter=100, robust=True) -> FitResult
+
+- ``model(x, **theta) -> ndarray (n,)``: model values at the inputs ``x`` (any object the model
+  understands: an array, a tuple of arrays...) for the named parameters ``theta``.
+- ``jacobian(x, **theta) -> ndarray (n, m)``: analytic partials, columns in ``theta0`` key order.
+  Without it, central finite differences are used.
+- ``y``: the n observations. ``theta0``: start values ``{name: value}``; its key order is the
+  parameter order everywhere (Jacobian columns, covariance rows, log entries).
+- ``bounds``: ``{name: (lo, hi)}`` hard limits (unnamed parameters are unbounded). A Gauss-Newton
+  iterate that leaves them hands the fit to the trust-region path, which honours them.
+- ``x_scale``: ``{name: typical magnitude}`` for the trust-region path (default: Jacobian-based),
+  for badly scaled parameters such as C ~ 1e7 next to T ~ 1.
+- ``eps``: ``{name: epsilon_i}`` absolute thresholds of the stopping rule |a_i| < epsilon_i (1.8).
+  When omitted, epsilon_i = ``eps_se`` x SE_i at the current iterate (the paper chooses epsilon
+  "commensurate with the expected errors of the estimates"), floored at 1e-13 |theta_i|.
+- ``max_iter``: Gauss-Newton iterations allowed before the fit is declared stalled.
+- ``robust``: when False a Gauss-Newton failure is returned as is (``converged=False``).
+
+Gauss-Newton diverges (non-finite values, residual sum of squares rising three iterations in a
+row), stalls (singular linearisation, ``max_iter`` reached) or leaves ``bounds``: then, with
+``robust=True``, the trust-region path refits from the start values and ``FitResult.path`` /
+``FitResult.fallback_reason`` say so. A solution where the Jacobian is (nearly) rank-deficient is
+flagged ``converged=False`` ("degenerate"): typically a local minimum on a flat direction, as
+NIST BoxBOD from its first start vector.
+"""
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import linalg
+from scipy.optimize import least_squares
+
+from analysis.errors import NonFiniteError, TooFewTrialsError
+
+Model = Callable[..., np.ndarray]
+"""``model(x, **theta) -> (n,)`` array."""
+
+# Condition number of the column-equilibrated Jacobian above which X^T X counts as singular:
+# its inverse (1.10) would then carry fewer than ~4 correct digits.
+COND_LIMIT = 1e10
+_DIVERGING_RISES = 3
+_FD_STEP = np.finfo(float).eps ** (1 / 3)  # optimal relative step of a central difference
+
+
+@dataclass(frozen=True)
+class IterationRecord:
+    """One Gauss-Newton iteration d: theta_d, the step a_d = Delta theta_d (1.6-1.7), and the fit
+    quality at theta_d (residual sum of squares and S^2 of eq 1.9)."""
+
+    iteration: int
+    theta: dict[str, float]
+    step: dict[str, float]
+    rss: float
+    s2: float
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Estimates and their precision at the solution (eqs 1.6-1.10).
+
+    ``residuals`` are observed minus fitted (y - f). ``xtx_inv`` is the unscaled covariance
+    (X^T X)^-1 of the linearisation at the solution, ``covariance`` = ``xtx_inv`` x S^2 (1.10).
+    ``path`` is "gauss-newton" or "trust-region"; ``fallback_reason`` says why Gauss-Newton was
+    abandoned (None when it was not). ``log`` holds the Gauss-Newton iterations (including those
+    of an abandoned attempt)."""
+
+    names: tuple[str, ...]
+    estimates: dict[str, float]
+    std_errors: dict[str, float]
+    covariance: np.ndarray
+    correlation: np.ndarray
+    xtx_inv: np.ndarray
+    jacobian: np.ndarray
+    fitted: np.ndarray
+    residuals: np.ndarray
+    rss: float
+    s2: float
+    n: int
+    dof: int
+    iterations: int
+    converged: bool
+    reason: str
+    path: str
+    fallback_reason: str | None
+    condition_number: float
+    log: tuple[IterationRecord, ...]
+
+    def summary(self) -> str:
+        """A plain-text table of estimates, standard errors and the fit diagnostics."""
+        width = max(9, *(len(n) for n in self.names))
+        lines = [
+            f"{'parameter':<{width}}  {'estimate':>15}  {'std error':>12}  {'rel. SE':>8}",
+        ]
+        for name in self.names:
+            est, se = self.estimates[name], self.std_errors[name]
+            rel = f"{abs(se / est):8.2%}" if est != 0 else f"{'-':>8}"
+            lines.append(f"{name:<{width}}  {est:>15.8g}  {se:>12.4g}  {rel}")
+        lines.append(
+            f"S^2 = {self.s2:.6g} (dof {self.dof}), RSS = {self.rss:.6g}, n = {self.n}, "
+            f"cond = {self.condition_number:.3g}"
+        )
+        lines.append(
+            f"path: {self.path}, iterations: {self.iterations}, "
+            f"{'converged' if self.converged else 'NOT converged'} ({self.reason})"
+        )
+        if self.fallback_reason:
+            lines.append(f"Gauss-Newton abandoned: {self.fallback_reason}")
+        return "\n".join(lines)
+
+
+class _Problem:
+    """The model, data and parameter bookkeeping shared by both solution paths."""
+
+    def __init__(
+        self,
+        model: Model,
+        x: Any,
+        y: np.ndarray,
+        names: tuple[str, ...],
+        jacobian: Callable[..., np.ndarray] | None,
+    ) -> None:
+        self.model, self.x, self.y, self.names, self._jacobian = model, x, y, names, jacobian
+
+    def kwargs(self, theta: np.ndarray) -> dict[str, float]:
+        return {name: float(v) for name, v in zip(self.names, theta, strict=True)}
+
+    def values(self, theta: np.ndarray) -> np.ndarray:
+        # Overflow while exploring is expected and handled (non-finite values end the path).
+        with np.errstate(all="ignore"):
+            values = self.model(self.x, **self.kwargs(theta))
+        return np.asarray(values, dtype=float).reshape(-1)
+
+    def jacobian(self, theta: np.ndarray) -> np.ndarray:
+        if self._jacobian is not None:
+            jac = np.asarray(self._jacobian(self.x, **self.kwargs(theta)), dtype=float)
+            return jac.reshape(self.y.size, len(self.names))
+        # Central differences: scipy's public approx_fprime is forward-only (error ~1e-8), too
+        # coarse to reproduce certified NIST values to 6 digits; central gives ~1e-11.
+        columns = []
+        for i, value in enumerate(theta):
+            h = _FD_STEP * (abs(value) if value != 0 else 1.0)
+            up, down = theta.copy(), theta.copy()
+            up[i] += h
+            down[i] -= h
+            with np.errstate(all="ignore"):
+                columns.append((self.values(up) - self.values(down)) / (up[i] - down[i]))
+        return np.column_stack(columns)
+
+
+@dataclass(frozen=True)
+class _Linearisation:
+    """QR solution of the linearised problem (1.5-1.6) at one theta."""
+
+    values: np.ndarray
+    jac: np.ndarray
+    residuals: np.ndarray
+    step: np.ndarray
+    xtx_inv: np.ndarray
+    cond: float
+
+    @property
+    def rss(self) -> float:
+        return float(self.residuals @ self.residuals)
+
+
+def _linearise(problem: _Problem, theta: np.ndarray) -> _Linearisation | str:
+    """Solve A = (X^T X)^-1 X^T Y (1.6) by QR of the column-equilibrated X; a string on failure."""
+    values = problem.values(theta)
+    jac = problem.jacobian(theta)
+    if not (np.all(np.isfinite(values)) and np.all(np.isfinite(jac))):
+        return "diverged: non-finite model values or Jacobian"
+    scale = np.linalg.norm(jac, axis=0)
+    if np.any(scale == 0):
+        zero = [problem.names[i] for i in np.flatnonzero(scale == 0)]
+        return f"singular linearisation: the model does not depend on {', '.join(zero)}"
+    q, r = linalg.qr(jac / scale, mode="economic")
+    cond = float(np.linalg.cond(r))
+    if not cond < COND_LIMIT:
+        return f"singular linearisation: condition number {cond:.3g} of X"
+    residuals = problem.y - values  # Y of eq 1.4: observed minus computed
+    step = linalg.solve_triangular(r, q.T @ residuals) / scale  # eq 1.6
+    r_inv = linalg.solve_triangular(r, np.eye(r.shape[0]))
+    xtx_inv = (r_inv @ r_inv.T) / np.outer(scale, scale)
+    return _Linearisation(values, jac, residuals, step, xtx_inv, cond)
+
+
+def _gauss_newton(
+    problem: _Problem,
+    theta0: np.ndarray,
+    eps: np.ndarray | None,
+    eps_se: float,
+    bounds: tuple[np.ndarray, np.ndarray],
+    max_iter: int,
+) -> tuple[np.ndarray, list[IterationRecord], str | None]:
+    """Iterate 1.3-1.8; returns the final theta, the log, and a failure reason (None if met)."""
+    theta, log, rises = theta0.astype(float), [], 0
+    dof = problem.y.size - theta0.size
+    for d in range(1, max_iter + 1):
+        lin = _linearise(problem, theta)
+        if isinstance(lin, str):
+            return theta, log, f"{lin} at iteration {d}"
+        s2 = lin.rss / dof
+        log.append(IterationRecord(d, problem.kwargs(theta), problem.kwargs(lin.step), lin.rss, s2))
+        rises = rises + 1 if len(log) > 1 and lin.rss > log[-2].rss else 0
+        if rises >= _DIVERGING_RISES:
+            return theta, log, f"diverged: S^2 rose {rises} iterations in a row (iteration {d})"
+        new = theta + lin.step  # eq 1.7
+        outside = np.flatnonzero((new < bounds[0]) | (new > bounds[1]))
+        if outside.size:
+            i = outside[0]
+            return (
+                theta,
+                log,
+                f"left the bounds at iteration {d}: {problem.names[i]} = {new[i]:.6g} outside "
+                f"[{bounds[0][i]:.6g}, {bounds[1][i]:.6g}]",
+            )
+        if eps is None:
+            se = np.sqrt(s2 * np.diag(lin.xtx_inv))
+            threshold = np.maximum(eps_se * se, 1e-13 * np.abs(theta))
+        else:
+            threshold = eps
+        theta = new
+        if np.all(np.abs(lin.step) < threshold):  # eq 1.8
+            return theta, log, None
+    return theta, log, f"stalled: stopping rule (1.8) not met in {max_iter} iterations"
+
+
+def _trust_region(
+    problem: _Problem,
+    theta0: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    x_scale: np.ndarray | str,
+) -> tuple[np.ndarray, int, bool, str]:
+    """Bounded trust-region reflective fit from theta0 (clipped into the bounds)."""
+    lo, hi = bounds
+    start = np.clip(theta0.astype(float), lo, hi)
+    inner = (hi - lo) * 1e-9
+    start = np.where(start <= lo, lo + np.where(np.isfinite(inner), inner, 1e-9), start)
+    start = np.where(start >= hi, hi - np.where(np.isfinite(inner), inner, 1e-9), start)
+    jac = "3-point" if problem._jacobian is None else (lambda th: -problem.jacobian(th))
+    with np.errstate(all="ignore"):
+        sol = least_squares(
+            lambda th: problem.y - problem.values(th),
+            start,
+            jac=jac,
+            bounds=(lo, hi),
+            x_scale=x_scale,
+            method="trf",
+            ftol=1e-15,
+            xtol=1e-15,
+            gtol=1e-15,
+            max_nfev=2000 * theta0.size,
+        )
+    return sol.x, int(sol.nfev), sol.status > 0, f"trust region: {sol.message}"
+
+
+def _vector(
+    values: Mapping[str, float] | None, names: tuple[str, ...], what: str
+) -> np.ndarray | None:
+    if values is None:
+        return None
+    unknown = set(values) - set(names)
+    if unknown:
+        raise KeyError(f"{what} names unknown parameters: {sorted(unknown)}")
+    return np.array([float(values.get(n, np.nan)) for n in names])
+
+
+def fit_nonlinear(
+    model: Model,
+    x: Any,
+    y: Any,
+    theta0: Mapping[str, float],
+    *,
+    jacobian: Callable[..., np.ndarray] | None = None,
+    bounds: Mapping[str, tuple[float, float]] | None = None,
+    x_scale: Mapping[str, float] | None = None,
+    eps: Mapping[str, float] | None = None,
+    eps_se: float = 1e-8,
+    max_iter: int = 100,
+    robust: bool = True,
+) -> FitResult:
+    """Fit ``model`` to ``y`` by Gauss-Newton (eqs 1.3-1.8), falling back to a bounded trust
+    region when it fails; see the module docstring for every argument."""
+    names = tuple(theta0)
+    start = np.array([float(theta0[n]) for n in names])
+    y = np.asarray(y, dtype=float).reshape(-1)
+    if not np.all(np.isfinite(y)):
+        raise NonFiniteError(f"observation y[{np.flatnonzero(~np.isfinite(y))[0]}] is not finite")
+    if not np.all(np.isfinite(start)):
+        bad = names[int(np.flatnonzero(~np.isfinite(start))[0])]
+        raise NonFiniteError(f"start value of parameter {bad} is not finite")
+    if y.size <= len(names):
+        raise TooFewTrialsError(
+            f"{y.size} observations for {len(names)} parameters: need at least {len(names) + 1}"
+        )
+    lo = np.full(len(names), -np.inf)
+    hi = np.full(len(names), np.inf)
+    for i, name in enumerate(names):
+        if bounds and name in bounds:
+            lo[i], hi[i] = bounds[name]
+    eps_vec = _vector(eps, names, "eps")
+    scale_vec = _vector(x_scale, names, "x_scale")
+    problem = _Problem(model, x, y, names, jacobian)
+
+    theta, log, failure = _gauss_newton(problem, start, eps_vec, eps_se, (lo, hi), max_iter)
+    path, fallback, iterations, converged = "gauss-newton", None, len(log), failure is None
+    reason = "stopping rule (1.8) met" if failure is None else failure
+    if failure is not None and robust:
+        path, fallback = "trust-region", failure
+        theta, iterations, converged, reason = _trust_region(
+            problem, start, (lo, hi), "jac" if scale_vec is None else scale_vec
+        )
+    return _result(problem, theta, log, iterations, converged, reason, path, fallback)
+
+
+def _result(
+    problem: _Problem,
+    theta: np.ndarray,
+    log: list[IterationRecord],
+    iterations: int,
+    converged: bool,
+    reason: str,
+    path: str,
+    fallback: str | None,
+) -> FitResult:
+    """Statistics at the solution (1.9-1.10), flagging a degenerate (rank-deficient) one."""
+    m = len(problem.names)
+    dof = problem.y.size - m
+    lin = _linearise(problem, theta)
+    if isinstance(lin, str):
+        values = problem.values(theta)
+        with np.errstate(all="ignore"):
+            residuals = problem.y - values
+            rss = float(residuals @ residuals)
+        nan = np.full((m, m), np.nan)
+        if converged:
+            reason = (
+                f"degenerate solution ({lin}): a local minimum on a flat direction or "
+                f"unidentifiable parameters; {reason}"
+            )
+        return FitResult(
+            names=problem.names,
+            estimates=problem.kwargs(theta),
+            std_errors=dict.fromkeys(problem.names, float("nan")),
+            covariance=nan,
+            correlation=nan,
+            xtx_inv=nan,
+            jacobian=problem.jacobian(theta),
+            fitted=values,
+            residuals=residuals,
+            rss=rss,
+            s2=rss / dof,
+            n=problem.y.size,
+            dof=dof,
+            iterations=iterations,
+            converged=False,
+            reason=reason,
+            path=path,
+            fallback_reason=fallback,
+            condition_number=float("inf"),
+            log=tuple(log),
+        )
+    s2 = lin.rss / dof  # eq 1.9
+    covariance = lin.xtx_inv * s2  # eq 1.10
+    se = np.sqrt(np.diag(covariance))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        correlation = covariance / np.outer(se, se)
+    return FitResult(
+        names=problem.names,
+        estimates=problem.kwargs(theta),
+        std_errors=problem.kwargs(se),
+        covariance=covariance,
+        correlation=correlation,
+        xtx_inv=lin.xtx_inv,
+        jacobian=lin.jac,
+        fitted=lin.values,
+        residuals=lin.residuals,
+        rss=lin.rss,
+        s2=s2,
+        n=problem.y.size,
+        dof=dof,
+        iterations=iterations,
+        converged=converged,
+        reason=reason,
+        path=path,
+        fallback_reason=fallback,
+        condition_number=lin.cond,
+        log=tuple(log),
+    )
