@@ -1,0 +1,264 @@
+"""Frames in batches: raw CAN frames as arrays, decoded into heading and status arrays.
+
+Live acquisition (messages from the bus) and offline replay (records from a log file) both turn
+their frames into `RawFrames` and decode them here, so everything downstream is one code path.
+Heading and stand-status frames, nearly all the traffic, are decoded with numpy
+(`VectorDecoder`); the rare rest (acks, compass status, wrong lengths, error frames, and any frame
+failing a range or CRC check) goes through `stand.protocol.Codec.decode` one by one, which gives
+the authoritative `InvalidFrame` reasons.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+
+import can
+import numpy as np
+
+from acquisition.vectordecode import SignalLayout, VectorDecoder
+from stand.protocol import Codec, Frame, StandStatusFrame
+
+_STATUS_FIELDS = ("time", "rocking", "direction", "amplitude", "period")
+
+
+@dataclass(frozen=True)
+class RawFrames:
+    """n CAN frames as arrays; `start` is the stream position of the first one."""
+
+    start: int
+    arbitration_id: np.ndarray  # uint32
+    dlc: np.ndarray  # int64, payload length in bytes
+    data: np.ndarray  # (n, 8) uint8, zero-padded
+    is_error: np.ndarray  # bool
+    is_remote: np.ndarray  # bool
+    timestamp: np.ndarray  # float64, receive time (informative only: windows use stand time)
+
+    def __len__(self) -> int:
+        return len(self.arbitration_id)
+
+    @classmethod
+    def from_messages(cls, start: int, messages: Sequence[can.Message]) -> RawFrames:
+        n = len(messages)
+        dlc = np.fromiter((len(m.data) for m in messages), np.int64, n)
+        if n and bool((dlc == 8).all()):
+            payload = b"".join(bytes(m.data) for m in messages)
+        else:
+            payload = b"".join(bytes(m.data[:8]).ljust(8, b"\0") for m in messages)
+        return cls(
+            start=start,
+            arbitration_id=np.fromiter((m.arbitration_id for m in messages), np.uint32, n),
+            dlc=dlc,
+            data=np.frombuffer(payload, np.uint8).reshape(n, 8),
+            is_error=np.fromiter((m.is_error_frame for m in messages), bool, n),
+            is_remote=np.fromiter((m.is_remote_frame for m in messages), bool, n),
+            timestamp=np.fromiter((m.timestamp for m in messages), np.float64, n),
+        )
+
+    def message(self, row: int) -> can.Message:
+        """Row `row` as a python-can message (for the rare frames decoded one by one)."""
+        return can.Message(
+            timestamp=float(self.timestamp[row]),
+            arbitration_id=int(self.arbitration_id[row]),
+            is_extended_id=bool(self.arbitration_id[row] > 0x7FF),
+            is_error_frame=bool(self.is_error[row]),
+            is_remote_frame=bool(self.is_remote[row]),
+            dlc=int(self.dlc[row]),
+            data=bytes(self.data[row, : int(self.dlc[row])]),
+        )
+
+
+@dataclass(frozen=True)
+class Headings:
+    """Decoded heading frames: stream position, stand time, heading, validity, counter."""
+
+    pos: np.ndarray
+    t_ms: np.ndarray
+    heading_deg: np.ndarray
+    valid: np.ndarray
+    counter: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.pos)
+
+    def take(self, index: np.ndarray | slice) -> Headings:
+        return Headings(*(getattr(self, f.name)[index] for f in fields(self)))
+
+
+@dataclass(frozen=True)
+class Statuses:
+    """Decoded stand statuses (what the stand measures it is doing)."""
+
+    pos: np.ndarray
+    t_ms: np.ndarray
+    rocking: np.ndarray
+    direction_deg: np.ndarray
+    amplitude_cm: np.ndarray
+    period_s: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.pos)
+
+    def take(self, index: np.ndarray | slice) -> Statuses:
+        return Statuses(*(getattr(self, f.name)[index] for f in fields(self)))
+
+    def frame(self, i: int) -> StandStatusFrame:
+        return StandStatusFrame(
+            stand_time_ms=int(self.t_ms[i]),
+            rocking=bool(self.rocking[i]),
+            direction_deg=float(self.direction_deg[i]),
+            amplitude_cm=float(self.amplitude_cm[i]),
+            period_s=float(self.period_s[i]),
+            cycle=0,
+            phase_deg=0.0,
+        )
+
+
+@dataclass(frozen=True)
+class FrameBatch:
+    """One decoded batch: heading and status arrays plus the other frames, each with its
+    stream position so that consumers can keep the order of the stream."""
+
+    headings: Headings
+    statuses: Statuses
+    others: tuple[tuple[int, Frame], ...]
+    end: int  # stream position after the last frame
+
+
+def _crc8_table(poly: int = 0x1D) -> np.ndarray:
+    """Lookup table of the MSB-first CRC-8 with the given polynomial (SAE J1850: 0x1D)."""
+    table = np.zeros(256, np.uint8)
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ poly) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+        table[byte] = crc
+    return table
+
+
+_CRC8_SAE_J1850 = _crc8_table()
+
+
+def crc8_sae_j1850(data: np.ndarray) -> np.ndarray:
+    """CRC-8/SAE-J1850 (init 0xFF, xorout 0xFF) of each row of an (n, k) uint8 array."""
+    crc = np.full(len(data), 0xFF, np.uint8)
+    for column in range(data.shape[1]):
+        crc = _CRC8_SAE_J1850[crc ^ data[:, column]]
+    return crc ^ np.uint8(0xFF)
+
+
+def _mask_bytes(layout: SignalLayout) -> np.ndarray:
+    """The 8 payload bytes with exactly this signal's bits set."""
+    word = ((1 << layout.length) - 1) << layout.shift
+    return np.frombuffer(word.to_bytes(8, "big" if layout.big_endian else "little"), np.uint8)
+
+
+class BatchDecoder:
+    """Decodes `RawFrames` into a `FrameBatch` with the codec's DBC and signal map.
+
+    Keeps across batches only what the stream itself carries over: the latest values of status
+    signals sent in a separate message (STAND_MOTION before STAND_STATUS)."""
+
+    def __init__(self, codec: Codec) -> None:
+        self.codec = codec
+        smap = codec.signal_map
+        db = codec.database
+        heading_msg = db.get_message_by_name(smap.heading.message)
+        self.heading_id = heading_msg.frame_id
+        keys = {"heading": smap.heading, "time": smap.heading_time, "counter": smap.heading_counter}
+        if smap.heading_valid is not None:
+            keys["valid"] = smap.heading_valid
+        self._heading_keys = {k: ref.signal for k, ref in keys.items()}
+        self._heading = VectorDecoder(heading_msg, list(self._heading_keys.values()))
+        self._crc: tuple[SignalLayout, np.ndarray] | None = None
+        if smap.heading_crc is not None:
+            layout = SignalLayout.of(heading_msg.get_signal_by_name(smap.heading_crc.signal))
+            self._crc = (layout, ~_mask_bytes(layout))
+
+        # status: each field in some message; the message carrying the time completes a status
+        self._status_fields: dict[int, dict[str, str]] = {}
+        for name in _STATUS_FIELDS:
+            ref = getattr(smap, f"status_{name}")
+            frame_id = db.get_message_by_name(ref.message).frame_id
+            self._status_fields.setdefault(frame_id, {})[name] = ref.signal
+        self.status_trigger = db.get_message_by_name(smap.status_time.message).frame_id
+        self._status_decoders = {
+            frame_id: VectorDecoder(db.get_message_by_frame_id(frame_id), list(names.values()))
+            for frame_id, names in self._status_fields.items()
+        }
+        self._latest: dict[str, float] = {}
+
+    def decode(self, raw: RawFrames) -> FrameBatch:
+        ids, ok = raw.arbitration_id, ~(raw.is_error | raw.is_remote)
+        slow = np.ones(len(raw), dtype=bool)  # rows left for the codec, one by one
+        headings = self._headings(raw, ids == self.heading_id, ok, slow)
+        statuses = self._statuses(raw, ok, slow)
+        others: list[tuple[int, Frame]] = []
+        for row in np.flatnonzero(slow).tolist():
+            frame = self.codec.decode(raw.message(row))
+            if frame is not None and not isinstance(frame, StandStatusFrame):
+                others.append((raw.start + row, frame))
+        return FrameBatch(headings, statuses, tuple(others), raw.start + len(raw))
+
+    def _fast_rows(
+        self, raw: RawFrames, candidate: np.ndarray, ok: np.ndarray, decoder: VectorDecoder
+    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Rows of one message decodable in bulk (right length, values within the DBC range)."""
+        rows = np.flatnonzero(candidate & ok & (raw.dlc == decoder.length))
+        values = decoder.decode(raw.data[rows])
+        good = ~decoder.out_of_range(values)
+        return rows[good], {k: v[good] for k, v in values.items()}
+
+    def _headings(
+        self, raw: RawFrames, candidate: np.ndarray, ok: np.ndarray, slow: np.ndarray
+    ) -> Headings:
+        rows, values = self._fast_rows(raw, candidate, ok, self._heading)
+        if self._crc is not None and len(rows):
+            layout, keep = self._crc
+            data = raw.data[rows]
+            crc_raw = layout.raw(*VectorDecoder.words(data))
+            good = crc8_sae_j1850(data & keep) == (crc_raw & ((1 << layout.length) - 1))
+            rows, values = rows[good], {k: v[good] for k, v in values.items()}
+        slow[rows] = False
+        k = self._heading_keys
+        valid = values[k["valid"]] if "valid" in k else np.ones(len(rows))
+        return Headings(
+            pos=rows + raw.start,
+            t_ms=values[k["time"]].astype(np.int64),
+            heading_deg=values[k["heading"]].astype(np.float64),
+            valid=valid.astype(bool),
+            counter=values[k["counter"]].astype(np.int64),
+        )
+
+    def _statuses(self, raw: RawFrames, ok: np.ndarray, slow: np.ndarray) -> Statuses:
+        found: dict[int, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
+        for frame_id, decoder in self._status_decoders.items():
+            rows, values = self._fast_rows(raw, raw.arbitration_id == frame_id, ok, decoder)
+            slow[rows] = False
+            found[frame_id] = (rows, values)
+        trigger_rows, _ = found[self.status_trigger]
+        columns: dict[str, np.ndarray] = {}
+        complete = np.ones(len(trigger_rows), dtype=bool)
+        for frame_id, (rows, values) in found.items():
+            for name, signal in self._status_fields[frame_id].items():
+                v = values[signal]
+                if frame_id == self.status_trigger:
+                    columns[name] = v
+                    continue
+                # the latest value sent before each status trigger, carried over batches
+                before = np.searchsorted(rows, trigger_rows) - 1
+                column = np.full(len(trigger_rows), self._latest.get(name, np.nan))
+                column[before >= 0] = v[before[before >= 0]]
+                columns[name] = column
+                complete &= ~np.isnan(columns[name])
+                if len(v):
+                    self._latest[name] = float(v[-1])
+        keep = complete  # a status before any motion frame is incomplete: dropped
+        return Statuses(
+            pos=trigger_rows[keep] + raw.start,
+            t_ms=columns["time"][keep].astype(np.int64),
+            rocking=columns["rocking"][keep].astype(bool),
+            direction_deg=columns["direction"][keep].astype(np.float64),
+            amplitude_cm=columns["amplitude"][keep].astype(np.float64),
+            period_s=columns["period"][keep].astype(np.float64),
+        )
