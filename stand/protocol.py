@@ -1,0 +1,603 @@
+"""The CAN protocol between the test controller, the roll stand and the gyrocompass.
+
+Frames are described by a DBC file (`DBC_PATH`, table in docs/protocol.md) and encoded/decoded
+with cantools. A `SignalMap` says which DBC message/signal carries each quantity, so a lab can use
+its own DBC for its own angle sensor without code changes. Decoding never raises: frames that
+cannot be decoded become `InvalidFrame`. Times are STAND time in milliseconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+from enum import StrEnum
+from pathlib import Path
+
+import can
+import cantools
+from cantools.database.can import Message as DbcMessage
+from cantools.database.can import Signal
+
+DBC_PATH: Path = Path(__file__).with_name("gyrostand.dbc")
+
+COMMANDS = ("set", "start", "stop")
+
+
+def _crc8_table(poly: int) -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ poly if crc & 0x80 else crc << 1) & 0xFF
+        table.append(crc)
+    return tuple(table)
+
+
+_CRC8_J1850 = _crc8_table(0x1D)
+
+
+def crc8_sae_j1850(data: bytes) -> int:
+    """CRC-8/SAE-J1850 (poly 0x1D, init 0xFF, xorout 0xFF), the automotive E2E CRC.
+
+    Table-driven here because crccheck's bitwise loop costs ~7 us a frame and the simulator
+    sends 10 000 heading frames a second at 1000x (tests check it against crccheck)."""
+    crc = 0xFF
+    for byte in data:
+        crc = _CRC8_J1850[crc ^ byte]
+    return crc ^ 0xFF
+
+
+class ProtocolError(ValueError):
+    """A value that cannot be encoded, or a DBC / signal map that does not fit the protocol."""
+
+
+class Reason(StrEnum):
+    """Stand refusal reasons: the texts of the REASON value table in the shipped DBC."""
+
+    DIRECTION = "direction out of stand limits"
+    AMPLITUDE = "amplitude out of stand limits"
+    PERIOD = "period out of stand limits"
+    NOT_CONFIGURED = "not configured: send set first"
+    BUSY = "busy: stop rocking first"
+    FAULT = "stand fault"
+
+
+ACCEPTED_REASON_TEXT = "accepted"  # REASON value-table text meaning "no refusal"
+
+
+@dataclass(frozen=True)
+class HeadingFrame:
+    stand_time_ms: int
+    heading_deg: float
+    valid: bool
+    counter: int
+
+
+@dataclass(frozen=True)
+class StandStatusFrame:
+    """What the stand MEASURES it is doing (amplitude 0 and period 0 when not rocking)."""
+
+    stand_time_ms: int
+    rocking: bool
+    direction_deg: float
+    amplitude_cm: float
+    period_s: float
+    cycle: int
+    phase_deg: float
+
+
+@dataclass(frozen=True)
+class AckFrame:
+    command: str
+    accepted: bool
+    reason: str
+    seq: int = 0
+    stand_time_ms: int = 0
+
+
+@dataclass(frozen=True)
+class CompassStatusFrame:
+    rotor_running: bool
+    fluid_temp_c: float
+    fault_bits: int
+
+
+@dataclass(frozen=True)
+class CommandFrame:
+    """A stand command as the stand receives it (direction/amplitude/period used by "set")."""
+
+    command: str
+    seq: int
+    direction_deg: float
+    amplitude_cm: float
+    period_s: float
+
+
+@dataclass(frozen=True)
+class InvalidFrame:
+    arbitration_id: int
+    reason: str
+    raw: bytes
+
+
+Frame = (
+    HeadingFrame | StandStatusFrame | AckFrame | CompassStatusFrame | CommandFrame | InvalidFrame
+)
+
+
+@dataclass(frozen=True)
+class SignalRef:
+    """One signal of one DBC message, written `MESSAGE.SIGNAL` in plans."""
+
+    message: str
+    signal: str
+
+    @classmethod
+    def parse(cls, text: str) -> SignalRef:
+        message, dot, signal = text.strip().partition(".")
+        if not dot or not message or not signal or "." in signal:
+            raise ValueError(f"expected MESSAGE.SIGNAL, got {text!r}")
+        return cls(message, signal)
+
+    def __str__(self) -> str:
+        return f"{self.message}.{self.signal}"
+
+
+_HEADING_KEYS = ("heading", "heading_time", "heading_counter", "heading_valid", "heading_crc")
+_COMMAND_KEYS = (
+    "command_code",
+    "command_seq",
+    "command_direction",
+    "command_amplitude",
+    "command_period",
+)
+_ACK_KEYS = ("ack_command", "ack_seq", "ack_accepted", "ack_reason", "ack_time")
+_COMPASS_KEYS = ("compass_rotor", "compass_temp", "compass_faults")
+_OPTIONAL = frozenset({"heading_valid", "heading_crc", "command_seq", "ack_seq", "ack_time"})
+
+
+def _ref(text: str) -> SignalRef:
+    return SignalRef.parse(text)
+
+
+@dataclass(frozen=True)
+class SignalMap:
+    """Which DBC message/signal carries each quantity. Optional entries may be None.
+
+    The heading entries must share one message (it carries its own stand time); the stand status
+    is emitted when the message carrying `status_time` arrives, with the latest values of the
+    other status entries (which may sit in other messages, as STAND_MOTION does here)."""
+
+    heading: SignalRef = _ref("GYRO_HEADING.HEADING")
+    heading_time: SignalRef = _ref("GYRO_HEADING.STAND_TIME")
+    heading_counter: SignalRef = _ref("GYRO_HEADING.COUNTER")
+    heading_valid: SignalRef | None = _ref("GYRO_HEADING.VALID")
+    heading_crc: SignalRef | None = _ref("GYRO_HEADING.CRC")
+    status_time: SignalRef = _ref("STAND_STATUS.STAND_TIME")
+    status_rocking: SignalRef = _ref("STAND_STATUS.ROCKING")
+    status_cycle: SignalRef = _ref("STAND_STATUS.CYCLE")
+    status_phase: SignalRef = _ref("STAND_STATUS.PHASE")
+    status_direction: SignalRef = _ref("STAND_MOTION.DIRECTION")
+    status_amplitude: SignalRef = _ref("STAND_MOTION.AMPLITUDE")
+    status_period: SignalRef = _ref("STAND_MOTION.PERIOD")
+    command_code: SignalRef = _ref("STAND_COMMAND.COMMAND")
+    command_seq: SignalRef | None = _ref("STAND_COMMAND.SEQ")
+    command_direction: SignalRef = _ref("STAND_COMMAND.DIRECTION")
+    command_amplitude: SignalRef = _ref("STAND_COMMAND.AMPLITUDE")
+    command_period: SignalRef = _ref("STAND_COMMAND.PERIOD")
+    ack_command: SignalRef = _ref("STAND_ACK.COMMAND")
+    ack_seq: SignalRef | None = _ref("STAND_ACK.SEQ")
+    ack_accepted: SignalRef = _ref("STAND_ACK.ACCEPTED")
+    ack_reason: SignalRef = _ref("STAND_ACK.REASON")
+    ack_time: SignalRef | None = _ref("STAND_ACK.STAND_TIME")
+    compass_rotor: SignalRef = _ref("GYRO_STATUS.ROTOR_RUNNING")
+    compass_temp: SignalRef = _ref("GYRO_STATUS.FLUID_TEMP")
+    compass_faults: SignalRef = _ref("GYRO_STATUS.FAULT_BITS")
+
+    @classmethod
+    def default(cls) -> SignalMap:
+        """The map matching the shipped DBC."""
+        return cls()
+
+    @classmethod
+    def from_mapping(cls, mapping: Mapping[str, object]) -> SignalMap:
+        """Override the defaults from a plan's `[signals]` table: key = "MESSAGE.SIGNAL".
+
+        An optional entry may be "" (the lab's DBC has no such signal)."""
+        known = {f.name: f for f in fields(cls)}
+        values: dict[str, SignalRef | None] = {}
+        for key, value in mapping.items():
+            if key not in known:
+                raise ProtocolError(
+                    f"signals: unknown key {key!r} (known: {', '.join(sorted(known))})"
+                )
+            if not isinstance(value, str):
+                raise ProtocolError(f'signals.{key}: expected a "MESSAGE.SIGNAL" string')
+            if value == "" and key in _OPTIONAL:
+                values[key] = None
+                continue
+            try:
+                values[key] = SignalRef.parse(value)
+            except ValueError as exc:
+                raise ProtocolError(f"signals.{key}: {exc}") from None
+        return cls(**values)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class _Bound:
+    """A resolved signal map entry with its DBC range (widened by a rounding tolerance)."""
+
+    key: str
+    ref: SignalRef
+    message: DbcMessage
+    signal: Signal
+    low: float
+    high: float
+
+    @classmethod
+    def of(cls, key: str, ref: SignalRef, message: DbcMessage, signal: Signal) -> _Bound:
+        tolerance = abs(signal.scale) * 1e-6
+        low = signal.minimum - tolerance if signal.minimum is not None else -math.inf
+        high = signal.maximum + tolerance if signal.maximum is not None else math.inf
+        return cls(key, ref, message, signal, low, high)
+
+    def check(self, value: float) -> None:
+        """Refuse a value whose encoded (rounded) value falls outside the DBC range."""
+        signal = self.signal
+        if not math.isfinite(value):
+            raise ProtocolError(f"{self.ref} = {value} is not a finite number")
+        rounded = round((value - signal.offset) / signal.scale) * signal.scale + signal.offset
+        if not self.low <= rounded <= self.high:
+            unit = f" {signal.unit}" if signal.unit else ""
+            raise ProtocolError(
+                f"{self.ref} = {value} is outside the allowed range "
+                f"[{signal.minimum}, {signal.maximum}]{unit}"
+            )
+
+
+class Codec:
+    """Encode and decode gyrostand frames with cantools according to a DBC and a signal map."""
+
+    def __init__(self, dbc_path: Path = DBC_PATH, signal_map: SignalMap | None = None) -> None:
+        try:
+            self._db = cantools.database.load_file(str(dbc_path))
+        except (OSError, cantools.database.UnsupportedDatabaseFormatError) as exc:
+            raise ProtocolError(f"cannot load DBC {dbc_path}: {exc}") from None
+        self.signal_map = signal_map or SignalMap.default()
+        self._bound: dict[str, _Bound] = {}
+        for f in fields(self.signal_map):
+            ref = getattr(self.signal_map, f.name)
+            if ref is not None:
+                self._bound[f.name] = self._resolve(f.name, ref)
+        self._heading = self._one_message("heading", _HEADING_KEYS)
+        self._command = self._one_message("command", _COMMAND_KEYS)
+        self._ack = self._one_message("ack", _ACK_KEYS)
+        self._compass = self._one_message("compass", _COMPASS_KEYS)
+        self._status_keys = [k for k in self._bound if k.startswith("status_")]
+        status_messages = {self._bound[k].message.frame_id for k in self._status_keys}
+        if self._heading.frame_id in status_messages:
+            raise ProtocolError("signals: the heading message cannot also carry stand status")
+        self._status_trigger = self._bound["status_time"].message.frame_id
+        self._status_cache: dict[str, float] = {}
+        self._crc_mask = self._crc_mask_of(self._bound.get("heading_crc"))
+        self._crc_bits_memo: dict[int, bytes] = {}
+        # physical value of raw 0 for every signal: the filler for signals a frame does not set
+        self._zero = {m.name: {s.name: s.offset for s in m.signals} for m in self._db.messages}
+        self._decoders = {
+            self._heading.frame_id: self._decode_heading,
+            self._command.frame_id: self._decode_command,
+            self._ack.frame_id: self._decode_ack,
+            self._compass.frame_id: self._decode_compass,
+        }
+        for frame_id in status_messages:
+            self._decoders[frame_id] = self._decode_status
+
+    # ----------------------------------------------------------------------------- set-up helpers
+    def _resolve(self, key: str, ref: SignalRef) -> _Bound:
+        try:
+            message = self._db.get_message_by_name(ref.message)
+        except KeyError:
+            raise ProtocolError(f"signals.{key}: no message {ref.message!r} in the DBC") from None
+        try:
+            signal = message.get_signal_by_name(ref.signal)
+        except KeyError:
+            raise ProtocolError(
+                f"signals.{key}: message {ref.message} has no signal {ref.signal!r}"
+            ) from None
+        return _Bound.of(key, ref, message, signal)
+
+    def _one_message(self, group: str, keys: tuple[str, ...]) -> DbcMessage:
+        messages = {self._bound[k].message.name for k in keys if k in self._bound}
+        if len(messages) != 1:
+            raise ProtocolError(
+                f"signals: the {group} entries must share one message, got {sorted(messages)}"
+            )
+        return self._bound[keys[0]].message
+
+    @staticmethod
+    def _crc_mask_of(bound: _Bound | None) -> bytes | None:
+        """Bytes with exactly the CRC signal's bits set (to zero them before computing the CRC)."""
+        if bound is None:
+            return None
+        zero = {s.name: 0 for s in bound.message.signals}
+        ones = zero | {bound.signal.name: 2**bound.signal.length - 1}
+        return bound.message.encode(ones, scaling=False, strict=False)
+
+    @property
+    def heading_arbitration_id(self) -> int:
+        return self._heading.frame_id
+
+    @property
+    def database(self) -> cantools.database.can.Database:
+        return self._db
+
+    # ------------------------------------------------------------------------------------ encode
+    def _encode(self, values: Mapping[str, float], *, strict: bool = True) -> list[can.Message]:
+        """Encode signal-map entries (key -> physical value) into one frame per DBC message."""
+        by_message: dict[str, dict[str, float]] = {}
+        for key, value in values.items():
+            bound = self._bound.get(key)
+            if bound is None:
+                continue  # an optional entry this DBC does not have
+            if strict:
+                bound.check(value)
+            name = bound.message.name
+            data = by_message.get(name)
+            if data is None:
+                data = by_message[name] = dict(self._zero[name])
+            data[bound.signal.name] = value
+        messages = [self._db.get_message_by_name(name) for name in by_message]
+        return [
+            can.Message(
+                arbitration_id=message.frame_id,
+                is_extended_id=message.is_extended_frame,
+                data=message.encode(by_message[message.name], strict=False),
+            )
+            for message in messages
+        ]
+
+    def encode_heading(
+        self,
+        stand_time_ms: int,
+        heading_deg: float,
+        valid: bool,
+        counter: int,
+        *,
+        strict: bool = True,
+    ) -> can.Message:
+        """Heading frame (with its CRC when the map has one). strict=False lets the simulator put
+        an out-of-range heading on the wire."""
+        values = {
+            "heading_time": stand_time_ms,
+            "heading": heading_deg,
+            "heading_valid": int(valid),
+            "heading_counter": counter,
+            "heading_crc": 0,
+        }
+        (msg,) = self._encode(values, strict=strict)
+        if self._crc_mask is not None:  # the CRC bits are still zero: OR the CRC into them
+            crc_bits = self._crc_bits(self._crc(bytes(msg.data)))
+            msg.data = bytearray(a | b for a, b in zip(msg.data, crc_bits, strict=True))
+        return msg
+
+    def _crc_bits(self, crc: int) -> bytes:
+        """The payload bytes of a frame whose only non-zero signal is the CRC (memoised)."""
+        bits = self._crc_bits_memo.get(crc)
+        if bits is None:
+            bound = self._bound["heading_crc"]
+            data = {s.name: 0 for s in bound.message.signals} | {bound.signal.name: crc}
+            bits = self._crc_bits_memo[crc] = bound.message.encode(
+                data, scaling=False, strict=False
+            )
+        return bits
+
+    def _crc(self, data: bytes) -> int:
+        """CRC of the payload with the CRC bits zeroed, cut to the CRC signal length."""
+        assert self._crc_mask is not None
+        masked = bytes(b & ~m & 0xFF for b, m in zip(data, self._crc_mask, strict=False))
+        return crc8_sae_j1850(masked) & (2 ** self._bound["heading_crc"].signal.length - 1)
+
+    def encode_status(
+        self,
+        stand_time_ms: int,
+        rocking: bool,
+        direction_deg: float,
+        amplitude_cm: float,
+        period_s: float,
+        cycle: int,
+        phase_deg: float,
+    ) -> list[can.Message]:
+        """Stand status frames; the one carrying the stand time comes last (it completes the
+        status at the receiver)."""
+        msgs = self._encode(
+            {
+                "status_time": stand_time_ms,
+                "status_rocking": int(rocking),
+                "status_direction": direction_deg,
+                "status_amplitude": amplitude_cm,
+                "status_period": period_s,
+                "status_cycle": cycle,
+                "status_phase": phase_deg,
+            }
+        )
+        return sorted(msgs, key=lambda m: m.arbitration_id == self._status_trigger)
+
+    def _command_msg(
+        self, command: str, seq: int, direction_deg: float, amplitude_cm: float, period_s: float
+    ) -> can.Message:
+        values = {
+            "command_code": _choice_code(self._bound["command_code"], command),
+            "command_seq": seq,
+            "command_direction": direction_deg,
+            "command_amplitude": amplitude_cm,
+            "command_period": period_s,
+        }
+        (msg,) = self._encode(values)
+        return msg
+
+    def encode_command_set(
+        self, direction_deg: float, amplitude_cm: float, period_s: float, *, seq: int = 0
+    ) -> can.Message:
+        return self._command_msg("set", seq, direction_deg, amplitude_cm, period_s)
+
+    def encode_command_start(self, *, seq: int = 0) -> can.Message:
+        return self._command_msg("start", seq, 0.0, 0.0, 0.0)
+
+    def encode_command_stop(self, *, seq: int = 0) -> can.Message:
+        return self._command_msg("stop", seq, 0.0, 0.0, 0.0)
+
+    def encode_ack(
+        self,
+        command: str,
+        accepted: bool,
+        reason: str = "",
+        *,
+        seq: int = 0,
+        stand_time_ms: int = 0,
+    ) -> can.Message:
+        """Acknowledgement (accepted, reason "") or refusal (reason from the REASON value table)."""
+        if accepted and reason:
+            raise ProtocolError("an accepted command carries no refusal reason")
+        if not accepted and not reason:
+            raise ProtocolError("a refusal needs a reason")
+        reason_bound = self._bound["ack_reason"]
+        (msg,) = self._encode(
+            {
+                "ack_command": _choice_code(self._bound["ack_command"], command),
+                "ack_seq": seq,
+                "ack_accepted": int(accepted),
+                "ack_reason": _choice_code(reason_bound, reason or ACCEPTED_REASON_TEXT),
+                "ack_time": stand_time_ms,
+            }
+        )
+        return msg
+
+    def encode_compass_status(
+        self, rotor_running: bool, fluid_temp_c: float, fault_bits: int
+    ) -> can.Message:
+        (msg,) = self._encode(
+            {
+                "compass_rotor": int(rotor_running),
+                "compass_temp": fluid_temp_c,
+                "compass_faults": fault_bits,
+            }
+        )
+        return msg
+
+    # ------------------------------------------------------------------------------------ decode
+    def decode(self, msg: can.Message) -> Frame | None:
+        """Decode one frame; None for IDs the protocol does not use (and for a status part that
+        waits for the rest of its status). Never raises: bad frames become InvalidFrame."""
+        raw = bytes(msg.data)
+        if msg.is_error_frame:
+            return InvalidFrame(msg.arbitration_id, "error frame", raw)
+        decoder = self._decoders.get(msg.arbitration_id)
+        if decoder is None:
+            return None
+        if msg.is_remote_frame:
+            return InvalidFrame(msg.arbitration_id, "remote frame", raw)
+        try:
+            return decoder(msg.arbitration_id, raw)
+        except _Invalid as exc:
+            return InvalidFrame(msg.arbitration_id, str(exc), raw)
+        except Exception as exc:  # a corrupt frame must never kill the receiving thread
+            return InvalidFrame(msg.arbitration_id, f"undecodable payload: {exc}", raw)
+
+    def _values(self, frame_id: int, raw: bytes, keys: Sequence[str]) -> dict[str, float]:
+        """Physical values of the given map entries from one frame, range-checked."""
+        message = self._db.get_message_by_frame_id(frame_id)
+        if len(raw) != message.length:
+            raise _Invalid(f"wrong length: {len(raw)} bytes, {message.name} has {message.length}")
+        decoded = message.decode(raw, decode_choices=False)
+        out: dict[str, float] = {}
+        for key in keys:
+            bound = self._bound.get(key)
+            if bound is None or bound.message is not message:
+                continue
+            value = decoded[bound.signal.name]
+            if not bound.low <= value <= bound.high:
+                raise _Invalid(
+                    f"{bound.ref} = {value} outside [{bound.signal.minimum}, "
+                    f"{bound.signal.maximum}]"
+                )
+            out[key] = value
+        return out
+
+    def _decode_heading(self, frame_id: int, raw: bytes) -> HeadingFrame:
+        v = self._values(frame_id, raw, _HEADING_KEYS)
+        if self._crc_mask is not None and v["heading_crc"] != self._crc(raw):
+            raise _Invalid("CRC mismatch: corrupt payload")
+        return HeadingFrame(
+            stand_time_ms=int(v["heading_time"]),
+            heading_deg=float(v["heading"]),
+            valid=bool(v.get("heading_valid", 1)),
+            counter=int(v["heading_counter"]),
+        )
+
+    def _decode_status(self, frame_id: int, raw: bytes) -> StandStatusFrame | None:
+        self._status_cache.update(self._values(frame_id, raw, self._status_keys))
+        if frame_id != self._status_trigger or len(self._status_cache) < len(self._status_keys):
+            return None
+        v = self._status_cache
+        return StandStatusFrame(
+            stand_time_ms=int(v["status_time"]),
+            rocking=bool(v["status_rocking"]),
+            direction_deg=float(v["status_direction"]),
+            amplitude_cm=float(v["status_amplitude"]),
+            period_s=float(v["status_period"]),
+            cycle=int(v["status_cycle"]),
+            phase_deg=float(v["status_phase"]),
+        )
+
+    def _decode_command(self, frame_id: int, raw: bytes) -> CommandFrame:
+        v = self._values(frame_id, raw, _COMMAND_KEYS)
+        return CommandFrame(
+            command=_choice_name(self._bound["command_code"], v["command_code"], COMMANDS),
+            seq=int(v.get("command_seq", 0)),
+            direction_deg=float(v["command_direction"]),
+            amplitude_cm=float(v["command_amplitude"]),
+            period_s=float(v["command_period"]),
+        )
+
+    def _decode_ack(self, frame_id: int, raw: bytes) -> AckFrame:
+        v = self._values(frame_id, raw, _ACK_KEYS)
+        reason_bound = self._bound["ack_reason"]
+        choices = reason_bound.signal.choices or {}
+        code = int(v["ack_reason"])
+        reason = str(choices[code]) if code in choices else f"reason code {code}"
+        accepted = bool(v["ack_accepted"])
+        return AckFrame(
+            command=_choice_name(self._bound["ack_command"], v["ack_command"], COMMANDS),
+            accepted=accepted,
+            reason="" if accepted else reason,
+            seq=int(v.get("ack_seq", 0)),
+            stand_time_ms=int(v.get("ack_time", 0)),
+        )
+
+    def _decode_compass(self, frame_id: int, raw: bytes) -> CompassStatusFrame:
+        v = self._values(frame_id, raw, _COMPASS_KEYS)
+        return CompassStatusFrame(
+            rotor_running=bool(v["compass_rotor"]),
+            fluid_temp_c=float(v["compass_temp"]),
+            fault_bits=int(v["compass_faults"]),
+        )
+
+
+class _Invalid(Exception):
+    """Internal: the frame is invalid for the given reason."""
+
+
+def _choice_code(bound: _Bound, name: str) -> int:
+    for code, text in (bound.signal.choices or {}).items():
+        if str(text) == name:
+            return int(code)
+    known = ", ".join(repr(str(t)) for t in (bound.signal.choices or {}).values())
+    raise ProtocolError(f"{bound.ref}: {name!r} is not one of the DBC values ({known})")
+
+
+def _choice_name(bound: _Bound, code: float, allowed: tuple[str, ...]) -> str:
+    name = str((bound.signal.choices or {}).get(int(code), ""))
+    if name not in allowed:
+        raise _Invalid(f"{bound.ref}: unknown command code {int(code)}")
+    return name
