@@ -1,0 +1,639 @@
+"""Import of historical manual measurements and export of campaigns (pandas: CSV, Parquet, Excel).
+
+Three file forms, detected from the columns (extra per-observation columns are optional):
+
+- observations: trial, role, direction_deg, amplitude_cm, period_s, j, k, value_deg
+  [, window_start_ms, window_end_ms, frames_used, frames_lost, flags]
+- series:       trial, role, direction_deg, amplitude_cm, period_s, j, mean_deg, variance_deg2,
+  n_obs
+- trials (the paper's table, seed 000 example): trial, role, direction_deg, amplitude_cm,
+  period_s, delta_mean_deg, delta_var_deg2, n_obs  (delta_var_deg2 may be empty for control
+  trials; variances in deg^2, not the paper's 1e-4 deg^2)
+
+Every row is validated and every problem is reported with its line (CSV) or row (Excel,
+Parquet); nothing is written unless the whole file is valid, and then in one transaction.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+from sqlalchemy.orm import Session, sessionmaker
+
+from db.models import TRIAL_ROLES, Campaign, Event, Observation, Series, Trial
+from db.queries import instrument_for, load_campaign
+
+COMMON_COLUMNS = ("trial", "role", "direction_deg", "amplitude_cm", "period_s")
+FORM_COLUMNS = {
+    "observations": COMMON_COLUMNS + ("j", "k", "value_deg"),
+    "series": COMMON_COLUMNS + ("j", "mean_deg", "variance_deg2", "n_obs"),
+    "trials": COMMON_COLUMNS + ("delta_mean_deg", "delta_var_deg2", "n_obs"),
+}
+OBSERVATION_EXTRAS = ("window_start_ms", "window_end_ms", "frames_used", "frames_lost", "flags")
+EXPORT_FORMATS = ("csv", "parquet", "xlsx")
+MAX_REPORTED = 10
+
+# seed 000 example: known constants B of the two-rotor gyrocompass and the site
+SEED_000_METADATA: dict[str, Any] = {
+    "model": "two-rotor gyrocompass (seed 000 example)",
+    "serial": "seed-000",
+    "lp_gcm2s2": 6.57e6,
+    "h1_gcm2s": 1.55e8,
+    "latitude_deg": 46.5,
+    "earth_rate_rad_s": 7.3e-5,
+    "gravity_cm_s2": 981.0,
+}
+
+
+class ImportFileError(ValueError):
+    """The file cannot be imported; `problems` lists each one with its line or row."""
+
+    def __init__(self, path: Path, problems: list[str]) -> None:
+        self.path = path
+        self.problems = problems
+        shown = "; ".join(problems[:MAX_REPORTED])
+        more = len(problems) - MAX_REPORTED
+        tail = f"; ... and {more} more" if more > 0 else ""
+        count = f"{len(problems)} problem{'s' if len(problems) > 1 else ''}"
+        super().__init__(f"{path}: {count}: {shown}{tail}")
+
+
+class MetadataError(ValueError):
+    """Campaign metadata (instrument, site, operator) missing or out of range."""
+
+
+# ---------------------------------------------------------------- reading files into raw rows
+
+
+@dataclass(frozen=True)
+class RawRow:
+    where: str  # "line 7" (CSV) or "row 7" (Excel sheet row, Parquet record)
+    cells: dict[str, Any]
+
+
+def _read_csv(path: Path) -> tuple[list[str], list[RawRow], list[str]]:
+    # The csv module rather than pandas.read_csv: it gives the physical line of every record,
+    # which the error messages need, and lets '#' lines be skipped without losing that count.
+    problems: list[str] = []
+    header: list[str] | None = None
+    rows: list[RawRow] = []
+    with path.open(newline="", encoding="utf-8-sig") as handle:
+        reader = csv.reader(handle)
+        for record in reader:
+            if not any(cell.strip() for cell in record) or record[0].lstrip().startswith("#"):
+                continue
+            where = f"line {reader.line_num}"
+            if header is None:
+                header = [cell.strip() for cell in record]
+            elif len(record) != len(header):
+                problems.append(f"{where}: {len(record)} fields, the header has {len(header)}")
+            else:
+                rows.append(RawRow(where, dict(zip(header, record, strict=True))))
+    return header or [], rows, problems
+
+
+def _read_excel(path: Path) -> tuple[list[str], list[RawRow], list[str]]:
+    """The first sheet; rows are numbered as the spreadsheet shows them."""
+    sheet = pd.read_excel(path, sheet_name=0, header=None, dtype=object)
+    header: list[str] | None = None
+    rows: list[RawRow] = []
+    for number, values in zip(sheet.index, sheet.itertuples(index=False), strict=True):
+        cells = list(values)
+        if all(_blank(cell) for cell in cells) or str(cells[0]).lstrip().startswith("#"):
+            continue
+        if header is None:
+            header = ["" if _blank(cell) else str(cell).strip() for cell in cells]
+        else:
+            rows.append(RawRow(f"row {number + 1}", dict(zip(header, cells, strict=True))))
+    return [name for name in header or [] if name], rows, []
+
+
+def _read_parquet(path: Path) -> tuple[list[str], list[RawRow], list[str]]:
+    table = pd.read_parquet(path)
+    rows = [
+        RawRow(f"row {number}", record)
+        for number, record in enumerate(table.to_dict(orient="records"), start=1)
+    ]
+    return [str(c) for c in table.columns], rows, []
+
+
+READERS: dict[str, Callable[[Path], tuple[list[str], list[RawRow], list[str]]]] = {
+    ".csv": _read_csv,
+    ".xlsx": _read_excel,
+    ".parquet": _read_parquet,
+}
+
+
+# ---------------------------------------------------------------- cells to typed values
+
+
+def _blank(value: Any) -> bool:
+    if value is None or value is pd.NA:
+        return True
+    if isinstance(value, float):
+        return math.isnan(value)
+    return isinstance(value, str) and not value.strip()
+
+
+def _to_float(value: Any) -> float:
+    if isinstance(value, bool):
+        raise ValueError
+    number = float(value.strip()) if isinstance(value, str) else float(value)
+    if not math.isfinite(number):
+        raise ValueError
+    return number
+
+
+def _to_int(value: Any) -> int:
+    number = _to_float(value)
+    if not number.is_integer():
+        raise ValueError
+    return int(number)
+
+
+def _to_str(value: Any) -> str:
+    return str(value).strip()
+
+
+@dataclass(frozen=True)
+class Field:
+    """One column: how to convert a cell, the admissible values, whether it may be empty."""
+
+    convert: Callable[[Any], Any]
+    what: str  # "an integer", "a finite number", "text"
+    ok: Callable[[Any], bool]
+    rule: str
+    optional: bool = False
+
+
+def _anything(_: Any) -> bool:
+    return True
+
+
+INTEGER, NUMBER = "an integer", "a finite number"
+FIELDS: dict[str, Field] = {
+    "trial": Field(_to_int, INTEGER, lambda v: v >= 1, ">= 1"),
+    "role": Field(_to_str, "text", lambda v: v in TRIAL_ROLES, "fit or control"),
+    "direction_deg": Field(_to_float, NUMBER, lambda v: 0 <= v < 360, "in [0, 360)"),
+    "amplitude_cm": Field(_to_float, NUMBER, lambda v: v > 0, "> 0"),
+    "period_s": Field(_to_float, NUMBER, lambda v: v > 0, "> 0"),
+    "j": Field(_to_int, INTEGER, lambda v: v in (1, 2), "1 (still) or 2 (rocking)"),
+    "k": Field(_to_int, INTEGER, lambda v: v >= 1, ">= 1"),
+    "value_deg": Field(_to_float, NUMBER, lambda v: abs(v) <= 360, "within +-360"),
+    "mean_deg": Field(_to_float, NUMBER, lambda v: abs(v) <= 360, "within +-360"),
+    "variance_deg2": Field(_to_float, NUMBER, lambda v: v >= 0, ">= 0"),
+    "n_obs": Field(_to_int, INTEGER, lambda v: v >= 2, ">= 2"),
+    "delta_mean_deg": Field(_to_float, NUMBER, lambda v: abs(v) <= 180, "within +-180"),
+    "delta_var_deg2": Field(_to_float, NUMBER, lambda v: v >= 0, ">= 0", optional=True),
+    "window_start_ms": Field(_to_int, INTEGER, lambda v: v >= 0, ">= 0", optional=True),
+    "window_end_ms": Field(_to_int, INTEGER, lambda v: v >= 0, ">= 0", optional=True),
+    "frames_used": Field(_to_int, INTEGER, lambda v: v >= 0, ">= 0", optional=True),
+    "frames_lost": Field(_to_int, INTEGER, lambda v: v >= 0, ">= 0", optional=True),
+    "flags": Field(_to_str, "text", _anything, "", optional=True),
+}
+
+
+def _typed_row(raw: RawRow, columns: tuple[str, ...], problems: list[str]) -> dict[str, Any] | None:
+    """The row's cells converted and range-checked, or None (problems appended)."""
+    values: dict[str, Any] = {}
+    before = len(problems)
+    for name in columns:
+        field, cell = FIELDS[name], raw.cells.get(name)
+        if _blank(cell):
+            if not field.optional:
+                problems.append(f"{raw.where}: {name} is empty")
+            values[name] = "" if name == "flags" else None
+            continue
+        try:
+            value = field.convert(cell)
+        except (TypeError, ValueError):
+            problems.append(f"{raw.where}: {name} {cell!r} is not {field.what}")
+            continue
+        if not field.ok(value):
+            problems.append(f"{raw.where}: {name} = {value!r} is not {field.rule}")
+        values[name] = value
+    return values if len(problems) == before else None
+
+
+# ---------------------------------------------------------------- the validated content
+
+
+@dataclass(frozen=True)
+class ImportedObservation:
+    k: int
+    value_deg: float
+    window_start_ms: int | None = None
+    window_end_ms: int | None = None
+    frames_used: int | None = None
+    frames_lost: int | None = None
+    flags: str = ""
+
+
+@dataclass(frozen=True)
+class ImportedSeries:
+    j: int
+    observations: tuple[ImportedObservation, ...] = ()
+    mean_deg: float | None = None  # seed 000 eq 2.1, when imported pre-averaged
+    variance_deg2: float | None = None  # seed 000 eq 2.2
+    n_obs: int | None = None
+
+
+@dataclass(frozen=True)
+class ImportedTrial:
+    index: int
+    role: str
+    direction_deg: float
+    amplitude_cm: float
+    period_s: float
+    series: tuple[ImportedSeries, ...] = ()
+    delta_mean_deg: float | None = None  # seed 000: <delta_i> = <delta_2i> - <delta_1i>
+    delta_var_deg2: float | None = None  # seed 000 eq 2.3
+    n_obs: int | None = None
+
+
+@dataclass(frozen=True)
+class ImportedFile:
+    path: Path
+    sha256: str
+    form: str  # "observations", "series" or "trials"
+    n_obs: int  # N of every series
+    trials: tuple[ImportedTrial, ...]
+
+
+def _detect_form(path: Path, columns: list[str]) -> str:
+    present = set(columns)
+    matching = [form for form, cols in FORM_COLUMNS.items() if set(cols) <= present]
+    if len(matching) == 1:
+        form = matching[0]
+        extras = OBSERVATION_EXTRAS if form == "observations" else ()
+        unknown = [c for c in columns if c not in FORM_COLUMNS[form] and c not in extras]
+        if unknown:
+            raise ImportFileError(path, [f"unknown column(s) {', '.join(unknown)} ({form} form)"])
+        return form
+    if len(matching) > 1:
+        raise ImportFileError(path, [f"columns fit several forms ({', '.join(matching)})"])
+    closest = max(FORM_COLUMNS, key=lambda f: len(set(FORM_COLUMNS[f]) & present))
+    missing = [c for c in FORM_COLUMNS[closest] if c not in present]
+    expected = " | ".join(",".join(cols) for cols in FORM_COLUMNS.values())
+    raise ImportFileError(
+        path,
+        [f"header has no {', '.join(missing)} for the {closest} form; expected one of: {expected}"],
+    )
+
+
+def read_import_file(path: Path) -> ImportedFile:
+    """Read and fully validate `path` (.csv, .xlsx, .parquet). Raises ImportFileError."""
+    path = Path(path)
+    reader = READERS.get(path.suffix.lower())
+    if reader is None:
+        raise ImportFileError(path, [f"unsupported file type {path.suffix!r} (csv, xlsx, parquet)"])
+    try:
+        content = path.read_bytes()
+        columns, raw_rows, problems = reader(path)
+    except (OSError, UnicodeDecodeError, ValueError, ImportError) as error:
+        raise ImportFileError(path, [f"cannot read it: {error}"]) from error
+    if not columns:
+        raise ImportFileError(path, ["no header row (empty file?)"])
+    form = _detect_form(path, columns)
+    if not raw_rows:
+        raise ImportFileError(path, ["no data rows"])
+    wanted = FORM_COLUMNS[form] + tuple(c for c in OBSERVATION_EXTRAS if c in columns)
+    rows: list[tuple[str, dict[str, Any]]] = []
+    for raw in raw_rows:
+        values = _typed_row(raw, wanted, problems)
+        if values is not None:
+            rows.append((raw.where, values))
+    if problems:  # grouping checks on a partial set of rows would only echo these problems
+        raise ImportFileError(path, problems)
+    trials, n_obs = _assemble(form, rows, problems)
+    if problems:
+        raise ImportFileError(path, problems)
+    return ImportedFile(path, hashlib.sha256(content).hexdigest(), form, n_obs, trials)
+
+
+def _assemble(
+    form: str, rows: list[tuple[str, dict[str, Any]]], problems: list[str]
+) -> tuple[tuple[ImportedTrial, ...], int]:
+    """Group valid rows into trials and series; check consistency, duplicates, k = 1..N, equal N."""
+    by_trial: dict[int, list[tuple[str, dict[str, Any]]]] = {}
+    for where, values in rows:
+        by_trial.setdefault(values["trial"], []).append((where, values))
+    sizes: dict[int, str] = {}  # N -> where it was first seen
+    trials = []
+    for index in sorted(by_trial):
+        group = by_trial[index]
+        first_where, first = group[0]
+        for where, values in group[1:] if form != "trials" else ():
+            changed = [c for c in COMMON_COLUMNS[1:] if values[c] != first[c]]
+            if changed:
+                problems.append(
+                    f"{where}: trial {index} {', '.join(changed)} differs from {first_where}"
+                )
+        common = dict(
+            index=index,
+            role=first["role"],
+            direction_deg=first["direction_deg"],
+            amplitude_cm=first["amplitude_cm"],
+            period_s=first["period_s"],
+        )
+        if form == "trials":
+            for where, _ in group[1:]:
+                problems.append(f"{where}: trial {index} repeats {first_where}")
+            if first["delta_var_deg2"] is None and first["role"] == "fit":
+                problems.append(f"{first_where}: delta_var_deg2 is empty for fit trial {index}")
+            sizes.setdefault(first["n_obs"], first_where)
+            trials.append(
+                ImportedTrial(
+                    **common,
+                    delta_mean_deg=first["delta_mean_deg"],
+                    delta_var_deg2=first["delta_var_deg2"],
+                    n_obs=first["n_obs"],
+                )
+            )
+            continue
+        series = []
+        for j in (1, 2):
+            rows_j = [(w, v) for w, v in group if v["j"] == j]
+            if not rows_j:
+                problems.append(f"{first_where}: trial {index} has no rows with j = {j}")
+                continue
+            built = _series(form, index, j, rows_j, problems)
+            sizes.setdefault(built.n_obs or len({o.k for o in built.observations}), rows_j[0][0])
+            series.append(built)
+        trials.append(ImportedTrial(**common, series=tuple(series)))
+    if len(sizes) > 1:
+        seen = ", ".join(f"N = {n} at {where}" for n, where in sizes.items())
+        problems.append(f"all series must have the same N, found {seen}")
+    return tuple(trials), next(iter(sizes), 0)
+
+
+def _series(
+    form: str, index: int, j: int, rows: list[tuple[str, dict[str, Any]]], problems: list[str]
+) -> ImportedSeries:
+    first_where, first = rows[0]
+    if form == "series":
+        for where, _ in rows[1:]:
+            problems.append(f"{where}: trial {index} j = {j} repeats {first_where}")
+        return ImportedSeries(
+            j,
+            mean_deg=first["mean_deg"],
+            variance_deg2=first["variance_deg2"],
+            n_obs=first["n_obs"],
+        )
+    seen: dict[int, str] = {}
+    for where, values in rows:
+        if values["k"] in seen:
+            problems.append(
+                f"{where}: trial {index} j = {j} k = {values['k']} repeats {seen[values['k']]}"
+            )
+        seen.setdefault(values["k"], where)
+    missing = sorted(set(range(1, max(seen) + 1)) - set(seen))
+    if missing:
+        problems.append(
+            f"{first_where}: trial {index} j = {j} has no k = {', '.join(map(str, missing))}"
+            " (k must run 1..N)"
+        )
+    if len(seen) < 2:
+        problems.append(f"{first_where}: trial {index} j = {j} has {len(seen)} observation, N >= 2")
+    observations = tuple(
+        ImportedObservation(**{name: values[name] for name in values if name in OBS_FIELDS})
+        for _, values in sorted(rows, key=lambda row: row[1]["k"])
+    )
+    return ImportedSeries(j, observations=observations)
+
+
+OBS_FIELDS = ("k", "value_deg") + OBSERVATION_EXTRAS
+
+
+# ---------------------------------------------------------------- storing
+
+
+METADATA_RULES: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "model": (lambda v: isinstance(v, str) and v.strip() != "", "non-empty text"),
+    "serial": (lambda v: isinstance(v, str) and v.strip() != "", "non-empty text"),
+    "lp_gcm2s2": (lambda v: _positive(v), "a number > 0 (g*cm^2*s^-2)"),
+    "h1_gcm2s": (lambda v: _positive(v), "a number > 0 (g*cm^2*s^-1)"),
+    "latitude_deg": (lambda v: _number(v) and -90 < v < 90, "a number in (-90, 90)"),
+    "earth_rate_rad_s": (lambda v: _positive(v), "a number > 0 (rad/s)"),
+    "gravity_cm_s2": (lambda v: _positive(v), "a number > 0 (cm/s^2)"),
+}
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _positive(value: Any) -> bool:
+    return _number(value) and value > 0
+
+
+def check_metadata(metadata: Mapping[str, Any]) -> None:
+    """Raise MetadataError naming every missing or bad key of the campaign metadata."""
+    problems = []
+    for key, (ok, rule) in METADATA_RULES.items():
+        if key not in metadata:
+            problems.append(f"{key} is missing")
+        elif not ok(metadata[key]):
+            problems.append(f"{key} = {metadata[key]!r} is not {rule}")
+    for key in ("operator", "software_version", "plan_toml"):
+        if key in metadata and not isinstance(metadata[key], str):
+            problems.append(f"{key} = {metadata[key]!r} is not text")
+    if problems:
+        raise MetadataError("campaign metadata: " + "; ".join(problems))
+
+
+def metadata_toml(metadata: Mapping[str, Any]) -> str:
+    """The instrument and site metadata as a small TOML plan (stored when no plan file is given)."""
+
+    def value(v: Any) -> str:
+        return json.dumps(v) if isinstance(v, str) else repr(float(v))
+
+    tables = {
+        "instrument": ("model", "serial", "lp_gcm2s2", "h1_gcm2s"),
+        "site": ("latitude_deg", "earth_rate_rad_s", "gravity_cm_s2"),
+    }
+    lines = ["# campaign metadata of an imported file (no plan file was given)"]
+    for table, keys in tables.items():
+        lines += ["", f"[{table}]"] + [f"{key} = {value(metadata[key])}" for key in keys]
+    return "\n".join(lines) + "\n"
+
+
+def store_import(session: Session, data: ImportedFile, metadata: Mapping[str, Any]) -> Campaign:
+    """Add the imported campaign (status completed, source import) to `session` and flush.
+
+    `metadata`: model, serial, lp_gcm2s2, h1_gcm2s, latitude_deg, earth_rate_rad_s, gravity_cm_s2;
+    optional operator, software_version, plan_toml (default: `metadata_toml(metadata)`)."""
+    check_metadata(metadata)
+    plan_toml = metadata.get("plan_toml") or metadata_toml(metadata)
+    campaign = Campaign(
+        instrument=instrument_for(
+            session,
+            metadata["model"],
+            metadata["serial"],
+            {"lp_gcm2s2": float(metadata["lp_gcm2s2"]), "h1_gcm2s": float(metadata["h1_gcm2s"])},
+        ),
+        plan_toml=plan_toml,
+        plan_hash=hashlib.sha256(plan_toml.encode()).hexdigest(),
+        operator=metadata.get("operator", "unknown"),
+        latitude_deg=float(metadata["latitude_deg"]),
+        earth_rate_rad_s=float(metadata["earth_rate_rad_s"]),
+        gravity_cm_s2=float(metadata["gravity_cm_s2"]),
+        n_obs=data.n_obs,
+        status="completed",
+        source="import",
+        software_version=metadata.get("software_version", "unknown"),
+    )
+    for trial in data.trials:
+        campaign.trials.append(
+            Trial(
+                index=trial.index,
+                role=trial.role,
+                cmd_direction_deg=trial.direction_deg,
+                cmd_amplitude_cm=trial.amplitude_cm,
+                cmd_period_s=trial.period_s,
+                status="completed",
+                summary_delta_mean_deg=trial.delta_mean_deg,
+                summary_delta_var_deg2=trial.delta_var_deg2,
+                summary_n=trial.n_obs,
+                series=[
+                    Series(
+                        j=s.j,
+                        status="completed",
+                        summary_mean_deg=s.mean_deg,
+                        summary_variance_deg2=s.variance_deg2,
+                        summary_n=s.n_obs,
+                        observations=[Observation(**vars(o)) for o in s.observations],
+                    )
+                    for s in trial.series
+                ],
+            )
+        )
+    campaign.events.append(
+        Event(
+            kind="import",
+            severity="info",
+            message=f"imported {data.form} form, {len(data.trials)} trials, from {data.path} "
+            f"(sha256 {data.sha256})",
+        )
+    )
+    session.add(campaign)
+    session.flush()
+    return campaign
+
+
+def import_file(sessions: sessionmaker[Session], path: Path, metadata: Mapping[str, Any]) -> int:
+    """Validate metadata and file completely, then store them in one transaction; the new
+    campaign's id. Raises MetadataError or ImportFileError (the database is then untouched)."""
+    check_metadata(metadata)
+    data = read_import_file(path)
+    with sessions.begin() as session:
+        return store_import(session, data, metadata).id
+
+
+# ---------------------------------------------------------------- export
+
+
+@dataclass(frozen=True)
+class CampaignFrames:
+    """A campaign as three tables in the import forms' columns (so every export re-imports)."""
+
+    observations: pd.DataFrame
+    series: pd.DataFrame
+    trials: pd.DataFrame
+
+
+def campaign_frames(session: Session, campaign_id: int) -> CampaignFrames:
+    """Observations as stored; series and trial summaries from the observations (seed 000
+    eq 2.1-2.3) or, for pre-averaged imports, as imported. K, A, tau are the applied values
+    (stand-measured, else commanded)."""
+    campaign = load_campaign(session, campaign_id)
+    observations, series, trials = [], [], []
+    for trial in campaign.trials:
+        common = {
+            "trial": trial.index,
+            "role": trial.role,
+            "direction_deg": trial.direction_deg,
+            "amplitude_cm": trial.amplitude_cm,
+            "period_s": trial.period_s,
+        }
+        stats: dict[int, tuple[float, float, int]] = {}
+        for s in trial.series:
+            values = pd.Series([o.value_deg for o in s.observations], dtype=float)
+            observations += [
+                {**common, "j": s.j, **{name: getattr(o, name) for name in OBS_FIELDS}}
+                for o in s.observations
+            ]
+            if s.observations:
+                # seed 000 eq 2.1 (mean) and eq 2.2 (variance, N - 1 in the denominator)
+                stats[s.j] = (values.mean(), values.var(ddof=1), len(values))
+            elif s.summary_mean_deg is not None:
+                stats[s.j] = (s.summary_mean_deg, s.summary_variance_deg2, s.summary_n)
+            if s.j in stats:
+                mean, var, n = stats[s.j]
+                series.append(
+                    {**common, "j": s.j, "mean_deg": mean, "variance_deg2": var, "n_obs": n}
+                )
+        if trial.summary_delta_mean_deg is not None:
+            delta = (trial.summary_delta_mean_deg, trial.summary_delta_var_deg2, trial.summary_n)
+        elif 1 in stats and 2 in stats:
+            (m1, v1, n1), (m2, v2, n2) = stats[1], stats[2]
+            # <delta_i> = <delta_2i> - <delta_1i> (wrapped to [-180, 180): headings);
+            # seed 000 eq 2.3: S^2{<delta_i>} = S^2{<delta_1i>} + S^2{<delta_2i>}
+            delta = ((m2 - m1 + 180.0) % 360.0 - 180.0, v1 + v2, n1 if n1 == n2 else None)
+        else:
+            continue
+        trials.append(dict(zip(FORM_COLUMNS["trials"], (*common.values(), *delta), strict=True)))
+    integer_columns = ("window_start_ms", "window_end_ms", "frames_used", "frames_lost", "n_obs")
+    frames = []
+    for rows, columns in (
+        (observations, FORM_COLUMNS["observations"] + OBSERVATION_EXTRAS),
+        (series, FORM_COLUMNS["series"]),
+        (trials, FORM_COLUMNS["trials"]),
+    ):
+        frame = pd.DataFrame(rows, columns=list(columns))
+        for column in frame.columns:
+            if column in integer_columns:
+                frame[column] = frame[column].astype("Int64")
+        frames.append(frame)
+    return CampaignFrames(*frames)
+
+
+def export_paths(out: Path, fmt: str) -> dict[str, Path]:
+    """Where `export_campaign` writes: for xlsx one workbook (sheets observations, series, trials);
+    for csv/parquet `out` holds the observations, `<stem>.series<ext>` and `<stem>.trials<ext>`
+    the summaries."""
+    if fmt == "xlsx":
+        return dict.fromkeys(("observations", "series", "trials"), out)
+    return {
+        "observations": out,
+        "series": out.with_name(f"{out.stem}.series{out.suffix}"),
+        "trials": out.with_name(f"{out.stem}.trials{out.suffix}"),
+    }
+
+
+def export_campaign(session: Session, campaign_id: int, fmt: str, out: Path) -> CampaignFrames:
+    """Write the campaign's three tables in `fmt` (csv, parquet, xlsx) to `export_paths(out)`."""
+    if fmt not in EXPORT_FORMATS:
+        raise ValueError(f"unknown export format {fmt!r} (one of {', '.join(EXPORT_FORMATS)})")
+    frames = campaign_frames(session, campaign_id)
+    tables = {"observations": frames.observations, "series": frames.series, "trials": frames.trials}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if fmt == "xlsx":
+        with pd.ExcelWriter(out, engine="openpyxl") as workbook:
+            for name, frame in tables.items():
+                frame.to_excel(workbook, sheet_name=name, index=False)
+        return frames
+    for name, path in export_paths(out, fmt).items():
+        if fmt == "csv":
+            tables[name].to_csv(path, index=False)
+        else:
+            tables[name].to_parquet(path, index=False)
+    return frames
