@@ -34,3 +34,7 @@ class UnequalDegreesOfFreedomError(AnalysisError):
 
 class MissingDataError(AnalysisError):
     """A trial lacks a quantity its role needs, or mixes incompatible input forms."""
+
+
+class ConvergenceError(AnalysisError):
+    """Neither Gauss-Newton nor the trust-region fallback reached a solution."""

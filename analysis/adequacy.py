@@ -1,0 +1,124 @@
+"""Adequacy of the fitted model (seed 000 eqs 2.7-2.8) and the judgement of control trials.
+
+Two error bases are reported side by side. The paper's (eq 2.8) divides S^2_r by the pooled
+single-observation variance S^2_e (2.6) with nu_e = n (N - 1) dof, as its example does. The trial
+means <delta_i> that S^2_r scatters about have variance S^2_e / N, so the ratio on that basis is
+N times larger; a report should show both.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from analysis.forecast import Predictor
+from analysis.gyro_model import Conditions
+
+
+@dataclass(frozen=True)
+class Adequacy:
+    """F test of the model (2.7-2.8) on the paper's basis and on the trial-mean basis.
+
+    ``adequate`` / ``adequate_mean_basis`` are None when the trial variances are not homogeneous
+    (Cochran rejected), since S^2_e is then not a valid error estimate."""
+
+    s2_r: float
+    dof_r: int
+    s2_e: float
+    dof_e: int
+    f_p: float
+    f_critical: float
+    p_value: float
+    adequate: bool | None
+    s2_e_mean: float
+    f_p_mean: float
+    p_value_mean: float
+    adequate_mean_basis: bool | None
+    q: float
+
+
+def adequacy_test(
+    s2_r: float,
+    dof_r: int,
+    s2_e: float,
+    s2_e_mean: float,
+    dof_e: int,
+    *,
+    q: float,
+    homogeneous: bool,
+) -> Adequacy:
+    """F_p = S^2_r / S^2_e (2.8) against F_T(1 - q; n - m, nu_e), and the trial-mean variant."""
+    f_p = s2_r / s2_e  # eq 2.8
+    f_p_mean = s2_r / s2_e_mean
+    f_crit = float(stats.f.ppf(1 - q, dof_r, dof_e))
+    return Adequacy(
+        s2_r=s2_r,
+        dof_r=dof_r,
+        s2_e=s2_e,
+        dof_e=dof_e,
+        f_p=f_p,
+        f_critical=f_crit,
+        p_value=float(stats.f.sf(f_p, dof_r, dof_e)),
+        adequate=bool(f_p < f_crit) if homogeneous else None,
+        s2_e_mean=s2_e_mean,
+        f_p_mean=f_p_mean,
+        p_value_mean=float(stats.f.sf(f_p_mean, dof_r, dof_e)),
+        adequate_mean_basis=bool(f_p_mean < f_crit) if homogeneous else None,
+        q=q,
+    )
+
+
+@dataclass(frozen=True)
+class ControlResult:
+    """A control trial (not fitted): observed <delta>, the model's prediction, residual
+    v = <delta> - alpha, judged against S_e (bound t(1 - q/2; nu_e) S_e) and against the
+    (1 - q) prediction interval of eq 2.11."""
+
+    index: int
+    direction_deg: float
+    amplitude_cm: float
+    period_s: float
+    observed_deg: float
+    predicted_deg: float
+    residual_deg: float
+    residual_over_s_e: float
+    s_e_bound_deg: float
+    within_s_e_bound: bool
+    half_width_deg: float
+    within_interval: bool
+
+
+def judge_controls(
+    predictor: Predictor,
+    conditions: Conditions,
+    observed_deg: np.ndarray,
+    indices: list[int],
+    *,
+    s_e: float,
+    dof_e: int,
+) -> tuple[ControlResult, ...]:
+    """Predict each control trial and judge its residual."""
+    if not indices:
+        return ()
+    p = predictor.predict(conditions)
+    bound = float(stats.t.ppf(1 - predictor.q / 2, dof_e)) * s_e
+    results = []
+    for i, index in enumerate(indices):
+        residual = float(observed_deg[i] - p.alpha_deg[i])
+        results.append(
+            ControlResult(
+                index=index,
+                direction_deg=float(conditions.direction_deg[i]),
+                amplitude_cm=float(conditions.amplitude_cm[i]),
+                period_s=float(conditions.period_s[i]),
+                observed_deg=float(observed_deg[i]),
+                predicted_deg=float(p.alpha_deg[i]),
+                residual_deg=residual,
+                residual_over_s_e=residual / s_e,
+                s_e_bound_deg=bound,
+                within_s_e_bound=abs(residual) <= bound,
+                half_width_deg=float(p.half_width_deg[i]),
+                within_interval=abs(residual) <= float(p.half_width_deg[i]),
+            )
+        )
+    return tuple(results)

@@ -1,0 +1,373 @@
+"""A whole campaign through the seed-000 method: trial statistics (2.1-2.4), Cochran (2.5-2.6),
+Gauss-Newton fit of model 1.1 (1.2-1.10), adequacy (2.7-2.8), control trials and forecasts
+(2.10-2.11), and the assumption checks of section 2.
+
+Entry point::
+
+    analyze_campaign(trials, constants, *, q=0.05, start=(7e7, 0.55), admissible=None,
+                     forecast=None, eps=None, eps_se=1e-3, n_repeat=None) -> CampaignAnalysis
+
+The admissible region (the plan's prior range of C and T) is not imposed on the fit: an estimate
+outside it is reported unconstrained, with a warning. (The paper's own example states
+T = 0.1..1 s, yet its data put T near 1.15 s; clipping would bias the fit and its adequacy test.)
+The fit's hard bounds are the physical domain C > 0, T >= 0; Gauss-Newton leaving them, diverging
+or stalling hands the fit to the bounded trust-region path, and the result says so.
+
+``CampaignAnalysis.to_dict()`` returns plain JSON types (no NaN: missing values are null):
+
+- ``schema``: "gyrostand.analysis/1"; ``q``; ``variance_basis``; ``sign_convention``;
+- ``constants``: lP_gcm2s2, H1_gcm2s, earth_rate_rad_s, gravity_cm_s2, latitude_deg;
+- ``trials``: per trial index, role, direction_deg, amplitude_cm, period_s, delta_deg,
+  var_deg2 (eq 2.3), var_mean_deg2 (variance of the mean difference), dof (2.4), n_before,
+  n_under, before / under ({mean_deg, var_deg2, n} or null), source;
+- ``cochran``: g_ex, g_critical, q, nu, k, homogeneous, largest (trial index), pooled_variance
+  (S^2_e of 2.6, deg^2), s_e (deg);
+- ``fit``: parameters, start, estimates, std_errors, covariance, correlation, xtx_inv,
+  trial_indices, fitted_deg, residuals_deg (observed - fitted), rss, s2, n, dof, iterations,
+  converged, reason, path, fallback_reason, condition_number, log (per Gauss-Newton iteration:
+  iteration, theta, step, rss, s2, f_p = s2 / S^2_e);
+- ``adequacy``: s2_r, dof_r, s2_e, dof_e, f_p, f_critical, p_value, adequate, s2_e_mean, f_p_mean,
+  p_value_mean, adequate_mean_basis, q (see `analysis.adequacy`);
+- ``controls``: per control trial index, direction_deg, amplitude_cm, period_s, observed_deg,
+  predicted_deg, residual_deg, residual_over_s_e, s_e_bound_deg, within_s_e_bound,
+  half_width_deg, within_interval;
+- ``assumptions``: per check name, method, statistic, p_value, holds, verdict, detail, series;
+- ``predictor``: constants, C_gcm2s2, T_s, xtx_inv, s2_r, dof, q, n_repeat (rebuild it with
+  `Predictor.from_dict` to call `forecast_grid`);
+- ``forecasts``: per forecast conditions {roll_deg, arm_cm, period_s, course_deg, latitude_deg,
+  motion, amplitude_cm}, direction_deg (K), amplitude_cm (used), alpha_deg, se_deg, se_mean_deg,
+  t, half_width_deg, half_width_mean_deg, lower_deg, upper_deg;
+- ``admissible``: {C_gcm2s2: [lo, hi], T_s: [lo, hi]} or null; ``warnings``: list of strings.
+"""
+
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, fields, is_dataclass
+from typing import Any
+
+import numpy as np
+
+from analysis.adequacy import Adequacy, ControlResult, adequacy_test, judge_controls
+from analysis.assumptions import (
+    AssumptionCheck,
+    homogeneity_check,
+    independence_check,
+    normality_check,
+)
+from analysis.cochran import CochranResult, cochran_test
+from analysis.errors import (
+    AnalysisError,
+    ConvergenceError,
+    MissingDataError,
+    SingularDesignError,
+    TooFewTrialsError,
+    ZeroVarianceError,
+)
+from analysis.forecast import SIGN_CONVENTION, Forecast, Predictor, ShipConditions, forecast_ship
+from analysis.gyro_model import PARAMETERS, Conditions, KnownConstants, RollingErrorModel
+from analysis.nlsq import COND_LIMIT, FitResult, fit_nonlinear
+from analysis.trials import TrialInput, TrialStats, trial_statistics
+
+VARIANCE_BASIS = (
+    "S^2{<delta_i>} = S1^2 + S2^2 (eq 2.3, single-observation variances) for Cochran, S_e and "
+    "F_p; var_mean = S1^2/N1 + S2^2/N2 (variance of <delta_i>) for the trial-mean basis"
+)
+PHYSICAL_BOUNDS = {"C_gcm2s2": (0.0, np.inf), "T_s": (0.0, np.inf)}
+
+
+@dataclass(frozen=True)
+class AdmissibleRegion:
+    """The plan's prior range of the parameters (checked and reported, not imposed)."""
+
+    C_gcm2s2: tuple[float, float]
+    T_s: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class CampaignAnalysis:
+    """Everything the seed-000 method concludes about one campaign (see module docstring)."""
+
+    q: float
+    constants: KnownConstants
+    start: dict[str, float]
+    trials: tuple[TrialStats, ...]
+    cochran: CochranResult
+    fit: FitResult
+    fit_indices: tuple[int, ...]
+    iteration_f_p: tuple[float, ...]
+    adequacy: Adequacy
+    controls: tuple[ControlResult, ...]
+    assumptions: tuple[AssumptionCheck, ...]
+    predictor: Predictor
+    forecasts: tuple[Forecast, ...]
+    admissible: AdmissibleRegion | None
+    warnings: tuple[str, ...]
+
+    @property
+    def estimates(self) -> dict[str, float]:
+        return self.fit.estimates
+
+    def to_dict(self) -> dict[str, Any]:
+        fit = self.fit
+        log = [
+            {**asdict(record), "f_p": f_p}
+            for record, f_p in zip(fit.log, self.iteration_f_p, strict=True)
+        ]
+        data = {
+            "schema": "gyrostand.analysis/1",
+            "q": self.q,
+            "variance_basis": VARIANCE_BASIS,
+            "sign_convention": SIGN_CONVENTION,
+            "constants": asdict(self.constants),
+            "trials": [asdict(t) for t in self.trials],
+            "cochran": asdict(self.cochran),
+            "fit": {
+                "parameters": list(fit.names),
+                "start": self.start,
+                "estimates": fit.estimates,
+                "std_errors": fit.std_errors,
+                "covariance": fit.covariance,
+                "correlation": fit.correlation,
+                "xtx_inv": fit.xtx_inv,
+                "trial_indices": list(self.fit_indices),
+                "fitted_deg": fit.fitted,
+                "residuals_deg": fit.residuals,
+                "rss": fit.rss,
+                "s2": fit.s2,
+                "n": fit.n,
+                "dof": fit.dof,
+                "iterations": fit.iterations,
+                "converged": fit.converged,
+                "reason": fit.reason,
+                "path": fit.path,
+                "fallback_reason": fit.fallback_reason,
+                "condition_number": fit.condition_number,
+                "log": log,
+            },
+            "adequacy": asdict(self.adequacy),
+            "controls": [asdict(c) for c in self.controls],
+            "assumptions": [{**asdict(a), "verdict": a.verdict} for a in self.assumptions],
+            "predictor": self.predictor.to_dict(),
+            "forecasts": [
+                {
+                    **asdict(f),
+                    "lower_deg": f.interval_deg[0],
+                    "upper_deg": f.interval_deg[1],
+                }
+                for f in self.forecasts
+            ],
+            "admissible": asdict(self.admissible) if self.admissible else None,
+            "warnings": list(self.warnings),
+        }
+        return json_safe(data)
+
+
+def json_safe(value: Any) -> Any:
+    """Plain JSON types: numpy scalars/arrays to floats/lists, tuples to lists, NaN/inf to None."""
+    if is_dataclass(value) and not isinstance(value, type):
+        return json_safe({f.name: getattr(value, f.name) for f in fields(value)})
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple | np.ndarray):
+        return [json_safe(v) for v in value]
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        return float(value) if np.isfinite(value) else None
+    return value
+
+
+def _fit_trials(stats: tuple[TrialStats, ...]) -> list[TrialStats]:
+    """The fitted trials, checked: enough of them, each with a positive variance."""
+    indices = [s.index for s in stats]
+    duplicated = [i for i, n in Counter(indices).items() if n > 1]
+    if duplicated:
+        raise AnalysisError(f"trial {duplicated[0]} appears more than once")
+    fit = [s for s in stats if s.role == "fit"]
+    m = len(PARAMETERS)
+    if len(fit) < m + 1:
+        raise TooFewTrialsError(
+            f"{len(fit)} fit trials for {m} parameters: need at least {m + 1} (n - m >= 1)"
+        )
+    for s in fit:
+        if s.var_deg2 is None:
+            raise MissingDataError(f"trial {s.index}: a fit trial needs its variance (eq 2.3)")
+        if s.var_deg2 == 0:
+            raise ZeroVarianceError(
+                f"trial {s.index}: variance S^2{{<delta_i>}} (eq 2.3) is zero: identical readings"
+                " (stuck or coarsely quantised sensor?)"
+            )
+    return fit
+
+
+def _conditions(stats: Sequence[TrialStats]) -> Conditions:
+    return Conditions(
+        direction_deg=np.array([s.direction_deg for s in stats]),
+        amplitude_cm=np.array([s.amplitude_cm for s in stats]),
+        period_s=np.array([s.period_s for s in stats]),
+    )
+
+
+def _check_design(model: RollingErrorModel, x: Conditions, theta0: dict[str, float]) -> None:
+    """Refuse designs where X^T X is singular whatever C and T are."""
+    alpha = model(x, **theta0)
+    if np.all(np.abs(alpha) < 1e-12):
+        raise SingularDesignError(
+            "the model predicts no error in any fit trial (sin 2K = 0 or A = 0 in every one: "
+            f"K = {sorted(set(x.direction_deg.tolist()))} deg): C and T cannot be estimated"
+        )
+    if np.unique(x.period_s).size == 1:
+        raise SingularDesignError(
+            f"all fit trials share one period tau = {x.period_s[0]} s: the partials x1 and x2 "
+            "(eq 1.4) are proportional, X^T X is singular; rock at two periods at least"
+        )
+    jac = model.jacobian(x, **theta0)
+    scaled = jac / np.linalg.norm(jac, axis=0)
+    cond = float(np.linalg.cond(scaled))
+    if not cond < COND_LIMIT:
+        raise SingularDesignError(f"X^T X is near-singular (condition number of X {cond:.3g})")
+
+
+def analyze_campaign(
+    trials: Sequence[TrialInput],
+    constants: KnownConstants,
+    *,
+    q: float = 0.05,
+    start: tuple[float, float] = (7e7, 0.55),
+    admissible: AdmissibleRegion | None = None,
+    forecast: ShipConditions | Sequence[ShipConditions] | None = None,
+    eps: dict[str, float] | None = None,
+    eps_se: float = 1e-3,
+    n_repeat: int | None = None,
+) -> CampaignAnalysis:
+    """Run the seed-000 method on a campaign.
+
+    q: significance level of every test; start: (C0 in g cm^2 s^-2, T0 in s); eps: absolute
+    thresholds of eq 1.8 per parameter (default: eps_se x the standard error at the iterate, i.e.
+    steps below 0.1 % of a standard error); n_repeat: N of the mean-of-N prediction variant
+    (default: the fit trials' series length)."""
+    if not 0 < q < 1:
+        raise AnalysisError(f"significance level q = {q} must lie in (0, 1)")
+    theta0 = dict(zip(PARAMETERS, map(float, start), strict=True))
+    if not (theta0["C_gcm2s2"] > 0 and theta0["T_s"] >= 0):
+        raise AnalysisError(f"start values must have C > 0 and T >= 0, got {theta0}")
+    stats = tuple(trial_statistics(t) for t in trials)
+    fit_stats = _fit_trials(stats)
+    labels = [s.index for s in fit_stats]
+    cochran = cochran_test(
+        [s.var_deg2 for s in fit_stats], [s.dof for s in fit_stats], q=q, labels=labels
+    )
+    model = RollingErrorModel(constants)
+    x = _conditions(fit_stats)
+    _check_design(model, x, theta0)
+    fit = fit_nonlinear(
+        model,
+        x,
+        [s.delta_deg for s in fit_stats],
+        theta0,
+        jacobian=model.jacobian,
+        bounds=PHYSICAL_BOUNDS,
+        x_scale={k: max(abs(v), 1e-12) for k, v in theta0.items()},
+        eps=eps,
+        eps_se=eps_se,
+    )
+    if not fit.converged:
+        error = SingularDesignError if "degenerate" in fit.reason else ConvergenceError
+        raise error(f"the fit of C and T failed: {fit.reason}")
+
+    s2_e = cochran.pooled_variance  # eq 2.6
+    dof_e = sum(s.dof for s in fit_stats) // 2  # n (N - 1), as the paper's example
+    adequacy = adequacy_test(
+        fit.s2,  # eq 2.7 = eq 1.9 at the solution
+        fit.dof,
+        s2_e,
+        float(np.mean([s.var_mean_deg2 for s in fit_stats])),
+        dof_e,
+        q=q,
+        homogeneous=cochran.homogeneous,
+    )
+    predictor = Predictor(
+        constants=constants,
+        C_gcm2s2=fit.estimates["C_gcm2s2"],
+        T_s=fit.estimates["T_s"],
+        xtx_inv=tuple(tuple(float(v) for v in row) for row in fit.xtx_inv),
+        s2_r=fit.s2,
+        dof=fit.dof,
+        q=q,
+        n_repeat=n_repeat or Counter(s.n_under for s in fit_stats).most_common(1)[0][0],
+    )
+    control_stats = [s for s in stats if s.role == "control"]
+    controls = judge_controls(
+        predictor,
+        _conditions(control_stats),
+        np.array([s.delta_deg for s in control_stats]),
+        [s.index for s in control_stats],
+        s_e=cochran.s_e,
+        dof_e=dof_e,
+    )
+    assumptions = (
+        normality_check(trials, q),
+        independence_check(trials, q),
+        homogeneity_check(cochran),
+    )
+    if forecast is None:
+        ships: Sequence[ShipConditions] = ()
+    else:
+        ships = (forecast,) if isinstance(forecast, ShipConditions) else forecast
+    return CampaignAnalysis(
+        q=q,
+        constants=constants,
+        start=theta0,
+        trials=stats,
+        cochran=cochran,
+        fit=fit,
+        fit_indices=tuple(labels),
+        iteration_f_p=tuple(r.s2 / s2_e for r in fit.log),
+        adequacy=adequacy,
+        controls=controls,
+        assumptions=assumptions,
+        predictor=predictor,
+        forecasts=tuple(forecast_ship(predictor, ship) for ship in ships),
+        admissible=admissible,
+        warnings=_warnings(fit, cochran, adequacy, assumptions, admissible),
+    )
+
+
+def _warnings(
+    fit: FitResult,
+    cochran: CochranResult,
+    adequacy: Adequacy,
+    assumptions: tuple[AssumptionCheck, ...],
+    admissible: AdmissibleRegion | None,
+) -> tuple[str, ...]:
+    """Plain-language cautions a report must carry."""
+    found = []
+    if fit.path != "gauss-newton":
+        found.append(f"Gauss-Newton failed ({fit.fallback_reason}); trust-region result used")
+    if admissible is not None:
+        for name in PARAMETERS:
+            lo, hi = getattr(admissible, name)
+            value = fit.estimates[name]
+            if not lo <= value <= hi:
+                found.append(
+                    f"{name} = {value:.6g} lies outside the admissible region [{lo:g}, {hi:g}] "
+                    "stated in the plan; reported unconstrained"
+                )
+    if not cochran.homogeneous:
+        found.append(
+            f"trial variances are not homogeneous (Cochran G_ex = {cochran.g_ex:.4f} >= "
+            f"G* = {cochran.g_critical:.4f}; trial {cochran.largest}): S_e and the adequacy "
+            "test are not valid"
+        )
+    elif adequacy.adequate != adequacy.adequate_mean_basis:
+        found.append(
+            f"adequacy depends on the error basis: F_p = {adequacy.f_p:.3g} on the paper's "
+            f"single-observation basis, {adequacy.f_p_mean:.3g} on the trial-mean basis "
+            f"(F_T = {adequacy.f_critical:.3g})"
+        )
+    for check in assumptions:
+        if check.holds is False and check.name != "homogeneity":
+            found.append(f"assumption of {check.name} violated: {check.detail}")
+    return tuple(found)

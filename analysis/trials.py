@@ -1,0 +1,235 @@
+"""Trial inputs and their statistics, seed 000 eqs 2.1-2.4.
+
+Each trial i has a series j=1 of readings before rocking and j=2 under rocking (degrees). A trial
+is given in exactly one of three forms:
+
+- raw observations: ``before_deg`` and ``under_deg`` (N1 and N2 readings, N1 may differ from N2);
+- per-series summaries: ``before`` and ``under`` (`SeriesSummary`: mean, variance, N);
+- the per-trial figures the paper prints: ``delta_mean_deg`` = <delta_i>, ``delta_var_deg2`` =
+  S^2{<delta_i>} of eq 2.3 and ``n_obs`` = N per series (variance optional for control trials).
+
+Variance basis: ``var_deg2`` is the paper's eq 2.3, the sum of the two single-observation
+variances (what Cochran's test and S_e use); ``var_mean_deg2`` = S1^2/N1 + S2^2/N2 is the variance
+of the mean difference <delta_i> itself. Both are kept so a report can show both.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from analysis.errors import (
+    AnalysisError,
+    MissingDataError,
+    NonFiniteError,
+    TooFewObservationsError,
+)
+
+ROLES = ("fit", "control")
+
+
+@dataclass(frozen=True)
+class SeriesSummary:
+    """A pre-averaged series: mean (2.1) in deg, sample variance (2.2, N-1) in deg^2, and N."""
+
+    mean_deg: float
+    var_deg2: float
+    n: int
+
+
+@dataclass(frozen=True)
+class TrialInput:
+    """One stand trial: rocking conditions, role, and its observations in one of three forms."""
+
+    index: int
+    role: str
+    direction_deg: float
+    amplitude_cm: float
+    period_s: float
+    before_deg: tuple[float, ...] | None = None
+    under_deg: tuple[float, ...] | None = None
+    before: SeriesSummary | None = None
+    under: SeriesSummary | None = None
+    delta_mean_deg: float | None = None
+    delta_var_deg2: float | None = None
+    n_obs: int | None = None
+
+    def __post_init__(self) -> None:
+        name = f"trial {self.index}"
+        if self.role not in ROLES:
+            raise AnalysisError(f"{name}: role {self.role!r} must be one of {ROLES}")
+        for field in ("direction_deg", "amplitude_cm", "period_s"):
+            if not np.isfinite(getattr(self, field)):
+                raise NonFiniteError(f"{name}: {field} = {getattr(self, field)} is not finite")
+        if self.amplitude_cm < 0 or self.period_s <= 0:
+            raise AnalysisError(f"{name}: amplitude must be >= 0 and period > 0")
+        forms = [
+            self.before_deg is not None or self.under_deg is not None,
+            self.before is not None or self.under is not None,
+            self.delta_mean_deg is not None or self.delta_var_deg2 is not None,
+        ]
+        if sum(forms) != 1:
+            raise MissingDataError(
+                f"{name}: give exactly one of raw series (before_deg, under_deg), series "
+                "summaries (before, under), or the trial mean (delta_mean_deg)"
+            )
+        if forms[0]:
+            self._check_raw(name)
+        elif forms[1]:
+            self._check_summaries(name)
+        else:
+            self._check_trial(name)
+
+    def _check_raw(self, name: str) -> None:
+        for field in ("before_deg", "under_deg"):
+            series = getattr(self, field)
+            if series is None:
+                raise MissingDataError(f"{name}: {field} is missing")
+            values = tuple(float(v) for v in series)
+            object.__setattr__(self, field, values)
+            _check_count(f"{name}, {field}", len(values))
+            bad = [k for k, v in enumerate(values) if not np.isfinite(v)]
+            if bad:
+                raise NonFiniteError(f"{name}: {field}[{bad[0]}] is not finite")
+
+    def _check_summaries(self, name: str) -> None:
+        for field in ("before", "under"):
+            summary = getattr(self, field)
+            if summary is None:
+                raise MissingDataError(f"{name}: series summary {field} is missing")
+            _check_count(f"{name}, {field}", summary.n)
+            _check_value(f"{name}: {field} mean", summary.mean_deg)
+            _check_variance(f"{name}: {field} variance", summary.var_deg2)
+
+    def _check_trial(self, name: str) -> None:
+        if self.delta_mean_deg is None:
+            raise MissingDataError(f"{name}: delta_mean_deg is missing")
+        _check_value(f"{name}: delta_mean_deg", self.delta_mean_deg)
+        if self.delta_var_deg2 is not None:
+            _check_variance(f"{name}: delta_var_deg2", self.delta_var_deg2)
+            if self.n_obs is None:
+                raise MissingDataError(f"{name}: n_obs is needed with delta_var_deg2")
+        if self.n_obs is not None:
+            _check_count(f"{name}, n_obs", self.n_obs)
+
+
+def _check_count(what: str, n: int) -> None:
+    if int(n) != n or n < 2:
+        raise TooFewObservationsError(f"{what}: N = {n} < 2 observations, variance undefined")
+
+
+def _check_value(what: str, value: float) -> None:
+    if not np.isfinite(value):
+        raise NonFiniteError(f"{what} = {value} is not finite")
+
+
+def _check_variance(what: str, value: float) -> None:
+    _check_value(what, value)
+    if value < 0:
+        raise AnalysisError(f"{what} = {value} is negative")
+
+
+@dataclass(frozen=True)
+class DifferenceStats:
+    """Vectorised eqs 2.1-2.4 over k trials: arrays of shape (k,)."""
+
+    delta_deg: np.ndarray
+    var_deg2: np.ndarray
+    var_mean_deg2: np.ndarray
+    dof: np.ndarray
+
+
+def series_moments(observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean (2.1) and sample variance with N-1 (2.2) along the last axis."""
+    return observations.mean(axis=-1), observations.var(axis=-1, ddof=1)
+
+
+def difference_statistics(before: np.ndarray, under: np.ndarray) -> DifferenceStats:
+    """Rolling error <delta_i> = <delta_2i> - <delta_1i> and its variances for (k, N) arrays of
+    readings before and under rocking (N1 and N2 may differ)."""
+    m1, v1 = series_moments(before)
+    m2, v2 = series_moments(under)
+    n1, n2 = before.shape[-1], under.shape[-1]
+    return DifferenceStats(
+        delta_deg=m2 - m1,
+        var_deg2=v1 + v2,  # eq 2.3
+        var_mean_deg2=v1 / n1 + v2 / n2,
+        dof=np.full(np.shape(m1), n1 + n2 - 2),  # eq 2.4
+    )
+
+
+@dataclass(frozen=True)
+class TrialStats:
+    """Statistics of one trial. ``var_deg2`` is eq 2.3 (single-observation basis), ``dof`` eq 2.4;
+    ``var_mean_deg2`` is the variance of <delta_i>. Variances are None when the input gives none
+    (control trials as printed in the paper). ``source`` names the input form."""
+
+    index: int
+    role: str
+    direction_deg: float
+    amplitude_cm: float
+    period_s: float
+    delta_deg: float
+    var_deg2: float | None
+    var_mean_deg2: float | None
+    dof: int | None
+    n_before: int | None
+    n_under: int | None
+    before: SeriesSummary | None
+    under: SeriesSummary | None
+    source: str
+
+
+def trial_statistics(trial: TrialInput) -> TrialStats:
+    """Eqs 2.1-2.4 for one trial, whatever its input form."""
+    common = {
+        "index": trial.index,
+        "role": trial.role,
+        "direction_deg": float(trial.direction_deg),
+        "amplitude_cm": float(trial.amplitude_cm),
+        "period_s": float(trial.period_s),
+    }
+    if trial.before_deg is not None:
+        before, under = np.array(trial.before_deg), np.array(trial.under_deg)
+        m1, v1 = series_moments(before)
+        m2, v2 = series_moments(under)
+        d = difference_statistics(before, under)
+        return TrialStats(
+            **common,
+            delta_deg=float(d.delta_deg),
+            var_deg2=float(d.var_deg2),
+            var_mean_deg2=float(d.var_mean_deg2),
+            dof=int(d.dof),
+            n_before=before.size,
+            n_under=under.size,
+            before=SeriesSummary(float(m1), float(v1), before.size),
+            under=SeriesSummary(float(m2), float(v2), under.size),
+            source="observations",
+        )
+    if trial.before is not None:
+        s1, s2 = trial.before, trial.under
+        return TrialStats(
+            **common,
+            delta_deg=s2.mean_deg - s1.mean_deg,
+            var_deg2=s1.var_deg2 + s2.var_deg2,  # eq 2.3
+            var_mean_deg2=s1.var_deg2 / s1.n + s2.var_deg2 / s2.n,
+            dof=s1.n + s2.n - 2,  # eq 2.4
+            n_before=s1.n,
+            n_under=s2.n,
+            before=s1,
+            under=s2,
+            source="series",
+        )
+    n = trial.n_obs
+    has_var = trial.delta_var_deg2 is not None
+    return TrialStats(
+        **common,
+        delta_deg=float(trial.delta_mean_deg),
+        var_deg2=float(trial.delta_var_deg2) if has_var else None,
+        var_mean_deg2=float(trial.delta_var_deg2) / n if has_var else None,
+        dof=2 * (n - 1) if n is not None else None,  # eq 2.4, N1 = N2 = N
+        n_before=n,
+        n_under=n,
+        before=None,
+        under=None,
+        source="trial",
+    )
