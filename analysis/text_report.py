@@ -1,0 +1,168 @@
+"""Plain-text rendering of a `CampaignAnalysis`: trial table, Cochran, fit with its Gauss-Newton
+log, adequacy, control trials, assumption checks, forecasts and warnings."""
+
+from collections.abc import Sequence
+
+from analysis.campaign import VARIANCE_BASIS, CampaignAnalysis
+from analysis.forecast import SIGN_CONVENTION
+
+
+def _table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    """Right-aligned columns under a rule."""
+    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(headers)]
+    line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths, strict=True))  # noqa: E731
+    return [line(headers), "  ".join("-" * w for w in widths), *(line(r) for r in rows)]
+
+
+def _opt(value: float | None, fmt: str) -> str:
+    return "-" if value is None else format(value, fmt)
+
+
+def _verdict(value: bool | None, yes: str, no: str) -> str:
+    return "not assessed" if value is None else yes if value else no
+
+
+def trials_section(a: CampaignAnalysis) -> list[str]:
+    rows = [
+        [
+            str(t.index),
+            t.role,
+            f"{t.direction_deg:g}",
+            f"{t.amplitude_cm:g}",
+            f"{t.period_s:g}",
+            f"{t.delta_deg:+.4f}",
+            _opt(None if t.var_deg2 is None else t.var_deg2 * 1e4, ".3f"),
+            _opt(None if t.var_mean_deg2 is None else t.var_mean_deg2 * 1e4, ".3f"),
+            _opt(t.dof, "d"),
+        ]
+        for t in a.trials
+    ]
+    headers = ["i", "role", "K deg", "A cm", "tau s", "<delta> deg", "S2 e-4", "S2/N e-4", "nu"]
+    return [
+        "TRIALS (eqs 2.1-2.4)",
+        *_table(headers, rows),
+        f"variance basis: {VARIANCE_BASIS}",
+    ]
+
+
+def cochran_section(a: CampaignAnalysis) -> list[str]:
+    c = a.cochran
+    verdict = "homogeneous" if c.homogeneous else f"NOT homogeneous (trial {c.largest})"
+    return [
+        "COCHRAN TEST (eqs 2.5-2.6)",
+        f"G_ex = {c.g_ex:.4f}, G* = {c.g_critical:.4f} (q = {c.q}, nu = {c.nu}, k = {c.k}): "
+        f"{verdict}",
+        f"S^2_e = {c.pooled_variance:.4g} deg^2, S_e = {c.s_e:.4f} deg",
+    ]
+
+
+def fit_section(a: CampaignAnalysis) -> list[str]:
+    fit = a.fit
+    names = fit.names
+    rows = [
+        [
+            str(r.iteration),
+            *(f"{r.theta[n]:.7g}" for n in names),
+            *(f"{r.step[n]:+.4g}" for n in names),
+            f"{r.s2:.4g}",
+            f"{f_p:.4g}",
+        ]
+        for r, f_p in zip(fit.log, a.iteration_f_p, strict=True)
+    ]
+    headers = ["d", *names, *(f"a({n})" for n in names), "S^2", "F_p"]
+    corr = fit.correlation[0, 1]
+    return [
+        "FIT OF MODEL 1.1 (Gauss-Newton, eqs 1.2-1.10)",
+        *_table(headers, rows),
+        "",
+        *fit.summary().splitlines(),
+        f"correlation(C, T) = {corr:+.3f}",
+    ]
+
+
+def adequacy_section(a: CampaignAnalysis) -> list[str]:
+    d = a.adequacy
+    return [
+        "ADEQUACY (eqs 2.7-2.8)",
+        f"S^2_r = {d.s2_r:.4g} deg^2 (nu_r = {d.dof_r}), S^2_e = {d.s2_e:.4g} deg^2 "
+        f"(nu_e = {d.dof_e}), F_T(1 - {d.q}; {d.dof_r}, {d.dof_e}) = {d.f_critical:.3f}",
+        f"paper's basis (eq 2.8): F_p = {d.f_p:.3f} (p = {d.p_value:.3g}): "
+        + _verdict(d.adequate, "adequate", "NOT adequate"),
+        f"trial-mean basis (S^2_e/N = {d.s2_e_mean:.4g}): F_p = {d.f_p_mean:.3f} "
+        f"(p = {d.p_value_mean:.3g}): "
+        + _verdict(d.adequate_mean_basis, "adequate", "NOT adequate"),
+    ]
+
+
+def controls_section(a: CampaignAnalysis) -> list[str]:
+    if not a.controls:
+        return ["CONTROL TRIALS", "none"]
+    rows = [
+        [
+            str(c.index),
+            f"{c.observed_deg:+.4f}",
+            f"{c.predicted_deg:+.4f}",
+            f"{c.residual_deg:+.4f}",
+            f"{c.residual_over_s_e:+.2f}",
+            "yes" if c.within_s_e_bound else "NO",
+            f"{c.half_width_deg:.4f}",
+            "yes" if c.within_interval else "NO",
+        ]
+        for c in a.controls
+    ]
+    bound = a.controls[0].s_e_bound_deg
+    return [
+        "CONTROL TRIALS (predicted by the fit, eqs 2.10-2.11)",
+        *_table(
+            ["i", "observed", "predicted", "v deg", "v/S_e", "|v|<=bound", "PI +/-", "in PI"],
+            rows,
+        ),
+        f"bound = t(1 - q/2; nu_e) S_e = {bound:.4f} deg; PI: {1 - a.q:.0%} prediction interval",
+    ]
+
+
+def assumptions_section(a: CampaignAnalysis) -> list[str]:
+    lines = ["ASSUMPTIONS (section 2)"]
+    for check in a.assumptions:
+        stat = "" if check.statistic is None else f", statistic {check.statistic:.4g}"
+        p = "" if check.p_value is None else f", p = {check.p_value:.3g}"
+        lines.append(f"{check.name}: {check.verdict} ({check.method}{stat}{p}; {check.detail})")
+    return lines
+
+
+def forecasts_section(a: CampaignAnalysis) -> list[str]:
+    if not a.forecasts:
+        return ["FORECAST", "none requested"]
+    lines = ["FORECAST (eqs 1.1, 2.10-2.11)", SIGN_CONVENTION]
+    for f in a.forecasts:
+        s = f.conditions
+        lo, hi = f.interval_deg
+        given = (
+            "" if s.amplitude_cm is None else f" given; theta0 h = {s.amplitude_from_roll_cm:.4g}"
+        )
+        lines += [
+            f"{s.motion} {s.roll_deg:g} deg at arm {s.arm_cm:g} cm (A = {f.amplitude_cm:.4g} cm"
+            f"{given}), "
+            f"tau = {s.period_s:g} s, course {s.course_deg:g} deg (K = {f.direction_deg:g} deg), "
+            f"latitude {s.latitude_deg:g} deg",
+            f"alpha_p = {f.alpha_deg:+.3f} deg, S = {f.se_deg:.4f} deg, t = {f.t:.3f}: "
+            f"{f.alpha_deg:+.3f} +/- {f.half_width_deg:.3f} deg [{lo:+.3f}, {hi:+.3f}] "
+            f"({1 - a.q:.0%}); mean of N: +/- {f.half_width_mean_deg:.3f} deg",
+        ]
+    return lines
+
+
+def render_text(analysis: CampaignAnalysis) -> str:
+    """The whole analysis as plain text, sections separated by blank lines."""
+    sections = [
+        trials_section(analysis),
+        cochran_section(analysis),
+        fit_section(analysis),
+        adequacy_section(analysis),
+        controls_section(analysis),
+        assumptions_section(analysis),
+        forecasts_section(analysis),
+    ]
+    if analysis.warnings:
+        sections.append(["WARNINGS", *(f"- {w}" for w in analysis.warnings)])
+    return "\n\n".join("\n".join(s) for s in sections) + "\n"
