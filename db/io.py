@@ -62,8 +62,8 @@ class ImportFileError(ValueError):
         shown = "; ".join(problems[:MAX_REPORTED])
         more = len(problems) - MAX_REPORTED
         tail = f"; ... and {more} more" if more > 0 else ""
-        count = f"{len(problems)} problem{'s' if len(problems) > 1 else ''}"
-        super().__init__(f"{path}: {count}: {shown}{tail}")
+        count = f"{len(problems)} problems: " if len(problems) > 1 else ""
+        super().__init__(f"{path}: {count}{shown}{tail}")
 
 
 class MetadataError(ValueError):
@@ -549,6 +549,9 @@ class CampaignFrames:
     series: pd.DataFrame
     trials: pd.DataFrame
 
+    def tables(self) -> dict[str, pd.DataFrame]:
+        return {"observations": self.observations, "series": self.series, "trials": self.trials}
+
 
 def campaign_frames(session: Session, campaign_id: int) -> CampaignFrames:
     """Observations as stored; series and trial summaries from the observations (seed 000
@@ -624,7 +627,7 @@ def export_campaign(session: Session, campaign_id: int, fmt: str, out: Path) -> 
     if fmt not in EXPORT_FORMATS:
         raise ValueError(f"unknown export format {fmt!r} (one of {', '.join(EXPORT_FORMATS)})")
     frames = campaign_frames(session, campaign_id)
-    tables = {"observations": frames.observations, "series": frames.series, "trials": frames.trials}
+    tables = frames.tables()
     out.parent.mkdir(parents=True, exist_ok=True)
     if fmt == "xlsx":
         with pd.ExcelWriter(out, engine="openpyxl") as workbook:

@@ -1,19 +1,148 @@
-"""CLI: import, export."""
+"""CLI: import historical measurements, export a campaign (CSV, Parquet, Excel)."""
+
+import tomllib
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated, Any
 
 import typer
+from sqlalchemy.orm import Session, sessionmaker
 
-from gyrostand.errors import not_implemented
+from db.io import (
+    SEED_000_METADATA,
+    ImportFileError,
+    MetadataError,
+    check_metadata,
+    export_campaign,
+    export_paths,
+    read_import_file,
+    store_import,
+)
+from db.queries import CampaignNotFound
+from db.session import DatabaseVersionError, database_url, open_database
+from gyrostand import __version__
+from gyrostand.errors import fail
+
+DEFAULT_DB = "runs/gyrostand.sqlite"
+PLAN_KEYS = {
+    "instrument": ("model", "serial", "lp_gcm2s2", "h1_gcm2s"),
+    "site": ("latitude_deg", "earth_rate_rad_s", "gravity_cm_s2"),
+}
+
+DbOption = Annotated[
+    str, typer.Option("--db", help="Database: a SQLite file path or any SQLAlchemy URL.")
+]
+
+
+class ExportFormat(StrEnum):
+    csv = "csv"
+    parquet = "parquet"
+    xlsx = "xlsx"
+
+
+def open_db(db: str, *, must_exist: bool = False) -> sessionmaker[Session]:
+    """The database's session factory, or a one-line error (missing file, wrong schema)."""
+    if must_exist and "://" not in db and not Path(db).exists():
+        fail(f"no database at {db}")
+    try:
+        return open_database(database_url(db))
+    except DatabaseVersionError as error:
+        fail(str(error))
+
+
+def plan_metadata(plan: Path) -> dict[str, Any]:
+    """Instrument, site and operator from a campaign plan's [instrument], [site], [campaign]."""
+    try:
+        text = plan.read_text(encoding="utf-8")
+        document = tomllib.loads(text)
+    except OSError as error:
+        fail(f"cannot read plan {plan}: {error.strerror}")
+    except tomllib.TOMLDecodeError as error:
+        fail(f"{plan}: not valid TOML: {error}")
+    metadata: dict[str, Any] = {"plan_toml": text}
+    missing = []
+    for table, keys in PLAN_KEYS.items():
+        section = document.get(table)
+        section = section if isinstance(section, dict) else {}
+        for key in keys:
+            if key in section:
+                metadata[key] = section[key]
+            else:
+                missing.append(f"{table}.{key}")
+    if missing:
+        fail(f"{plan}: missing {', '.join(missing)}")
+    campaign = document.get("campaign")
+    if isinstance(campaign, dict) and "operator" in campaign:
+        metadata["operator"] = campaign["operator"]
+    return metadata
 
 
 def register(app: typer.Typer) -> None:
-    """Add the import, export command(s) to the CLI."""
+    """Add the import and export commands to the CLI."""
 
     @app.command("import")
-    def import_() -> None:
-        """Import historical manual measurements from a file."""
-        not_implemented("import")
+    def import_(
+        file: Annotated[Path, typer.Argument(help="CSV, Excel (.xlsx) or Parquet file.")],
+        plan: Annotated[
+            Path | None,
+            typer.Option(
+                help="Campaign plan (TOML) whose instrument and site tables describe the data."
+            ),
+        ] = None,
+        operator: Annotated[str | None, typer.Option(help="Who made the measurements.")] = None,
+        db: DbOption = DEFAULT_DB,
+    ) -> None:
+        """Import historical manual measurements: per observation, per series (mean, variance,
+        N) or per trial as the paper's table prints it. Nothing is written unless the whole
+        file is valid."""
+        metadata = dict(SEED_000_METADATA) if plan is None else plan_metadata(plan)
+        if operator is not None:
+            metadata["operator"] = operator
+        metadata["software_version"] = __version__
+        try:
+            check_metadata(metadata)
+            data = read_import_file(file)
+        except (MetadataError, ImportFileError) as error:
+            fail(str(error))
+        sessions = open_db(db)
+        with sessions.begin() as session:
+            campaign_id = store_import(session, data, metadata).id
+        if plan is None:
+            typer.echo(
+                "no --plan: used the seed 000 example instrument and site (lP = 6.57e6 g*cm^2/s^2,"
+                " H1 = 1.55e8 g*cm^2/s, latitude 46.5 deg, U = 7.3e-5 rad/s, g = 981 cm/s^2)",
+                err=True,
+            )
+        typer.echo(
+            f"imported {file} ({data.form} form, {len(data.trials)} trials, N = {data.n_obs}) "
+            f"as campaign {campaign_id}"
+        )
 
     @app.command()
-    def export() -> None:
-        """Export a campaign's observations (CSV, Parquet, Excel)."""
-        not_implemented("export")
+    def export(
+        campaign: Annotated[int, typer.Argument(help="Campaign id.")],
+        format: Annotated[ExportFormat, typer.Option("--format", "-f")] = ExportFormat.csv,
+        out: Annotated[
+            Path | None,
+            typer.Option(
+                help="Output file (default runs/export/campaign-ID.FORMAT). For csv and parquet "
+                "the series and trial summaries go next to it as NAME.series.EXT, NAME.trials.EXT."
+            ),
+        ] = None,
+        db: DbOption = DEFAULT_DB,
+    ) -> None:
+        """Export a campaign's observations and series/trial summaries (CSV, Parquet, Excel)."""
+        fmt = format.value
+        out = out or Path("runs/export") / f"campaign-{campaign}.{fmt}"
+        sessions = open_db(db, must_exist=True)
+        try:
+            with sessions() as session:
+                frames = export_campaign(session, campaign, fmt, out)
+        except CampaignNotFound as error:
+            fail(str(error))
+        except OSError as error:
+            fail(f"cannot write {out}: {error.strerror or error}")
+        tables = frames.tables()
+        for table, path in export_paths(out, fmt).items():
+            where = f"{path} [{table}]" if fmt == "xlsx" else str(path)
+            typer.echo(f"wrote {where}: {len(tables[table])} {table}")

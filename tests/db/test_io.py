@@ -322,8 +322,8 @@ def test_bad_file_gives_every_problem_and_writes_nothing(
     with pytest.raises(ImportFileError) as caught:
         import_file(sessions, tmp_path / "bad.csv", SEED_000_METADATA)
     assert caught.value.problems == problems
-    count = f"{len(problems)} problem{'s' if len(problems) > 1 else ''}"
-    assert str(caught.value) == f"{tmp_path / 'bad.csv'}: {count}: {'; '.join(problems)}"
+    count = f"{len(problems)} problems: " if len(problems) > 1 else ""
+    assert str(caught.value) == f"{tmp_path / 'bad.csv'}: {count}{'; '.join(problems)}"
     assert dump(db_path) == before
 
 
