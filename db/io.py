@@ -20,6 +20,7 @@ import csv
 import hashlib
 import json
 import math
+import zipfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -298,7 +299,7 @@ def read_import_file(path: Path) -> ImportedFile:
     try:
         content = path.read_bytes()
         columns, raw_rows, problems = reader(path)
-    except (OSError, UnicodeDecodeError, ValueError, ImportError) as error:
+    except (OSError, ValueError, ImportError, zipfile.BadZipFile) as error:
         raise ImportFileError(path, [f"cannot read it: {error}"]) from error
     if not columns:
         raise ImportFileError(path, ["no header row (empty file?)"])

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session, sessionmaker
 
 from db.io import (
@@ -105,8 +106,11 @@ def register(app: typer.Typer) -> None:
         except (MetadataError, ImportFileError) as error:
             fail(str(error))
         sessions = open_db(db)
-        with sessions.begin() as session:
-            campaign_id = store_import(session, data, metadata).id
+        try:
+            with sessions.begin() as session:
+                campaign_id = store_import(session, data, metadata).id
+        except OperationalError as error:  # e.g. locked by another writer; rolled back
+            fail(f"nothing imported, the database refused the write: {error.orig}")
         if plan is None:
             typer.echo(
                 "no --plan: used the seed 000 example instrument and site (lP = 6.57e6 g*cm^2/s^2,"

@@ -1,11 +1,14 @@
-"""Alembic migrations of the gyrostand schema, run programmatically by `db.session.migrate`.
+"""Alembic migrations of the gyrostand schema, run programmatically by `db.session.migrate`
+(no alembic.ini). To add a revision after changing `db/models.py`:
 
-To add a revision after changing `db/models.py` (developers):
+    from alembic import command
+    from db.session import alembic_config, open_database
 
-    .venv/bin/python -c "from alembic import command; from db.session import *; \
-engine = open_database('sqlite:////tmp/head.sqlite').kw['bind']; \
-c = alembic_config(); c.attributes['connection'] = engine.connect(); \
-command.revision(c, message='what changed', autogenerate=True)"
+    engine = open_database("sqlite:////tmp/gyrostand-head.sqlite").kw["bind"]  # at head
+    config = alembic_config()
+    with engine.connect() as connection:
+        config.attributes["connection"] = connection
+        command.revision(config, message="what changed", autogenerate=True, rev_id="0002")
 
-then review the new file in `versions/` (names `NNNN_*.py`, ruff-formatted).
+then review and ruff-format the new file in `versions/`; released revisions are never edited.
 """

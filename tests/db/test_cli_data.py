@@ -140,3 +140,23 @@ def test_database_newer_than_the_code_is_a_clean_error(paper: Path, db_path: Pat
     assert code == 2
     assert err.startswith("gyrostand: error: sqlite:///") and "newer than this gyrostand" in err
     assert err.count("\n") == 1
+
+
+def test_locked_database_is_a_clean_error_and_nothing_is_written(
+    paper: Path, db_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    assert gyrostand("import", paper, "--db", db_path)[0] == 0
+    before = dump(db_path)
+    monkeypatch.setattr("db.session.BUSY_TIMEOUT_MS", 50)
+    other_writer = sqlite3.connect(db_path, isolation_level=None)
+    other_writer.execute("BEGIN IMMEDIATE")  # e.g. a running campaign holding the write lock
+    try:
+        code, _, err = gyrostand("import", paper, "--db", db_path)
+    finally:
+        other_writer.execute("ROLLBACK")
+        other_writer.close()
+    assert code == 2
+    assert err == (
+        "gyrostand: error: nothing imported, the database refused the write: database is locked\n"
+    )
+    assert dump(db_path) == before

@@ -341,6 +341,11 @@ def test_unsupported_or_missing_files(tmp_path: Path) -> None:
         read_import_file(tmp_path / "notes.txt")
     with pytest.raises(ImportFileError, match="cannot read it: .*No such file"):
         read_import_file(tmp_path / "absent.csv")
+    (tmp_path / "zip.xlsx").write_bytes(b"PK\x03\x04 not really a workbook")
+    (tmp_path / "bad.parquet").write_bytes(b"PAR1 not really parquet")
+    for name in ("zip.xlsx", "bad.parquet"):
+        with pytest.raises(ImportFileError, match=f"{name}: cannot read it: "):
+            read_import_file(tmp_path / name)
 
 
 def test_bad_metadata_is_refused_before_anything_is_written(
