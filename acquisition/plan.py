@@ -88,6 +88,11 @@ class TrackingPlan:
 
 
 @dataclass(frozen=True)
+class ChecksPlan:
+    max_error_frames: int  # per series; more fails the trial
+
+
+@dataclass(frozen=True)
 class TimeoutsPlan:
     ack_s: float  # wall seconds for a command acknowledgement
     bus_silence_s: float  # stand seconds without a heading frame
@@ -127,6 +132,7 @@ class Plan:
     settle: SettlePlan
     tracking: TrackingPlan
     timeouts: TimeoutsPlan
+    checks: ChecksPlan
     bus: BusPlan
     dbc_path: str | None
     signals: Mapping[str, Any]
@@ -339,6 +345,10 @@ def parse_plan(text: str) -> Plan:
     )
     t.done()
 
+    ch = _Fields(problems, top.table_of("checks"), "checks")
+    checks = ChecksPlan(max_error_frames=ch.integer("max_error_frames", 10, ge=0))
+    ch.done()
+
     bus = _bus(problems, top.table_of("bus"))
 
     p = _Fields(problems, top.table_of("protocol"), "protocol")
@@ -366,6 +376,7 @@ def parse_plan(text: str) -> Plan:
         settle=settle,
         tracking=tracking,
         timeouts=timeouts,
+        checks=checks,
         bus=bus,
         dbc_path=dbc_path,
         signals=dict(signals),

@@ -1,0 +1,680 @@
+"""The campaign state machine: frames in stream order -> observations, events, commands.
+
+One implementation for live acquisition and offline replay. It sees only decoded frames
+(`FrameBatch`) and times everything by the STAND time they carry, so the result does not depend on
+how the stream is cut into batches nor on how fast it arrives. Per trial i (seed 000 §2):
+
+    stand still -> settle -> N observations, series j = 1 -> set K, A, tau + start -> confirm the
+    stand tracks it -> settle -> N observations, series j = 2 -> stop
+
+Commands go out through a `Commander` (the live one talks to the stand; replay's does nothing):
+in both cases the engine waits for the stand's acknowledgement IN THE STREAM, so a replay of the
+raw log takes exactly the same decisions as the live run did. Results go to a `Sink` (the
+database store).
+
+Arithmetic is exact where order could matter: heading deviations from the trial's reference are
+quantised to nano-degrees and summed as integers, so a window mean is bit-identical however the
+frames were batched.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Literal, Protocol
+
+import numpy as np
+
+from acquisition.batch import FrameBatch, Headings, Statuses
+from acquisition.plan import Plan, TrialPlan
+from stand.protocol import AckFrame, Frame, InvalidFrame
+
+NANO = 1_000_000_000  # deviations are summed as integer nano-degrees
+CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the error frame's identifier
+
+
+@dataclass(frozen=True)
+class Command:
+    kind: Literal["stop", "set", "start"]
+    direction_deg: float = 0.0
+    amplitude_cm: float = 0.0
+    period_s: float = 0.0
+
+    def describe(self) -> str:
+        if self.kind != "set":
+            return self.kind
+        return (
+            f"set K={self.direction_deg:g} deg, A={self.amplitude_cm:g} cm, tau={self.period_s:g} s"
+        )
+
+
+@dataclass(frozen=True)
+class ObservationResult:
+    """delta_jik of seed 000 eq 2.1: the mean heading over one stand-time window."""
+
+    trial: int
+    j: int
+    k: int
+    value_deg: float
+    window_start_ms: int
+    window_end_ms: int
+    frames_used: int
+    frames_lost: int
+    flags: str
+
+
+@dataclass(frozen=True)
+class Measured:
+    """What the stand reported doing during series j = 2 (mean of its status frames)."""
+
+    direction_deg: float
+    amplitude_cm: float
+    period_s: float
+
+
+class Commander(Protocol):
+    def issue(self, command: Command) -> None: ...
+
+
+class Sink(Protocol):
+    def trial_started(self, trial: int) -> None: ...
+    def series_settling(self, trial: int, j: int, t_ms: int) -> None: ...
+    def series_settled(self, trial: int, j: int, t_ms: int, estimate_deg: float) -> None: ...
+    def observation(self, obs: ObservationResult) -> None: ...
+    def series_completed(self, trial: int, j: int) -> None: ...
+    def trial_completed(self, trial: int, measured: Measured | None) -> None: ...
+    def trial_failed(self, trial: int, j: int | None, reason: str) -> None: ...
+    def event(
+        self,
+        kind: str,
+        severity: str,
+        message: str,
+        trial: int | None = None,
+        j: int | None = None,
+        t_ms: int | None = None,
+    ) -> None: ...
+
+
+@dataclass(frozen=True)
+class TrialState:
+    """What the database already holds for a trial (for resume)."""
+
+    completed: bool = False
+    series_done: frozenset[int] = frozenset()
+    committed: dict[int, int] = field(default_factory=dict)  # j -> observations committed
+    reference_deg: float | None = None
+
+
+class Phase(Enum):
+    COMMANDS = "waiting for the stand's acknowledgement"
+    STILL = "confirming the stand is still"
+    TRACKING = "confirming the stand rocks as commanded"
+    SETTLE = "settling"
+    OBSERVE = "observing"
+    DONE = "done"
+
+
+@dataclass
+class _Window:
+    """Accumulators for one settle block or observation window."""
+
+    start_ms: int
+    end_ms: int
+    total_ndeg: int = 0
+    used: int = 0
+    lost: int = 0
+    low: int | None = None
+    high: int | None = None
+    anomalies: Counter[str] = field(default_factory=Counter)
+
+    def add(self, dev: np.ndarray, lost: int, invalid: int) -> None:
+        self.lost += lost
+        if invalid:
+            self.anomalies["invalid"] += invalid
+        if len(dev):
+            self.total_ndeg += int(dev.sum())
+            self.used += len(dev)
+            lo, hi = int(dev.min()), int(dev.max())
+            self.low = lo if self.low is None else min(self.low, lo)
+            self.high = hi if self.high is None else max(self.high, hi)
+
+    def mean_ndeg(self) -> float:
+        return self.total_ndeg / self.used if self.used else math.nan
+
+    def flags(self) -> str:
+        counts = dict(self.anomalies)
+        if self.lost:
+            counts["lost"] = self.lost
+        return ",".join(f"{k}={v}" for k, v in sorted(counts.items()))
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """Where the engine is, for the progress display."""
+
+    trial: int
+    n_trials: int
+    j: int
+    k: int
+    n_obs: int
+    phase: Phase
+    now_ms: int
+    values_deg: tuple[float, ...]
+    settle_spread_deg: float | None
+    remaining_ms: int
+
+
+def _wrap180(x: np.ndarray) -> np.ndarray:
+    return (x + 180.0) % 360.0 - 180.0
+
+
+def _is_bus_off(frame: InvalidFrame) -> bool:
+    return frame.reason == "error frame" and bool(frame.arbitration_id & CAN_ERR_BUSOFF)
+
+
+def _circular_diff_deg(a: float, b: float) -> float:
+    return abs((a - b + 180.0) % 360.0 - 180.0)
+
+
+class Engine:
+    """Drives one campaign plan through the trials still to do, from a stream of frame batches."""
+
+    def __init__(
+        self,
+        plan: Plan,
+        sink: Sink,
+        commander: Commander,
+        progress: dict[int, TrialState] | None = None,
+    ) -> None:
+        self.plan = plan
+        self.sink = sink
+        self.commander = commander
+        self.progress = progress or {}
+        self.todo = [t for t in plan.trials if not self.progress.get(t.index, _NONE).completed]
+        self.outcome: Literal["running", "completed", "paused", "stopped"] = "running"
+        self.phase = Phase.DONE
+        self.now_ms = 0
+        self._last_t: int | None = None
+        self._last_counter: int | None = None
+        self._stopped = False  # the stand acknowledged a stop since the last start
+        self._trial: TrialPlan | None = None
+        self._ref: float | None = None
+        self._j = 1
+        self._k = 1
+        self._values: list[float] = []
+        self._pending: list[Command] = []
+        self._then = Phase.DONE
+        self._phase_start_ms = 0
+        self._window: _Window | None = None
+        self._blocks: list[tuple[float, int]] = []  # (mean deviation ndeg, end ms) per block
+        self._settle_start: int | None = None
+        self._series_errors = 0
+        self._motion: list[tuple[float, float, float]] = []
+        self._last_status_text = ""
+        self._settle_durations: list[int] = []
+        self._next_trial()
+
+    # --------------------------------------------------------------------------- trial sequence
+    def _next_trial(self) -> None:
+        if not self.todo:
+            self.phase = Phase.DONE
+            if self.outcome == "running":
+                self.outcome = "completed"
+            return
+        self._trial = self.todo.pop(0)
+        done = self.progress.get(self._trial.index, _NONE)
+        self._ref = done.reference_deg
+        self._motion = []
+        self.sink.trial_started(self._trial.index)
+        self._j = 2 if 1 in done.series_done else 1
+        self._k = done.committed.get(self._j, 0) + 1
+        self._values = []
+        commands: list[Command] = [] if self._stopped else [Command("stop")]
+        if self._j == 1:
+            self._send(commands, Phase.STILL)
+        else:
+            self._send(commands + self._rocking_commands(), Phase.TRACKING)
+
+    def _rocking_commands(self) -> list[Command]:
+        t = self._trial
+        assert t is not None
+        return [Command("set", t.direction_deg, t.amplitude_cm, t.period_s), Command("start")]
+
+    def _send(self, commands: list[Command], then: Phase) -> None:
+        self._pending = list(commands)
+        self._then = then
+        self._enter(Phase.COMMANDS if commands else then)
+        if commands:
+            self._issue_next()
+
+    def _issue_next(self) -> None:
+        command = self._pending[0]
+        if command.kind != "stop":
+            self._stopped = False
+        self.sink.event("command", "info", command.describe(), self._tidx, None, self.now_ms)
+        self.commander.issue(command)
+        self._phase_start_ms = self.now_ms
+
+    def _enter(self, phase: Phase) -> None:
+        self.phase = phase
+        self._phase_start_ms = self.now_ms
+        if phase is Phase.SETTLE:
+            self._settle_start = None
+            self._blocks = []
+            self._window = None
+            self._series_errors = 0
+
+    @property
+    def _tidx(self) -> int | None:
+        return None if self._trial is None else self._trial.index
+
+    def _window_ms(self) -> int:
+        assert self._trial is not None
+        period = self._trial.period_s if self._j == 2 else None
+        return self.plan.observation.window_ms(period)
+
+    # ----------------------------------------------------------------------------------- input
+    def feed(self, batch: FrameBatch) -> None:
+        """Consume one batch of frames in stream order."""
+        self._h, self._s, self._o = batch.headings, batch.statuses, batch.others
+        self._hi = self._si = self._oi = 0
+        self._end = batch.end
+        while self.phase is not Phase.DONE and (
+            self._hi < len(self._h) or self._si < len(self._s) or self._oi < len(self._o)
+        ):
+            if self.phase in (Phase.SETTLE, Phase.OBSERVE):
+                self._bulk()
+            else:
+                self._step()
+
+    def fail(self, reason: str, kind: str = "fault") -> None:
+        """A fatal problem for the current trial (also called by the live driver)."""
+        if self.phase is Phase.DONE or self._trial is None:
+            return
+        j = self._j if self.phase in (Phase.SETTLE, Phase.OBSERVE) else None
+        self.sink.event(kind, "error", reason, self._tidx, j, self.now_ms)
+        self.sink.trial_failed(self._trial.index, j, reason)
+        self._stopped = False
+        self._trial = None
+        if self.plan.on_trial_failure == "pause":
+            self.outcome = "paused"
+            self.todo = []
+            self.commander.issue(Command("stop"))
+            self.phase = Phase.DONE
+        else:
+            self._next_trial()
+
+    def interrupt(self, reason: str) -> None:
+        """Stop where we are (operator or signal): the stand is told to stop rocking."""
+        if self.phase is not Phase.DONE:
+            self.sink.event("interrupted", "warning", reason, self._tidx, None, self.now_ms)
+            self.commander.issue(Command("stop"))
+            self.outcome = "stopped"
+            self.phase = Phase.DONE
+
+    # ------------------------------------------------------------ one frame at a time (waiting)
+    def _step(self) -> None:
+        """Consume the next frame in stream order while waiting for an ack or a status."""
+        candidates = []
+        if self._hi < len(self._h):
+            candidates.append((int(self._h.pos[self._hi]), 0))
+        if self._si < len(self._s):
+            candidates.append((int(self._s.pos[self._si]), 1))
+        if self._oi < len(self._o):
+            candidates.append((self._o[self._oi][0], 2))
+        _, which = min(candidates)
+        if which == 0:
+            i = self._hi
+            self._hi += 1
+            if not self._heading_clock(int(self._h.t_ms[i]), int(self._h.counter[i])):
+                return
+            if self._ref is None and self._h.valid[i]:
+                self._ref = float(self._h.heading_deg[i])
+        elif which == 1:
+            i = self._si
+            self._si += 1
+            self.now_ms = max(self.now_ms, int(self._s.t_ms[i]))
+            self._on_status(self._s, i)
+        else:
+            frame = self._o[self._oi][1]
+            self._oi += 1
+            self._on_other(frame)
+        if self.phase in (Phase.COMMANDS, Phase.STILL, Phase.TRACKING):
+            self._check_wait_timeout()
+
+    def _heading_clock(self, t: int, counter: int) -> bool:
+        """Advance the stand clock with one heading frame; False when that revealed silence."""
+        silent = self._last_t is not None and t - self._last_t > self._silence_ms
+        gap = self._last_t
+        self._last_t, self._last_counter = t, counter
+        self.now_ms = max(self.now_ms, t)
+        if silent:
+            assert gap is not None
+            self.fail(
+                f"bus silence: no heading frame for {(t - gap) / 1000:g} s of stand time",
+                kind="bus silence",
+            )
+            return False
+        return True
+
+    @property
+    def _silence_ms(self) -> int:
+        return round(self.plan.timeouts.bus_silence_s * 1000)
+
+    def _check_wait_timeout(self) -> None:
+        waited_s = (self.now_ms - self._phase_start_ms) / 1000
+        if self.phase is Phase.COMMANDS:
+            limit = self.plan.timeouts.ack_s * self.plan.bus.speedup
+            if waited_s > limit:
+                self.fail(
+                    f"stand did not acknowledge '{self._pending[0].kind}' within "
+                    f"{limit:g} s of stand time",
+                    kind="no ack",
+                )
+        elif waited_s > self.plan.tracking.confirm_s:
+            what = "still" if self.phase is Phase.STILL else "rocking as commanded"
+            detail = f" (last status: {self._last_status_text})" if self._last_status_text else ""
+            self.fail(
+                f"stand not {what} within {self.plan.tracking.confirm_s:g} s{detail}",
+                kind="mis-tracking",
+            )
+
+    def _on_other(self, frame: Frame) -> None:
+        if isinstance(frame, AckFrame):
+            self._on_ack(frame)
+        elif isinstance(frame, InvalidFrame) and _is_bus_off(frame):
+            self.fail("bus-off reported by the CAN controller", kind="bus-off")
+
+    def _on_ack(self, ack: AckFrame) -> None:
+        if self.phase is not Phase.COMMANDS or ack.command != self._pending[0].kind:
+            return
+        if not ack.accepted:
+            self.fail(f"stand refused '{ack.command}': {ack.reason}", kind="stand refusal")
+            return
+        command = self._pending.pop(0)
+        if command.kind == "stop":
+            self._stopped = True
+        if self._pending:
+            self._issue_next()
+        elif self._then is Phase.DONE:
+            self._trial_completed()
+        else:
+            self._enter(self._then)
+
+    def _on_status(self, s: Statuses, i: int) -> None:
+        frame = s.frame(i)
+        self._last_status_text = (
+            f"{'rocking' if frame.rocking else 'still'}, K={frame.direction_deg:g} deg, "
+            f"A={frame.amplitude_cm:g} cm, tau={frame.period_s:g} s"
+        )
+        if self.phase in (Phase.STILL, Phase.TRACKING) and self._tracking_problem(s, i) is None:
+            self._enter(Phase.SETTLE)
+
+    def _tracking_problem(self, s: Statuses, i: int) -> str | None:
+        """Why status i does not match what the current series needs (None when it does)."""
+        t = self._trial
+        assert t is not None
+        rocking = bool(s.rocking[i])
+        if self._j == 1 or self.phase is Phase.STILL:
+            return "stand rocking during a still series" if rocking else None
+        if not rocking:
+            return "stand stopped rocking"
+        tol = self.plan.tracking
+        amplitude, period = float(s.amplitude_cm[i]), float(s.period_s[i])
+        direction = float(s.direction_deg[i])
+        if abs(amplitude - t.amplitude_cm) > tol.amplitude_rel * t.amplitude_cm:
+            return f"amplitude {amplitude:g} cm, commanded {t.amplitude_cm:g} cm"
+        if abs(period - t.period_s) > tol.period_rel * t.period_s:
+            return f"period {period:g} s, commanded {t.period_s:g} s"
+        if _circular_diff_deg(direction, t.direction_deg) > tol.direction_deg:
+            return f"direction {direction:g} deg, commanded {t.direction_deg:g} deg"
+        return None
+
+    # ------------------------------------------------------------ bulk (settling and observing)
+    def _bulk(self) -> None:
+        fatal_pos, fatal_reason, fatal_kind = self._first_fatal()
+        h = self._h
+        stop = self._hi + int(np.searchsorted(h.pos[self._hi :], fatal_pos))
+        seg = h.take(slice(self._hi, stop))
+        consumed, transition, silence = self._consume(seg)
+        self._hi += consumed
+        self._account(int(h.pos[self._hi]) if transition or silence else fatal_pos)
+        if silence:  # the next heading frame comes after a gap: it fails the trial
+            self._hi += 1
+            self._heading_clock(int(h.t_ms[self._hi - 1]), int(h.counter[self._hi - 1]))
+        elif transition:
+            self._close_window()
+        elif fatal_reason is not None:
+            self._skip_to(fatal_pos + 1)
+            self.fail(fatal_reason, kind=fatal_kind)
+
+    def _first_fatal(self) -> tuple[int, str | None, str]:
+        """Position and reason of the first status or frame that ends this series."""
+        best: tuple[int, str | None, str] = (self._end, None, "")
+        s = self._s
+        for i in range(self._si, len(s)):
+            problem = self._tracking_problem(s, i)
+            if problem is not None:
+                best = (int(s.pos[i]), f"mis-tracking: {problem}", "mis-tracking")
+                break
+        errors = self._series_errors
+        for pos, frame in self._o[self._oi :]:
+            if pos >= best[0]:
+                break
+            if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
+                if _is_bus_off(frame):
+                    return pos, "bus-off reported by the CAN controller", "bus-off"
+                errors += 1
+                if errors > self.plan.checks.max_error_frames:
+                    limit = self.plan.checks.max_error_frames
+                    return pos, f"more than {limit} error frames in one series", "error frames"
+        return best
+
+    def _skip_to(self, pos: int) -> None:
+        self._hi += int(np.searchsorted(self._h.pos[self._hi :], pos))
+        self._si += int(np.searchsorted(self._s.pos[self._si :], pos))
+        while self._oi < len(self._o) and self._o[self._oi][0] < pos:
+            self._oi += 1
+
+    def _account(self, limit: int) -> None:
+        """Attribute statuses and other frames before stream position `limit` to the window."""
+        s = self._s
+        stop = self._si + int(np.searchsorted(s.pos[self._si :], limit))
+        if self._j == 2 and self.phase is Phase.OBSERVE:
+            for i in range(self._si, stop):
+                self._motion.append(
+                    (float(s.direction_deg[i]), float(s.amplitude_cm[i]), float(s.period_s[i]))
+                )
+        if stop > self._si:
+            self.now_ms = max(self.now_ms, int(s.t_ms[stop - 1]))
+        self._si = stop
+        while self._oi < len(self._o) and self._o[self._oi][0] < limit:
+            frame = self._o[self._oi][1]
+            self._oi += 1
+            if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
+                self._series_errors += 1
+            if isinstance(frame, InvalidFrame) and self._window is not None:
+                if frame.reason == "error frame":
+                    self._window.anomalies["error_frame"] += 1
+                elif "CRC" in frame.reason:
+                    self._window.anomalies["corrupt"] += 1
+                elif "outside" in frame.reason:
+                    self._window.anomalies["out_of_range"] += 1
+                else:
+                    self._window.anomalies["invalid_frame"] += 1
+
+    def _consume(self, seg: Headings) -> tuple[int, bool, bool]:
+        """Accumulate heading frames into the current block/window up to the first one that
+        closes it. Returns (frames consumed, window closed, bus silence at the next frame)."""
+        n = len(seg)
+        if n == 0:
+            return 0, False, False
+        t = seg.t_ms
+        prev_t = t[0] if self._last_t is None else self._last_t
+        gaps = np.diff(t, prepend=prev_t)
+        silent = np.flatnonzero(gaps > self._silence_ms)
+        limit = int(silent[0]) if len(silent) else n
+        if self._ref is None:
+            valid_idx = np.flatnonzero(seg.valid[:limit])
+            if len(valid_idx):
+                self._ref = float(seg.heading_deg[valid_idx[0]])
+        if self._window is None:
+            start = int(t[0])
+            if self.phase is Phase.SETTLE:
+                self._settle_start = start
+                assert self._trial is not None
+                self.sink.series_settling(self._trial.index, self._j, start)
+            self._window = _Window(start, start + self._window_ms())
+        w = self._window
+        close = np.flatnonzero(t[:limit] >= w.end_ms)
+        end = int(close[0]) if len(close) else limit
+        if end:
+            prev_c = seg.counter[0] - 1 if self._last_counter is None else self._last_counter
+            lost = (np.diff(seg.counter[:end], prepend=prev_c) - 1) % 16
+            inside = t[:end] >= w.start_ms
+            valid = seg.valid[:end] & inside
+            assert self._ref is not None
+            dev = np.rint(_wrap180(seg.heading_deg[:end][valid] - self._ref) * NANO)
+            w.add(dev.astype(np.int64), int(lost[inside].sum()), int((inside & ~valid).sum()))
+            self._last_t, self._last_counter = int(t[end - 1]), int(seg.counter[end - 1])
+            self.now_ms = max(self.now_ms, self._last_t)
+        return end, end < limit, end == limit < n
+
+    def _close_window(self) -> None:
+        w = self._window
+        assert w is not None and self._trial is not None
+        if self.phase is Phase.SETTLE:
+            self._close_settle_block(w)
+        else:
+            self._close_observation(w)
+
+    def _close_settle_block(self, w: _Window) -> None:
+        assert self._settle_start is not None and self._trial is not None
+        self._blocks.append((w.mean_ndeg(), w.end_ms))
+        width = w.end_ms - w.start_ms
+        settle = self.plan.settle
+        need = max(1, math.ceil(settle.hold_s * 1000 / width))
+        recent = [m for m, _ in self._blocks[-need:]]
+        if len(recent) == need and not any(math.isnan(m) for m in recent):
+            centre = sum(recent) / need
+            spread = max(abs(m - centre) for m in recent) / NANO
+            if spread <= settle.band_deg:
+                assert self._ref is not None
+                estimate = self._ref + centre / NANO
+                self._settle_durations.append(w.end_ms - self._settle_start)
+                self.sink.series_settled(self._trial.index, self._j, w.end_ms, estimate)
+                self._enter(Phase.OBSERVE)
+                self._window = _Window(w.end_ms, w.end_ms + width)
+                return
+        if w.end_ms - self._settle_start > settle.max_wait_s * 1000:
+            self.fail(f"not settled within {settle.max_wait_s:g} s", kind="settle timeout")
+            return
+        next_start = w.end_ms
+        if self._last_t is not None and self._last_t >= next_start + width:  # skip empty blocks
+            next_start += (self._last_t - next_start) // width * width
+        self._window = _Window(next_start, next_start + width)
+
+    def _close_observation(self, w: _Window) -> None:
+        trial = self._trial
+        assert trial is not None and self._ref is not None
+        if w.used == 0:
+            self.fail(f"no valid heading frame in observation window {self._k}")
+            return
+        if w.used >= 3 and w.low == w.high:
+            w.anomalies["stuck"] += 1
+            self.fail(
+                f"stuck sensor: {w.used} identical readings in observation window {self._k}",
+                kind="stuck sensor",
+            )
+            return
+        value = self._ref + w.mean_ndeg() / NANO
+        flags = w.flags()
+        obs = ObservationResult(
+            trial.index, self._j, self._k, value, w.start_ms, w.end_ms, w.used, w.lost, flags
+        )
+        self.sink.observation(obs)
+        if flags:
+            self.sink.event(
+                "frame anomalies",
+                "warning",
+                f"observation {self._k}: {flags.replace(',', ', ')}",
+                trial.index,
+                self._j,
+                w.end_ms,
+            )
+        self._values.append(value)
+        self._k += 1
+        if self._k <= self.plan.n_obs:
+            start = w.end_ms + round(self.plan.observation.spacing_s * 1000)
+            self._window = _Window(start, start + (w.end_ms - w.start_ms))
+            return
+        self.sink.series_completed(trial.index, self._j)
+        self._window = None
+        if self._j == 1:
+            self._j, self._k, self._values = 2, 1, []
+            self._send(self._rocking_commands(), Phase.TRACKING)
+        else:
+            self._send([Command("stop")], Phase.DONE)
+
+    def _trial_completed(self) -> None:
+        assert self._trial is not None
+        self.sink.trial_completed(self._trial.index, self._measured())
+        self._trial = None
+        self._next_trial()
+
+    def _measured(self) -> Measured | None:
+        if not self._motion:
+            return None
+        d, a, p = np.array(self._motion).T
+        rad = np.radians(d)
+        direction = math.degrees(math.atan2(np.sin(rad).mean(), np.cos(rad).mean())) % 360.0
+        return Measured(round(direction, 6), float(a.mean()), float(p.mean()))
+
+    # -------------------------------------------------------------------------------- progress
+    def snapshot(self) -> Snapshot:
+        spread = None
+        if self.phase is Phase.SETTLE and len(self._blocks) >= 2:
+            means = [m for m, _ in self._blocks[-5:] if not math.isnan(m)]
+            if means:
+                spread = (max(means) - min(means)) / NANO / 2
+        return Snapshot(
+            trial=self._tidx or 0,
+            n_trials=len(self.plan.trials),
+            j=self._j,
+            k=min(self._k, self.plan.n_obs),
+            n_obs=self.plan.n_obs,
+            phase=self.phase,
+            now_ms=self.now_ms,
+            values_deg=tuple(self._values),
+            settle_spread_deg=spread,
+            remaining_ms=self._remaining_ms(),
+        )
+
+    def _remaining_ms(self) -> int:
+        """Rough stand time still needed: settles (as long as the ones seen) plus windows."""
+        plan = self.plan
+        settle_ms = (
+            sum(self._settle_durations) / len(self._settle_durations)
+            if self._settle_durations
+            else plan.settle.hold_s * 1000
+        )
+        spacing = plan.observation.spacing_s * 1000
+
+        def series_ms(trial: TrialPlan, j: int, obs: int) -> float:
+            w = plan.observation.window_ms(trial.period_s if j == 2 else None)
+            return settle_ms + obs * (w + spacing)
+
+        total = 0.0
+        if self._trial is not None:
+            left = plan.n_obs - self._k + 1
+            total += series_ms(self._trial, self._j, left)
+            if self._j == 1:
+                total += series_ms(self._trial, 2, plan.n_obs)
+        for trial in self.todo:
+            total += series_ms(trial, 1, plan.n_obs) + series_ms(trial, 2, plan.n_obs)
+        return round(total)
+
+
+_NONE = TrialState()
