@@ -39,6 +39,7 @@ FORM_COLUMNS = {
     "trials": COMMON_COLUMNS + ("delta_mean_deg", "delta_var_deg2", "n_obs"),
 }
 OBSERVATION_EXTRAS = ("window_start_ms", "window_end_ms", "frames_used", "frames_lost", "flags")
+OBS_FIELDS = ("k", "value_deg") + OBSERVATION_EXTRAS
 EXPORT_FORMATS = ("csv", "parquet", "xlsx")
 MAX_REPORTED = 10
 
@@ -175,10 +176,6 @@ class Field:
     optional: bool = False
 
 
-def _anything(_: Any) -> bool:
-    return True
-
-
 INTEGER, NUMBER = "an integer", "a finite number"
 FIELDS: dict[str, Field] = {
     "trial": Field(_to_int, INTEGER, lambda v: v >= 1, ">= 1"),
@@ -198,7 +195,9 @@ FIELDS: dict[str, Field] = {
     "window_end_ms": Field(_to_int, INTEGER, lambda v: v >= 0, ">= 0", optional=True),
     "frames_used": Field(_to_int, INTEGER, lambda v: v >= 0, ">= 0", optional=True),
     "frames_lost": Field(_to_int, INTEGER, lambda v: v >= 0, ">= 0", optional=True),
-    "flags": Field(_to_str, "text", _anything, "", optional=True),
+    "flags": Field(
+        _to_str, "text", lambda v: len(v) <= 200, "at most 200 characters", optional=True
+    ),
 }
 
 
@@ -396,7 +395,10 @@ def _series(
                 f"{where}: trial {index} j = {j} k = {values['k']} repeats {seen[values['k']]}"
             )
         seen.setdefault(values["k"], where)
-    missing = sorted(set(range(1, max(seen) + 1)) - set(seen))
+        start, end = values.get("window_start_ms"), values.get("window_end_ms")
+        if start is not None and end is not None and end < start:
+            problems.append(f"{where}: window_end_ms {end} is before window_start_ms {start}")
+    missing = [k for k in range(1, len(seen) + 1) if k not in seen]  # k distinct, >= 1
     if missing:
         problems.append(
             f"{first_where}: trial {index} j = {j} has no k = {', '.join(map(str, missing))}"
@@ -409,9 +411,6 @@ def _series(
         for _, values in sorted(rows, key=lambda row: row[1]["k"])
     )
     return ImportedSeries(j, observations=observations)
-
-
-OBS_FIELDS = ("k", "value_deg") + OBSERVATION_EXTRAS
 
 
 # ---------------------------------------------------------------- storing

@@ -282,6 +282,18 @@ BAD_FILES = {
             "trial,role,direction_deg,amplitude_cm,period_s,delta_mean_deg,delta_var_deg2,n_obs"
         ],
     ),
+    "k far out": (
+        HEADER + obs_lines() + "1,fit,332,24,8,2,1000000000,0.3\n",
+        [
+            "line 4: trial 1 j = 2 has no k = 3 (k must run 1..N)",
+            "all series must have the same N, found N = 2 at line 2, N = 3 at line 4",
+        ],
+    ),
+    "window order": (
+        HEADER.replace("\n", ",window_start_ms,window_end_ms\n")
+        + obs_lines().replace("\n", ",1000,2000\n").replace("1000,2000", "3000,2000", 1),
+        ["line 2: window_end_ms 2000 is before window_start_ms 3000"],
+    ),
     "header only": (HEADER, ["no data rows"]),
     "empty": ("# nothing\n\n", ["no header row (empty file?)"]),
     "fit trial without variance": (
