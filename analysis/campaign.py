@@ -224,8 +224,8 @@ def _check_design(model: RollingErrorModel, x: Conditions, theta0: dict[str, flo
             "(eq 1.4) are proportional, X^T X is singular; rock at two periods at least"
         )
     jac = model.jacobian(x, **theta0)
-    scaled = jac / np.linalg.norm(jac, axis=0)
-    cond = float(np.linalg.cond(scaled))
+    norms = np.linalg.norm(jac, axis=0)
+    cond = float(np.linalg.cond(jac / norms)) if np.all(norms > 0) else np.inf
     if not cond < COND_LIMIT:
         raise SingularDesignError(f"X^T X is near-singular (condition number of X {cond:.3g})")
 
@@ -251,8 +251,9 @@ def analyze_campaign(
     if not 0 < q < 1:
         raise AnalysisError(f"significance level q = {q} must lie in (0, 1)")
     theta0 = dict(zip(PARAMETERS, map(float, start), strict=True))
-    if not (theta0["C_gcm2s2"] > 0 and theta0["T_s"] >= 0):
-        raise AnalysisError(f"start values must have C > 0 and T >= 0, got {theta0}")
+    if not (theta0["C_gcm2s2"] > 0 and theta0["T_s"] > 0):
+        # at T = 0 the model is flat in T (dalpha/dT = 0): Gauss-Newton could never move T
+        raise AnalysisError(f"start values must have C > 0 and T > 0, got {theta0}")
     stats = tuple(trial_statistics(t) for t in trials)
     fit_stats = _fit_trials(stats)
     labels = [s.index for s in fit_stats]
