@@ -9,6 +9,7 @@ pre-averaged input they are reported as not checked.
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -46,17 +47,20 @@ class AssumptionCheck:
         return {True: "holds", False: "violated", None: "not checked"}[self.holds]
 
 
-def _raw_series(trials: Sequence[TrialInput], min_n: int) -> list[tuple[int, str, np.ndarray]]:
-    """Raw series with at least min_n readings and non-zero spread."""
-    found = []
+def _raw_series(
+    trials: Sequence[TrialInput],
+) -> dict[int, tuple[list[tuple[int, str]], np.ndarray]]:
+    """Raw series with N >= 3 readings and non-zero spread, grouped by N: labels and (m, N)."""
+    groups: dict[int, tuple[list[tuple[int, str]], list[tuple[float, ...]]]] = {}
     for trial in trials:
         if trial.before_deg is None:
             continue
         for label, values in (("before", trial.before_deg), ("under", trial.under_deg)):
-            x = np.asarray(values)
-            if x.size >= min_n and np.ptp(x) > 0:
-                found.append((trial.index, label, x))
-    return found
+            if len(values) >= 3 and max(values) > min(values):
+                labels, rows = groups.setdefault(len(values), ([], []))
+                labels.append((trial.index, label))
+                rows.append(values)
+    return {n: (labels, np.array(rows)) for n, (labels, rows) in groups.items()}
 
 
 def _not_checked(
@@ -67,15 +71,27 @@ def _not_checked(
     return AssumptionCheck(name, method, None, None, None, need)
 
 
+def _series_checks(
+    groups: dict[int, tuple[list[tuple[int, str]], np.ndarray]], test: Any
+) -> tuple[SeriesCheck, ...]:
+    """Apply a vectorised test(rows) -> (statistics, p-values) to each group of equal N."""
+    checks = []
+    for n, (labels, rows) in groups.items():
+        statistic, p = test(rows)
+        checks += [
+            SeriesCheck(i, label, n, float(s), float(pv))
+            for (i, label), s, pv in zip(labels, statistic, p, strict=True)
+        ]
+    return tuple(checks)
+
+
 def normality_check(trials: Sequence[TrialInput], q: float) -> AssumptionCheck:
     """Shapiro-Wilk per series, Fisher-combined."""
     method = "Shapiro-Wilk per series, Fisher-combined"
-    series = _raw_series(trials, 3)
-    if not series:
+    groups = _raw_series(trials)
+    if not groups:
         return _not_checked("normality", method, trials, "no series with N >= 3 and spread")
-    checks = tuple(
-        SeriesCheck(i, label, x.size, *map(float, stats.shapiro(x))) for i, label, x in series
-    )
+    checks = _series_checks(groups, lambda rows: stats.shapiro(rows, axis=-1))
     combined = stats.combine_pvalues([c.p_value for c in checks], method="fisher")
     rejected = sum(c.p_value < q for c in checks)
     return AssumptionCheck(
@@ -89,24 +105,28 @@ def normality_check(trials: Sequence[TrialInput], q: float) -> AssumptionCheck:
     )
 
 
-def ljung_box_lag1(x: np.ndarray) -> float:
-    """Ljung-Box Q at lag 1: N (N + 2) r1^2 / (N - 1), r1 the lag-1 autocorrelation."""
-    d = x - x.mean()
-    r1 = float(d[:-1] @ d[1:] / (d @ d))
-    return x.size * (x.size + 2) * r1**2 / (x.size - 1)
+def ljung_box_lag1(x: np.ndarray) -> np.ndarray:
+    """Ljung-Box Q at lag 1 along the last axis: N (N + 2) r1^2 / (N - 1), r1 the lag-1
+    autocorrelation."""
+    d = x - x.mean(axis=-1, keepdims=True)
+    r1 = np.sum(d[..., :-1] * d[..., 1:], axis=-1) / np.sum(d * d, axis=-1)
+    n = x.shape[-1]
+    return n * (n + 2) * r1**2 / (n - 1)
 
 
 def independence_check(trials: Sequence[TrialInput], q: float) -> AssumptionCheck:
     """Lag-1 Ljung-Box per series, summed over series."""
     method = "lag-1 autocorrelation (Ljung-Box Q) per series, summed"
-    series = _raw_series(trials, 3)
-    if not series:
+    groups = _raw_series(trials)
+    if not groups:
         return _not_checked("independence", method, trials, "no series with N >= 3 and spread")
-    checks = []
-    for i, label, x in series:
-        q_stat = ljung_box_lag1(x)
-        checks.append(SeriesCheck(i, label, x.size, q_stat, float(stats.chi2.sf(q_stat, 1))))
-    total = sum(c.statistic for c in checks)
+
+    def test(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        q_stat = ljung_box_lag1(rows)
+        return q_stat, stats.chi2.sf(q_stat, 1)
+
+    checks = _series_checks(groups, test)
+    total = float(sum(c.statistic for c in checks))
     p = float(stats.chi2.sf(total, len(checks)))
     rejected = sum(c.p_value < q for c in checks)
     return AssumptionCheck(
@@ -116,7 +136,7 @@ def independence_check(trials: Sequence[TrialInput], q: float) -> AssumptionChec
         p,
         p >= q,
         f"{rejected} of {len(checks)} series show lag-1 correlation at q = {q}",
-        tuple(checks),
+        checks,
     )
 
 

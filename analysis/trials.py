@@ -13,7 +13,8 @@ variances (what Cochran's test and S_e use); ``var_mean_deg2`` = S1^2/N1 + S2^2/
 of the mean difference <delta_i> itself. Both are kept so a report can show both.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -143,18 +144,20 @@ def series_moments(observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return observations.mean(axis=-1), observations.var(axis=-1, ddof=1)
 
 
+def combine_series(m1: Any, v1: Any, n1: Any, m2: Any, v2: Any, n2: Any) -> tuple[Any, ...]:
+    """From the series' means, variances and counts (scalars or arrays): <delta_i> = <delta_2i> -
+    <delta_1i>, its variance by eq 2.3, the variance of the mean difference, and dof by eq 2.4."""
+    return m2 - m1, v1 + v2, v1 / n1 + v2 / n2, n1 + n2 - 2
+
+
 def difference_statistics(before: np.ndarray, under: np.ndarray) -> DifferenceStats:
-    """Rolling error <delta_i> = <delta_2i> - <delta_1i> and its variances for (k, N) arrays of
-    readings before and under rocking (N1 and N2 may differ)."""
-    m1, v1 = series_moments(before)
-    m2, v2 = series_moments(under)
+    """Eqs 2.1-2.4 vectorised over (k, N1) and (k, N2) arrays of readings before and under
+    rocking."""
     n1, n2 = before.shape[-1], under.shape[-1]
-    return DifferenceStats(
-        delta_deg=m2 - m1,
-        var_deg2=v1 + v2,  # eq 2.3
-        var_mean_deg2=v1 / n1 + v2 / n2,
-        dof=np.full(np.shape(m1), n1 + n2 - 2),  # eq 2.4
+    delta, var, var_mean, dof = combine_series(
+        *series_moments(before), n1, *series_moments(under), n2
     )
+    return DifferenceStats(delta, var, var_mean, np.full(np.shape(delta), dof))
 
 
 @dataclass(frozen=True)
@@ -179,6 +182,25 @@ class TrialStats:
     source: str
 
 
+def _from_summaries(common: dict, s1: SeriesSummary, s2: SeriesSummary) -> TrialStats:
+    """Trial statistics from the two series' summaries."""
+    delta, var, var_mean, dof = combine_series(
+        s1.mean_deg, s1.var_deg2, s1.n, s2.mean_deg, s2.var_deg2, s2.n
+    )
+    return TrialStats(
+        **common,
+        delta_deg=delta,
+        var_deg2=var,
+        var_mean_deg2=var_mean,
+        dof=dof,
+        n_before=s1.n,
+        n_under=s2.n,
+        before=s1,
+        under=s2,
+        source="series",
+    )
+
+
 def trial_statistics(trial: TrialInput) -> TrialStats:
     """Eqs 2.1-2.4 for one trial, whatever its input form."""
     common = {
@@ -190,35 +212,11 @@ def trial_statistics(trial: TrialInput) -> TrialStats:
     }
     if trial.before_deg is not None:
         before, under = np.array(trial.before_deg), np.array(trial.under_deg)
-        m1, v1 = series_moments(before)
-        m2, v2 = series_moments(under)
-        d = difference_statistics(before, under)
-        return TrialStats(
-            **common,
-            delta_deg=float(d.delta_deg),
-            var_deg2=float(d.var_deg2),
-            var_mean_deg2=float(d.var_mean_deg2),
-            dof=int(d.dof),
-            n_before=before.size,
-            n_under=under.size,
-            before=SeriesSummary(float(m1), float(v1), before.size),
-            under=SeriesSummary(float(m2), float(v2), under.size),
-            source="observations",
-        )
+        s1 = SeriesSummary(*map(float, series_moments(before)), before.size)
+        s2 = SeriesSummary(*map(float, series_moments(under)), under.size)
+        return replace(_from_summaries(common, s1, s2), source="observations")
     if trial.before is not None:
-        s1, s2 = trial.before, trial.under
-        return TrialStats(
-            **common,
-            delta_deg=s2.mean_deg - s1.mean_deg,
-            var_deg2=s1.var_deg2 + s2.var_deg2,  # eq 2.3
-            var_mean_deg2=s1.var_deg2 / s1.n + s2.var_deg2 / s2.n,
-            dof=s1.n + s2.n - 2,  # eq 2.4
-            n_before=s1.n,
-            n_under=s2.n,
-            before=s1,
-            under=s2,
-            source="series",
-        )
+        return _from_summaries(common, trial.before, trial.under)
     n = trial.n_obs
     has_var = trial.delta_var_deg2 is not None
     return TrialStats(
