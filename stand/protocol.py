@@ -9,7 +9,7 @@ cannot be decoded become `InvalidFrame`. Times are STAND time in milliseconds.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, fields
 from enum import StrEnum
 from pathlib import Path
@@ -34,7 +34,7 @@ def _crc8_table(poly: int) -> tuple[int, ...]:
     return tuple(table)
 
 
-_CRC8_J1850 = _crc8_table(0x1D)
+CRC8_J1850_TABLE = _crc8_table(0x1D)
 
 
 def crc8_sae_j1850(data: bytes) -> int:
@@ -44,7 +44,7 @@ def crc8_sae_j1850(data: bytes) -> int:
     sends 10 000 heading frames a second at 1000x (tests check it against crccheck)."""
     crc = 0xFF
     for byte in data:
-        crc = _CRC8_J1850[crc ^ byte]
+        crc = CRC8_J1850_TABLE[crc ^ byte]
     return crc ^ 0xFF
 
 
@@ -144,7 +144,7 @@ class SignalRef:
         return f"{self.message}.{self.signal}"
 
 
-_HEADING_KEYS = ("heading", "heading_time", "heading_counter", "heading_valid", "heading_crc")
+HEADING_KEYS = ("heading", "heading_time", "heading_counter", "heading_valid", "heading_crc")
 _COMMAND_KEYS = (
     "command_code",
     "command_seq",
@@ -154,6 +154,15 @@ _COMMAND_KEYS = (
 )
 _ACK_KEYS = ("ack_command", "ack_seq", "ack_accepted", "ack_reason", "ack_time")
 _COMPASS_KEYS = ("compass_rotor", "compass_temp", "compass_faults")
+STATUS_KEYS = (
+    "status_time",
+    "status_rocking",
+    "status_direction",
+    "status_amplitude",
+    "status_period",
+    "status_cycle",
+    "status_phase",
+)
 _OPTIONAL = frozenset({"heading_valid", "heading_crc", "command_seq", "ack_seq", "ack_time"})
 
 
@@ -226,7 +235,8 @@ class SignalMap:
 
 @dataclass(frozen=True)
 class _Bound:
-    """A resolved signal map entry with its DBC range (widened by a rounding tolerance)."""
+    """A resolved signal map entry with its DBC range (physical, widened by a rounding
+    tolerance, for decoding; raw, for encoding)."""
 
     key: str
     ref: SignalRef
@@ -234,25 +244,30 @@ class _Bound:
     signal: Signal
     low: float
     high: float
+    raw_low: float
+    raw_high: float
 
     @classmethod
     def of(cls, key: str, ref: SignalRef, message: DbcMessage, signal: Signal) -> _Bound:
         tolerance = abs(signal.scale) * 1e-6
         low = signal.minimum - tolerance if signal.minimum is not None else -math.inf
         high = signal.maximum + tolerance if signal.maximum is not None else math.inf
-        return cls(key, ref, message, signal, low, high)
+        raw_low, raw_high = sorted(
+            ((low - signal.offset) / signal.scale, (high - signal.offset) / signal.scale)
+        )
+        return cls(key, ref, message, signal, low, high, raw_low, raw_high)
 
     def check(self, value: float) -> None:
         """Refuse a value whose encoded (rounded) value falls outside the DBC range."""
-        signal = self.signal
-        if not math.isfinite(value):
-            raise ProtocolError(f"{self.ref} = {value} is not a finite number")
-        rounded = round((value - signal.offset) / signal.scale) * signal.scale + signal.offset
-        if not self.low <= rounded <= self.high:
-            unit = f" {signal.unit}" if signal.unit else ""
+        try:
+            raw = round((value - self.signal.offset) / self.signal.scale)
+        except (ValueError, OverflowError):
+            raise ProtocolError(f"{self.ref} = {value} is not a finite number") from None
+        if not self.raw_low <= raw <= self.raw_high:
+            unit = f" {self.signal.unit}" if self.signal.unit else ""
             raise ProtocolError(
                 f"{self.ref} = {value} is outside the allowed range "
-                f"[{signal.minimum}, {signal.maximum}]{unit}"
+                f"[{self.signal.minimum}, {self.signal.maximum}]{unit}"
             )
 
 
@@ -270,11 +285,11 @@ class Codec:
             ref = getattr(self.signal_map, f.name)
             if ref is not None:
                 self._bound[f.name] = self._resolve(f.name, ref)
-        self._heading = self._one_message("heading", _HEADING_KEYS)
+        self._heading = self._one_message("heading", HEADING_KEYS)
         self._command = self._one_message("command", _COMMAND_KEYS)
         self._ack = self._one_message("ack", _ACK_KEYS)
         self._compass = self._one_message("compass", _COMPASS_KEYS)
-        self._status_keys = [k for k in self._bound if k.startswith("status_")]
+        self._status_keys = [k for k in STATUS_KEYS if k in self._bound]
         status_messages = {self._bound[k].message.frame_id for k in self._status_keys}
         if self._heading.frame_id in status_messages:
             raise ProtocolError("signals: the heading message cannot also carry stand status")
@@ -329,32 +344,57 @@ class Codec:
         return self._heading.frame_id
 
     @property
+    def ack_arbitration_id(self) -> int:
+        return self._ack.frame_id
+
+    @property
+    def status_arbitration_ids(self) -> frozenset[int]:
+        """The messages that make up a stand status."""
+        return frozenset(self._bound[k].message.frame_id for k in self._status_keys)
+
+    def layout(self, keys: Iterable[str]) -> list[tuple[DbcMessage, dict[str, Signal]]]:
+        """The DBC messages carrying the given map entries, each with its signals by key
+        (for batch encoding); the message completing a stand status comes last."""
+        groups: dict[str, tuple[DbcMessage, dict[str, Signal]]] = {}
+        for key in keys:
+            bound = self._bound.get(key)
+            if bound is not None:
+                groups.setdefault(bound.message.name, (bound.message, {}))[1][key] = bound.signal
+        return sorted(groups.values(), key=lambda g: g[0].frame_id == self._status_trigger)
+
+    @property
+    def has_sequence(self) -> bool:
+        """Whether commands and acks carry a sequence number (to pair an ack with its command)."""
+        return "command_seq" in self._bound and "ack_seq" in self._bound
+
+    @property
     def database(self) -> cantools.database.can.Database:
         return self._db
 
     # ------------------------------------------------------------------------------------ encode
     def _encode(self, values: Mapping[str, float], *, strict: bool = True) -> list[can.Message]:
         """Encode signal-map entries (key -> physical value) into one frame per DBC message."""
-        by_message: dict[str, dict[str, float]] = {}
+        by_message: dict[str, tuple[DbcMessage, dict[str, float]]] = {}
         for key, value in values.items():
             bound = self._bound.get(key)
             if bound is None:
                 continue  # an optional entry this DBC does not have
             if strict:
                 bound.check(value)
-            name = bound.message.name
-            data = by_message.get(name)
-            if data is None:
-                data = by_message[name] = dict(self._zero[name])
-            data[bound.signal.name] = value
-        messages = [self._db.get_message_by_name(name) for name in by_message]
+            entry = by_message.get(bound.message.name)
+            if entry is None:
+                entry = by_message[bound.message.name] = (
+                    bound.message,
+                    dict(self._zero[bound.message.name]),
+                )
+            entry[1][bound.signal.name] = value
         return [
             can.Message(
                 arbitration_id=message.frame_id,
                 is_extended_id=message.is_extended_frame,
-                data=message.encode(by_message[message.name], strict=False),
+                data=message.encode(data, strict=False),
             )
-            for message in messages
+            for message, data in by_message.values()
         ]
 
     def encode_heading(
@@ -525,7 +565,7 @@ class Codec:
         return out
 
     def _decode_heading(self, frame_id: int, raw: bytes) -> HeadingFrame:
-        v = self._values(frame_id, raw, _HEADING_KEYS)
+        v = self._values(frame_id, raw, HEADING_KEYS)
         if self._crc_mask is not None and v["heading_crc"] != self._crc(raw):
             raise _Invalid("CRC mismatch: corrupt payload")
         return HeadingFrame(

@@ -199,7 +199,7 @@ def test_unknown_ids_are_ignored() -> None:
 
 @given(st.sampled_from([0x80, 0x81, 0x100, 0x200, 0x201, 0x300]), st.binary(max_size=8))
 def test_decode_never_raises(arbitration_id: int, data: bytes) -> None:
-    frame = Codec().decode(can.Message(arbitration_id=arbitration_id, data=data))
+    frame = CODEC.decode(can.Message(arbitration_id=arbitration_id, data=data))
     if len(data) != 8:
         assert isinstance(frame, InvalidFrame)
 

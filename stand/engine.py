@@ -1,0 +1,265 @@
+"""The simulated gyrocompass + roll stand as a deterministic machine advanced in STAND time.
+
+`advance_to(t)` returns every frame the stand and the compass send up to stand time t (their
+`timestamp` is the stand time in seconds); `receive(msg)` applies a command at the current stand
+time and returns the acknowledgement. No bus and no clock here: the live `Simulator` paces this
+against wall time, the standalone schedule runs it as fast as the machine allows."""
+
+from __future__ import annotations
+
+import math
+
+import can
+import numpy as np
+
+from stand.packing import BatchEncoder
+from stand.physics import CorrelatedNoise, DampedPrecession
+from stand.protocol import HEADING_KEYS, STATUS_KEYS, Codec, CommandFrame, Reason
+from stand.simconfig import SimConfig
+
+# columns of the per-sample uniform draws for the fault knobs (always drawn, so switching one
+# knob on does not change the noise or the other faults)
+_DROP, _JUMP, _JUMP_SIZE, _INVALID, _OOR, _OOR_VALUE, _CORRUPT, _CORRUPT_BIT, _ERROR = range(9)
+_N_FAULT_DRAWS = 9
+_EPS = 1e-9  # tolerance when turning stand times into sample indices
+
+
+class StandEngine:
+    def __init__(self, config: SimConfig, codec: Codec | None = None) -> None:
+        self.config = config
+        self.codec = codec or Codec()
+        compass = config.compass
+        noise_seed, white_seed, fault_seed = np.random.SeedSequence(config.seed).spawn(3)
+        self._dt = 1.0 / config.heading_rate_hz
+        self._corr = CorrelatedNoise(
+            config.noise.corr_sigma_deg,
+            config.noise.corr_mu_per_s,
+            self._dt,
+            np.random.default_rng(noise_seed),
+        )
+        self._white_rng = np.random.default_rng(white_seed)
+        self._fault_rng = np.random.default_rng(fault_seed)
+        w0 = 2.0 * math.pi / compass.undamped_period_s
+        self._precession = DampedPrecession(
+            w0, compass.damping_ratio * w0, self._dt, nonlinear=compass.nonlinear
+        )
+        if compass.transient:
+            self._precession.x_rad = math.radians(compass.initial_error_deg)
+        self._equilibrium_deg = 0.0
+        self._time_s = 0.0
+        self._next_heading = 0  # index of the next heading sample (at index / heading rate)
+        self._next_status = 0
+        self._counter = 0
+        self._last_reading_deg = compass.heading_deg
+        self._stuck_reading_deg: float | None = None
+        ((heading_message, heading_signals),) = self.codec.layout(HEADING_KEYS)
+        self._heading_encoder = BatchEncoder(heading_message, heading_signals, "heading_crc")
+        self._status_encoders = [BatchEncoder(*g) for g in self.codec.layout(STATUS_KEYS)]
+        self._setting: tuple[float, float, float] | None = None  # commanded K deg, A cm, tau s
+        self._rocking_since_s: float | None = None
+
+    # ------------------------------------------------------------------------------ state
+    @property
+    def stand_time_s(self) -> float:
+        return self._time_s
+
+    @property
+    def rocking(self) -> bool:
+        return self._rocking_since_s is not None
+
+    @property
+    def equilibrium_deg(self) -> float:
+        """Current equilibrium reading shift from the true heading (model 1.1 while rocking)."""
+        return self._equilibrium_deg
+
+    def _actual_motion(self) -> tuple[float, float, float]:
+        """Direction deg, amplitude cm and period s the stand really rocks at."""
+        assert self._setting is not None
+        direction, amplitude, period = self._setting
+        return direction, amplitude * self.config.faults.amplitude_factor, period
+
+    def _silent(self, t_s: np.ndarray | float) -> np.ndarray:
+        f = self.config.faults
+        return _within(t_s, f.silence_at_s, f.silence_for_s)
+
+    # ------------------------------------------------------------------------------ frames
+    def advance_to(self, t_s: float) -> list[can.Message]:
+        """Every frame due in (current stand time, t_s], in stand-time order."""
+        heading_end = math.floor(t_s * self.config.heading_rate_hz + _EPS) + 1
+        status_end = math.floor(t_s * self.config.status_rate_hz + _EPS) + 1
+        frames = self._heading_frames(self._next_heading, heading_end)
+        frames += self._status_frames(self._next_status, status_end)
+        self._next_heading = max(self._next_heading, heading_end)
+        self._next_status = max(self._next_status, status_end)
+        self._time_s = max(self._time_s, t_s)
+        frames.sort(key=lambda m: m.timestamp)  # stable: keeps the order within one instant
+        return frames
+
+    def _readings_deg(self, t: np.ndarray) -> np.ndarray:
+        """The compass reading at the sample times, before sensor faults."""
+        compass, noise = self.config.compass, self.config.noise
+        n = len(t)
+        deviation = np.zeros(n)
+        if compass.transient:
+            for i in range(n):
+                deviation[i] = self._precession.x_rad
+                self._precession.step()
+        reading = compass.heading_deg + self._equilibrium_deg + np.degrees(deviation)
+        if self.rocking:
+            _, amplitude, period = self._actual_motion()
+            p = 2.0 * math.pi / period
+            accel_g = amplitude * p**2 / compass.g_cm_s2
+            phase = p * (t - self._rocking_since_s)
+            reading += accel_g * (
+                compass.harmonic_p_deg_per_g * np.sin(phase)
+                + compass.harmonic_2p_deg_per_g * np.sin(2.0 * phase)
+            )
+        reading += noise.drift_deg_per_h * t / 3600.0
+        reading += noise.spurious_amplitude_deg * np.sin(
+            2.0 * math.pi * t / noise.spurious_period_s
+        )
+        reading += self._corr.sample(n)
+        reading += noise.white_sigma_deg * self._white_rng.standard_normal(n)
+        if noise.quantum_deg > 0:
+            reading = np.round(reading / noise.quantum_deg) * noise.quantum_deg
+        return np.round(np.mod(reading, 360.0), 3) % 360.0  # on the frame's 0.001 deg grid
+
+    def _heading_frames(self, start: int, end: int) -> list[can.Message]:
+        n = end - start
+        if n <= 0:
+            return []
+        f = self.config.faults
+        index = np.arange(start, end)
+        t = index * self._dt
+        readings = self._stick(t, self._readings_deg(t))
+        u = self._fault_rng.random((n, _N_FAULT_DRAWS))
+        jumps = np.where(u[:, _JUMP] < f.counter_jump_rate, 1 + (u[:, _JUMP_SIZE] * 14), 0)
+        counter = (self._counter + np.arange(n) + np.cumsum(jumps.astype(np.int64))) % 16
+        self._counter = int(counter[-1] + 1) % 16
+        out_of_range = u[:, _OOR] < f.out_of_range_rate  # up to the 19-bit raw maximum
+        readings = np.where(out_of_range, 360.0 + np.round(u[:, _OOR_VALUE] * 164.0, 3), readings)
+        values = {
+            "heading_time": np.round(index * (1000.0 / self.config.heading_rate_hz)),
+            "heading": readings,
+            "heading_valid": u[:, _INVALID] >= f.invalid_rate,
+            "heading_counter": counter,
+        }
+        data = self._heading_encoder.pack(values, n)
+        corrupt = np.nonzero(u[:, _CORRUPT] < f.corrupt_rate)[0]
+        bits = (u[corrupt, _CORRUPT_BIT] * 8 * data.shape[1]).astype(np.int64)
+        data[corrupt, bits // 8] ^= (1 << (bits % 8)).astype(np.uint8)
+        sent = (u[:, _DROP] >= f.drop_rate) & ~self._silent(t)
+        error_times = t[sent & (u[:, _ERROR] < f.error_frame_rate)]
+        errors = [can.Message(is_error_frame=True, timestamp=float(e)) for e in error_times]
+        # first in the list: advance_to's stable sort puts each before its heading frame
+        return errors + self._heading_encoder.messages(data[sent], t[sent])
+
+    def _stick(self, t: np.ndarray, readings: np.ndarray) -> np.ndarray:
+        """A stuck sensor repeats the last reading it gave before sticking."""
+        f = self.config.faults
+        stuck = _within(t, f.stuck_at_s, f.stuck_for_s)
+        if stuck.any():
+            first = int(np.argmax(stuck))
+            if self._stuck_reading_deg is None:
+                self._stuck_reading_deg = (
+                    float(readings[first - 1]) if first > 0 else self._last_reading_deg
+                )
+            readings = np.where(stuck, self._stuck_reading_deg, readings)
+        self._last_reading_deg = float(readings[-1])
+        return readings
+
+    def _status_frames(self, start: int, end: int) -> list[can.Message]:
+        index = np.arange(start, max(start, end))
+        t = index / self.config.status_rate_hz
+        index, t = index[~self._silent(t)], t[~self._silent(t)]
+        n = len(index)
+        if n == 0:
+            return []
+        direction = self._setting[0] if self._setting else 0.0
+        amplitude = period = 0.0
+        cycles = np.zeros(n)
+        if self._rocking_since_s is not None:
+            direction, amplitude, period = self._actual_motion()
+            cycles = np.maximum(t - self._rocking_since_s, 0.0) / period
+        values = {
+            "status_time": np.round(index * (1000.0 / self.config.status_rate_hz)),
+            "status_rocking": np.full(n, self.rocking),
+            "status_direction": np.full(n, direction),
+            "status_amplitude": np.full(n, amplitude),
+            "status_period": np.full(n, period),
+            "status_cycle": np.floor(cycles) % 32768,
+            "status_phase": np.round((cycles % 1.0) * 360.0, 2) % 360.0,
+        }
+        frames: list[can.Message] = []
+        for encoder in self._status_encoders:  # the part completing the status goes last
+            frames += encoder.messages(encoder.pack(values, n), t)
+        compass = self._compass_status()
+        frames += [can.Message(**compass, timestamp=float(ts)) for ts in t]
+        return frames
+
+    def _compass_status(self) -> dict:
+        msg = self.codec.encode_compass_status(
+            True, self.config.compass.fluid_temp_c, self.config.faults.compass_fault_bits
+        )
+        return {
+            "arbitration_id": msg.arbitration_id,
+            "is_extended_id": msg.is_extended_id,
+            "data": bytes(msg.data),
+        }
+
+    # ------------------------------------------------------------------------------ commands
+    def receive(self, msg: can.Message) -> list[can.Message]:
+        """Handle a frame from the bus at the current stand time; return the ack to send."""
+        frame = self.codec.decode(msg)
+        if not isinstance(frame, CommandFrame):
+            return []
+        if self.config.faults.no_ack or self._silent(self._time_s):
+            return []
+        reason = self._apply(frame)
+        ack = self.codec.encode_ack(
+            frame.command,
+            reason is None,
+            reason or "",
+            seq=frame.seq,
+            stand_time_ms=round(self._time_s * 1000.0),
+        )
+        ack.timestamp = self._time_s
+        return [ack]
+
+    def _apply(self, cmd: CommandFrame) -> Reason | None:
+        """Carry out a command; the refusal reason, or None when accepted."""
+        limits = self.config.stand
+        if cmd.command == "set":
+            if self.rocking:
+                return Reason.BUSY
+            if not 0.0 < cmd.amplitude_cm <= limits.max_amplitude_cm:
+                return Reason.AMPLITUDE
+            if not limits.min_period_s <= cmd.period_s <= limits.max_period_s:
+                return Reason.PERIOD
+            self._setting = (cmd.direction_deg, cmd.amplitude_cm, cmd.period_s)
+        elif cmd.command == "start":
+            if self._setting is None:
+                return Reason.NOT_CONFIGURED
+            if not self.rocking:
+                self._rocking_since_s = self._time_s
+                self._move_equilibrium(
+                    self.config.compass.settled_shift_deg(*self._actual_motion())
+                )
+        elif cmd.command == "stop" and self.rocking:
+            self._rocking_since_s = None
+            self._move_equilibrium(0.0)
+        return None
+
+    def _move_equilibrium(self, shift_deg: float) -> None:
+        """The compass starts its transient from where it is toward the new equilibrium."""
+        if self.config.compass.transient:
+            self._precession.shift_equilibrium(math.radians(shift_deg - self._equilibrium_deg))
+        self._equilibrium_deg = shift_deg
+
+
+def _within(t: np.ndarray | float, start_s: float | None, length_s: float) -> np.ndarray:
+    """Which times fall in the window [start, start + length) (none when start is None)."""
+    t = np.asarray(t)
+    if start_s is None:
+        return np.zeros(t.shape, dtype=bool)
+    return (t >= start_s) & (t < start_s + length_s)

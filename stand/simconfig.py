@@ -1,0 +1,158 @@
+"""Configuration of the simulated gyrocompass + roll stand. Every field carries its help text,
+which `gyrostand simulate --help` shows, so the options and their documentation cannot drift."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from stand.physics import rolling_error_rad
+
+
+def param(default: Any, help: str) -> Any:
+    """A dataclass field with its help text."""
+    return field(default=default, metadata={"help": help})
+
+
+@dataclass(frozen=True)
+class CompassParams:
+    """The simulated gyrocompass. C and T are the unit's hidden truth that a campaign estimates."""
+
+    C_gcm2s2: float = param(
+        6.0e7, "true reduced elastic compliance C of the gyrosphere, g*cm^2*s^-2 (hidden)"
+    )
+    T_s: float = param(
+        1.1, "true time constant T of the gyrosphere's mass-centre shift, s (hidden)"
+    )
+    lP_gcm2s2: float = param(6.57e6, "maximum pendulous moment lP, g*cm^2*s^-2")
+    H1_gcm2s: float = param(1.55e8, "angular momentum H1 of the gyrosphere along N-S, g*cm^2/s")
+    U_rad_s: float = param(7.3e-5, "Earth rotation rate U, rad/s")
+    g_cm_s2: float = param(981.0, "gravity g, cm/s^2")
+    latitude_deg: float = param(46.5, "latitude phi of the stand, deg")
+    rolling_error: bool = param(
+        True, "shift the settled reading by the rolling error of seed 000 eq 1.1 while rocking"
+    )
+    heading_deg: float = param(120.0, "true heading of the stand (settled reading at rest), deg")
+    initial_error_deg: float = param(
+        0.0, "deviation of the sensitive element from equilibrium at stand time 0, deg"
+    )
+    transient: bool = param(
+        True, "damped precessional transient to each new equilibrium (seed 003 eqs 1-2)"
+    )
+    undamped_period_s: float = param(5064.0, "undamped precession period 2*pi/w0, s (84.4 min)")
+    damping_ratio: float = param(
+        0.7, "damping xi/w0 of the precession (0.7: within 5% of a step after ~40 min)"
+    )
+    nonlinear: bool = param(True, "keep the sin(alpha) term of seed 003 eq 1 (else linear)")
+    harmonic_p_deg_per_g: float = param(
+        1.0, "reading oscillation at the rocking frequency p, deg per g of stand acceleration A*p^2"
+    )
+    harmonic_2p_deg_per_g: float = param(
+        0.5, "reading oscillation at 2p, deg per g of stand acceleration A*p^2"
+    )
+    fluid_temp_c: float = param(42.0, "supporting-fluid temperature reported in GYRO_STATUS, degC")
+
+    def settled_shift_deg(
+        self, direction_deg: float, amplitude_cm: float, period_s: float
+    ) -> float:
+        """The settled reading shift while rocking (0 when the rolling error is switched off)."""
+        if not self.rolling_error:
+            return 0.0
+        alpha = rolling_error_rad(
+            direction_deg,
+            amplitude_cm,
+            period_s,
+            C_gcm2s2=self.C_gcm2s2,
+            T_s=self.T_s,
+            lP_gcm2s2=self.lP_gcm2s2,
+            H1_gcm2s=self.H1_gcm2s,
+            U_rad_s=self.U_rad_s,
+            g_cm_s2=self.g_cm_s2,
+            latitude_deg=self.latitude_deg,
+        )
+        return math.degrees(alpha)
+
+
+@dataclass(frozen=True)
+class NoiseParams:
+    """Angle-sensor noise (seed 004 §8.3) and optional slow disturbances."""
+
+    corr_sigma_deg: float = param(
+        0.01, "sigma of the exponentially correlated noise sigma^2*exp(-mu*|tau|), deg"
+    )
+    corr_mu_per_s: float = param(0.05, "mu of the correlated noise, 1/s (correlation time 1/mu)")
+    white_sigma_deg: float = param(0.005, "sigma of the white noise added to each sample, deg")
+    quantum_deg: float = param(
+        360.0 / 65536, "angle-sensor quantisation step, deg (16-bit encoder; 0 = none)"
+    )
+    drift_deg_per_h: float = param(0.0, "slow linear drift of the reading, deg/h")
+    spurious_amplitude_deg: float = param(
+        0.0, "amplitude of a spurious harmonic in the reading (seed 004 §8.3 item 2), deg"
+    )
+    spurious_period_s: float = param(60.0, "period of the spurious harmonic, s")
+
+
+@dataclass(frozen=True)
+class StandParams:
+    """Limits of the roll stand: commands outside them are refused with a reason."""
+
+    max_amplitude_cm: float = param(50.0, "largest amplitude the stand accepts, cm")
+    min_period_s: float = param(2.0, "shortest rocking period the stand accepts, s")
+    max_period_s: float = param(20.0, "longest rocking period the stand accepts, s")
+
+
+@dataclass(frozen=True)
+class FaultParams:
+    """Fault knobs (all off by default). Rates are per heading sample."""
+
+    drop_rate: float = param(0.0, "probability that a heading frame is not sent (counter gap)")
+    counter_jump_rate: float = param(0.0, "probability that the rolling counter jumps by 2..15")
+    invalid_rate: float = param(0.0, "probability that a heading frame has its VALID flag cleared")
+    stuck_at_s: float | None = param(None, "stand time at which the angle sensor sticks, s")
+    stuck_for_s: float = param(0.0, "how long the sensor stays stuck (repeats one value), s")
+    out_of_range_rate: float = param(
+        0.0, "probability that a heading frame carries a raw angle above 359.999 deg"
+    )
+    corrupt_rate: float = param(0.0, "probability that one bit of a heading frame is flipped")
+    error_frame_rate: float = param(0.0, "probability that an error frame precedes a heading frame")
+    silence_at_s: float | None = param(None, "stand time at which the bus falls silent, s")
+    silence_for_s: float = param(0.0, "how long the bus stays silent (no frames at all), s")
+    no_ack: bool = param(False, "the stand ignores commands: no acknowledgement, no action")
+    amplitude_factor: float = param(
+        1.0, "the stand rocks at this multiple of the commanded amplitude (and reports it)"
+    )
+    compass_fault_bits: int = param(0, "FAULT_BITS reported in GYRO_STATUS")
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    compass: CompassParams = field(default_factory=CompassParams)
+    noise: NoiseParams = field(default_factory=NoiseParams)
+    faults: FaultParams = field(default_factory=FaultParams)
+    speedup: float = param(1.0, "stand seconds per wall second (1 = real time)")
+    heading_rate_hz: float = param(10.0, "GYRO_HEADING rate, Hz of stand time")
+    status_rate_hz: float = param(2.0, "STAND_STATUS/STAND_MOTION/GYRO_STATUS rate, Hz")
+    seed: int = param(0, "random seed: equal seeds and schedules give equal frames")
+    stand: StandParams = field(default_factory=StandParams)
+
+    def __post_init__(self) -> None:
+        positive = {
+            "speedup": self.speedup,
+            "heading_rate_hz": self.heading_rate_hz,
+            "status_rate_hz": self.status_rate_hz,
+            "undamped_period_s": self.compass.undamped_period_s,
+            "C_gcm2s2": self.compass.C_gcm2s2,
+            "corr_mu_per_s": self.noise.corr_mu_per_s,
+            "spurious_period_s": self.noise.spurious_period_s,
+        }
+        for name, value in positive.items():
+            if not (value > 0 and math.isfinite(value)):
+                raise ValueError(f"{name} must be a positive number, got {value}")
+        if not self.compass.damping_ratio >= 0.0:
+            raise ValueError("damping_ratio must be >= 0")
+        if self.compass.undamped_period_s * self.heading_rate_hz < 20:
+            raise ValueError("undamped_period_s must span at least 20 heading intervals")
+        for f in fields(FaultParams):
+            if f.name.endswith("_rate") and not 0.0 <= getattr(self.faults, f.name) <= 1.0:
+                raise ValueError(f"{f.name} must be a probability in [0, 1]")
