@@ -7,19 +7,16 @@ The pieces are separate functions so other sources (a campaign in the database) 
 """
 
 import json
-import tomllib
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 
-from analysis import paper_example
-from analysis.campaign import AdmissibleRegion, CampaignAnalysis, analyze_campaign
+from analysis.campaign import CampaignAnalysis, analyze_campaign
 from analysis.csv_input import read_trials_csv
 from analysis.errors import AnalysisError
-from analysis.forecast import ShipConditions
-from analysis.gyro_model import KnownConstants
+from analysis.settings import SEED_000_SETTINGS, AnalysisSettings
+from analysis.settings import settings_from_plan as plan_settings
 from analysis.text_report import render_text
 from analysis.trials import TrialInput
 from gyrostand.errors import fail
@@ -28,102 +25,19 @@ PAPER_NOTE = (
     "note: no --plan given: using the seed-000 example constants, start values and ship "
     "forecast (Potemkin 1982)"
 )
-
-
-@dataclass(frozen=True)
-class AnalysisSettings:
-    """What a plan contributes to the analysis."""
-
-    constants: KnownConstants
-    q: float
-    start: tuple[float, float]
-    admissible: AdmissibleRegion | None
-    forecast: ShipConditions | None
-
-
-PAPER_SETTINGS = AnalysisSettings(
-    constants=paper_example.CONSTANTS,
-    q=0.05,
-    start=paper_example.START,
-    admissible=paper_example.ADMISSIBLE,
-    forecast=paper_example.FORECAST,
-)
-
-
-def _table(plan: dict[str, Any], name: str, path: Path) -> dict[str, Any]:
-    table = plan.get(name)
-    if not isinstance(table, dict):
-        fail(f"plan {path}: table [{name}] is missing")
-    return table
-
-
-def _number(table: dict[str, Any], table_name: str, key: str, path: Path) -> float:
-    value = table.get(key)
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        fail(f"plan {path}: [{table_name}] {key} must be a number, got {value!r}")
-    return float(value)
-
-
-def _range(table: dict[str, Any], key: str, path: Path) -> tuple[float, float] | None:
-    value = table.get(key)
-    if value is None:
-        return None
-    if not (isinstance(value, list) and len(value) == 2 and value[0] < value[1]):
-        fail(f"plan {path}: [analysis] {key} must be [low, high], got {value!r}")
-    return float(value[0]), float(value[1])
+PAPER_SETTINGS = SEED_000_SETTINGS
 
 
 def settings_from_plan(path: Path) -> AnalysisSettings:
     """Read [instrument], [site], [analysis] and the optional [forecast] of a campaign plan."""
     try:
-        plan = tomllib.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
         fail(f"plan {path}: cannot read it ({exc})")
-    instrument, site = _table(plan, "instrument", path), _table(plan, "site", path)
-    settings = _table(plan, "analysis", path)
     try:
-        constants = KnownConstants(
-            lP_gcm2s2=_number(instrument, "instrument", "lp_gcm2s2", path),
-            H1_gcm2s=_number(instrument, "instrument", "h1_gcm2s", path),
-            earth_rate_rad_s=_number(site, "site", "earth_rate_rad_s", path),
-            gravity_cm_s2=_number(site, "site", "gravity_cm_s2", path),
-            latitude_deg=_number(site, "site", "latitude_deg", path),
-        )
-        c_range = _range(settings, "admissible_c", path)
-        t_range = _range(settings, "admissible_t_s", path)
-        admissible = (
-            None
-            if c_range is None and t_range is None
-            else AdmissibleRegion(c_range or (0.0, float("inf")), t_range or (0.0, float("inf")))
-        )
-        ship = plan.get("forecast")
-        forecast = None
-        if ship is not None:
-            forecast = ShipConditions(
-                roll_deg=_number(ship, "forecast", "roll_deg", path),
-                arm_cm=_number(ship, "forecast", "arm_cm", path),
-                period_s=_number(ship, "forecast", "period_s", path),
-                course_deg=_number(ship, "forecast", "course_deg", path),
-                latitude_deg=_number(ship, "forecast", "latitude_deg", path),
-                motion=str(ship.get("motion", "roll")),
-                amplitude_cm=(
-                    _number(ship, "forecast", "amplitude_cm", path)
-                    if "amplitude_cm" in ship
-                    else None
-                ),
-            )
+        return plan_settings(text)
     except AnalysisError as exc:
         fail(f"plan {path}: {exc}")
-    return AnalysisSettings(
-        constants=constants,
-        q=_number(settings, "analysis", "q", path) if "q" in settings else 0.05,
-        start=(
-            _number(settings, "analysis", "start_c", path),
-            _number(settings, "analysis", "start_t_s", path),
-        ),
-        admissible=admissible,
-        forecast=forecast,
-    )
 
 
 def run_analysis(trials: list[TrialInput], settings: AnalysisSettings) -> CampaignAnalysis:
