@@ -25,3 +25,9 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	@for b in bench/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+
+# The `socketcan` tests on a real SocketCAN bus: in a small Linux VM with vcan0 (tools/vcan-vm,
+# docs/socketcan.md). On a machine that has vcan0 itself: .venv/bin/pytest -m socketcan
+.PHONY: test-socketcan
+test-socketcan: $(STAMP)
+	tools/vcan-vm run $(VENV)/bin/pytest -p no:cacheprovider -m socketcan tests/socketcan
