@@ -70,7 +70,8 @@ class FitResult:
     (X^T X)^-1 of the linearisation at the solution, ``covariance`` = ``xtx_inv`` x S^2 (1.10).
     ``path`` is "gauss-newton" or "trust-region"; ``fallback_reason`` says why Gauss-Newton was
     abandoned (None when it was not). ``log`` holds the Gauss-Newton iterations (including those
-    of an abandoned attempt)."""
+    of an abandoned attempt); ``iterations`` counts them, or the trust-region solver's function
+    evaluations on that path."""
 
     names: tuple[str, ...]
     estimates: dict[str, float]
@@ -187,7 +188,11 @@ def _linearise(problem: _Problem, theta: np.ndarray) -> _Linearisation | str:
         return f"singular linearisation: condition number {cond:.3g} of X"
     residuals = problem.y - values  # Y of eq 1.4: observed minus computed
     step = linalg.solve_triangular(r, q.T @ residuals) / scale  # eq 1.6
-    r_inv = linalg.solve_triangular(r, np.eye(r.shape[0]))
+    # LAPACK's triangular inverse: a BLAS-3 solve against the identity costs ~1000x more on tiny
+    # matrices when a multi-threaded BLAS contends for cores
+    r_inv, info = linalg.lapack.dtrtri(r)
+    if info != 0:
+        return f"singular linearisation: R[{info - 1}, {info - 1}] = 0"
     xtx_inv = (r_inv @ r_inv.T) / np.outer(scale, scale)
     return _Linearisation(values, jac, residuals, step, xtx_inv, cond)
 
