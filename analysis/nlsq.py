@@ -38,7 +38,7 @@ import numpy as np
 from scipy import linalg
 from scipy.optimize import least_squares
 
-from analysis.errors import NonFiniteError, TooFewTrialsError
+from analysis.errors import AnalysisError, NonFiniteError, TooFewTrialsError
 
 Model = Callable[..., np.ndarray]
 """``model(x, **theta) -> (n,)`` array."""
@@ -48,6 +48,7 @@ Model = Callable[..., np.ndarray]
 COND_LIMIT = 1e10
 _DIVERGING_RISES = 3
 _FD_STEP = np.finfo(float).eps ** (1 / 3)  # optimal relative step of a central difference
+_TINY = np.finfo(float).tiny
 
 
 @dataclass(frozen=True)
@@ -128,7 +129,7 @@ class _Problem:
         names: tuple[str, ...],
         jacobian: Callable[..., np.ndarray] | None,
     ) -> None:
-        self.model, self.x, self.y, self.names, self._jacobian = model, x, y, names, jacobian
+        self.model, self.x, self.y, self.names, self.analytic = model, x, y, names, jacobian
 
     def kwargs(self, theta: np.ndarray) -> dict[str, float]:
         return {name: float(v) for name, v in zip(self.names, theta, strict=True)}
@@ -140,8 +141,8 @@ class _Problem:
         return np.asarray(values, dtype=float).reshape(-1)
 
     def jacobian(self, theta: np.ndarray) -> np.ndarray:
-        if self._jacobian is not None:
-            jac = np.asarray(self._jacobian(self.x, **self.kwargs(theta)), dtype=float)
+        if self.analytic is not None:
+            jac = np.asarray(self.analytic(self.x, **self.kwargs(theta)), dtype=float)
             return jac.reshape(self.y.size, len(self.names))
         # Central differences: scipy's public approx_fprime is forward-only (error ~1e-8), too
         # coarse to reproduce certified NIST values to 6 digits; central gives ~1e-11.
@@ -229,7 +230,7 @@ def _gauss_newton(
             )
         if eps is None:
             se = np.sqrt(s2 * np.diag(lin.xtx_inv))
-            threshold = np.maximum(eps_se * se, 1e-13 * np.abs(theta))
+            threshold = np.maximum(eps_se * se, 1e-13 * np.abs(theta) + _TINY)
         else:
             threshold = eps
         theta = new
@@ -246,11 +247,8 @@ def _trust_region(
 ) -> tuple[np.ndarray, int, bool, str]:
     """Bounded trust-region reflective fit from theta0 (clipped into the bounds)."""
     lo, hi = bounds
-    start = np.clip(theta0.astype(float), lo, hi)
-    inner = (hi - lo) * 1e-9
-    start = np.where(start <= lo, lo + np.where(np.isfinite(inner), inner, 1e-9), start)
-    start = np.where(start >= hi, hi - np.where(np.isfinite(inner), inner, 1e-9), start)
-    jac = "3-point" if problem._jacobian is None else (lambda th: -problem.jacobian(th))
+    start = np.clip(theta0.astype(float), lo, hi)  # trf moves it strictly inside itself
+    jac = "3-point" if problem.analytic is None else (lambda th: -problem.jacobian(th))
     with np.errstate(all="ignore"):
         sol = least_squares(
             lambda th: problem.y - problem.values(th),
@@ -270,12 +268,17 @@ def _trust_region(
 def _vector(
     values: Mapping[str, float] | None, names: tuple[str, ...], what: str
 ) -> np.ndarray | None:
+    """A per-parameter mapping as a vector in parameter order; every name must be given."""
     if values is None:
         return None
-    unknown = set(values) - set(names)
-    if unknown:
-        raise KeyError(f"{what} names unknown parameters: {sorted(unknown)}")
-    return np.array([float(values.get(n, np.nan)) for n in names])
+    if set(values) != set(names):
+        raise AnalysisError(
+            f"{what} must name exactly the parameters {names}, got {sorted(values)}"
+        )
+    vector = np.array([float(values[n]) for n in names])
+    if not np.all(np.isfinite(vector) & (vector > 0)):
+        raise AnalysisError(f"{what} values must be positive and finite, got {dict(values)}")
+    return vector
 
 
 def fit_nonlinear(

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from analysis import FitResult, fit_nonlinear
-from analysis.errors import NonFiniteError, TooFewTrialsError
+from analysis.errors import AnalysisError, NonFiniteError, TooFewTrialsError
 
 NIST = json.loads(Path("/work/shared/reference/nist-strd-nonlinear.json").read_text())
 
@@ -134,3 +134,15 @@ def test_linear_model_is_exact_in_one_step() -> None:
     assert fit.std_errors["b"] == pytest.approx(np.sqrt(cov[0, 0]), rel=1e-8)
     assert fit.iterations == 2  # the step, then a zero step that meets (1.8)
     assert fit.correlation[0, 1] == pytest.approx(cov[0, 1] / np.sqrt(cov[0, 0] * cov[1, 1]))
+
+
+def test_exact_data_with_a_zero_parameter_converges() -> None:
+    x = np.linspace(0, 1, 5)
+    fit = fit_nonlinear(lambda x, a, b: a + b * x, x, 2 * x, {"a": 0.0, "b": 1.0})
+    assert fit.converged and fit.estimates == pytest.approx({"a": 0.0, "b": 2.0}, abs=1e-12)
+
+
+def test_per_parameter_options_must_name_every_parameter() -> None:
+    model = lambda x, a, b: a + b * x  # noqa: E731
+    with pytest.raises(AnalysisError, match="eps must name exactly"):
+        fit_nonlinear(model, np.arange(4.0), np.arange(4.0), {"a": 0.0, "b": 0.0}, eps={"a": 1})
