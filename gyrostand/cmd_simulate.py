@@ -1,14 +1,241 @@
-"""CLI: simulate."""
+"""CLI: `gyrostand simulate` -- the simulated gyrocompass + roll stand.
 
+Two modes: live (join a python-can bus, answer stand commands, publish at `--speedup` x real
+time) and standalone (play a scripted schedule as fast as possible into a BLF/ASC log). Every
+physics, noise, stand and fault parameter is an option generated from the config dataclasses,
+whose field help is the single source of its documentation."""
+
+from __future__ import annotations
+
+import inspect
+import time
+import typing
+from dataclasses import MISSING, fields
+from pathlib import Path
+from typing import Any
+
+import can
 import typer
+from rich.console import Console
 
-from gyrostand.errors import not_implemented
+from gyrostand.errors import fail
+from stand.schedule import LOG_SUFFIXES, ScheduleError, Step, load_schedule, run_schedule
+from stand.simulator import (
+    CompassParams,
+    FaultParams,
+    NoiseParams,
+    SimConfig,
+    Simulator,
+    StandParams,
+)
+
+_out = Console(stderr=True, highlight=False)
+
+# (SimConfig field or None for its top-level fields, dataclass, help panel)
+_GROUPS: tuple[tuple[str | None, type, str], ...] = (
+    (None, SimConfig, "Timing"),
+    ("compass", CompassParams, "Physics: gyrocompass"),
+    ("noise", NoiseParams, "Physics: sensor noise"),
+    ("stand", StandParams, "Roll stand limits"),
+    ("faults", FaultParams, "Faults"),
+)
+
+
+def _option_name(field_name: str) -> str:
+    return "--" + field_name.lower().replace("_", "-")
+
+
+def _config_parameters() -> list[inspect.Parameter]:
+    """One keyword parameter (a typer option) per scalar config field."""
+    params = []
+    for _, cls, panel in _GROUPS:
+        hints = typing.get_type_hints(cls)
+        for f in fields(cls):
+            if f.default is MISSING:  # the nested dataclasses of SimConfig
+                continue
+            name = _option_name(f.name)
+            switch_off = hints[f.name] is bool and f.default  # --x/--no-x; else a plain flag
+            decl = f"{name}/--no-{name[2:]}" if switch_off else name
+            option = typer.Option(
+                f.default, decl, help=f.metadata["help"], rich_help_panel=panel, show_default=True
+            )
+            params.append(
+                inspect.Parameter(
+                    f.name, inspect.Parameter.KEYWORD_ONLY, default=option, annotation=hints[f.name]
+                )
+            )
+    return params
+
+
+def _config(values: dict[str, Any]) -> SimConfig:
+    """Build the SimConfig from the option values; a clear error for a bad combination."""
+    nested = {}
+    top = {}
+    for group, cls, _ in _GROUPS:
+        chosen = {f.name: values[f.name] for f in fields(cls) if f.default is not MISSING}
+        if group is None:
+            top = chosen
+        else:
+            nested[group] = cls(**chosen)
+    try:
+        return SimConfig(**nested, **top)
+    except ValueError as exc:
+        fail(str(exc))
+
+
+_RUN_PARAMETERS = [
+    inspect.Parameter(
+        "interface",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=str | None,
+        default=typer.Option(
+            None, help="python-can interface to join (virtual, socketcan, pcan, ...)"
+        ),
+    ),
+    inspect.Parameter(
+        "channel",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=str | None,
+        default=typer.Option(None, help="python-can channel, e.g. vcan0"),
+    ),
+    inspect.Parameter(
+        "duration_s",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=float | None,
+        default=typer.Option(None, help="live mode: stop after this many wall seconds"),
+    ),
+    inspect.Parameter(
+        "schedule",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=Path | None,
+        default=typer.Option(
+            None,
+            help="standalone mode: TOML file, an array of 'step' tables with action (still or "
+            "rock), duration_s and, to rock, direction_deg, amplitude_cm, period_s",
+        ),
+    ),
+    inspect.Parameter(
+        "step",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=list[str] | None,
+        default=typer.Option(
+            None,
+            help="standalone mode step (repeatable, after --schedule's): "
+            "'still DURATION_S' or 'rock K_DEG A_CM TAU_S DURATION_S'",
+        ),
+    ),
+    inspect.Parameter(
+        "log",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=Path | None,
+        default=typer.Option(
+            None, help="python-can log (.blf or .asc) of every frame sent; required standalone"
+        ),
+    ),
+    inspect.Parameter(
+        "start_epoch",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=float | None,
+        default=typer.Option(None, help="Unix time of stand time 0 in the log (default: now)"),
+    ),
+]
+_RUN_NAMES = [p.name for p in _RUN_PARAMETERS]
+
+
+_HELP = (
+    "Run the simulated gyrocompass + roll stand.\n\n"
+    "Live: --interface virtual|socketcan|... --channel ... joins that bus, answers stand "
+    "commands and publishes heading and status at --speedup x real time until --duration-s or "
+    "Ctrl-C.\n\n"
+    "Standalone: --schedule FILE.toml and/or --step ... plays the schedule with no partner on "
+    "the bus, as fast as possible, into --log FILE.blf|.asc (and onto the bus when --interface "
+    "is given)."
+)
+
+
+def simulate(**options: Any) -> None:
+    """Run the simulated gyrocompass + roll stand (options: see _HELP and the config fields)."""
+    run = {name: options.pop(name) for name in _RUN_NAMES}
+    config = _config(options)
+    standalone = run["schedule"] is not None or run["step"]
+    if not standalone and run["interface"] is None:
+        fail("give --interface/--channel to join a bus, or --schedule/--step to play a schedule")
+    bus = _open_bus(run["interface"], run["channel"]) if run["interface"] else None
+    try:
+        if standalone:
+            _standalone(config, run, bus)
+        else:
+            assert bus is not None
+            _live(config, run, bus)
+    finally:
+        if bus is not None:
+            bus.shutdown()
+
+
+def _open_bus(interface: str, channel: str | None) -> can.BusABC:
+    try:
+        return can.Bus(interface=interface, channel=channel)
+    except (can.CanError, ValueError, ImportError, OSError, NotImplementedError) as exc:
+        fail(f"cannot open CAN bus (interface {interface!r}, channel {channel!r}): {exc}")
+
+
+def _standalone(config: SimConfig, run: dict[str, Any], bus: can.BusABC | None) -> None:
+    log: Path | None = run["log"]
+    if log is None or log.suffix.lower() not in LOG_SUFFIXES:
+        fail(f"standalone mode needs --log FILE ending in {' or '.join(LOG_SUFFIXES)}")
+    try:
+        steps = load_schedule(run["schedule"]) if run["schedule"] else []
+        steps += [Step.parse(text) for text in run["step"] or []]
+        if not log.parent.is_dir():
+            raise ScheduleError(f"folder {log.parent} does not exist")
+        result = run_schedule(config, steps, log, start_epoch_s=run["start_epoch"], bus=bus)
+    except ScheduleError as exc:
+        fail(str(exc))
+    for ack in result.refusals:
+        _out.print(f"warning: stand refused {ack.command!r}: {ack.reason}")
+    _out.print(
+        f"{result.frames} frames, {result.stand_duration_s:g} s of stand time in "
+        f"{result.wall_s:.2f} s -> {log}"
+    )
+
+
+def _live(config: SimConfig, run: dict[str, Any], bus: can.BusABC) -> None:
+    log: Path | None = run["log"]
+    if log is not None and log.suffix.lower() not in LOG_SUFFIXES:
+        fail(f"--log must end in {' or '.join(LOG_SUFFIXES)}")
+    recorder = can.Logger(str(log)) if log is not None else None
+    simulator = Simulator(bus, config, recorder=recorder, start_epoch_s=run["start_epoch"])
+    _out.print(
+        f"simulating on {run['interface']}:{run['channel']} at {config.speedup:g}x (Ctrl-C to stop)"
+    )
+    deadline = None if run["duration_s"] is None else time.monotonic() + run["duration_s"]
+    simulator.start()
+    try:
+        while deadline is None or time.monotonic() < deadline:
+            time.sleep(
+                0.05 if deadline is None else max(0.0, min(0.05, deadline - time.monotonic()))
+            )
+            if simulator.error is not None:
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        try:
+            simulator.stop()
+        except can.CanError as exc:
+            fail(f"CAN bus failed: {exc}", code=1)
+        finally:
+            if recorder is not None:
+                recorder.stop()
+    _out.print(
+        f"sent {simulator.frames_sent} frames ({simulator.frames_failed} failed), "
+        f"stand time {simulator.stand_time_s:.1f} s"
+    )
+
+
+simulate.__signature__ = inspect.Signature(_RUN_PARAMETERS + _config_parameters())  # type: ignore[attr-defined]
 
 
 def register(app: typer.Typer) -> None:
-    """Add the simulate command(s) to the CLI."""
-
-    @app.command()
-    def simulate() -> None:
-        """Run the simulated gyrocompass + roll stand on a CAN bus."""
-        not_implemented("simulate")
+    """Add the simulate command to the CLI."""
+    app.command(help=_HELP)(simulate)

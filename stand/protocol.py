@@ -295,7 +295,11 @@ class Codec:
             raise ProtocolError("signals: the heading message cannot also carry stand status")
         self._status_trigger = self._bound["status_time"].message.frame_id
         self._status_cache: dict[str, float] = {}
-        self._crc_mask = self._crc_mask_of(self._bound.get("heading_crc"))
+        crc = self._bound.get("heading_crc")
+        self._crc_keep: int | None = None  # the payload bits outside the CRC signal
+        if crc is not None:
+            self._crc_keep = ~int.from_bytes(_crc_mask(crc), "little")
+            self._crc_cut = 2**crc.signal.length - 1
         self._crc_bits_memo: dict[int, bytes] = {}
         # physical value of raw 0 for every signal: the filler for signals a frame does not set
         self._zero = {m.name: {s.name: s.offset for s in m.signals} for m in self._db.messages}
@@ -329,15 +333,6 @@ class Codec:
                 f"signals: the {group} entries must share one message, got {sorted(messages)}"
             )
         return self._bound[keys[0]].message
-
-    @staticmethod
-    def _crc_mask_of(bound: _Bound | None) -> bytes | None:
-        """Bytes with exactly the CRC signal's bits set (to zero them before computing the CRC)."""
-        if bound is None:
-            return None
-        zero = {s.name: 0 for s in bound.message.signals}
-        ones = zero | {bound.signal.name: 2**bound.signal.length - 1}
-        return bound.message.encode(ones, scaling=False, strict=False)
 
     @property
     def heading_arbitration_id(self) -> int:
@@ -416,7 +411,7 @@ class Codec:
             "heading_crc": 0,
         }
         (msg,) = self._encode(values, strict=strict)
-        if self._crc_mask is not None:  # the CRC bits are still zero: OR the CRC into them
+        if self._crc_keep is not None:  # the CRC bits are still zero: OR the CRC into them
             crc_bits = self._crc_bits(self._crc(bytes(msg.data)))
             msg.data = bytearray(a | b for a, b in zip(msg.data, crc_bits, strict=True))
         return msg
@@ -434,9 +429,9 @@ class Codec:
 
     def _crc(self, data: bytes) -> int:
         """CRC of the payload with the CRC bits zeroed, cut to the CRC signal length."""
-        assert self._crc_mask is not None
-        masked = bytes(b & ~m & 0xFF for b, m in zip(data, self._crc_mask, strict=False))
-        return crc8_sae_j1850(masked) & (2 ** self._bound["heading_crc"].signal.length - 1)
+        assert self._crc_keep is not None
+        masked = (int.from_bytes(data, "little") & self._crc_keep).to_bytes(len(data), "little")
+        return crc8_sae_j1850(masked) & self._crc_cut
 
     def encode_status(
         self,
@@ -566,7 +561,7 @@ class Codec:
 
     def _decode_heading(self, frame_id: int, raw: bytes) -> HeadingFrame:
         v = self._values(frame_id, raw, HEADING_KEYS)
-        if self._crc_mask is not None and v["heading_crc"] != self._crc(raw):
+        if self._crc_keep is not None and v["heading_crc"] != self._crc(raw):
             raise _Invalid("CRC mismatch: corrupt payload")
         return HeadingFrame(
             stand_time_ms=int(v["heading_time"]),
@@ -626,6 +621,13 @@ class Codec:
 
 class _Invalid(Exception):
     """Internal: the frame is invalid for the given reason."""
+
+
+def _crc_mask(bound: _Bound) -> bytes:
+    """Payload bytes with exactly the CRC signal's bits set."""
+    zero = {s.name: 0 for s in bound.message.signals}
+    ones = zero | {bound.signal.name: 2**bound.signal.length - 1}
+    return bound.message.encode(ones, scaling=False, strict=False)
 
 
 def _choice_code(bound: _Bound, name: str) -> int:
