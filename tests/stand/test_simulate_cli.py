@@ -1,0 +1,162 @@
+"""`gyrostand simulate`: documented options, standalone logs readable with python-can + the DBC,
+live mode on a virtual bus, one-line errors."""
+
+import threading
+import uuid
+from dataclasses import MISSING, fields
+from pathlib import Path
+
+import can
+import cantools
+import pytest
+import typer
+from typer.testing import CliRunner
+
+from gyrostand import cmd_simulate
+from stand.protocol import DBC_PATH
+from stand.simulator import CompassParams, FaultParams, NoiseParams, SimConfig, StandParams
+
+runner = CliRunner()
+app = typer.Typer()
+cmd_simulate.register(app)
+
+
+@app.callback()
+def _root() -> None:
+    """Test root: keeps `simulate` a subcommand as in the real CLI."""
+
+
+def invoke(*args: str) -> object:
+    return runner.invoke(app, ["simulate", *args], env={"COLUMNS": "250"})
+
+
+def test_help_documents_every_parameter() -> None:
+    result = invoke("--help")
+    assert result.exit_code == 0
+    for cls in (SimConfig, CompassParams, NoiseParams, StandParams, FaultParams):
+        for f in fields(cls):
+            if f.default is MISSING:
+                continue
+            assert "--" + f.name.lower().replace("_", "-") in result.output, f.name
+            assert f.metadata["help"][:40] in result.output, f.name
+    for option in ("--interface", "--channel", "--schedule", "--step", "--log"):
+        assert option in result.output
+
+
+SCHEDULE = ["--step", "still 60", "--step", "rock 31 23.5 6.2 300", "--step", "still 60"]
+
+
+def decode_log(path: Path) -> list[tuple[float, str, dict]]:
+    """Every frame of a log, read by python-can and decoded by cantools with the DBC alone."""
+    db = cantools.database.load_file(DBC_PATH)
+    out = []
+    for msg in can.LogReader(str(path)):
+        if msg.is_error_frame:
+            out.append((msg.timestamp, "ERROR", {}))
+            continue
+        message = db.get_message_by_frame_id(msg.arbitration_id)
+        out.append((msg.timestamp, message.name, message.decode(msg.data)))
+    return out
+
+
+@pytest.mark.parametrize("suffix", [".blf", ".asc"])
+def test_standalone_schedule_writes_a_log_that_decodes_with_the_dbc(
+    tmp_path: Path, suffix: str
+) -> None:
+    log = tmp_path / f"run{suffix}"
+    result = invoke(*SCHEDULE, "--log", str(log), "--start-epoch", "1700000000", "--seed", "4")
+    assert result.exit_code == 0, result.output
+    assert "420 s of stand time" in result.output
+    frames = decode_log(log)
+    heading = [d for _, name, d in frames if name == "GYRO_HEADING"]
+    assert len(heading) == 4201  # 0 .. 420 s at 10 Hz
+    assert [d["STAND_TIME"] for d in heading[:3]] == [0, 100, 200]
+    assert all(0 <= d["HEADING"] < 360 and d["VALID"] == 1 for d in heading)
+    commands = [str(d["COMMAND"]) for _, name, d in frames if name == "STAND_COMMAND"]
+    assert commands == ["set", "start", "stop"]
+    acks = [d for _, name, d in frames if name == "STAND_ACK"]
+    assert [(str(a["COMMAND"]), a["ACCEPTED"], a["STAND_TIME"]) for a in acks] == [
+        ("set", 1, 60_000),
+        ("start", 1, 60_000),
+        ("stop", 1, 360_000),
+    ]
+    rocking = {d["STAND_TIME"]: d["ROCKING"] for _, name, d in frames if name == "STAND_STATUS"}
+    assert (rocking[59_500], rocking[60_500], rocking[359_500], rocking[360_500]) == (0, 1, 1, 0)
+    motion = [d for _, name, d in frames if name == "STAND_MOTION" and d["AMPLITUDE"] > 0]
+    assert {(d["DIRECTION"], d["AMPLITUDE"], d["PERIOD"]) for d in motion} == {(31, 23.5, 6.2)}
+    first, last = frames[0][0], frames[-1][0]
+    if suffix == ".blf":  # ASC stores times relative to its start
+        assert first == pytest.approx(1_700_000_000.0)
+    assert last - first == pytest.approx(420.0, abs=1e-3)
+
+
+def test_schedule_file_and_seeds(tmp_path: Path) -> None:
+    schedule = tmp_path / "plan.toml"
+    schedule.write_text(
+        '[[step]]\naction = "still"\nduration_s = 30\n\n'
+        '[[step]]\naction = "rock"\ndirection_deg = 45\namplitude_cm = 20\nperiod_s = 5\n'
+        "duration_s = 30\n"
+    )
+    runs = {}
+    for name, seed in (("a", "1"), ("b", "1"), ("c", "2")):
+        log = tmp_path / f"{name}.blf"
+        args = [
+            "--schedule",
+            str(schedule),
+            "--log",
+            str(log),
+            "--seed",
+            seed,
+            "--drop-rate",
+            "0.1",
+        ]
+        assert invoke(*args, "--start-epoch", "0").exit_code == 0
+        runs[name] = [(t, n, d) for t, n, d in decode_log(log)]
+    assert runs["a"] == runs["b"] and runs["a"] != runs["c"]
+    assert sum(n == "GYRO_HEADING" for _, n, _ in runs["a"]) < 601  # some dropped
+
+
+def test_refused_step_is_reported_as_a_warning(tmp_path: Path) -> None:
+    result = invoke("--step", "rock 31 80 6 10", "--log", str(tmp_path / "x.blf"))
+    assert result.exit_code == 0
+    assert "stand refused 'set': amplitude out of stand limits" in result.output
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--step", "rok 1 2 3 4", "--log", "{tmp}/x.blf"], "bad step 'rok 1 2 3 4'"),
+        (["--step", "still 10", "--log", "{tmp}/x.txt"], "needs --log FILE ending in .blf or .asc"),
+        (["--step", "still 10"], "needs --log FILE"),
+        (["--step", "still 10", "--log", "{tmp}/no/x.blf"], "does not exist"),
+        (["--schedule", "{tmp}/absent.toml", "--log", "{tmp}/x.blf"], "cannot read schedule"),
+        ([], "give --interface/--channel to join a bus"),
+        (["--interface", "nonexistent", "--channel", "x"], "cannot open CAN bus"),
+        (["--step", "still 1", "--log", "{tmp}/x.blf", "--speedup", "-1"], "speedup must be"),
+        (["--step", "still 1", "--log", "{tmp}/x.blf", "--drop-rate", "2"], "drop_rate must be"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, args: list[str], message: str) -> None:
+    result = invoke(*[a.replace("{tmp}", str(tmp_path)) for a in args])
+    assert result.exit_code == 2
+    assert message in result.output
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "x.blf").exists()
+
+
+def test_live_mode_on_a_virtual_bus(tmp_path: Path) -> None:
+    channel = f"gyrostand-cli-{uuid.uuid4()}"
+    received: list[can.Message] = []
+    with can.Bus(interface="virtual", channel=channel) as bus:
+        collect = threading.Thread(
+            target=lambda: received.extend(iter(lambda: bus.recv(timeout=1.0), None))
+        )
+        collect.start()
+        log = tmp_path / "live.asc"
+        args = ["--interface", "virtual", "--channel", channel, "--duration-s", "0.4"]
+        result = invoke(*args, "--speedup", "100", "--log", str(log))
+        collect.join()
+    assert result.exit_code == 0, result.output
+    heading = [m for m in received if m.arbitration_id == 0x100]
+    assert len(heading) > 50  # ~40 s of stand time at 10 Hz
+    assert len(list(can.LogReader(str(log)))) == len(received)
