@@ -2,8 +2,9 @@
 
 `advance_to(t)` returns every frame the stand and the compass send up to stand time t (their
 `timestamp` is the stand time in seconds); `receive(msg)` applies a command at the current stand
-time and returns the acknowledgement. No bus and no clock here: the live `Simulator` paces this
-against wall time, the standalone schedule runs it as fast as the machine allows."""
+time and returns the acknowledgement (a command takes effect from the next heading sample). No
+bus and no clock here: the live `Simulator` paces this against wall time, the standalone
+schedule runs it as fast as the machine allows."""
 
 from __future__ import annotations
 
@@ -57,6 +58,9 @@ class StandEngine:
         self._status_encoders = [BatchEncoder(*g) for g in self.codec.layout(STATUS_KEYS)]
         self._setting: tuple[float, float, float] | None = None  # commanded K deg, A cm, tau s
         self._rocking_since_s: float | None = None
+        self._compass_status = self.codec.encode_compass_status(  # constant while simulated
+            True, compass.fluid_temp_c, config.faults.compass_fault_bits
+        )
 
     # ------------------------------------------------------------------------------ state
     @property
@@ -115,6 +119,7 @@ class StandEngine:
                 + compass.harmonic_2p_deg_per_g * np.sin(2.0 * phase)
             )
         reading += noise.drift_deg_per_h * t / 3600.0
+        # seed 004 eq 8.90: a harmonic a cos(nu t + phi) hidden in the stationary noise X(t)
         reading += noise.spurious_amplitude_deg * np.sin(
             2.0 * math.pi * t / noise.spurious_period_s
         )
@@ -171,7 +176,8 @@ class StandEngine:
     def _status_frames(self, start: int, end: int) -> list[can.Message]:
         index = np.arange(start, max(start, end))
         t = index / self.config.status_rate_hz
-        index, t = index[~self._silent(t)], t[~self._silent(t)]
+        heard = ~self._silent(t)
+        index, t = index[heard], t[heard]
         n = len(index)
         if n == 0:
             return []
@@ -193,19 +199,17 @@ class StandEngine:
         frames: list[can.Message] = []
         for encoder in self._status_encoders:  # the part completing the status goes last
             frames += encoder.messages(encoder.pack(values, n), t)
-        compass = self._compass_status()
-        frames += [can.Message(**compass, timestamp=float(ts)) for ts in t]
+        compass = self._compass_status
+        frames += [
+            can.Message(
+                arbitration_id=compass.arbitration_id,
+                is_extended_id=compass.is_extended_id,
+                data=compass.data,
+                timestamp=float(ts),
+            )
+            for ts in t
+        ]
         return frames
-
-    def _compass_status(self) -> dict:
-        msg = self.codec.encode_compass_status(
-            True, self.config.compass.fluid_temp_c, self.config.faults.compass_fault_bits
-        )
-        return {
-            "arbitration_id": msg.arbitration_id,
-            "is_extended_id": msg.is_extended_id,
-            "data": bytes(msg.data),
-        }
 
     # ------------------------------------------------------------------------------ commands
     def receive(self, msg: can.Message) -> list[can.Message]:

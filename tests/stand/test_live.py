@@ -12,6 +12,7 @@ import pytest
 from stand.controller import StandController, StandError, StandRefused, StandTimeout
 from stand.protocol import Codec, HeadingFrame, Reason
 from stand.simulator import CompassParams, Simulator
+from tests.conftest import socketcan_channel
 from tests.stand.frames import config
 
 
@@ -50,10 +51,16 @@ class Collector(can.Listener):
 class Rig:
     """A simulator on one end of a fresh virtual channel; controller + collector on the other."""
 
-    def __init__(self, ack_timeout_s: float = 2.0, **groups) -> None:
-        channel = f"gyrostand-test-{uuid.uuid4()}"
-        self.sim_bus = can.Bus(interface="virtual", channel=channel)
-        self.bus = can.Bus(interface="virtual", channel=channel)
+    def __init__(
+        self,
+        ack_timeout_s: float = 2.0,
+        interface: str = "virtual",
+        channel: str | None = None,
+        **groups,
+    ) -> None:
+        channel = channel or f"gyrostand-test-{uuid.uuid4()}"
+        self.sim_bus = can.Bus(interface=interface, channel=channel)
+        self.bus = can.Bus(interface=interface, channel=channel)
         self.codec = Codec()
         self.controller = StandController(self.bus, self.codec, ack_timeout_s=ack_timeout_s)
         self.collector = Collector(self.codec)
@@ -159,3 +166,14 @@ def test_stopping_the_notifier_does_not_command_the_stand(rig: Rig) -> None:
     rig.notifier.stop()  # python-can calls Listener.stop() here: it must not wait for an ack
     assert time.monotonic() - started < 1.0
     assert rig.simulator.engine.rocking
+
+
+@pytest.mark.socketcan
+def test_command_cycle_over_socketcan() -> None:
+    with Rig(interface="socketcan", channel=socketcan_channel(), speedup=100) as rig:
+        rig.controller.set_rocking(31.0, 23.5, 6.2)
+        rig.controller.start()
+        rig.wait_status(lambda s: s.rocking and s.amplitude_cm == 23.5)
+        rig.controller.stop()
+        rig.wait_status(lambda s: not s.rocking)
+        assert rig.collector.now_ms > 0
