@@ -80,15 +80,17 @@ def ar1(rng: np.random.Generator, n: int, rho: float, sd: float, reps: int) -> n
     return x
 
 
-@pytest.mark.parametrize("rho", [0.0, 0.9])
-def test_standard_error_matches_monte_carlo_scatter(rho: float) -> None:
-    """Reported SE (with the AR(1) inflation) vs the scatter of R^ over 300 noisy records of
-    0.7 T0 with known damping: shorter than one period, as the damped model allows."""
+@pytest.mark.parametrize(("rho", "white_sd"), [(0.0, 0.0), (0.9, 0.0), (0.8, 0.05)])
+def test_standard_error_matches_monte_carlo_scatter(rho: float, white_sd: float) -> None:
+    """Reported SE (with the inflation for correlated noise) vs the scatter of R^ over 300 noisy
+    records of 0.7 T0 with known damping: shorter than one period, as the damped model allows.
+    Noise: white, AR(1), and AR(1) plus as much white noise (seed 004's exponential + white),
+    where the lag-1 rule (1 + r1) / (1 - r1) alone would give two thirds of the SE."""
     rng = np.random.default_rng(7)
     t = np.arange(0, 0.7 * T0_S, 10.0)
     xi = 0.35 * OMEGA
     clean = 50.0 + 10.0 * np.exp(-xi * t) * np.sin(OMEGA * t + 0.5)
-    noise = ar1(rng, t.size, rho, 0.05, 300)
+    noise = ar1(rng, t.size, rho, 0.05, 300) + rng.normal(0, white_sd, (300, t.size))
     ests = [estimate_settle_point(t, clean + e, OMEGA, xi) for e in noise]
     r_hat = np.array([e.settle_point_deg for e in ests])
     reported = np.sqrt(np.mean([e.standard_error_deg**2 for e in ests]))
