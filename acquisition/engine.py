@@ -29,7 +29,7 @@ import numpy as np
 
 from acquisition.batch import FrameBatch, Headings, Statuses
 from acquisition.plan import Plan, TrialPlan
-from stand.protocol import AckFrame, Frame, InvalidFrame
+from stand.protocol import AckFrame, CommandFrame, Frame, InvalidFrame
 
 NANO = 1_000_000_000  # deviations are summed as integer nano-degrees
 CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the error frame's identifier
@@ -48,6 +48,10 @@ class Command:
         return (
             f"set K={self.direction_deg:g} deg, A={self.amplitude_cm:g} cm, tau={self.period_s:g} s"
         )
+
+
+class CommandNotSent(Exception):
+    """The commander could not put the command on the bus at all."""
 
 
 @dataclass(frozen=True)
@@ -205,6 +209,7 @@ class Engine:
         self._k = 1
         self._values: list[float] = []
         self._pending: list[Command] = []
+        self._sent = False  # the pending command has been seen in the stream
         self._then = Phase.DONE
         self._phase_start_ms = 0
         self._window: _Window | None = None
@@ -250,12 +255,18 @@ class Engine:
             self._issue_next()
 
     def _issue_next(self) -> None:
+        """Send the next pending command. Its ack is awaited only after the command itself shows
+        up in the stream (the frames before it were on their way before it was sent), and the
+        ack timeout runs in stand time from there."""
         command = self._pending[0]
         if command.kind != "stop":
             self._stopped = False
+        self._sent = False
         self.sink.event("command", "info", command.describe(), self._tidx, None, self.now_ms)
-        self.commander.issue(command)
-        self._phase_start_ms = self.now_ms
+        try:
+            self.commander.issue(command)
+        except CommandNotSent as exc:
+            self.fail(f"could not send '{command.kind}': {exc}", kind="bus error")
 
     def _enter(self, phase: Phase) -> None:
         self.phase = phase
@@ -301,16 +312,23 @@ class Engine:
         if self.plan.on_trial_failure == "pause":
             self.outcome = "paused"
             self.todo = []
-            self.commander.issue(Command("stop"))
+            self._stop_stand()
             self.phase = Phase.DONE
         else:
             self._next_trial()
+
+    def _stop_stand(self) -> None:
+        """Best effort on the way out: nothing waits for this ack."""
+        try:
+            self.commander.issue(Command("stop"))
+        except CommandNotSent as exc:
+            self.sink.event("command", "error", f"could not send 'stop': {exc}", self._tidx)
 
     def interrupt(self, reason: str) -> None:
         """Stop where we are (operator or signal): the stand is told to stop rocking."""
         if self.phase is not Phase.DONE:
             self.sink.event("interrupted", "warning", reason, self._tidx, None, self.now_ms)
-            self.commander.issue(Command("stop"))
+            self._stop_stand()
             self.outcome = "stopped"
             self.phase = Phase.DONE
 
@@ -366,6 +384,8 @@ class Engine:
     def _check_wait_timeout(self) -> None:
         waited_s = (self.now_ms - self._phase_start_ms) / 1000
         if self.phase is Phase.COMMANDS:
+            if not self._sent:
+                return
             limit = self.plan.timeouts.ack_s * self.plan.bus.speedup
             if waited_s > limit:
                 self.fail(
@@ -382,13 +402,19 @@ class Engine:
             )
 
     def _on_other(self, frame: Frame) -> None:
-        if isinstance(frame, AckFrame):
+        if isinstance(frame, CommandFrame):
+            if self.phase is Phase.COMMANDS and frame.command == self._pending[0].kind:
+                self._sent = True
+                self._phase_start_ms = self.now_ms
+        elif isinstance(frame, AckFrame):
             self._on_ack(frame)
         elif isinstance(frame, InvalidFrame) and _is_bus_off(frame):
             self.fail("bus-off reported by the CAN controller", kind="bus-off")
 
     def _on_ack(self, ack: AckFrame) -> None:
-        if self.phase is not Phase.COMMANDS or ack.command != self._pending[0].kind:
+        if self.phase is not Phase.COMMANDS or not self._sent:
+            return
+        if ack.command != self._pending[0].kind:
             return
         if not ack.accepted:
             self.fail(f"stand refused '{ack.command}': {ack.reason}", kind="stand refusal")

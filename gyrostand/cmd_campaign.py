@@ -1,10 +1,104 @@
 """CLI: campaign run/resume/status, replay."""
 
+from __future__ import annotations
+
+import dataclasses
 from pathlib import Path
+from typing import Annotated
 
+import can
 import typer
+from rich.console import Console
+from rich.table import Table
 
-from gyrostand.errors import not_implemented
+from acquisition.plan import Plan, PlanError, load_plan
+from acquisition.runner import RunResult, prepare, replay, resume_store, run_live
+from acquisition.store import CampaignStore
+from db.queries import CampaignNotFound, campaign_summary
+from db.session import DatabaseVersionError, database_url, open_database
+from gyrostand.cmd_data import DEFAULT_DB
+from gyrostand.errors import EXIT_FAILED, fail
+
+_out = Console(highlight=False)
+
+
+def _load(plan_path: Path) -> Plan:
+    try:
+        return load_plan(plan_path)
+    except PlanError as exc:
+        fail(f"{plan_path}: invalid plan: " + "; ".join(exc.problems))
+
+
+def _with_overrides(
+    plan: Plan,
+    *,
+    interface: str | None,
+    channel: str | None,
+    db: str | None,
+    speedup: float | None,
+    seed: int | None,
+) -> Plan:
+    bus = plan.bus
+    if interface is not None or channel is not None:
+        if speedup is not None or seed is not None:
+            fail("--speedup and --seed apply to the simulated stand, not to --interface/--channel")
+        bus = dataclasses.replace(
+            bus, simulated=False, interface=interface, channel=channel, speedup=1.0
+        )
+    else:
+        if (speedup is not None or seed is not None) and not bus.simulated:
+            fail("--speedup and --seed apply only when the plan's bus is simulated")
+        if speedup is not None:
+            if not speedup > 0:
+                fail("--speedup must be > 0")
+            bus = dataclasses.replace(bus, speedup=speedup)
+        if seed is not None:
+            bus = dataclasses.replace(bus, seed=seed)
+    plan = dataclasses.replace(plan, bus=bus, database=db or plan.database)
+    try:
+        prepare(plan)
+    except PlanError as exc:
+        fail("invalid plan: " + "; ".join(exc.problems))
+    return plan
+
+
+def _sessions(db: str, *, must_exist: bool):  # type: ignore[no-untyped-def]
+    if must_exist and "://" not in db and not Path(db).exists():
+        fail(f"no database at {db}")
+    try:
+        return open_database(database_url(db))
+    except DatabaseVersionError as exc:
+        fail(str(exc))
+
+
+def _report(result: RunResult, db: str) -> None:
+    _out.print(
+        f"campaign {result.campaign_id} {result.outcome}: {result.trials_completed} trials "
+        f"completed, {result.trials_failed} failed, {result.observations} observations in {db}"
+    )
+    if result.raw_log is not None:
+        _out.print(f"raw frames: {result.raw_log} (sha256 {result.raw_log_sha256})")
+    if result.outcome != "completed":
+        _out.print(f"continue with: gyrostand campaign resume {result.campaign_id} --db {db}")
+        raise typer.Exit(EXIT_FAILED)
+
+
+def _run(plan: Plan, store: CampaignStore, quiet: bool) -> RunResult:
+    try:
+        return run_live(plan, store, quiet=quiet)
+    except (can.CanError, OSError, ValueError) as exc:
+        store.set_status("paused")
+        fail(f"campaign {store.campaign_id} could not use the bus: {exc}", code=EXIT_FAILED)
+
+
+Interface = Annotated[
+    str | None,
+    typer.Option(help="python-can interface (e.g. socketcan); default: the plan's bus."),
+]
+Channel = Annotated[str | None, typer.Option(help="python-can channel (e.g. can0).")]
+Speedup = Annotated[float | None, typer.Option(help="Simulated stand: stand s per wall s.")]
+Seed = Annotated[int | None, typer.Option(help="Simulated stand: random seed.")]
+Quiet = Annotated[bool, typer.Option("--quiet", help="No live progress display.")]
 
 
 def register(app: typer.Typer) -> None:
@@ -14,21 +108,100 @@ def register(app: typer.Typer) -> None:
     app.add_typer(campaign_app, name="campaign")
 
     @campaign_app.command("run")
-    def campaign_run(plan: Path) -> None:
-        """Run a campaign plan (TOML) on the stand."""
-        not_implemented("campaign run")
+    def campaign_run(
+        plan: Annotated[Path, typer.Argument(help="Campaign plan (TOML).")],
+        interface: Interface = None,
+        channel: Channel = None,
+        db: Annotated[
+            str | None, typer.Option(help="Database (file or URL); default: the plan's.")
+        ] = None,
+        speedup: Speedup = None,
+        seed: Seed = None,
+        quiet: Quiet = False,
+    ) -> None:
+        """Run a campaign plan on the stand (the simulated stand when the plan says so)."""
+        checked = _with_overrides(
+            _load(plan), interface=interface, channel=channel, db=db, speedup=speedup, seed=seed
+        )
+        sessions = _sessions(checked.database, must_exist=False)
+        store = CampaignStore.create(sessions, checked)
+        _report(_run(checked, store, quiet), checked.database)
 
     @campaign_app.command("resume")
-    def campaign_resume(campaign_id: int) -> None:
-        """Continue a campaign from its first incomplete series."""
-        not_implemented("campaign resume")
+    def campaign_resume(
+        campaign_id: int,
+        db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
+        interface: Interface = None,
+        channel: Channel = None,
+        speedup: Speedup = None,
+        seed: Seed = None,
+        quiet: Quiet = False,
+    ) -> None:
+        """Continue a campaign from its first incomplete series (re-settling first)."""
+        sessions = _sessions(db, must_exist=True)
+        try:
+            stored, store = resume_store(sessions, campaign_id)
+        except LookupError as exc:
+            fail(str(exc))
+        except PlanError as exc:
+            fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
+        checked = _with_overrides(
+            stored, interface=interface, channel=channel, db=db, speedup=speedup, seed=seed
+        )
+        _report(_run(checked, store, quiet), db)
 
     @campaign_app.command("status")
-    def campaign_status(campaign_id: int) -> None:
+    def campaign_status(
+        campaign_id: int,
+        db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
+    ) -> None:
         """Show where a campaign stands."""
-        not_implemented("campaign status")
+        sessions = _sessions(db, must_exist=True)
+        with sessions() as session:
+            try:
+                s = campaign_summary(session, campaign_id)
+            except CampaignNotFound as exc:
+                fail(str(exc))
+        _out.print(
+            f"campaign {s.campaign_id} ({s.source}): {s.status}, {s.instrument}, "
+            f"operator {s.operator}, N={s.n_obs}"
+        )
+        table = Table("trial", "role", "status", "j=1", "j=2", "failure")
+        for t in s.trials:
+            table.add_row(
+                str(t.index),
+                t.role,
+                t.status,
+                f"{t.observations_by_j.get(1, 0)}/{s.n_obs}",
+                f"{t.observations_by_j.get(2, 0)}/{s.n_obs}",
+                t.failure_reason or "",
+            )
+        _out.print(table)
+        events = ", ".join(f"{n} {sev}" for sev, n in s.events_by_severity.items())
+        _out.print(f"observations: {s.observations_stored}; events: {events}")
+        if s.resume is not None:
+            _out.print(
+                f"next: trial {s.resume.trial_index}, series j={s.resume.j}, "
+                f"observation {s.resume.next_k}"
+            )
 
-    @app.command()
-    def replay() -> None:
+    @app.command("replay")
+    def replay_command(
+        log: Annotated[Path, typer.Argument(help="Raw CAN log of a campaign (.blf or .asc).")],
+        plan: Annotated[Path, typer.Option("--plan", help="The campaign's plan (TOML).")],
+        db: Annotated[
+            str | None, typer.Option(help="Database (file or URL); default: the plan's.")
+        ] = None,
+    ) -> None:
         """Re-derive observations offline from a raw CAN log into a new campaign."""
-        not_implemented("replay")
+        checked = _with_overrides(
+            _load(plan), interface=None, channel=None, db=db, speedup=None, seed=None
+        )
+        if not log.is_file():
+            fail(f"no log file at {log}")
+        sessions = _sessions(checked.database, must_exist=False)
+        try:
+            result = replay(checked, sessions, log)
+        except (ValueError, OSError, can.CanError) as exc:
+            fail(f"cannot read {log}: {exc}")
+        _report(result, checked.database)

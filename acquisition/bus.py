@@ -1,0 +1,209 @@
+"""The bus side of a live campaign: open the bus (or the in-process simulated stand), one
+`can.Notifier` feeding a bounded queue, the raw log, and the stand controller.
+
+Every listener runs on the notifier's thread; the campaign thread only drains the queue. A full
+queue or a listener error is counted and reported as an event, never dropped silently."""
+
+from __future__ import annotations
+
+import dataclasses
+import queue
+import threading
+import time
+import uuid
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import can
+
+from acquisition.plan import BusPlan, Plan, PlanError
+from stand.controller import StandController
+from stand.protocol import DBC_PATH, Codec, ProtocolError, SignalMap
+from stand.simulator import SimConfig, Simulator
+
+
+def codec_for(plan: Plan) -> Codec:
+    """The plan's DBC and signal map as a codec (PlanError naming the problem)."""
+    try:
+        dbc = Path(plan.dbc_path) if plan.dbc_path else DBC_PATH
+        return Codec(dbc, SignalMap.from_mapping(plan.signals))
+    except ProtocolError as exc:
+        raise PlanError([str(exc)]) from None
+
+
+def sim_config(bus: BusPlan) -> SimConfig:
+    """The simulated stand for a plan: `[bus.simulator]` overrides (nested tables compass,
+    noise, faults, stand) on the defaults, plus the plan's speedup and seed."""
+    overrides: dict[str, Any] = dict(bus.simulator)
+    problems: list[str] = []
+    base = SimConfig()
+    values: dict[str, Any] = {"speedup": bus.speedup, "seed": bus.seed}
+    for f in dataclasses.fields(SimConfig):
+        if f.name not in overrides:
+            continue
+        given = overrides.pop(f.name)
+        current = getattr(base, f.name)
+        if dataclasses.is_dataclass(current):
+            if not isinstance(given, Mapping):
+                problems.append(f"bus.simulator.{f.name}: must be a table")
+                continue
+            known = {g.name for g in dataclasses.fields(current)}
+            for key in sorted(set(given) - known):
+                problems.append(f"bus.simulator.{f.name}.{key}: unknown key")
+            values[f.name] = dataclasses.replace(
+                current, **{k: v for k, v in given.items() if k in known}
+            )
+        else:
+            values[f.name] = given
+    problems += [f"bus.simulator.{key}: unknown key" for key in sorted(overrides)]
+    if problems:
+        raise PlanError(problems)
+    try:
+        return dataclasses.replace(base, **values)
+    except (TypeError, ValueError) as exc:
+        raise PlanError([f"bus.simulator: {exc}"]) from None
+
+
+class Recorder(can.Listener):
+    """The one path of every frame: received frames (notifier thread) and the commands we send
+    (campaign thread) go, under one lock, to the raw log and to a bounded queue for the campaign
+    thread. So the queue and the log hold the same frames in the same order, and a replay of the
+    log sees exactly what the live engine saw. A full queue is counted, never silent."""
+
+    def __init__(self, maxsize: int, log_path: Path | None) -> None:
+        self.queue: queue.Queue[can.Message] = queue.Queue(maxsize)
+        self.writer = can.Logger(log_path) if log_path is not None else None
+        self.lock = threading.Lock()
+        self.dropped = 0
+        self.errors: list[Exception] = []  # from the bus, through the notifier
+        self.log_error: Exception | None = None  # the raw log stopped being written
+        self._stopped = False
+
+    def on_message_received(self, msg: can.Message) -> None:
+        with self.lock:
+            if self.writer is not None and not self._stopped and self.log_error is None:
+                try:
+                    self.writer.on_message_received(msg)
+                except Exception as exc:  # the frame still reaches the campaign
+                    self.log_error = exc
+            try:
+                self.queue.put_nowait(msg)
+            except queue.Full:
+                self.dropped += 1
+
+    def on_error(self, exc: Exception) -> None:
+        self.errors.append(exc)
+
+    def stop(self) -> None:
+        with self.lock:
+            if self.writer is not None and not self._stopped:
+                self.writer.stop()
+            self._stopped = True
+
+    def drain(self, limit: int, timeout_s: float) -> list[can.Message]:
+        """Up to `limit` frames: waits `timeout_s` for the first, then takes what is there."""
+        try:
+            first = self.queue.get(timeout=timeout_s)
+        except queue.Empty:
+            return []
+        out = [first]
+        get = self.queue.get_nowait
+        try:
+            while len(out) < limit:
+                out.append(get())
+        except queue.Empty:
+            pass
+        return out
+
+
+class Filtered(can.Listener):
+    """Passes only some arbitration IDs on (the controller needs acks and status, not the
+    heading stream it would otherwise decode frame by frame)."""
+
+    def __init__(self, listener: can.Listener, ids: set[int]) -> None:
+        self.listener, self.ids = listener, ids
+
+    def on_message_received(self, msg: can.Message) -> None:
+        if msg.arbitration_id in self.ids and not msg.is_error_frame:
+            self.listener.on_message_received(msg)
+
+    def on_error(self, exc: Exception) -> None:
+        self.listener.on_error(exc)
+
+
+class RecordedSend:
+    """The bus as the controller sees it: every frame it sends also enters the stream."""
+
+    def __init__(self, bus: can.BusABC, recorder: Recorder) -> None:
+        self._bus, self._recorder = bus, recorder
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        # recorded first: the stand's answer must not enter the stream before the command
+        if not msg.timestamp:
+            msg.timestamp = time.time()
+        self._recorder.on_message_received(msg)
+        self._bus.send(msg, timeout)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._bus, name)
+
+
+class LiveBus:
+    """Opens everything a live campaign needs on the bus; `close()` releases it in order."""
+
+    def __init__(self, plan: Plan, codec: Codec, raw_log: Path | None) -> None:
+        self.plan = plan
+        self.simulator: Simulator | None = None
+        config = sim_config(plan.bus) if plan.bus.simulated else None
+        self.bus = self._open(plan.bus)
+        try:
+            if config is not None:
+                self._sim_bus = can.Bus(interface="virtual", channel=self._channel)
+                self.simulator = Simulator(self._sim_bus, config, codec=codec_for(plan))
+            self.recorder = Recorder(plan.bus.queue_size, raw_log)
+            self.controller = StandController(
+                RecordedSend(self.bus, self.recorder),  # type: ignore[arg-type]
+                codec,
+                ack_timeout_s=plan.timeouts.ack_s,
+            )
+            smap = codec.signal_map
+            control_ids = {
+                codec.database.get_message_by_name(ref.message).frame_id
+                for ref in (smap.ack_command, smap.status_time, smap.status_amplitude)
+            }
+            listeners = [self.recorder, Filtered(self.controller, control_ids)]
+            self.notifier = can.Notifier(self.bus, listeners, timeout=0.05)
+            if self.simulator is not None:
+                self.simulator.start()
+        except BaseException:
+            self.bus.shutdown()
+            raise
+
+    def _open(self, bus: BusPlan) -> can.BusABC:
+        if bus.simulated:
+            # a name not ending in digits: log writers would take those for a channel number
+            self._channel = f"gyrostand-{uuid.uuid4().hex}-sim"
+            return can.Bus(interface="virtual", channel=self._channel)
+        kwargs: dict[str, Any] = {}
+        if bus.interface is not None:
+            kwargs["interface"] = bus.interface
+        if bus.channel is not None:
+            kwargs["channel"] = bus.channel
+        if bus.bitrate is not None:
+            kwargs["bitrate"] = bus.bitrate
+        return can.Bus(**kwargs)  # without arguments: python-can's config file / environment
+
+    def close(self) -> None:
+        """Stop the simulated stand, the notifier (which stops the raw log), the buses."""
+        try:
+            if self.simulator is not None:
+                self.simulator.stop()
+        finally:
+            try:
+                self.notifier.stop()
+                self.recorder.stop()
+            finally:
+                self.bus.shutdown()
+                if self.simulator is not None:
+                    self._sim_bus.shutdown()

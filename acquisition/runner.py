@@ -1,0 +1,254 @@
+"""Run a campaign live on the bus, resume one, or re-derive one offline from its raw log.
+
+Live and replay share everything downstream of the frames: `BatchDecoder` -> `Engine` ->
+`CampaignStore`. Live adds the bus, the stand controller, signals and the wall-clock watchdog."""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session, sessionmaker
+
+from acquisition.batch import BatchDecoder, RawFrames
+from acquisition.bus import LiveBus, codec_for, sim_config
+from acquisition.engine import Command, CommandNotSent, Engine, Phase
+from acquisition.logfile import read_raw_frames
+from acquisition.plan import Plan
+from acquisition.progress import ProgressDisplay
+from acquisition.store import CampaignStore
+from db.models import Campaign, Observation, Series, Trial
+from stand.controller import StandController, StandError, StandRefused, StandTimeout
+
+BATCH_FRAMES = 50_000
+
+
+@dataclass(frozen=True)
+class RunResult:
+    campaign_id: int
+    outcome: str  # completed | paused | stopped
+    trials_completed: int
+    trials_failed: int
+    observations: int
+    raw_log: Path | None
+    raw_log_sha256: str | None
+
+
+def prepare(plan: Plan) -> None:
+    """Everything that can be checked before the bus or the database is touched (PlanError)."""
+    codec_for(plan)
+    if plan.bus.simulated:
+        sim_config(plan.bus)
+
+
+def sha256_of(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+class LiveCommander:
+    """Sends the engine's commands through the stand controller. Acks and refusals are judged by
+    the engine from the stream (as in replay), so only a failure to send is reported here."""
+
+    def __init__(self, controller: StandController) -> None:
+        self.controller = controller
+
+    def issue(self, command: Command) -> None:
+        try:
+            if command.kind == "set":
+                self.controller.set_rocking(
+                    command.direction_deg, command.amplitude_cm, command.period_s
+                )
+            elif command.kind == "start":
+                self.controller.start()
+            else:
+                self.controller.stop()
+        except (StandRefused, StandTimeout):
+            pass  # the engine sees the refusal, or waits out the ack timeout in stand time
+        except StandError as exc:
+            raise CommandNotSent(str(exc)) from exc
+
+
+@contextmanager
+def _stop_on_signals(stop: threading.Event) -> Iterator[None]:
+    """SIGINT/SIGTERM set `stop` (the loop then stops the stand and commits) instead of
+    killing the process mid-write. Only possible from the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    def handler(signum: int, _frame: object) -> None:
+        stop.set()
+
+    for s in previous:
+        signal.signal(s, handler)
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+def raw_log_path(plan: Plan, campaign_id: int) -> Path:
+    """campaign-ID.blf for the first run, campaign-ID-resumeN.blf for each resume."""
+    folder = Path(plan.raw_log_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"campaign-{campaign_id}.{plan.raw_log_format}"
+    n = 1
+    while path.exists():
+        path = folder / f"campaign-{campaign_id}-resume{n}.{plan.raw_log_format}"
+        n += 1
+    return path
+
+
+def run_live(
+    plan: Plan,
+    store: CampaignStore,
+    *,
+    quiet: bool = False,
+    stop: threading.Event | None = None,
+) -> RunResult:
+    """Acquire the trials the database does not hold yet, on the plan's bus."""
+    stop = stop or threading.Event()
+    codec = codec_for(plan)
+    raw_log = raw_log_path(plan, store.campaign_id)
+    store.set_status("running")
+    live = LiveBus(plan, codec, raw_log)
+    engine = Engine(plan, store, LiveCommander(live.controller), store.progress())
+    decoder = BatchDecoder(codec)
+    silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
+    position, dropped, errors, log_failed = 0, 0, 0, False
+    last_frame = time.monotonic()
+    try:
+        with _stop_on_signals(stop), ProgressDisplay(quiet=quiet) as display:
+            while engine.phase is not Phase.DONE:
+                if stop.is_set():
+                    engine.interrupt("stopped by signal: stand told to stop rocking")
+                    break
+                msgs = live.recorder.drain(BATCH_FRAMES, 0.05)
+                if live.recorder.dropped > dropped:
+                    lost = live.recorder.dropped - dropped
+                    dropped = live.recorder.dropped
+                    store.event("queue full", "error", f"{lost} frames dropped: queue full")
+                if live.recorder.log_error is not None and not log_failed:
+                    log_failed = True
+                    store.event(
+                        "raw log", "error", f"raw log incomplete: {live.recorder.log_error!r}"
+                    )
+                while errors < len(live.recorder.errors):
+                    exc = live.recorder.errors[errors]
+                    errors += 1
+                    engine.fail(f"bus or listener error: {exc!r}", kind="bus error")
+                if msgs:
+                    last_frame = time.monotonic()
+                    raw = RawFrames.from_messages(position, msgs)
+                    position += len(msgs)
+                    engine.feed(decoder.decode(raw))
+                elif time.monotonic() - last_frame > silence_wall_s:
+                    engine.fail(
+                        f"bus silence: no frame at all for {silence_wall_s:g} s (wall clock)",
+                        kind="bus silence",
+                    )
+                    last_frame = time.monotonic()
+                display.update(engine.snapshot())
+    finally:
+        live.close()
+        sha = sha256_of(raw_log)
+        if store_is_first_log(raw_log):
+            store.set_raw_log(str(raw_log), sha)
+        store.event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
+        outcome = engine.outcome if engine.outcome != "running" else "stopped"
+        store.set_status(outcome)
+    return result(store, outcome, raw_log, sha)
+
+
+def store_is_first_log(path: Path) -> bool:
+    return "-resume" not in path.name
+
+
+def result(store: CampaignStore, outcome: str, raw_log: Path | None, sha: str | None) -> RunResult:
+    with store.sessions() as session:
+        return RunResult(
+            campaign_id=store.campaign_id,
+            outcome=outcome,
+            trials_completed=_count_trials(session, store.campaign_id, "completed"),
+            trials_failed=_count_trials(session, store.campaign_id, "failed"),
+            observations=observation_count(session, store.campaign_id),
+            raw_log=raw_log,
+            raw_log_sha256=sha,
+        )
+
+
+def _count_trials(session: Session, campaign_id: int, status: str) -> int:
+    return (
+        session.scalar(
+            select(func.count(Trial.id)).where(
+                Trial.campaign_id == campaign_id, Trial.status == status
+            )
+        )
+        or 0
+    )
+
+
+def observation_count(session: Session, campaign_id: int) -> int:
+    return (
+        session.scalar(
+            select(func.count(Observation.id))
+            .join(Series, Series.id == Observation.series_id)
+            .join(Trial, Trial.id == Series.trial_id)
+            .where(Trial.campaign_id == campaign_id)
+        )
+        or 0
+    )
+
+
+class _NoCommands:
+    """Replay's commander: the commands were sent live; their acks are in the log."""
+
+    def issue(self, command: Command) -> None:
+        pass
+
+
+def replay(plan: Plan, sessions: sessionmaker[Session], log: Path) -> RunResult:
+    """Re-derive a campaign offline from a raw log into a new campaign (source "replay")."""
+    codec = codec_for(plan)
+    sha = sha256_of(log)
+    batches = read_raw_frames(log)
+    first = next(batches, None)  # an unreadable log fails here, before the database is touched
+    store = CampaignStore.create(sessions, plan, source="replay")
+    store.set_raw_log(str(log.resolve()), sha)
+    engine = Engine(plan, store, _NoCommands())
+    decoder = BatchDecoder(codec)
+    for raw in itertools.chain([first] if first is not None else [], batches):
+        engine.feed(decoder.decode(raw))
+        if engine.phase is Phase.DONE:
+            break
+    if engine.phase is not Phase.DONE:
+        engine.interrupt("the log ends before the campaign does")
+    outcome = engine.outcome
+    store.set_status(outcome)
+    return result(store, outcome, log, sha)
+
+
+def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Plan, CampaignStore]:
+    """The plan stored with a campaign and a store to continue it."""
+    from acquisition.plan import parse_plan
+
+    with sessions() as session:
+        campaign = session.get(Campaign, campaign_id)
+        if campaign is None:
+            raise LookupError(f"no campaign {campaign_id} in the database")
+        text = campaign.plan_toml
+    return parse_plan(text), CampaignStore(sessions, campaign_id)

@@ -1,0 +1,492 @@
+"""A stored campaign into the analysis and the report: trial inputs from whatever the database
+holds (raw observations, series summaries or the paper's per-trial summaries), the analysis
+settings from the stored plan, the analysis itself (recorded as an `AnalysisRun`), and every
+other fact the report shows, from the database and the raw CAN log.
+
+    analyze_stored(session, campaign_id) -> StoredAnalysis
+    report_inputs(session, campaign_id, database=...) -> ReportInputs
+    campaign_report(session, campaign_id, database=..., profile=..., generated_at=...) -> Report
+
+An analysis run is recorded once per distinct result: analysing an unchanged campaign again with
+the same software reuses the run already stored, so the database (and the report's JSON) does not
+change from one report to the next.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tomllib
+from dataclasses import dataclass, replace
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from acquisition.batch import BatchDecoder
+from acquisition.bus import codec_for
+from acquisition.logfile import read_raw_frames
+from acquisition.plan import Plan, PlanError, parse_plan
+from acquisition.store import software_version
+from analysis.campaign import CampaignAnalysis, analyze_campaign, json_safe
+from analysis.gyro_model import KnownConstants
+from analysis.report.build import Report, build_report
+from analysis.report.compliance import Profile
+from analysis.report.model import (
+    EventRecord,
+    HeadingTrace,
+    Identification,
+    ObservationRecord,
+    PlannedTrial,
+    PlanSummary,
+    ReportInputs,
+    SeriesRecord,
+    Signatures,
+    TrialAcquisition,
+    TrialRecord,
+)
+from analysis.settings import SEED_000_SETTINGS, AnalysisSettings, settings_from_plan
+from analysis.trials import SeriesSummary, TrialInput
+from db.models import AnalysisRun, Campaign, Trial
+from db.queries import campaign_constants, load_campaign
+
+TRACE_BINS = 600  # per trial: enough for a page-wide plot, small enough for inline SVG
+
+
+# ------------------------------------------------------------------------- analysis inputs
+
+
+@dataclass(frozen=True)
+class StoredInputs:
+    """What the analysis of a stored campaign runs on. ``excluded`` maps the index of every
+    trial left out to the reason; ``notes`` say where settings did not come from the plan."""
+
+    trials: tuple[TrialInput, ...]
+    settings: AnalysisSettings
+    excluded: dict[int, str]
+    notes: tuple[str, ...]
+
+    def sha256(self) -> str:
+        """Hash of the analysed inputs (trials as given to the analysis, and the settings)."""
+        document = json_safe({"trials": self.trials, "settings": self.settings})
+        return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
+
+
+def trial_input(trial: Trial) -> TrialInput | str:
+    """The analysis input of one stored trial, or why it cannot be analysed. K, A and tau are
+    the applied values (stand-measured, else commanded)."""
+    if trial.status != "completed":
+        return f"trial {trial.status}" + (
+            f": {trial.failure_reason}" if trial.failure_reason else ""
+        )
+    common = {
+        "index": trial.index,
+        "role": trial.role,
+        "direction_deg": trial.direction_deg,
+        "amplitude_cm": trial.amplitude_cm,
+        "period_s": trial.period_s,
+    }
+    series = {s.j: s for s in trial.series}
+    values = {j: tuple(o.value_deg for o in s.observations) for j, s in series.items()}
+    if all(len(values.get(j, ())) >= 2 for j in (1, 2)):
+        return TrialInput(**common, before_deg=values[1], under_deg=values[2])
+    if all(j in series and series[j].summary_mean_deg is not None for j in (1, 2)):
+        before, under = (
+            SeriesSummary(s.summary_mean_deg, s.summary_variance_deg2, s.summary_n)
+            for s in (series[1], series[2])
+        )
+        return TrialInput(**common, before=before, under=under)
+    if trial.summary_delta_mean_deg is not None:
+        return TrialInput(
+            **common,
+            delta_mean_deg=trial.summary_delta_mean_deg,
+            delta_var_deg2=trial.summary_delta_var_deg2,
+            n_obs=trial.summary_n,
+        )
+    return "no observations or summaries stored for both series"
+
+
+def stored_settings(campaign: Campaign) -> tuple[AnalysisSettings, tuple[str, ...]]:
+    """Settings from the stored plan; the known constants B from the campaign's own columns.
+    A plan without [analysis] or [forecast] (an import without a plan) takes those from the
+    seed-000 example, and a note says so."""
+    settings = settings_from_plan(campaign.plan_toml, fallback=SEED_000_SETTINGS)
+    plan = tomllib.loads(campaign.plan_toml)
+    notes = []
+    if "analysis" not in plan:
+        notes.append(
+            "The stored plan has no [analysis] table: q, the start values and the admissible "
+            "region of the seed-000 example (Potemkin 1982) were used."
+        )
+    if "forecast" not in plan:
+        notes.append(
+            "The stored plan has no [forecast] table: the seed-000 example's ship conditions "
+            "were forecast."
+        )
+    b = campaign_constants(campaign)
+    constants = KnownConstants(
+        lP_gcm2s2=b["lp_gcm2s2"],
+        H1_gcm2s=b["h1_gcm2s"],
+        earth_rate_rad_s=b["earth_rate_rad_s"],
+        gravity_cm_s2=b["gravity_cm_s2"],
+        latitude_deg=b["latitude_deg"],
+    )
+    return replace(settings, constants=constants), tuple(notes)
+
+
+def stored_inputs(campaign: Campaign) -> StoredInputs:
+    """The analysis inputs of a loaded campaign (see `db.queries.load_campaign`)."""
+    trials, excluded = [], {}
+    for trial in campaign.trials:
+        found = trial_input(trial)
+        if isinstance(found, str):
+            excluded[trial.index] = found
+        else:
+            trials.append(found)
+    settings, notes = stored_settings(campaign)
+    return StoredInputs(tuple(trials), settings, excluded, notes)
+
+
+@dataclass(frozen=True)
+class StoredAnalysis:
+    analysis: CampaignAnalysis
+    inputs: StoredInputs
+    run_id: int
+
+
+def analyze_stored(session: Session, campaign_id: int) -> StoredAnalysis:
+    """Analyse a stored campaign and record the run (AnalysisError for unusable data,
+    CampaignNotFound for a wrong id). The caller commits."""
+    campaign = load_campaign(session, campaign_id)
+    inputs = stored_inputs(campaign)
+    s = inputs.settings
+    analysis = analyze_campaign(
+        inputs.trials,
+        s.constants,
+        q=s.q,
+        start=s.start,
+        admissible=s.admissible,
+        forecast=s.forecast,
+    )
+    results, digest, version = analysis.to_dict(), inputs.sha256(), software_version()
+    run = session.scalars(
+        select(AnalysisRun)
+        .where(
+            AnalysisRun.campaign_id == campaign_id,
+            AnalysisRun.inputs_hash == digest,
+            AnalysisRun.software_version == version,
+        )
+        .order_by(AnalysisRun.id.desc())
+    ).first()
+    if run is None or run.results_json != results:
+        run = AnalysisRun(
+            campaign_id=campaign_id,
+            inputs_hash=digest,
+            results_json=results,
+            software_version=version,
+        )
+        session.add(run)
+        session.flush()
+    return StoredAnalysis(analysis, inputs, run.id)
+
+
+# -------------------------------------------------------------------------- report inputs
+
+
+def _when(value: datetime | None) -> str | None:
+    return None if value is None else value.isoformat(sep=" ", timespec="seconds")
+
+
+def sha256_file(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _raw_log_check(campaign: Campaign) -> tuple[str, Path | None]:
+    """How the recorded raw log checks out, and its path when it can be used."""
+    if not campaign.raw_log_path:
+        return "no raw log", None
+    path = Path(campaign.raw_log_path)
+    if not path.is_file():
+        return "file not found", None
+    actual = sha256_file(path)
+    if actual != campaign.raw_log_sha256:
+        return f"MISMATCH: the file's SHA-256 is {actual}", None
+    return "verified", path
+
+
+def _stand(campaign: Campaign, plan: Plan | None) -> str:
+    if campaign.source == "import" or plan is None:
+        return "none: measurements imported from a file (see the import event)"
+    bus = plan.bus
+    if bus.simulated:
+        where = f"simulated stand (HIL twin), seed {bus.seed}, speed-up x{bus.speedup:g}"
+    else:
+        where = (
+            f"python-can interface {bus.interface or '(from python-can configuration)'}, "
+            f"channel {bus.channel or '(default)'}"
+            + (f", {bus.bitrate} bit/s" if bus.bitrate else "")
+        )
+    return (
+        f"offline replay of the raw log; recorded on: {where}"
+        if campaign.source == "replay"
+        else where
+    )
+
+
+def _plan_summary(campaign: Campaign, plan: Plan | None, notes: tuple[str, ...]) -> PlanSummary:
+    if plan is not None:
+        trials = tuple(
+            PlannedTrial(t.index, t.role, t.direction_deg, t.amplitude_cm, t.period_s)
+            for t in plan.trials
+        )
+        o, st = plan.observation, plan.settle
+        windows = (o.still_window_s, o.rocking_window_periods, o.spacing_s)
+        settle = (st.band_deg, st.hold_s, st.max_wait_s)
+    else:
+        trials = tuple(
+            PlannedTrial(t.index, t.role, t.cmd_direction_deg, t.cmd_amplitude_cm, t.cmd_period_s)
+            for t in campaign.trials
+        )
+        windows, settle = (None, None, None), (None, None, None)
+    return PlanSummary(
+        n_obs=campaign.n_obs,
+        trials=trials,
+        still_window_s=windows[0],
+        rocking_window_periods=windows[1],
+        spacing_s=windows[2],
+        settle_band_deg=settle[0],
+        settle_hold_s=settle[1],
+        settle_max_wait_s=settle[2],
+        notes=notes,
+        plan_toml=campaign.plan_toml,
+    )
+
+
+def _trial_acquisition(trial: Trial, excluded: dict[int, str]) -> TrialAcquisition:
+    by_j = {s.j: s.observations for s in trial.series}
+    observations = [o for s in trial.series for o in s.observations]
+    used = [o.frames_used for o in observations if o.frames_used is not None]
+    lost = [o.frames_lost for o in observations if o.frames_lost is not None]
+    return TrialAcquisition(
+        index=trial.index,
+        role=trial.role,
+        status=trial.status,
+        failure_reason=trial.failure_reason,
+        cmd_direction_deg=trial.cmd_direction_deg,
+        cmd_amplitude_cm=trial.cmd_amplitude_cm,
+        cmd_period_s=trial.cmd_period_s,
+        meas_direction_deg=trial.meas_direction_deg,
+        meas_amplitude_cm=trial.meas_amplitude_cm,
+        meas_period_s=trial.meas_period_s,
+        observations_before=len(by_j.get(1, ())),
+        observations_under=len(by_j.get(2, ())),
+        frames_used=sum(used) if used else None,
+        frames_lost=sum(lost) if lost else None,
+        flagged_observations=sum(bool(o.flags) for o in observations),
+        analysed=trial.index not in excluded,
+    )
+
+
+def _events(campaign: Campaign) -> tuple[EventRecord, ...]:
+    trial_index = {t.id: t.index for t in campaign.trials}
+    series_j = {s.id: s.j for t in campaign.trials for s in t.series}
+    return tuple(
+        EventRecord(
+            stand_time_ms=e.stand_time_ms,
+            wall_time=_when(e.wall_time) or "",
+            trial_index=None if e.trial_id is None else trial_index.get(e.trial_id),
+            series_j=None if e.series_id is None else series_j.get(e.series_id),
+            kind=e.kind,
+            severity=e.severity,
+            message=e.message,
+        )
+        for e in campaign.events
+    )
+
+
+def _series_records(trial: Trial) -> tuple[SeriesRecord, ...]:
+    return tuple(
+        SeriesRecord(
+            j=s.j,
+            settle_started_ms=s.settle_started_ms,
+            settle_done_ms=s.settle_done_ms,
+            settle_estimate_deg=s.settle_estimate_deg,
+            observations=tuple(
+                ObservationRecord(o.k, o.value_deg, o.window_start_ms, o.window_end_ms)
+                for o in s.observations
+            ),
+        )
+        for s in trial.series
+    )
+
+
+def _stand_span_ms(series: tuple[SeriesRecord, ...], events: list[int]) -> tuple[int, int] | None:
+    """The stand-time span of a trial: its settles, windows and events."""
+    times = list(events)
+    for s in series:
+        times += [t for t in (s.settle_started_ms, s.settle_done_ms) if t is not None]
+        for o in s.observations:
+            times += [t for t in (o.window_start_ms, o.window_end_ms) if t is not None]
+    return (min(times), max(times)) if times else None
+
+
+class _Binner:
+    """Bins one trial's heading frames as they stream past: per bin the sums for the mean, and
+    min and max. Headings are taken relative to the trial's first one, wrapped to +-180 deg,
+    so a record crossing 0/360 deg stays continuous (as the engine does)."""
+
+    def __init__(self, span_ms: tuple[int, int], bins: int) -> None:
+        self.t0, self.t1 = span_ms
+        self.edges = np.linspace(self.t0, max(self.t1, self.t0 + 1), bins + 1)
+        self.sum_t, self.sum_h = np.zeros(bins), np.zeros(bins)
+        self.count = np.zeros(bins, dtype=np.int64)
+        self.low, self.high = np.full(bins, np.inf), np.full(bins, -np.inf)
+        self.ref: float | None = None
+
+    def add(self, t_ms: np.ndarray, heading_deg: np.ndarray) -> None:
+        inside = (t_ms >= self.t0) & (t_ms <= self.t1)
+        t, h = t_ms[inside].astype(float), heading_deg[inside]
+        if not t.size:
+            return
+        if self.ref is None:
+            self.ref = float(h[0])
+        h = self.ref + (h - self.ref + 180.0) % 360.0 - 180.0
+        n = self.count.size
+        b = np.clip(np.searchsorted(self.edges, t, side="right") - 1, 0, n - 1)
+        self.sum_t += np.bincount(b, t, n)
+        self.sum_h += np.bincount(b, h, n)
+        self.count += np.bincount(b, minlength=n)
+        np.minimum.at(self.low, b, h)
+        np.maximum.at(self.high, b, h)
+
+    def trace(self) -> HeadingTrace | None:
+        keep = self.count > 0
+        if not keep.any():
+            return None
+        n = self.count[keep]
+        return HeadingTrace(
+            t_ms=self.sum_t[keep] / n,
+            mean_deg=self.sum_h[keep] / n,
+            min_deg=self.low[keep],
+            max_deg=self.high[keep],
+            frames=int(n.sum()),
+        )
+
+
+def heading_traces(
+    log: Path, plan: Plan, spans: dict[int, tuple[int, int]], bins: int = TRACE_BINS
+) -> dict[int, HeadingTrace | None]:
+    """Binned valid heading frames of each trial's stand-time span, from the raw log."""
+    decoder = BatchDecoder(codec_for(plan))
+    binners = {index: _Binner(span, bins) for index, span in spans.items()}
+    for raw in read_raw_frames(log):
+        headings = decoder.decode(raw).headings
+        valid = headings.valid
+        t, h = headings.t_ms[valid], headings.heading_deg[valid]
+        for binner in binners.values():
+            binner.add(t, h)
+    return {index: binner.trace() for index, binner in binners.items()}
+
+
+def _records(
+    campaign: Campaign, plan: Plan | None, log: Path | None, check: str
+) -> tuple[tuple[TrialRecord, ...], str]:
+    """Per trial its series and (from the raw log) its heading trace; and how the plots were
+    made."""
+    series = {t.index: _series_records(t) for t in campaign.trials}
+    has_observations = any(s.observations for rows in series.values() for s in rows)
+    event_times: dict[int, list[int]] = {t.index: [] for t in campaign.trials}
+    by_id = {t.id: t.index for t in campaign.trials}
+    for e in campaign.events:
+        if e.trial_id in by_id and e.stand_time_ms is not None:
+            event_times[by_id[e.trial_id]].append(e.stand_time_ms)
+    spans = {
+        index: span
+        for index, rows in series.items()
+        if (span := _stand_span_ms(rows, event_times[index])) is not None
+    }
+    traces: dict[int, HeadingTrace | None] = {}
+    if log is not None and plan is not None and spans:
+        traces = heading_traces(log, plan, spans)
+        frames = sum(t.frames for t in traces.values() if t is not None)
+        note = (
+            f"Heading from the raw CAN log ({frames} valid heading frames within the trials), "
+            f"in up to {TRACE_BINS} time bins per trial: grey band min-max, line the bin mean. "
+            "Shaded: observation windows (blue still, orange rocking) with each observation's "
+            "value as a bar; dashed lines and triangles: where and at what heading each series "
+            "settled."
+        )
+    elif has_observations:
+        reason = {
+            "no raw log": "The campaign has no raw CAN log",
+            "file not found": f"The raw CAN log {campaign.raw_log_path} is not found",
+        }.get(check, f"The raw CAN log cannot be used ({check})")
+        note = f"{reason}: the plots show the stored observations over their windows."
+    else:
+        note = (
+            "No heading observations are stored (the data were imported as per-trial "
+            "summaries): there is no heading record to plot."
+        )
+    records = tuple(TrialRecord(index, rows, traces.get(index)) for index, rows in series.items())
+    return records, note
+
+
+def report_inputs(
+    session: Session, campaign_id: int, stored: StoredAnalysis, *, database: str
+) -> ReportInputs:
+    """Everything the report shows besides the analysis results: identification, plan,
+    acquisition summary, every event, the heading records (from the raw log when it verifies)."""
+    campaign = load_campaign(session, campaign_id)
+    excluded = stored.inputs.excluded
+    try:
+        plan: Plan | None = parse_plan(campaign.plan_toml)
+    except PlanError:  # e.g. the instrument/site metadata stored with an import
+        plan = None
+    check, log = _raw_log_check(campaign)
+    records, note = _records(campaign, plan, log, check)
+    ident = Identification(
+        campaign_id=campaign.id,
+        instrument_model=campaign.instrument.model,
+        instrument_serial=campaign.instrument.serial,
+        operator=campaign.operator,
+        source=campaign.source,
+        status=campaign.status,
+        created_at=_when(campaign.created_at),
+        started_at=_when(campaign.started_at),
+        finished_at=_when(campaign.finished_at),
+        latitude_deg=campaign.latitude_deg,
+        stand=_stand(campaign, plan),
+        acquisition_software=campaign.software_version,
+        analysis_software=software_version(),
+        analysis_run=stored.run_id,
+        inputs_sha256=stored.inputs.sha256(),
+        database=database,
+        plan_sha256=campaign.plan_hash,
+        raw_log_path=campaign.raw_log_path,
+        raw_log_sha256=campaign.raw_log_sha256,
+        raw_log_check=check,
+    )
+    return ReportInputs(
+        identification=ident,
+        plan=_plan_summary(campaign, plan, stored.inputs.notes),
+        acquisition=tuple(_trial_acquisition(t, excluded) for t in campaign.trials),
+        events=_events(campaign),
+        records=records,
+        raw_log_note=note,
+        signatures=Signatures(tested_by=campaign.operator),
+    )
+
+
+def campaign_report(
+    session: Session, campaign_id: int, *, database: str, profile: Profile, generated_at: str
+) -> Report:
+    """Analyse the stored campaign (recording the run) and assemble its report."""
+    stored = analyze_stored(session, campaign_id)
+    inputs = report_inputs(session, campaign_id, stored, database=database)
+    return build_report(inputs, stored.analysis, profile, generated_at=generated_at)
