@@ -12,6 +12,7 @@ from scipy.integrate import quad
 from scipy.optimize import brentq, curve_fit
 
 from analysis.allan import AllanDeviation, allan_deviation
+from analysis.errors import AnalysisError
 
 
 def _lists(obj: object) -> dict:
@@ -136,33 +137,22 @@ def fit_correlation(est: CorrelationEstimate, smooth: bool = False) -> Correlati
     last = min(est.lag_s.size - 1, max(5, int(np.ceil(5.0 / (mu0 * est.dt_s)))))
     tau, k = est.lag_s[1 : last + 1], est.covariance[1 : last + 1]
     var0 = max(float(est.covariance[1]), np.finfo(float).tiny)
-    if smooth:
 
-        def model(t, var, mu, beta):
-            return CorrelationModel(var, mu, beta)(t)
+    def model(t: np.ndarray, *params: float) -> np.ndarray:
+        return CorrelationModel(*params)(t)
 
-        fits = []
-        for beta0 in (0.0, 0.5 * mu0, 2.0 * mu0, 5.0 * mu0):
-            try:
-                p, _ = curve_fit(
-                    model, tau, k, p0=(var0, mu0, beta0), bounds=([0, 0, 0], np.inf), maxfev=5000
-                )
-            except RuntimeError:
-                continue
-            fits.append((float(np.sum((model(tau, *p) - k) ** 2)), p))
-        if not fits:
-            raise RuntimeError("smooth correlation model did not converge from any start value")
-        var, mu, beta = min(fits, key=lambda f: f[0])[1]
-        fitted = CorrelationModel(float(var), float(mu), float(beta))
-    else:
-        (var, mu), _ = curve_fit(
-            lambda t, var, mu: var * np.exp(-mu * t),
-            tau,
-            k,
-            p0=(var0, mu0),
-            bounds=([0, 0], np.inf),
-        )
-        fitted = CorrelationModel(float(var), float(mu))
+    # several start values of beta: the smooth fit has local minima
+    starts = [(var0, mu0, b * mu0) for b in (0.0, 0.5, 2.0, 5.0)] if smooth else [(var0, mu0)]
+    fits = []
+    for p0 in starts:
+        try:
+            params, _ = curve_fit(model, tau, k, p0=p0, bounds=(0.0, np.inf), maxfev=5000)
+        except RuntimeError:
+            continue
+        fits.append((float(np.sum((model(tau, *params) - k) ** 2)), params))
+    if not fits:
+        raise AnalysisError("the correlation model did not converge from any start value")
+    fitted = CorrelationModel(*(float(p) for p in min(fits, key=lambda f: f[0])[1]))
     white = max(float(est.covariance[0]) - fitted.variance, 0.0)
     return CorrelationModel(
         fitted.variance, fitted.decay_per_s, fitted.frequency_rad_s, white_variance=white
