@@ -194,11 +194,15 @@ def estimate_settle_point(
     return _estimate(t, y - rows @ coef, coef, xtx_inv[0, 0], omega_rad_s, damping, 3)
 
 
-def _damped_model(tau: np.ndarray, r: float, a_c: float, a_s: float, omega: float, xi: float):
-    return r + np.exp(-xi * tau) * (a_c * np.sin(omega * tau) + a_s * np.cos(omega * tau))
+def _damped_model(
+    tau: np.ndarray, r: float, a_c: float, a_s: float, omega: float, xi: float
+) -> np.ndarray:
+    return observation_rows(tau, omega, xi) @ np.array([r, a_c, a_s])  # seed 003 eq 3
 
 
-def _damped_jacobian(tau: np.ndarray, r: float, a_c: float, a_s: float, omega: float, xi: float):
+def _damped_jacobian(
+    tau: np.ndarray, r: float, a_c: float, a_s: float, omega: float, xi: float
+) -> np.ndarray:
     decay = np.exp(-xi * tau)
     sin, cos = np.sin(omega * tau), np.cos(omega * tau)
     osc = decay * (a_c * sin + a_s * cos)
