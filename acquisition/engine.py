@@ -29,10 +29,11 @@ import numpy as np
 
 from acquisition.batch import FrameBatch, Headings, Statuses
 from acquisition.plan import Plan, TrialPlan
-from stand.protocol import AckFrame, CommandFrame, Frame, InvalidFrame
+from stand.protocol import AckFrame, CommandFrame, CompassStatusFrame, Frame, InvalidFrame
 
 NANO = 1_000_000_000  # deviations are summed as integer nano-degrees
 CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the error frame's identifier
+COMPASS_FAULTS = ("rotor", "fluid temperature", "angle sensor", "follow-up")  # DBC FAULT_BITS
 
 
 @dataclass(frozen=True)
@@ -172,6 +173,16 @@ class Snapshot:
 
 def _wrap180(x: np.ndarray) -> np.ndarray:
     return (x + 180.0) % 360.0 - 180.0
+
+
+def _compass_fault(frame: CompassStatusFrame) -> str:
+    """Why the compass's own status makes its readings unusable ("" when it does not)."""
+    if not frame.rotor_running:
+        return "compass reports its rotor stopped"
+    if frame.fault_bits:
+        names = [n for bit, n in enumerate(COMPASS_FAULTS) if frame.fault_bits >> bit & 1]
+        return f"compass reports fault bits 0x{frame.fault_bits:02X} ({', '.join(names) or '?'})"
+    return ""
 
 
 def _is_bus_off(frame: InvalidFrame) -> bool:
@@ -319,6 +330,7 @@ class Engine:
 
     def _stop_stand(self) -> None:
         """Best effort on the way out: nothing waits for this ack."""
+        self.sink.event("command", "info", "stop", self._tidx, None, self.now_ms)
         try:
             self.commander.issue(Command("stop"))
         except CommandNotSent as exc:
@@ -408,6 +420,8 @@ class Engine:
                 self._phase_start_ms = self.now_ms
         elif isinstance(frame, AckFrame):
             self._on_ack(frame)
+        elif isinstance(frame, CompassStatusFrame) and _compass_fault(frame):
+            self.fail(_compass_fault(frame), kind="compass fault")
         elif isinstance(frame, InvalidFrame) and _is_bus_off(frame):
             self.fail("bus-off reported by the CAN controller", kind="bus-off")
 
@@ -489,6 +503,8 @@ class Engine:
         for pos, frame in self._o[self._oi :]:
             if pos >= best[0]:
                 break
+            if isinstance(frame, CompassStatusFrame) and _compass_fault(frame):
+                return pos, _compass_fault(frame), "compass fault"
             if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
                 if _is_bus_off(frame):
                     return pos, "bus-off reported by the CAN controller", "bus-off"

@@ -123,7 +123,13 @@ def run_live(
     """Acquire the trials the database does not hold yet, on the plan's bus."""
     stop = stop or threading.Event()
     codec = codec_for(plan)
+    first_log, first_sha = store.raw_log()
+    if first_log is not None and first_sha is None and Path(first_log).is_file():
+        # the first run was killed: its log holds what was flushed; fix that content's hash
+        store.set_raw_log(first_log, sha256_of(Path(first_log)))
     raw_log = raw_log_path(plan, store.campaign_id)
+    if first_log is None:
+        store.set_raw_log(str(raw_log), None)
     store.set_status("running")
     live = LiveBus(plan, codec, raw_log)
     engine = Engine(plan, store, LiveCommander(live.controller), store.progress())
@@ -166,16 +172,12 @@ def run_live(
     finally:
         live.close()
         sha = sha256_of(raw_log)
-        if store_is_first_log(raw_log):
+        if first_log is None:
             store.set_raw_log(str(raw_log), sha)
         store.event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
         outcome = engine.outcome if engine.outcome != "running" else "stopped"
         store.set_status(outcome)
     return result(store, outcome, raw_log, sha)
-
-
-def store_is_first_log(path: Path) -> bool:
-    return "-resume" not in path.name
 
 
 def result(store: CampaignStore, outcome: str, raw_log: Path | None, sha: str | None) -> RunResult:

@@ -132,7 +132,12 @@ class CampaignStore:
             else:
                 campaign.finished_at = None
 
-    def set_raw_log(self, path: str, sha256: str) -> None:
+    def raw_log(self) -> tuple[str | None, str | None]:
+        with self.sessions() as session:
+            campaign = session.get_one(Campaign, self.campaign_id)
+            return campaign.raw_log_path, campaign.raw_log_sha256
+
+    def set_raw_log(self, path: str, sha256: str | None) -> None:
         with self.sessions.begin() as session:
             campaign = session.get_one(Campaign, self.campaign_id)
             campaign.raw_log_path, campaign.raw_log_sha256 = path, sha256

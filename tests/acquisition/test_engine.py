@@ -182,3 +182,12 @@ def test_resume_continues_at_the_first_incomplete_series() -> None:
     commands = [args[2] for args in sink.of("event") if args[0] == "command"]
     assert commands == ["stop", "set K=315 deg, A=20 cm, tau=5 s", "start", "stop"]
     assert math.isclose(sink.observations[0].value_deg, 120.0, abs_tol=1.0)
+
+
+def test_compass_fault_bits_fail_the_trial() -> None:
+    sink, _, _ = run(compass_fault_bits=0b0100)
+    failures = failure_of(sink)
+    assert [f[0] for f in failures] == [1, 2]
+    assert failures[0][2] == "compass reports fault bits 0x04 (angle sensor)"
+    events = [a for a in sink.of("event") if a[0] == "compass fault"]
+    assert len(events) == 2 and events[0][1] == "error"
