@@ -2,6 +2,8 @@
 
 `gyrostand analyze --csv FILE [--plan PLAN.toml] [--json]`. Without --plan the seed-000 example
 constants, start values, admissible region and ship forecast are used (a note on stderr says so).
+`gyrostand analyze CAMPAIGN_ID [--db URL_OR_PATH] [--json]` analyses a campaign in the database
+with its stored plan's settings and records the run (`acquisition.stored.analyze_stored`).
 The pieces are separate functions so other sources (a campaign in the database) can reuse them:
 `settings_from_plan` -> `AnalysisSettings`, `run_analysis`, `emit`.
 """
@@ -11,7 +13,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from sqlalchemy.exc import OperationalError
 
+from acquisition.stored import analyze_stored
 from analysis.campaign import CampaignAnalysis, analyze_campaign
 from analysis.csv_input import read_trials_csv
 from analysis.errors import AnalysisError
@@ -19,6 +23,8 @@ from analysis.settings import SEED_000_SETTINGS, AnalysisSettings
 from analysis.settings import settings_from_plan as plan_settings
 from analysis.text_report import render_text
 from analysis.trials import TrialInput
+from db.queries import CampaignNotFound
+from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
 from gyrostand.errors import fail
 
 PAPER_NOTE = (
@@ -68,6 +74,10 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def analyze(
+        campaign: Annotated[
+            int | None, typer.Argument(help="A stored campaign's id (with --db).")
+        ] = None,
+        db: DbOption = DEFAULT_DB,
         csv: Annotated[
             Path | None,
             typer.Option("--csv", help="Trials table (columns as examples/paper.csv)."),
@@ -78,9 +88,15 @@ def register(app: typer.Typer) -> None:
         ] = None,
         as_json: Annotated[bool, typer.Option("--json", help="Print one JSON document.")] = False,
     ) -> None:
-        """Analyse a CSV of trials (Cochran, fit, adequacy, control, forecast)."""
+        """Analyse a stored campaign or a CSV of trials (Cochran, fit, adequacy, control,
+        forecast). A stored campaign's analysis is recorded in the database."""
+        if campaign is not None:
+            if csv is not None or plan is not None:
+                fail("give a CAMPAIGN id or --csv FILE [--plan PLAN], not both")
+            emit(analyze_stored_campaign(db, campaign), as_json)
+            return
         if csv is None:
-            fail("no source given: use --csv FILE (see examples/paper.csv)")
+            fail("no source given: use --csv FILE (see examples/paper.csv) or a CAMPAIGN id")
         if plan is None:
             typer.echo(PAPER_NOTE, err=True)
             settings = PAPER_SETTINGS
@@ -91,3 +107,16 @@ def register(app: typer.Typer) -> None:
         except AnalysisError as exc:
             fail(str(exc))
         emit(run_analysis(trials, settings), as_json)
+
+
+def analyze_stored_campaign(db: str, campaign_id: int) -> CampaignAnalysis:
+    """Analyse a campaign stored in the database (settings from its plan, constants from the
+    campaign) and record the analysis run; one-line CLI errors."""
+    sessions = open_db(db, must_exist=True)
+    try:
+        with sessions.begin() as session:
+            return analyze_stored(session, campaign_id).analysis
+    except (AnalysisError, CampaignNotFound) as exc:
+        fail(str(exc))
+    except OperationalError as exc:
+        fail(f"the database refused the analysis run: {exc.orig}")

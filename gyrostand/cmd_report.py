@@ -1,14 +1,72 @@
-"""CLI: report."""
+"""CLI: report -- the certification document of a stored campaign.
+
+`gyrostand report CAMPAIGN [--db URL_OR_PATH] [--out DIR] [--format html,pdf,json,csv]
+[--profile NAME_OR_FILE]` analyses the campaign (recording the analysis run), assembles the
+report from the database and the raw CAN log, and writes campaign-ID.html, .pdf, .json and
+campaign-ID-trials.csv. `write_campaign_report` does the same for other commands (the demo).
+"""
+
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Annotated
 
 import typer
+from sqlalchemy.exc import OperationalError
 
-from gyrostand.errors import not_implemented
+from acquisition.stored import campaign_report
+from analysis.errors import AnalysisError
+from analysis.report.compliance import SHIPPED, load_profile
+from analysis.report.writer import FORMATS, write_report
+from db.queries import CampaignNotFound
+from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
+from gyrostand.errors import fail
+
+DEFAULT_OUT = Path("runs/reports")
+
+
+def write_campaign_report(
+    db: str,
+    campaign_id: int,
+    out: Path = DEFAULT_OUT,
+    formats: tuple[str, ...] = FORMATS,
+    profile: str = SHIPPED,
+) -> dict[str, Path]:
+    """Analyse and report one campaign; the files written by format (one-line CLI errors)."""
+    sessions = open_db(db, must_exist=True)
+    try:
+        limits = load_profile(profile)
+        generated = datetime.now(UTC).isoformat(sep=" ", timespec="seconds")
+        with sessions.begin() as session:  # the analysis run is recorded with the report
+            report = campaign_report(
+                session, campaign_id, database=db, profile=limits, generated_at=generated
+            )
+        return write_report(report, out, formats)
+    except (AnalysisError, CampaignNotFound) as error:
+        fail(str(error))
+    except OperationalError as error:
+        fail(f"the database refused the analysis run: {error.orig}")
 
 
 def register(app: typer.Typer) -> None:
-    """Add the report command(s) to the CLI."""
+    """Add the report command to the CLI."""
 
     @app.command()
-    def report() -> None:
-        """Write the stand report (HTML, PDF, JSON, CSV) of a campaign."""
-        not_implemented("report")
+    def report(
+        campaign: Annotated[int, typer.Argument(help="Campaign id.")],
+        db: DbOption = DEFAULT_DB,
+        out: Annotated[Path, typer.Option(help="Folder for the report files.")] = DEFAULT_OUT,
+        format: Annotated[
+            str, typer.Option("--format", "-f", help="Comma-separated: html,pdf,json,csv.")
+        ] = ",".join(FORMATS),
+        profile: Annotated[
+            str,
+            typer.Option(help="Compliance limits: a shipped profile name or a TOML file."),
+        ] = SHIPPED,
+    ) -> None:
+        """Write the stand report (HTML, PDF, JSON, trial-table CSV) of a campaign."""
+        formats = tuple(f.strip().lower() for f in format.split(",") if f.strip())
+        unknown = [f for f in formats if f not in FORMATS]
+        if unknown or not formats:
+            fail(f"--format: {', '.join(unknown) or 'nothing'} not among {', '.join(FORMATS)}")
+        for kind, path in write_campaign_report(db, campaign, out, formats, profile).items():
+            typer.echo(f"wrote {kind}: {path}")

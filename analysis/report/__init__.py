@@ -1,0 +1,13 @@
+"""The stand report: the certification document of a campaign, in HTML, PDF, JSON and CSV.
+
+Pure rendering over plain dataclasses (no database, no bus): `acquisition.stored` gathers the
+inputs, the CLI (`gyrostand report`) composes.
+
+- `model`: the report's inputs (`ReportInputs`: identification, plan, acquisition, events,
+  heading records, signatures);
+- `compliance`: limits profiles (`load_profile`, shipped ``profiles/imo-a424.toml``) and `assess`;
+- `build`: `build_report(inputs, analysis, profile, generated_at=...) -> Report`;
+- `plots`: the figures as inline SVG; `html`: `render_html(report)`; `pdf`: `write_pdf`;
+  `json_doc`: `report_document` / `report_json` (schema gyrostand.report/1); `csv_table`;
+- `writer`: `write_report(report, out_dir, formats) -> {format: path}`.
+"""

@@ -1,0 +1,187 @@
+"""The report as one object: its inputs, the analysis results, the trial table in the paper's
+form, the forecast grid with its worst case, and the compliance verdicts. Every number a renderer
+prints is a field here (or of the `CampaignAnalysis` it holds); renderers only format.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from analysis.campaign import CampaignAnalysis
+from analysis.forecast import (
+    Forecast,
+    ForecastGrid,
+    acceleration_direction_deg,
+    forecast_grid,
+)
+from analysis.report.compliance import Compliance, Profile, assess
+from analysis.report.model import ReportInputs
+
+SCHEMA = "gyrostand.report/1"
+COURSE_STEP_DEG = 5.0  # forecast grid
+TABLE_COURSE_STEP_DEG = 15.0  # forecast table
+
+
+@dataclass(frozen=True)
+class TrialRow:
+    """Section 4, one trial in the paper's form: i, K, A, tau, p = 2 pi / tau (eq 1.1), <delta_i>
+    (2.1), S^2{<delta_i>} (2.3) and the variance of the mean, nu (2.4); alpha_i is the fitted
+    value (fit trials) or the prediction (control trials), v_i = <delta_i> - alpha_i."""
+
+    index: int
+    role: str
+    direction_deg: float
+    amplitude_cm: float
+    period_s: float
+    p_rad_s: float
+    delta_deg: float
+    var_deg2: float | None
+    var_mean_deg2: float | None
+    dof: int | None
+    n_obs: int | None
+    alpha_deg: float
+    residual_deg: float
+
+
+@dataclass(frozen=True)
+class GridPoint:
+    """One forecast grid point with its (1 - q) interval."""
+
+    course_deg: float
+    direction_deg: float
+    roll_deg: float
+    period_s: float
+    latitude_deg: float
+    alpha_deg: float
+    half_width_deg: float
+
+    @property
+    def bound_deg(self) -> float:
+        """|alpha| + half-width: the largest error the interval admits."""
+        return abs(self.alpha_deg) + self.half_width_deg
+
+
+@dataclass(frozen=True)
+class ForecastSection:
+    """Section 9: the plan's point forecast, the grid over course x roll x period x latitude,
+    the table (plan's conditions, every 15 deg of course), the worst course per period and the
+    worst case of the whole grid."""
+
+    point: Forecast
+    grid: ForecastGrid
+    amplitude_note: str
+    table: tuple[GridPoint, ...]
+    worst_by_period: tuple[GridPoint, ...]
+    worst: GridPoint
+
+
+@dataclass(frozen=True)
+class Report:
+    schema: str
+    generated_at: str
+    inputs: ReportInputs
+    analysis: CampaignAnalysis
+    trials: tuple[TrialRow, ...]
+    forecast: ForecastSection | None
+    compliance: Compliance
+
+
+def trial_rows(analysis: CampaignAnalysis) -> tuple[TrialRow, ...]:
+    """The trial table: statistics from the analysis, alpha_i and v_i from the fit (fit trials)
+    or the control judgement (control trials)."""
+    fitted = dict(zip(analysis.fit_indices, analysis.fit.fitted, strict=True))
+    residual = dict(zip(analysis.fit_indices, analysis.fit.residuals, strict=True))
+    for c in analysis.controls:
+        fitted[c.index], residual[c.index] = c.predicted_deg, c.residual_deg
+    return tuple(
+        TrialRow(
+            index=t.index,
+            role=t.role,
+            direction_deg=t.direction_deg,
+            amplitude_cm=t.amplitude_cm,
+            period_s=t.period_s,
+            p_rad_s=2 * np.pi / t.period_s,  # p of eq 1.1
+            delta_deg=t.delta_deg,
+            var_deg2=t.var_deg2,
+            var_mean_deg2=t.var_mean_deg2,
+            dof=t.dof,
+            n_obs=t.n_under,
+            alpha_deg=float(fitted[t.index]),
+            residual_deg=float(residual[t.index]),
+        )
+        for t in analysis.trials
+    )
+
+
+def _point(grid: ForecastGrid, at: tuple[int, ...]) -> GridPoint:
+    c, r, p, lat = at
+    return GridPoint(
+        course_deg=float(grid.course_deg[c]),
+        direction_deg=float(acceleration_direction_deg(grid.course_deg[c], grid.motion)),
+        roll_deg=float(grid.roll_deg[r]),
+        period_s=float(grid.period_s[p]),
+        latitude_deg=float(grid.latitude_deg[lat]),
+        alpha_deg=float(grid.alpha_deg[at]),
+        half_width_deg=float(grid.half_width_deg[at]),
+    )
+
+
+def forecast_section(analysis: CampaignAnalysis, periods_s: tuple[float, ...]) -> ForecastSection:
+    """The grid around the plan's forecast conditions: course 0-360 deg every 5 deg, the plan's
+    roll angle, arm and latitude, the plan's period and ``periods_s``."""
+    point = analysis.forecasts[0]
+    ship = point.conditions
+    arm_cm, note = ship.arm_cm, f"A = roll angle x arm = {point.amplitude_cm:.4g} cm"
+    if ship.amplitude_cm is not None:  # the plan's amplitude overrides theta0 h: keep it
+        arm_cm = ship.amplitude_cm / np.radians(ship.roll_deg)
+        note = (
+            f"A = {ship.amplitude_cm:g} cm as the plan gives it (roll angle x arm would be "
+            f"{ship.amplitude_from_roll_cm:.4g} cm)"
+        )
+    periods = np.unique(np.array([ship.period_s, *periods_s]))
+    grid = forecast_grid(
+        analysis.predictor,
+        course_deg=np.arange(0.0, 360.0 + COURSE_STEP_DEG / 2, COURSE_STEP_DEG),
+        roll_deg=(ship.roll_deg,),
+        period_s=periods,
+        latitude_deg=(ship.latitude_deg,),
+        arm_cm=arm_cm,
+        motion=ship.motion,
+    )
+    plan_p = int(np.flatnonzero(periods == ship.period_s)[0])
+    in_table = np.flatnonzero(
+        (np.mod(grid.course_deg, TABLE_COURSE_STEP_DEG) == 0) & (grid.course_deg < 360)
+    )
+    bound = np.abs(grid.alpha_deg) + grid.half_width_deg
+    worst_by_period = tuple(
+        _point(grid, (int(np.argmax(bound[:, 0, p, 0])), 0, p, 0)) for p in range(periods.size)
+    )
+    worst = np.unravel_index(int(np.argmax(bound)), bound.shape)
+    return ForecastSection(
+        point=point,
+        grid=grid,
+        amplitude_note=note,
+        table=tuple(_point(grid, (int(c), 0, plan_p, 0)) for c in in_table),
+        worst_by_period=worst_by_period,
+        worst=_point(grid, tuple(int(i) for i in worst)),
+    )
+
+
+def build_report(
+    inputs: ReportInputs, analysis: CampaignAnalysis, profile: Profile, *, generated_at: str
+) -> Report:
+    """Assemble the report; ``generated_at`` is its only wall-clock field (ISO 8601 text)."""
+    section = (
+        forecast_section(analysis, profile.envelope.forecast_periods_s)
+        if analysis.forecasts
+        else None
+    )
+    return Report(
+        schema=SCHEMA,
+        generated_at=generated_at,
+        inputs=inputs,
+        analysis=analysis,
+        trials=trial_rows(analysis),
+        forecast=section,
+        compliance=assess(profile, analysis, None if section is None else section.grid),
+    )

@@ -1,0 +1,112 @@
+"""The report as one self-contained HTML document: Jinja2 template with autoescape on (operator
+text and every stored string come out inert), CSS inline, plots inline as SVG.
+
+The template only formats: every number is a field of the `Report` or of its `CampaignAnalysis`.
+"""
+
+from importlib.resources import files
+
+from jinja2 import Environment, StrictUndefined
+from markupsafe import Markup, escape
+
+from analysis.campaign import VARIANCE_BASIS
+from analysis.forecast import SIGN_CONVENTION
+from analysis.report import plots
+from analysis.report.build import COURSE_STEP_DEG, Report
+from analysis.report.compliance import FAIL, NOT_ASSESSED, PASS
+
+TEMPLATES = files("analysis.report") / "templates"
+
+
+def fmt(value: float | int | None, spec: str = "g", scale: float = 1.0) -> str:
+    """A number in the given format (``scale`` divides it first, for columns in 1e-4 units);
+    a dash when there is none."""
+    if value is None:
+        return "\u2013"
+    text = format(value / scale if scale != 1.0 else value, spec)
+    if text[:1] in "+-" and not text.strip("+-0.e"):  # no signed zero: "-0.000" -> "0.000"
+        text = text[1:]
+    return text
+
+
+def sci(value: float | None, digits: int = 4) -> Markup:
+    """4.1234 x 10^7 with a real superscript."""
+    if value is None:
+        return Markup("\u2013")
+    mantissa, exponent = f"{value:.{digits}e}".split("e")
+    return Markup(f"{escape(mantissa)}\u00d710<sup>{int(exponent)}</sup>")
+
+
+def level(q: float) -> str:
+    """The confidence level 1 - q as a percentage."""
+    return f"{1 - q:.0%}"
+
+
+def verdict(value: bool | str | None, yes: str = "yes", no: str = "NO") -> Markup:
+    """A verdict as a coloured badge: True/PASS green, False/FAIL red, None grey."""
+    if isinstance(value, str):
+        text, kind = value, {PASS: "pass", FAIL: "fail", NOT_ASSESSED: "na"}.get(value, "na")
+    elif value is None:
+        text, kind = "not assessed", "na"
+    else:
+        text, kind = (yes, "pass") if value else (no, "fail")
+    return Markup(f'<span class="badge {kind}">{escape(text)}</span>')
+
+
+def _environment() -> Environment:
+    env = Environment(
+        autoescape=True,
+        undefined=StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+    )
+    env.filters.update(fmt=fmt, sci=sci, verdict=verdict, level=level)
+    return env
+
+
+def _figures(report: Report) -> dict[str, object]:
+    """Every plot of the report as SVG markup (trusted: made here from numbers only)."""
+    a = report.analysis
+    rows = {r.index: r for r in report.trials}
+    bound = a.controls[0].s_e_bound_deg if a.controls else None  # as the controls were judged
+    limits = [
+        i.limit_deg for i in report.compliance.items if i.evidence == "rolling_error_forecast"
+    ]
+    figures: dict[str, object] = {
+        "headings": {
+            r.index: Markup(plots.heading_plot(r, rows.get(r.index)))
+            for r in report.inputs.records
+            if r.trace is not None or any(s.observations for s in r.series)
+        },
+        "measured": Markup(plots.measured_vs_model(report.trials)),
+        "residuals": Markup(plots.residuals_plot(report.trials, a.cochran.s_e, bound)),
+        "iterations": Markup(plots.iteration_path_plot(a)),
+        "forecast": None,
+    }
+    if report.forecast is not None:
+        limit = next((v for v in limits if v is not None), None)
+        figures["forecast"] = Markup(plots.forecast_plot(report.forecast, limit))
+    return figures
+
+
+def render_html(report: Report) -> str:
+    """The whole report as HTML text."""
+    template = _environment().from_string(
+        (TEMPLATES / "report.html.j2").read_text(encoding="utf-8")
+    )
+    css = (TEMPLATES / "report.css").read_text(encoding="utf-8")
+    return template.render(
+        r=report,
+        a=report.analysis,
+        inputs=report.inputs,
+        ident=report.inputs.identification,
+        figures=_figures(report),
+        css=Markup(css),
+        variance_basis=VARIANCE_BASIS,
+        sign_convention=SIGN_CONVENTION,
+        course_step_deg=COURSE_STEP_DEG,
+        PASS=PASS,
+        FAIL=FAIL,
+        NOT_ASSESSED=NOT_ASSESSED,
+    )

@@ -1,0 +1,108 @@
+"""The report as one JSON document: every number the report prints, for machines and for diffing
+two reports. Deterministic: the same database gives the same text except ``generated_at``.
+
+Schema ``gyrostand.report/1`` (plain JSON types; absent values are null):
+
+- ``schema``, ``generated_at`` (the only wall-clock field);
+- ``identification``: the fields of `analysis.report.model.Identification`;
+- ``plan``: `PlanSummary` (n_obs, trials [index, role, direction_deg, amplitude_cm, period_s],
+  windows, settle criterion, notes, plan_toml);
+- ``acquisition``: ``trials`` (`TrialAcquisition` each: commanded and measured K/A/tau, status,
+  observations per series, frames used/lost, flagged observations, analysed), ``events``
+  (`EventRecord` each), ``raw_log_note``, ``records`` (per trial: series with settle start/end
+  ms, settle estimate, observations k/value/window; ``trace``: {frames, bins, t_first_ms,
+  t_last_ms} or null: the binned heading itself is only plotted);
+- ``trial_table``: `analysis.report.build.TrialRow` each;
+- ``analysis``: `CampaignAnalysis.to_dict()` (schema gyrostand.analysis/1, keys documented in
+  `analysis.campaign`);
+- ``forecast``: null, or {point (forecast at the plan's conditions, as in analysis.forecasts[0]),
+  amplitude_note, grid {course_deg, roll_deg, period_s, latitude_deg, arm_cm, motion, q,
+  alpha_deg and half_width_deg as nested lists indexed [course][roll][period][latitude]}, table,
+  worst_by_period, worst (grid points: course_deg, direction_deg, roll_deg, period_s,
+  latitude_deg, alpha_deg, half_width_deg, bound_deg)};
+- ``compliance``: profile_id, profile_name, source, caution, envelope, site_latitude_deg, items
+  (id, clause, requirement, evidence, limit_deg, limit_text, value_deg, verdict, detail);
+- ``signatures``: tested_by, checked_by, date.
+"""
+
+import json
+from dataclasses import asdict
+from typing import Any
+
+from analysis.campaign import json_safe
+from analysis.report.build import GridPoint, Report
+from analysis.report.model import TrialRecord
+
+
+def _point(p: GridPoint) -> dict[str, Any]:
+    return {**asdict(p), "bound_deg": p.bound_deg}
+
+
+def _record(record: TrialRecord) -> dict[str, Any]:
+    trace = record.trace
+    return {
+        "trial": record.index,
+        "series": [asdict(s) for s in record.series],
+        "trace": None
+        if trace is None
+        else {
+            "frames": trace.frames,
+            "bins": int(trace.t_ms.size),
+            "t_first_ms": float(trace.t_ms[0]) if trace.t_ms.size else None,
+            "t_last_ms": float(trace.t_ms[-1]) if trace.t_ms.size else None,
+        },
+    }
+
+
+def report_document(report: Report) -> dict[str, Any]:
+    """The report as plain JSON types (see the module docstring for the keys)."""
+    inputs, f = report.inputs, report.forecast
+    forecast = None
+    if f is not None:
+        g = f.grid
+        forecast = {
+            "point": {
+                **asdict(f.point),
+                "lower_deg": f.point.interval_deg[0],
+                "upper_deg": f.point.interval_deg[1],
+            },
+            "amplitude_note": f.amplitude_note,
+            "grid": {
+                "course_deg": g.course_deg,
+                "roll_deg": g.roll_deg,
+                "period_s": g.period_s,
+                "latitude_deg": g.latitude_deg,
+                "arm_cm": g.arm_cm,
+                "motion": g.motion,
+                "q": g.q,
+                "alpha_deg": g.alpha_deg,
+                "half_width_deg": g.half_width_deg,
+            },
+            "table": [_point(p) for p in f.table],
+            "worst_by_period": [_point(p) for p in f.worst_by_period],
+            "worst": _point(f.worst),
+        }
+    return json_safe(
+        {
+            "schema": report.schema,
+            "generated_at": report.generated_at,
+            "identification": asdict(inputs.identification),
+            "plan": asdict(inputs.plan),
+            "acquisition": {
+                "trials": [asdict(t) for t in inputs.acquisition],
+                "events": [asdict(e) for e in inputs.events],
+                "raw_log_note": inputs.raw_log_note,
+                "records": [_record(r) for r in inputs.records],
+            },
+            "trial_table": [asdict(t) for t in report.trials],
+            "analysis": report.analysis.to_dict(),
+            "forecast": forecast,
+            "compliance": asdict(report.compliance),
+            "signatures": asdict(inputs.signatures),
+        }
+    )
+
+
+def report_json(report: Report) -> str:
+    """The JSON document as text (indented, UTF-8, no NaN)."""
+    return json.dumps(report_document(report), indent=2, ensure_ascii=False, allow_nan=False) + "\n"

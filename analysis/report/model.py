@@ -1,0 +1,165 @@
+"""The report's inputs as plain frozen dataclasses: what the campaign was (identification, plan),
+how it was acquired (per-trial commanded vs measured motion, frame counts, every event) and the
+heading record the plots show. `acquisition.stored` fills them from the database and the raw CAN
+log; the renderers never see the database.
+
+Times: stand times in milliseconds of the stand's clock (``*_ms``), wall times as ISO 8601 text.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Identification:
+    """Section 1: who, what, where, with which software, from which records."""
+
+    campaign_id: int
+    instrument_model: str
+    instrument_serial: str
+    operator: str
+    source: str  # "stand", "import" or "replay"
+    status: str
+    created_at: str | None
+    started_at: str | None
+    finished_at: str | None
+    latitude_deg: float
+    stand: str  # the stand (or the imported file) the data came from
+    acquisition_software: str  # the software version stored with the campaign
+    analysis_software: str  # the software that produced this analysis and report
+    analysis_run: int  # id of the AnalysisRun row holding these results
+    inputs_sha256: str  # hash of the analysed inputs (trials and settings)
+    database: str
+    plan_sha256: str
+    raw_log_path: str | None
+    raw_log_sha256: str | None
+    raw_log_check: str  # "verified", "MISMATCH (...)", "file not found", "no raw log"
+
+
+@dataclass(frozen=True)
+class PlannedTrial:
+    """One row of the design: K (deg), A (cm), tau (s), role."""
+
+    index: int
+    role: str
+    direction_deg: float
+    amplitude_cm: float
+    period_s: float
+
+
+@dataclass(frozen=True)
+class PlanSummary:
+    """Section 2. Acquisition settings are None when the plan gives none (imported data)."""
+
+    n_obs: int
+    trials: tuple[PlannedTrial, ...]
+    still_window_s: float | None
+    rocking_window_periods: int | None
+    spacing_s: float | None
+    settle_band_deg: float | None
+    settle_hold_s: float | None
+    settle_max_wait_s: float | None
+    notes: tuple[str, ...]  # e.g. which settings were taken from the seed-000 example
+    plan_toml: str
+
+
+@dataclass(frozen=True)
+class TrialAcquisition:
+    """Section 3, one trial: commanded vs stand-measured motion, what was stored, what went
+    wrong. Frame counts are None when the observations carry none (manual readings)."""
+
+    index: int
+    role: str
+    status: str
+    failure_reason: str | None
+    cmd_direction_deg: float
+    cmd_amplitude_cm: float
+    cmd_period_s: float
+    meas_direction_deg: float | None
+    meas_amplitude_cm: float | None
+    meas_period_s: float | None
+    observations_before: int
+    observations_under: int
+    frames_used: int | None
+    frames_lost: int | None
+    flagged_observations: int
+    analysed: bool  # False: left out of the analysis (failed or incomplete)
+
+
+@dataclass(frozen=True)
+class EventRecord:
+    """One acquisition event as stored."""
+
+    stand_time_ms: int | None
+    wall_time: str
+    trial_index: int | None
+    series_j: int | None
+    kind: str
+    severity: str
+    message: str
+
+
+@dataclass(frozen=True)
+class ObservationRecord:
+    """delta_jik of seed 000 eq 2.1 as stored: the mean heading over one window."""
+
+    k: int
+    value_deg: float
+    window_start_ms: int | None
+    window_end_ms: int | None
+
+
+@dataclass(frozen=True)
+class SeriesRecord:
+    """Series j of a trial: settle start/end (stand ms), settle estimate and observations."""
+
+    j: int
+    settle_started_ms: int | None
+    settle_done_ms: int | None
+    settle_estimate_deg: float | None
+    observations: tuple[ObservationRecord, ...]
+
+
+@dataclass(frozen=True)
+class HeadingTrace:
+    """The compass heading of one trial from the raw CAN log, reduced to bins for plotting:
+    per bin its centre time (stand ms), mean, min and max heading (deg, unwrapped)."""
+
+    t_ms: np.ndarray
+    mean_deg: np.ndarray
+    min_deg: np.ndarray
+    max_deg: np.ndarray
+    frames: int  # valid heading frames behind the bins
+
+
+@dataclass(frozen=True)
+class TrialRecord:
+    """What the heading plot of one trial shows: the series (windows, settle points) and, when
+    the campaign has a raw CAN log covering the trial, the heading trace."""
+
+    index: int
+    series: tuple[SeriesRecord, ...]
+    trace: HeadingTrace | None
+
+
+@dataclass(frozen=True)
+class Signatures:
+    """Section 11. Empty strings leave a line to sign on."""
+
+    tested_by: str
+    checked_by: str = ""
+    date: str = ""
+
+
+@dataclass(frozen=True)
+class ReportInputs:
+    """Everything the report shows that is not a result of the analysis."""
+
+    identification: Identification
+    plan: PlanSummary
+    acquisition: tuple[TrialAcquisition, ...]
+    events: tuple[EventRecord, ...]
+    records: tuple[TrialRecord, ...]
+    raw_log_note: str  # how the heading plots were made (raw log, observations only, nothing)
+    signatures: Signatures

@@ -1,0 +1,21 @@
+"""The PDF of the HTML report, by WeasyPrint (the `pdf` extra). WeasyPrint needs Pango and its
+fonts from the system; without them its import fails, and the error says how to install them."""
+
+from pathlib import Path
+
+from analysis.report.errors import ReportError
+
+INSTALL_HINT = (
+    "PDF output needs WeasyPrint (pip install 'gyrostand[pdf]') and its system libraries "
+    "(Debian/Ubuntu: apt-get install libpango-1.0-0 libpangoft2-1.0-0 fonts-dejavu-core)"
+)
+
+
+def write_pdf(html: str, path: Path) -> Path:
+    """Render the report's HTML text to a PDF file (ReportError when WeasyPrint cannot run)."""
+    try:
+        import weasyprint  # heavy, optional: imported only when a PDF is asked for
+    except (ImportError, OSError) as exc:  # OSError: a system library failed to load
+        raise ReportError(f"{INSTALL_HINT}: {exc}") from None
+    weasyprint.HTML(string=html, base_url=str(path.parent)).write_pdf(path)
+    return path

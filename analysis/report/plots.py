@@ -1,0 +1,314 @@
+"""The report's figures as inline SVG text (matplotlib's object API with the SVG canvas: no
+pyplot state, no display). Output is deterministic: fixed hash salt, no date in the metadata.
+
+- `heading_plot`: one trial's heading from the raw CAN log (binned mean and min-max band) with
+  the observation windows shaded and the settle points marked; without a log, the stored
+  observations over their windows (or against k when they carry no times);
+- `measured_vs_model`: <delta_i> against alpha_i for every trial;
+- `residuals_plot`: v_i = <delta_i> - alpha_i per trial with the S_e bounds;
+- `forecast_plot`: alpha_p against the ship's course with its prediction band and the limit;
+- `iteration_path_plot`: the Gauss-Newton iterates in the (C, T) plane over contours of S^2.
+"""
+
+import functools
+import io
+from collections.abc import Callable, Sequence
+from typing import ParamSpec
+
+import matplotlib as mpl
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.colors import LogNorm
+from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter
+
+from analysis.campaign import CampaignAnalysis
+from analysis.gyro_model import Conditions, RollingErrorModel
+from analysis.report.build import ForecastSection, TrialRow
+from analysis.report.model import SeriesRecord, TrialRecord
+
+STYLE = {
+    "svg.hashsalt": "gyrostand-report",
+    "svg.fonttype": "none",
+    "font.family": "DejaVu Sans",
+    "font.size": 8.0,
+    "axes.titlesize": 9.0,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "legend.fontsize": 7.0,
+    "legend.framealpha": 0.85,
+}
+SERIES_COLOURS = {1: "#1f77b4", 2: "#d95f02"}  # still, rocking
+SERIES_LABELS = {1: "still (j = 1)", 2: "rocking (j = 2)"}
+WIDTH_IN = 7.0
+
+
+P = ParamSpec("P")
+
+
+def _styled(plot: Callable[P, Figure]) -> Callable[P, str]:
+    """Run a figure builder under the report's style and return its SVG text (no XML prolog or
+    DOCTYPE, to sit inline in HTML)."""
+
+    @functools.wraps(plot)
+    def svg(*args: P.args, **kwargs: P.kwargs) -> str:
+        buffer = io.StringIO()
+        with mpl.rc_context(STYLE):
+            plot(*args, **kwargs).savefig(buffer, format="svg", metadata={"Date": None})
+        text = buffer.getvalue()
+        return text[text.index("<svg") :]
+
+    return svg
+
+
+def _figure(height_in: float, width_in: float = WIDTH_IN) -> Figure:
+    return Figure(figsize=(width_in, height_in), layout="constrained")
+
+
+def _minutes(t_ms: float | np.ndarray, t0_ms: float) -> float | np.ndarray:
+    return (np.asarray(t_ms, dtype=float) - t0_ms) / 60_000.0
+
+
+def _trial_start_ms(record: TrialRecord) -> float | None:
+    starts = [
+        t
+        for s in record.series
+        for t in [s.settle_started_ms, *(o.window_start_ms for o in s.observations)]
+        if t is not None
+    ]
+    if record.trace is not None and record.trace.t_ms.size:
+        starts.append(float(record.trace.t_ms[0]))
+    return min(starts) if starts else None
+
+
+def _mark_series(ax: Axes, series: SeriesRecord, t0: float, labelled: set[int]) -> None:
+    colour = SERIES_COLOURS[series.j]
+    for o in series.observations:
+        if o.window_start_ms is None or o.window_end_ms is None:
+            continue
+        label = SERIES_LABELS[series.j] + " windows" if series.j not in labelled else None
+        labelled.add(series.j)
+        x0, x1 = _minutes(o.window_start_ms, t0), _minutes(o.window_end_ms, t0)
+        ax.axvspan(x0, x1, color=colour, alpha=0.15, lw=0, label=label)
+        ax.plot([x0, x1], [o.value_deg, o.value_deg], color=colour, lw=1.6)
+    if series.settle_done_ms is not None:
+        x = _minutes(series.settle_done_ms, t0)
+        ax.axvline(x, color=colour, ls="--", lw=0.8)
+        if series.settle_estimate_deg is not None:
+            ax.plot(
+                [x],
+                [series.settle_estimate_deg],
+                marker="v",
+                color=colour,
+                ms=6,
+                ls="none",
+                label=f"settled, j = {series.j}",
+            )
+
+
+@_styled
+def heading_plot(record: TrialRecord, row: TrialRow | None) -> Figure:
+    """Heading of one trial against stand time, windows and settle points marked."""
+    fig = _figure(3.0)
+    ax = fig.add_subplot()
+    title = f"Trial {record.index}"
+    if row is not None:
+        title += (
+            f" ({row.role}): K = {row.direction_deg:g} deg, A = {row.amplitude_cm:g} cm, "
+            f"tau = {row.period_s:g} s"
+        )
+    ax.set_title(title, loc="left")
+    t0 = _trial_start_ms(record)
+    if t0 is None:  # observations without window times: values against k
+        for s in record.series:
+            k = [o.k for o in s.observations]
+            values = [o.value_deg for o in s.observations]
+            ax.plot(k, values, "o-", color=SERIES_COLOURS[s.j], label=SERIES_LABELS[s.j])
+        ax.set_xlabel("observation k")
+    else:
+        trace = record.trace
+        if trace is not None and trace.t_ms.size:
+            x = _minutes(trace.t_ms, t0)
+            ax.fill_between(
+                x, trace.min_deg, trace.max_deg, color="0.75", lw=0, label="heading min-max"
+            )
+            ax.plot(x, trace.mean_deg, color="0.2", lw=0.7, label="heading (bin mean)")
+        labelled: set[int] = set()
+        for s in record.series:
+            _mark_series(ax, s, t0, labelled)
+        ax.set_xlabel("stand time since the trial began, min")
+    ax.set_ylabel("heading, deg")
+    ax.ticklabel_format(axis="y", useOffset=False)
+    fig.legend(loc="outside lower center", ncols=3, fontsize=6.5)
+    return fig
+
+
+@_styled
+def measured_vs_model(rows: Sequence[TrialRow]) -> Figure:
+    """Observed <delta_i> against the model's alpha_i (fitted or predicted)."""
+    fig = _figure(3.2, 4.6)
+    ax = fig.add_subplot()
+    for role, marker, colour in (("fit", "o", "#1f77b4"), ("control", "s", "#d95f02")):
+        chosen = [r for r in rows if r.role == role]
+        if not chosen:
+            continue
+        err = [0.0 if r.var_mean_deg2 is None else np.sqrt(r.var_mean_deg2) for r in chosen]
+        ax.errorbar(
+            [r.alpha_deg for r in chosen],
+            [r.delta_deg for r in chosen],
+            yerr=err,
+            fmt=marker,
+            color=colour,
+            capsize=2,
+            label=f"{role} trials",
+        )
+        for r in chosen:
+            ax.annotate(
+                str(r.index),
+                (r.alpha_deg, r.delta_deg),
+                xytext=(4, 3),
+                textcoords="offset points",
+                fontsize=7,
+            )
+    values = [v for r in rows for v in (r.alpha_deg, r.delta_deg)]
+    lo, hi = min(values), max(values)
+    pad = 0.08 * (hi - lo or 1.0)
+    ax.plot(
+        [lo - pad, hi + pad], [lo - pad, hi + pad], color="0.4", lw=0.8, label="measured = model"
+    )
+    ax.set_xlabel(r"model $\alpha_i$, deg (eq 1.1)")
+    ax.set_ylabel(r"measured $\langle\delta_i\rangle$, deg (eq 2.1)")
+    ax.set_title(r"Measured against model (bars: $\pm$ S of $\langle\delta_i\rangle$)", loc="left")
+    ax.legend(loc="upper left")
+    return fig
+
+
+@_styled
+def residuals_plot(rows: Sequence[TrialRow], s_e_deg: float, bound_deg: float | None) -> Figure:
+    """v_i per trial with +/- S_e and, when controls were judged, +/- t S_e."""
+    fig = _figure(2.6, 4.6)
+    ax = fig.add_subplot()
+    for role, marker, colour in (("fit", "o", "#1f77b4"), ("control", "s", "#d95f02")):
+        chosen = [r for r in rows if r.role == role]
+        if chosen:
+            x, v = [r.index for r in chosen], [r.residual_deg for r in chosen]
+            ax.vlines(x, 0, v, color=colour, lw=1.2)
+            ax.plot(x, v, marker, color=colour, label=f"{role} trials")
+    ax.axhline(0, color="0.3", lw=0.8)
+    if bound_deg is not None:
+        ax.axhspan(-bound_deg, bound_deg, color="#2ca02c", alpha=0.12, lw=0, label=r"$\pm t\,S_e$")
+    for sign in (-1, 1):
+        ax.axhline(
+            sign * s_e_deg,
+            color="#2ca02c",
+            ls="--",
+            lw=0.8,
+            label=r"$\pm S_e$" if sign > 0 else None,
+        )
+    ax.set_xticks([r.index for r in rows])
+    ax.set_xlabel("trial i")
+    ax.set_ylabel(r"$v_i = \langle\delta_i\rangle - \alpha_i$, deg")
+    ax.set_title("Residuals", loc="left")
+    ax.legend(loc="best", ncols=2)
+    return fig
+
+
+@_styled
+def forecast_plot(section: ForecastSection, limit_deg: float | None) -> Figure:
+    """alpha_p against course at the plan's conditions with its band; other periods as lines."""
+    grid = section.grid
+    ship = section.point.conditions
+    fig = _figure(3.0)
+    ax = fig.add_subplot()
+    for p, period in enumerate(grid.period_s):
+        alpha = grid.alpha_deg[:, 0, p, 0]
+        if period == ship.period_s:
+            half = grid.half_width_deg[:, 0, p, 0]
+            ax.fill_between(
+                grid.course_deg,
+                alpha - half,
+                alpha + half,
+                color="#1f77b4",
+                alpha=0.2,
+                lw=0,
+                label=f"{1 - grid.q:.0%} prediction interval",
+            )
+            ax.plot(
+                grid.course_deg,
+                alpha,
+                color="#1f77b4",
+                lw=1.8,
+                label=rf"$\alpha_p$, $\tau$ = {period:g} s (plan)",
+            )
+        else:
+            ax.plot(grid.course_deg, alpha, lw=0.8, ls=":", label=rf"$\tau$ = {period:g} s")
+    if limit_deg is not None:
+        for sign in (-1, 1):
+            ax.axhline(
+                sign * limit_deg,
+                color="#d62728",
+                lw=1.0,
+                ls="--",
+                label="limit" if sign > 0 else None,
+            )
+    ax.set_xticks(np.arange(0, 361, 45))
+    ax.set_xlim(0, 360)
+    ax.set_xlabel("ship's course, deg")
+    ax.set_ylabel("predicted rolling error, deg")
+    ax.set_title(
+        f"Forecast: {ship.motion} {ship.roll_deg:g} deg, latitude {ship.latitude_deg:g} deg",
+        loc="left",
+    )
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    return fig
+
+
+@_styled
+def iteration_path_plot(analysis: CampaignAnalysis) -> Figure:
+    """Gauss-Newton iterates theta_d (eq 1.7) over contours of S^2(C, T) (eq 1.9)."""
+    fit = analysis.fit
+    path = np.array([[r.theta["C_gcm2s2"], r.theta["T_s"]] for r in fit.log])
+    final = np.array([fit.estimates["C_gcm2s2"], fit.estimates["T_s"]])
+    se = np.array([fit.std_errors["C_gcm2s2"], fit.std_errors["T_s"]])
+    points = np.vstack([path, final]) if path.size else final[None, :]
+    lo = np.minimum(points.min(axis=0), final - 4 * se)
+    hi = np.maximum(points.max(axis=0), final + 4 * se)
+    span = hi - lo
+    lo, hi = np.maximum(lo - 0.1 * span, 1e-9 * np.abs(final)), hi + 0.1 * span
+    c_axis, t_axis = np.linspace(lo[0], hi[0], 160), np.linspace(lo[1], hi[1], 160)
+    fitted = {i: t for i, t in ((t.index, t) for t in analysis.trials)}
+    trials = [fitted[i] for i in analysis.fit_indices]
+    x = Conditions(
+        direction_deg=np.array([t.direction_deg for t in trials])[:, None, None],
+        amplitude_cm=np.array([t.amplitude_cm for t in trials])[:, None, None],
+        period_s=np.array([t.period_s for t in trials])[:, None, None],
+    )
+    y = np.array([t.delta_deg for t in trials])[:, None, None]
+    model = RollingErrorModel(analysis.constants)
+    alpha = model(x, c_axis[None, None, :], t_axis[None, :, None])
+    s2 = ((y - alpha) ** 2).sum(axis=0) / fit.dof  # eq 1.9 on the grid
+    fig = _figure(3.4, 5.2)
+    ax = fig.add_subplot()
+    levels = np.geomspace(fit.s2 * 1.05, s2.max(), 12)
+    contours = ax.contour(
+        c_axis, t_axis, s2, levels=levels, cmap="viridis", norm=LogNorm(), linewidths=0.7
+    )
+    ax.clabel(contours, fmt="%.2g", fontsize=6)
+    if path.size:
+        ax.plot(
+            path[:, 0],
+            path[:, 1],
+            "o-",
+            color="#d62728",
+            ms=3.5,
+            lw=1.0,
+            label=f"iterates d = 0..{len(path) - 1} ({fit.path})",
+        )
+        ax.annotate("start", path[0], xytext=(5, 4), textcoords="offset points", fontsize=7)
+    ax.plot(*final, marker="*", color="black", ms=10, ls="none", label="estimate")
+    ax.set_xlabel(r"C, $10^7$ g cm$^2$ s$^{-2}$")
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / 1e7:g}"))
+    ax.set_ylabel("T, s")
+    ax.set_title(r"Fit: iteration path over $S^2(C, T)$, deg$^2$ (eq 1.9)", loc="left")
+    ax.legend(loc="best")
+    return fig

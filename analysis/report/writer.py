@@ -1,0 +1,59 @@
+"""Write a report's files: HTML, PDF, JSON and the trial-table CSV, named after the campaign."""
+
+from collections.abc import Iterable
+from pathlib import Path
+
+from analysis.report.build import Report
+from analysis.report.csv_table import trial_table_csv
+from analysis.report.errors import ReportError
+from analysis.report.html import render_html
+from analysis.report.json_doc import report_json
+from analysis.report.pdf import write_pdf
+
+FORMATS = ("html", "pdf", "json", "csv")
+
+
+def report_paths(out_dir: Path, campaign_id: int) -> dict[str, Path]:
+    """Where each format goes: campaign-ID.html/.pdf/.json and campaign-ID-trials.csv."""
+    stem = f"campaign-{campaign_id}"
+    return {
+        "html": out_dir / f"{stem}.html",
+        "pdf": out_dir / f"{stem}.pdf",
+        "json": out_dir / f"{stem}.json",
+        "csv": out_dir / f"{stem}-trials.csv",
+    }
+
+
+def write_report(
+    report: Report, out_dir: Path, formats: Iterable[str] = FORMATS
+) -> dict[str, Path]:
+    """Write the asked formats (the PDF last, so a missing PDF engine leaves the others written);
+    returns the paths written, by format."""
+    wanted = list(dict.fromkeys(formats))
+    unknown = [f for f in wanted if f not in FORMATS]
+    if unknown:
+        raise ReportError(f"unknown report format {unknown[0]!r} (known: {', '.join(FORMATS)})")
+    paths = report_paths(out_dir, report.inputs.identification.campaign_id)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        written: dict[str, Path] = {}
+        if "json" in wanted:
+            paths["json"].write_text(report_json(report), encoding="utf-8")
+            written["json"] = paths["json"]
+        if "csv" in wanted:
+            paths["csv"].write_text(trial_table_csv(report.trials), encoding="utf-8")
+            written["csv"] = paths["csv"]
+        if "html" in wanted or "pdf" in wanted:
+            html = render_html(report)
+            if "html" in wanted:
+                paths["html"].write_text(html, encoding="utf-8")
+                written["html"] = paths["html"]
+            if "pdf" in wanted:
+                try:
+                    written["pdf"] = write_pdf(html, paths["pdf"])
+                except ReportError as exc:
+                    done = ", ".join(str(p) for p in written.values()) or "nothing"
+                    raise ReportError(f"{exc} (written: {done})") from None
+    except OSError as exc:
+        raise ReportError(f"cannot write the report in {out_dir}: {exc}") from None
+    return written

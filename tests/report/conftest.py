@@ -1,0 +1,132 @@
+"""Fixtures for the report tests, built once per session (the PDF render is the slow part):
+
+- the seed-000 paper example imported from examples/paper.csv into a fresh database (operator
+  name with a <script> tag), its report and its rendered files;
+- a simulated campaign run on the lockstep simulated stand (tests/acquisition/harness.py) into
+  a database through the real `CampaignStore`, with every frame written to a BLF raw log.
+"""
+
+import hashlib
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+import can
+import pytest
+from sqlalchemy.orm import Session, sessionmaker
+
+from acquisition.engine import Engine
+from acquisition.plan import parse_plan
+from acquisition.store import CampaignStore
+from acquisition.stored import campaign_report
+from analysis.report.build import Report
+from analysis.report.compliance import load_profile
+from analysis.report.writer import write_report
+from db.io import SEED_000_METADATA, import_file
+from db.session import open_database, sqlite_url
+from tests.acquisition.harness import Lockstep, plan_text, quick_config
+
+ROOT = Path(__file__).resolve().parents[2]
+PAPER_CSV = ROOT / "examples" / "paper.csv"
+OPERATOR = "<script>alert('x')</script> I. Ivanov"
+GENERATED = "2026-01-01 00:00:00+00:00"
+SIM_TRIALS = [
+    (45.0, 24.0, 6.0, "fit"),
+    (315.0, 20.0, 5.0, "fit"),
+    (30.0, 22.0, 8.0, "fit"),
+    (60.0, 18.0, 4.5, "control"),
+]
+
+
+@dataclass(frozen=True)
+class Stored:
+    """A database holding one campaign."""
+
+    path: Path
+    sessions: sessionmaker[Session]
+    campaign_id: int
+
+    @property
+    def url(self) -> str:
+        return str(self.path)
+
+    def report(self, generated_at: str = GENERATED) -> Report:
+        with self.sessions.begin() as session:
+            return campaign_report(
+                session,
+                self.campaign_id,
+                database=self.url,
+                profile=load_profile(),
+                generated_at=generated_at,
+            )
+
+
+def import_paper(folder: Path, operator: str = OPERATOR) -> Stored:
+    path = folder / "paper.sqlite"
+    sessions = open_database(sqlite_url(path))
+    metadata = {**SEED_000_METADATA, "operator": operator, "software_version": "test"}
+    return Stored(path, sessions, import_file(sessions, PAPER_CSV, metadata))
+
+
+@pytest.fixture(scope="session")
+def paper(tmp_path_factory: pytest.TempPathFactory) -> Stored:
+    return import_paper(tmp_path_factory.mktemp("paper"))
+
+
+@pytest.fixture(scope="session")
+def paper_report(paper: Stored) -> Report:
+    return paper.report()
+
+
+@dataclass(frozen=True)
+class Rendered:
+    files: dict[str, Path]
+    pdf_text: str
+    pdf_pages: int
+
+
+@pytest.fixture(scope="session")
+def paper_files(paper_report: Report, tmp_path_factory: pytest.TempPathFactory) -> Rendered:
+    files = write_report(paper_report, tmp_path_factory.mktemp("paper-report"))
+    text = subprocess.run(
+        ["pdftotext", "-layout", str(files["pdf"]), "-"], check=True, capture_output=True
+    ).stdout.decode()
+    info = subprocess.run(
+        ["pdfinfo", str(files["pdf"])], check=True, capture_output=True
+    ).stdout.decode()
+    pages = int(next(line for line in info.splitlines() if line.startswith("Pages:")).split()[1])
+    return Rendered(files, text, pages)
+
+
+@dataclass(frozen=True)
+class Simulated(Stored):
+    log: Path
+    stream: tuple[can.Message, ...]
+
+
+def run_simulated(folder: Path) -> Simulated:
+    """The lockstep simulated stand through the real engine and store, frames to a BLF log."""
+    path = folder / "sim.sqlite"
+    sessions = open_database(sqlite_url(path))
+    plan = parse_plan(plan_text(SIM_TRIALS, n_obs=4, database=str(path)))
+    store = CampaignStore.create(sessions, plan)
+    sim = Lockstep(quick_config(seed=3))
+    engine = Engine(plan, store, sim, store.progress())
+    sim.run(engine)
+    store.set_status(engine.outcome)
+    log = folder / "campaign.blf"
+    with can.BLFWriter(log) as writer:
+        for message in sim.stream:
+            writer.on_message_received(message)
+    store.set_raw_log(str(log), hashlib.sha256(log.read_bytes()).hexdigest())
+    return Simulated(path, sessions, store.campaign_id, log, tuple(sim.stream))
+
+
+@pytest.fixture(scope="session")
+def simulated(tmp_path_factory: pytest.TempPathFactory) -> Simulated:
+    return run_simulated(tmp_path_factory.mktemp("sim"))
+
+
+@pytest.fixture(scope="session")
+def simulated_report(simulated: Simulated) -> Report:
+    return simulated.report()
