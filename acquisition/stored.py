@@ -31,6 +31,7 @@ from acquisition.logfile import read_raw_frames
 from acquisition.plan import Plan, PlanError, parse_plan
 from acquisition.store import software_version
 from analysis.campaign import CampaignAnalysis, analyze_campaign, json_safe
+from analysis.errors import AnalysisError
 from analysis.gyro_model import KnownConstants
 from analysis.report.build import Report, build_report
 from analysis.report.compliance import Profile
@@ -438,12 +439,14 @@ def _records(
 
 
 def report_inputs(
-    session: Session, campaign_id: int, stored: StoredAnalysis, *, database: str
+    session: Session, campaign_id: int, stored: StoredAnalysis | None, *, database: str
 ) -> ReportInputs:
     """Everything the report shows besides the analysis results: identification, plan,
     acquisition summary, every event, the heading records (from the raw log when it verifies)."""
     campaign = load_campaign(session, campaign_id)
-    excluded = stored.inputs.excluded
+    excluded = {t.index: "not analysed" for t in campaign.trials}
+    if stored is not None:
+        excluded = stored.inputs.excluded
     try:
         plan: Plan | None = parse_plan(campaign.plan_toml)
     except PlanError:  # e.g. the instrument/site metadata stored with an import
@@ -464,8 +467,8 @@ def report_inputs(
         stand=_stand(campaign, plan),
         acquisition_software=campaign.software_version,
         analysis_software=software_version(),
-        analysis_run=stored.run_id,
-        inputs_sha256=stored.inputs.sha256(),
+        analysis_run=None if stored is None else stored.run_id,
+        inputs_sha256=None if stored is None else stored.inputs.sha256(),
         database=database,
         plan_sha256=campaign.plan_hash,
         raw_log_path=campaign.raw_log_path,
@@ -474,7 +477,7 @@ def report_inputs(
     )
     return ReportInputs(
         identification=ident,
-        plan=_plan_summary(campaign, plan, stored.inputs.notes),
+        plan=_plan_summary(campaign, plan, () if stored is None else stored.inputs.notes),
         acquisition=tuple(_trial_acquisition(t, excluded) for t in campaign.trials),
         events=_events(campaign),
         records=records,
@@ -486,7 +489,13 @@ def report_inputs(
 def campaign_report(
     session: Session, campaign_id: int, *, database: str, profile: Profile, generated_at: str
 ) -> Report:
-    """Analyse the stored campaign (recording the run) and assemble its report."""
-    stored = analyze_stored(session, campaign_id)
+    """Analyse the stored campaign (recording the run) and assemble its report. A campaign
+    that cannot be analysed (e.g. every trial failed) still gets its report: plan,
+    acquisition and events, with the reason in place of the results."""
+    try:
+        stored: StoredAnalysis | None = analyze_stored(session, campaign_id)
+    except AnalysisError as exc:
+        stored, reason = None, str(exc)
     inputs = report_inputs(session, campaign_id, stored, database=database)
-    return build_report(inputs, stored.analysis, profile, generated_at=generated_at)
+    result = reason if stored is None else stored.analysis
+    return build_report(inputs, result, profile, generated_at=generated_at)

@@ -40,6 +40,12 @@ def write_campaign_report(
             report = campaign_report(
                 session, campaign_id, database=db, profile=limits, generated_at=generated
             )
+        if report.analysis is None:
+            typer.echo(
+                f"note: campaign {campaign_id} could not be analysed ({report.analysis_error}); "
+                "the report documents its plan and acquisition only",
+                err=True,
+            )
         return write_report(report, out, formats)
     except (AnalysisError, CampaignNotFound) as error:
         fail(str(error))

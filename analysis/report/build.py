@@ -77,10 +77,14 @@ class ForecastSection:
 
 @dataclass(frozen=True)
 class Report:
+    """``analysis`` is None when the campaign could not be analysed (``analysis_error`` says
+    why): the report then documents the acquisition and assesses nothing."""
+
     schema: str
     generated_at: str
     inputs: ReportInputs
-    analysis: CampaignAnalysis
+    analysis: CampaignAnalysis | None
+    analysis_error: str | None
     trials: tuple[TrialRow, ...]
     forecast: ForecastSection | None
     compliance: Compliance
@@ -168,9 +172,25 @@ def forecast_section(analysis: CampaignAnalysis, periods_s: tuple[float, ...]) -
 
 
 def build_report(
-    inputs: ReportInputs, analysis: CampaignAnalysis, profile: Profile, *, generated_at: str
+    inputs: ReportInputs,
+    analysis: CampaignAnalysis | str,
+    profile: Profile,
+    *,
+    generated_at: str,
 ) -> Report:
-    """Assemble the report; ``generated_at`` is its only wall-clock field (ISO 8601 text)."""
+    """Assemble the report; ``analysis`` is the analysis or, when it failed, the reason.
+    ``generated_at`` is the report's only wall-clock field (ISO 8601 text)."""
+    if isinstance(analysis, str):
+        return Report(
+            schema=SCHEMA,
+            generated_at=generated_at,
+            inputs=inputs,
+            analysis=None,
+            analysis_error=analysis,
+            trials=(),
+            forecast=None,
+            compliance=assess(profile, None, None),
+        )
     section = (
         forecast_section(analysis, profile.envelope.forecast_periods_s)
         if analysis.forecasts
@@ -181,6 +201,7 @@ def build_report(
         generated_at=generated_at,
         inputs=inputs,
         analysis=analysis,
+        analysis_error=None,
         trials=trial_rows(analysis),
         forecast=section,
         compliance=assess(profile, analysis, None if section is None else section.grid),

@@ -99,7 +99,7 @@ class Compliance:
     source: str
     caution: str
     envelope: str
-    site_latitude_deg: float
+    site_latitude_deg: float | None
     items: tuple[ComplianceItem, ...]
 
     def count(self, verdict: str) -> int:
@@ -370,17 +370,27 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
     )
 
 
-def assess(profile: Profile, analysis: CampaignAnalysis, grid: ForecastGrid | None) -> Compliance:
-    """Every requirement of the profile judged on this campaign."""
-    evidence = Evidence(analysis, grid, profile)
+def assess(
+    profile: Profile, analysis: CampaignAnalysis | None, grid: ForecastGrid | None
+) -> Compliance:
+    """Every requirement of the profile judged on this campaign (all NOT ASSESSED when the
+    campaign could not be analysed)."""
+    if analysis is None:
+        findings = [_not_assessed("the campaign could not be analysed")] * len(profile.requirements)
+        latitude = None
+    else:
+        evidence = Evidence(analysis, grid, profile)
+        findings = [EVIDENCE[req.evidence](evidence) for req in profile.requirements]
+        latitude = evidence.site_latitude_deg
     return Compliance(
         profile_id=profile.id,
         profile_name=profile.name,
         source=profile.source,
         caution=profile.caution,
         envelope=profile.envelope.describe(),
-        site_latitude_deg=evidence.site_latitude_deg,
+        site_latitude_deg=latitude,
         items=tuple(
-            _judge(req, EVIDENCE[req.evidence](evidence), profile) for req in profile.requirements
+            _judge(req, finding, profile)
+            for req, finding in zip(profile.requirements, findings, strict=True)
         ),
     )

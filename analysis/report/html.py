@@ -14,6 +14,7 @@ from analysis.forecast import SIGN_CONVENTION
 from analysis.report import plots
 from analysis.report.build import COURSE_STEP_DEG, Report
 from analysis.report.compliance import FAIL, NOT_ASSESSED, PASS
+from analysis.report.model import TrialAcquisition
 
 TEMPLATES = files("analysis.report") / "templates"
 
@@ -65,27 +66,39 @@ def _environment() -> Environment:
     return env
 
 
+def _heading_title(t: TrialAcquisition) -> str:
+    return (
+        f"Trial {t.index} ({t.role}): K = {t.cmd_direction_deg:g} deg, "
+        f"A = {t.cmd_amplitude_cm:g} cm, tau = {t.cmd_period_s:g} s (commanded)"
+    )
+
+
 def _figures(report: Report) -> dict[str, object]:
     """Every plot of the report as SVG markup (trusted: made here from numbers only)."""
-    a = report.analysis
-    rows = {r.index: r for r in report.trials}
-    bound = a.controls[0].s_e_bound_deg if a.controls else None  # as the controls were judged
-    limits = [
-        i.limit_deg for i in report.compliance.items if i.evidence == "rolling_error_forecast"
-    ]
+    trials = {t.index: t for t in report.inputs.acquisition}
     figures: dict[str, object] = {
         "headings": {
-            r.index: Markup(plots.heading_plot(r, rows.get(r.index)))
+            r.index: Markup(plots.heading_plot(r, _heading_title(trials[r.index])))
             for r in report.inputs.records
             if r.trace is not None or any(s.observations for s in r.series)
         },
-        "measured": Markup(plots.measured_vs_model(report.trials)),
-        "residuals": Markup(plots.residuals_plot(report.trials, a.cochran.s_e, bound)),
-        "iterations": Markup(plots.iteration_path_plot(a)),
-        "forecast": None,
     }
+    a = report.analysis
+    if a is None:
+        return figures
+    bound = a.controls[0].s_e_bound_deg if a.controls else None  # as the controls were judged
+    figures["measured"] = Markup(plots.measured_vs_model(report.trials))
+    figures["residuals"] = Markup(plots.residuals_plot(report.trials, a.cochran.s_e, bound))
+    figures["iterations"] = Markup(plots.iteration_path_plot(a))
     if report.forecast is not None:
-        limit = next((v for v in limits if v is not None), None)
+        limit = next(
+            (
+                i.limit_deg
+                for i in report.compliance.items
+                if i.evidence == "rolling_error_forecast" and i.limit_deg is not None
+            ),
+            None,
+        )
         figures["forecast"] = Markup(plots.forecast_plot(report.forecast, limit))
     return figures
 

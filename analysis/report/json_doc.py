@@ -14,7 +14,8 @@ Schema ``gyrostand.report/1`` (plain JSON types; absent values are null):
   t_last_ms} or null: the binned heading itself is only plotted);
 - ``trial_table``: `analysis.report.build.TrialRow` each;
 - ``analysis``: `CampaignAnalysis.to_dict()` (schema gyrostand.analysis/1, keys documented in
-  `analysis.campaign`);
+  `analysis.campaign`), or null with ``analysis_error`` saying why the campaign could not be
+  analysed;
 - ``forecast``: null, or {point (forecast at the plan's conditions, as in analysis.forecasts[0]),
   amplitude_note, grid {course_deg, roll_deg, period_s, latitude_deg, arm_cm, motion, q,
   alpha_deg and half_width_deg as nested lists indexed [course][roll][period][latitude]}, table,
@@ -95,7 +96,8 @@ def report_document(report: Report) -> dict[str, Any]:
                 "records": [_record(r) for r in inputs.records],
             },
             "trial_table": [asdict(t) for t in report.trials],
-            "analysis": report.analysis.to_dict(),
+            "analysis": None if report.analysis is None else report.analysis.to_dict(),
+            "analysis_error": report.analysis_error,
             "forecast": forecast,
             "compliance": asdict(report.compliance),
             "signatures": asdict(inputs.signatures),

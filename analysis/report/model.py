@@ -28,8 +28,8 @@ class Identification:
     stand: str  # the stand (or the imported file) the data came from
     acquisition_software: str  # the software version stored with the campaign
     analysis_software: str  # the software that produced this analysis and report
-    analysis_run: int  # id of the AnalysisRun row holding these results
-    inputs_sha256: str  # hash of the analysed inputs (trials and settings)
+    analysis_run: int | None  # id of the AnalysisRun row holding these results
+    inputs_sha256: str | None  # hash of the analysed inputs (None: not analysed)
     database: str
     plan_sha256: str
     raw_log_path: str | None

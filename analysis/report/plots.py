@@ -107,16 +107,10 @@ def _mark_series(ax: Axes, series: SeriesRecord, t0: float, labelled: set[int]) 
 
 
 @_styled
-def heading_plot(record: TrialRecord, row: TrialRow | None) -> Figure:
+def heading_plot(record: TrialRecord, title: str) -> Figure:
     """Heading of one trial against stand time, windows and settle points marked."""
     fig = _figure(3.0)
     ax = fig.add_subplot()
-    title = f"Trial {record.index}"
-    if row is not None:
-        title += (
-            f" ({row.role}): K = {row.direction_deg:g} deg, A = {row.amplitude_cm:g} cm, "
-            f"tau = {row.period_s:g} s"
-        )
     ax.set_title(title, loc="left")
     t0 = _trial_start_ms(record)
     if t0 is None:  # observations without window times: values against k

@@ -6,12 +6,16 @@ import io
 import json
 import math
 import re
+import sys
+from pathlib import Path
 
 import pytest
 from sqlalchemy import func, select
 
 from analysis.report.build import Report
+from analysis.report.errors import ReportError
 from analysis.report.json_doc import report_json
+from analysis.report.writer import write_report
 from db.models import AnalysisRun
 
 from .conftest import GENERATED, OPERATOR, PAPER_CSV, Rendered, Stored
@@ -119,3 +123,12 @@ def test_csv_has_every_trial(paper_files: Rendered, paper_report: Report) -> Non
     assert [int(r["index"]) for r in rows] == [t.index for t in paper_report.trials]
     assert rows[0]["var_deg2"] and rows[4]["var_deg2"] == ""  # control: no variance printed
     assert [float(r["alpha_deg"]) for r in rows] == [t.alpha_deg for t in paper_report.trials]
+
+
+def test_missing_pdf_engine_is_one_clear_error(
+    paper_report: Report, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(sys.modules, "weasyprint", None)  # import weasyprint -> ImportError
+    with pytest.raises(ReportError, match=r"apt-get install libpango.*written: .*campaign-1\.html"):
+        write_report(paper_report, tmp_path, ("html", "pdf"))
+    assert (tmp_path / "campaign-1.html").exists() and not (tmp_path / "campaign-1.pdf").exists()

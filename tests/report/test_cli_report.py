@@ -1,0 +1,64 @@
+"""`gyrostand report` and `gyrostand analyze CAMPAIGN_ID --db`: files, JSON, one-line errors."""
+
+import json
+from pathlib import Path
+
+import pytest
+from sqlalchemy import func, select
+from typer.testing import CliRunner
+
+from db.models import AnalysisRun
+from gyrostand.cli import app
+
+from .conftest import Stored, import_paper
+
+runner = CliRunner()
+
+
+@pytest.fixture
+def stored(tmp_path: Path) -> Stored:
+    return import_paper(tmp_path)
+
+
+def test_report_writes_the_asked_formats(stored: Stored, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    args = ["report", str(stored.campaign_id), "--db", stored.url, "--out", str(out)]
+    result = runner.invoke(app, [*args, "--format", "json,csv"])
+    assert result.exit_code == 0, result.output
+    json_path, csv_path = out / "campaign-1.json", out / "campaign-1-trials.csv"
+    assert f"wrote json: {json_path}" in result.stdout and f"wrote csv: {csv_path}" in result.stdout
+    assert not (out / "campaign-1.pdf").exists() and not (out / "campaign-1.html").exists()
+    doc = json.loads(json_path.read_text())
+    assert doc["analysis"]["adequacy"]["f_p"] == pytest.approx(1.409, abs=1e-3)
+    assert doc["identification"]["database"] == stored.url
+    assert len(csv_path.read_text().splitlines()) == 7
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["report", "9"], "no campaign 9 in the database"),
+        (["report", "1", "--format", "html,docx"], "docx not among"),
+        (["report", "1", "--profile", "nope"], "no compliance profile named 'nope'"),
+        (["analyze", "9"], "no campaign 9"),
+        (["analyze", "1", "--csv", "x.csv"], "not both"),
+    ],
+)
+def test_one_line_errors(stored: Stored, args: list[str], message: str) -> None:
+    result = runner.invoke(app, [*args, "--db", stored.url])
+    assert result.exit_code == 2
+    assert message in result.stderr and "Traceback" not in result.output
+    missing = runner.invoke(app, ["report", "1", "--db", str(Path(stored.url).with_name("x.db"))])
+    assert missing.exit_code == 2 and "no database at" in missing.stderr
+
+
+def test_analyze_a_stored_campaign_records_one_run(stored: Stored) -> None:
+    for _ in range(2):
+        result = runner.invoke(app, ["analyze", "1", "--db", stored.url, "--json"])
+        assert result.exit_code == 0, result.output
+        data = json.loads(result.stdout)
+        assert data["cochran"]["g_ex"] == pytest.approx(0.4936, abs=1e-4)
+    text = runner.invoke(app, ["analyze", "1", "--db", stored.url])
+    assert "COCHRAN" in text.stdout and "FORECAST" in text.stdout
+    with stored.sessions() as session:
+        assert session.scalar(select(func.count(AnalysisRun.id))) == 1
