@@ -423,6 +423,13 @@ def _records(
             "value as a bar; dashed lines and triangles: where and at what heading each series "
             "settled."
         )
+        missing = [str(i) for i, trace in traces.items() if trace is None]
+        if missing:
+            note += (
+                f" Trials {', '.join(missing)} have no heading frames in the campaign's first raw "
+                "log (acquired after a resume, which writes its own log; see the events): their "
+                "plots show the stored observations only."
+            )
     elif has_observations:
         reason = {
             "no raw log": "The campaign has no raw CAN log",
