@@ -272,7 +272,10 @@ class _Bound:
 
 
 class Codec:
-    """Encode and decode gyrostand frames with cantools according to a DBC and a signal map."""
+    """Encode and decode gyrostand frames with cantools according to a DBC and a signal map.
+
+    Decoding keeps the latest parts of a stand status (they may span messages), so give each
+    receiving thread its own Codec."""
 
     def __init__(self, dbc_path: Path = DBC_PATH, signal_map: SignalMap | None = None) -> None:
         try:
