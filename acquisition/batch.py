@@ -187,12 +187,21 @@ class BatchDecoder:
             for frame_id, names in self._status_fields.items()
         }
         self._latest: dict[str, float] = {}
+        # compass status: only a faulty one matters downstream, so healthy ones stop here
+        rotor, faults = smap.compass_rotor, smap.compass_faults
+        compass_msg = db.get_message_by_name(rotor.message)
+        self.compass_id = compass_msg.frame_id
+        self._compass_keys = (rotor.signal, faults.signal)
+        self._compass = VectorDecoder(compass_msg, list(self._compass_keys))
 
     def decode(self, raw: RawFrames) -> FrameBatch:
         ids, ok = raw.arbitration_id, ~(raw.is_error | raw.is_remote)
         slow = np.ones(len(raw), dtype=bool)  # rows left for the codec, one by one
         headings = self._headings(raw, ids == self.heading_id, ok, slow)
         statuses = self._statuses(raw, ok, slow)
+        rows, values = self._fast_rows(raw, ids == self.compass_id, ok, self._compass)
+        rotor, faults = (values[k] for k in self._compass_keys)
+        slow[rows[(rotor == 1) & (faults == 0)]] = False  # faulty ones: the codec's frame
         others: list[tuple[int, Frame]] = []
         for row in np.flatnonzero(slow).tolist():
             frame = self.codec.decode(raw.message(row))

@@ -221,6 +221,8 @@ class Engine:
         self._values: list[float] = []
         self._pending: list[Command] = []
         self._sent = False  # the pending command has been seen in the stream
+        self._bad_key: tuple[object, ...] | None = None
+        self._bad = np.zeros(0, dtype=np.int64)
         self._then = Phase.DONE
         self._phase_start_ms = 0
         self._window: _Window | None = None
@@ -452,6 +454,21 @@ class Engine:
         if self.phase in (Phase.STILL, Phase.TRACKING) and self._tracking_problem(s, i) is None:
             self._enter(Phase.SETTLE)
 
+    def _tracking_bad(self, s: Statuses) -> np.ndarray:
+        """`_tracking_problem(...) is not None` for every status at once."""
+        t = self._trial
+        assert t is not None
+        if self._j == 1 or self.phase is Phase.STILL:
+            return s.rocking.copy()
+        tol = self.plan.tracking
+        direction = np.abs((s.direction_deg - t.direction_deg + 180.0) % 360.0 - 180.0)
+        return (
+            ~s.rocking
+            | (np.abs(s.amplitude_cm - t.amplitude_cm) > tol.amplitude_rel * t.amplitude_cm)
+            | (np.abs(s.period_s - t.period_s) > tol.period_rel * t.period_s)
+            | (direction > tol.direction_deg)
+        )
+
     def _tracking_problem(self, s: Statuses, i: int) -> str | None:
         """Why status i does not match what the current series needs (None when it does)."""
         t = self._trial
@@ -494,11 +511,13 @@ class Engine:
         """Position and reason of the first status or frame that ends this series."""
         best: tuple[int, str | None, str] = (self._end, None, "")
         s = self._s
-        for i in range(self._si, len(s)):
-            problem = self._tracking_problem(s, i)
-            if problem is not None:
-                best = (int(s.pos[i]), f"mis-tracking: {problem}", "mis-tracking")
-                break
+        key = (id(s), self._tidx, self._j, self.phase is Phase.STILL)
+        if self._bad_key != key:  # once per batch and series, not per window
+            self._bad_key, self._bad = key, np.flatnonzero(self._tracking_bad(s))
+        bad = self._bad[np.searchsorted(self._bad, self._si) :]
+        if len(bad):
+            i = int(bad[0])
+            best = (int(s.pos[i]), f"mis-tracking: {self._tracking_problem(s, i)}", "mis-tracking")
         errors = self._series_errors
         for pos, frame in self._o[self._oi :]:
             if pos >= best[0]:
@@ -549,19 +568,12 @@ class Engine:
 
     def _consume(self, seg: Headings) -> tuple[int, bool, bool]:
         """Accumulate heading frames into the current block/window up to the first one that
-        closes it. Returns (frames consumed, window closed, bus silence at the next frame)."""
+        closes it. Returns (frames consumed, window closed, bus silence at the next frame).
+        Work is bounded by the window, not by the rest of the batch."""
         n = len(seg)
         if n == 0:
             return 0, False, False
         t = seg.t_ms
-        prev_t = t[0] if self._last_t is None else self._last_t
-        gaps = np.diff(t, prepend=prev_t)
-        silent = np.flatnonzero(gaps > self._silence_ms)
-        limit = int(silent[0]) if len(silent) else n
-        if self._ref is None:
-            valid_idx = np.flatnonzero(seg.valid[:limit])
-            if len(valid_idx):
-                self._ref = float(seg.heading_deg[valid_idx[0]])
         if self._window is None:
             start = int(t[0])
             if self.phase is Phase.SETTLE:
@@ -570,19 +582,29 @@ class Engine:
                 self.sink.series_settling(self._trial.index, self._j, start)
             self._window = _Window(start, start + self._window_ms())
         w = self._window
-        close = np.flatnonzero(t[:limit] >= w.end_ms)
-        end = int(close[0]) if len(close) else limit
+        guess = int(np.searchsorted(t, w.end_ms))  # exact when the stand clock only advances
+        early = np.flatnonzero(t[:guess] >= w.end_ms)
+        close = int(early[0]) if len(early) else guess
+        span = min(close + 1, n)
+        prev_t = t[0] if self._last_t is None else self._last_t
+        silent = np.flatnonzero(np.diff(t[:span], prepend=prev_t) > self._silence_ms)
+        limit = int(silent[0]) if len(silent) else n
+        end = min(close, limit)
+        if self._ref is None:
+            valid_idx = np.flatnonzero(seg.valid[:end])
+            if len(valid_idx):
+                self._ref = float(seg.heading_deg[valid_idx[0]])
         if end:
             prev_c = seg.counter[0] - 1 if self._last_counter is None else self._last_counter
             lost = (np.diff(seg.counter[:end], prepend=prev_c) - 1) % 16
             inside = t[:end] >= w.start_ms
             valid = seg.valid[:end] & inside
-            assert self._ref is not None
-            dev = np.rint(_wrap180(seg.heading_deg[:end][valid] - self._ref) * NANO)
-            w.add(dev.astype(np.int64), int(lost[inside].sum()), int((inside & ~valid).sum()))
+            if self._ref is not None:
+                dev = np.rint(_wrap180(seg.heading_deg[:end][valid] - self._ref) * NANO)
+                w.add(dev.astype(np.int64), int(lost[inside].sum()), int((inside & ~valid).sum()))
             self._last_t, self._last_counter = int(t[end - 1]), int(seg.counter[end - 1])
             self.now_ms = max(self.now_ms, self._last_t)
-        return end, end < limit, end == limit < n
+        return end, close < limit, limit <= close and limit < n
 
     def _close_window(self) -> None:
         w = self._window

@@ -233,12 +233,17 @@ def replay(plan: Plan, sessions: sessionmaker[Session], log: Path) -> RunResult:
     store.set_raw_log(str(log.resolve()), sha)
     engine = Engine(plan, store, _NoCommands())
     decoder = BatchDecoder(codec)
-    for raw in itertools.chain([first] if first is not None else [], batches):
-        engine.feed(decoder.decode(raw))
-        if engine.phase is Phase.DONE:
-            break
-    if engine.phase is not Phase.DONE:
-        engine.interrupt("the log ends before the campaign does")
+    try:
+        with store.deferred():
+            for raw in itertools.chain([first] if first is not None else [], batches):
+                engine.feed(decoder.decode(raw))
+                if engine.phase is Phase.DONE:
+                    break
+            if engine.phase is not Phase.DONE:
+                engine.interrupt("the log ends before the campaign does")
+    except BaseException:
+        store.set_status("failed")
+        raise
     outcome = engine.outcome
     store.set_status(outcome)
     return result(store, outcome, log, sha)

@@ -3,6 +3,8 @@ durable the moment it completes and a killed process loses at most the one in pr
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
 
@@ -28,6 +30,7 @@ class CampaignStore:
     def __init__(self, sessions: sessionmaker[Session], campaign_id: int) -> None:
         self.sessions = sessions
         self.campaign_id = campaign_id
+        self._session: Session | None = None
         with sessions() as session:
             rows = session.execute(
                 select(Trial.index, Trial.id).where(Trial.campaign_id == campaign_id)
@@ -85,6 +88,26 @@ class CampaignStore:
             campaign_id = campaign.id
         return cls(sessions, campaign_id)
 
+    @contextmanager
+    def _tx(self) -> Iterator[Session]:
+        """A transaction per write (durable at once), unless inside `deferred()`."""
+        if self._session is not None:
+            yield self._session
+            return
+        with self.sessions.begin() as session:
+            yield session
+
+    @contextmanager
+    def deferred(self) -> Iterator[None]:
+        """Everything written inside goes in one transaction (replay: all or nothing, and no
+        commit per observation when durability comes from the log itself)."""
+        with self.sessions.begin() as session:
+            self._session = session
+            try:
+                yield
+            finally:
+                self._session = None
+
     # ------------------------------------------------------------------------ campaign level
     def progress(self) -> dict[int, TrialState]:
         """What is stored per trial, for the engine to resume after. A series holding N
@@ -124,7 +147,7 @@ class CampaignStore:
             return state
 
     def set_status(self, status: str) -> None:
-        with self.sessions.begin() as session:
+        with self._tx() as session:
             campaign = session.get_one(Campaign, self.campaign_id)
             campaign.status = status
             if status in ("completed", "failed", "stopped", "paused"):
@@ -138,7 +161,7 @@ class CampaignStore:
             return campaign.raw_log_path, campaign.raw_log_sha256
 
     def set_raw_log(self, path: str, sha256: str | None) -> None:
-        with self.sessions.begin() as session:
+        with self._tx() as session:
             campaign = session.get_one(Campaign, self.campaign_id)
             campaign.raw_log_path, campaign.raw_log_sha256 = path, sha256
 
@@ -154,22 +177,22 @@ class CampaignStore:
         return series
 
     def trial_started(self, trial: int) -> None:
-        with self.sessions.begin() as session:
+        with self._tx() as session:
             session.get_one(Trial, self._trial_ids[trial]).status = "running"
 
     def series_settling(self, trial: int, j: int, t_ms: int) -> None:
-        with self.sessions.begin() as session:
+        with self._tx() as session:
             series = self._series(session, trial, j)
             series.status, series.settle_started_ms, series.settle_done_ms = "settling", t_ms, None
 
     def series_settled(self, trial: int, j: int, t_ms: int, estimate_deg: float) -> None:
-        with self.sessions.begin() as session:
+        with self._tx() as session:
             series = self._series(session, trial, j)
             series.status, series.settle_done_ms = "observing", t_ms
             series.settle_estimate_deg = estimate_deg
 
     def observation(self, obs: ObservationResult) -> None:
-        with self.sessions.begin() as session:
+        with self._tx() as session:
             series = self._series(session, obs.trial, obs.j)
             session.add(
                 Observation(
@@ -185,11 +208,11 @@ class CampaignStore:
             )
 
     def series_completed(self, trial: int, j: int) -> None:
-        with self.sessions.begin() as session:
+        with self._tx() as session:
             self._series(session, trial, j).status = "completed"
 
     def trial_completed(self, trial: int, measured: Measured | None) -> None:
-        with self.sessions.begin() as session:
+        with self._tx() as session:
             row = session.get_one(Trial, self._trial_ids[trial])
             row.status = "completed"
             if measured is not None:
@@ -198,7 +221,7 @@ class CampaignStore:
                 row.meas_period_s = measured.period_s
 
     def trial_failed(self, trial: int, j: int | None, reason: str) -> None:
-        with self.sessions.begin() as session:
+        with self._tx() as session:
             row = session.get_one(Trial, self._trial_ids[trial])
             row.status, row.failure_reason = "failed", reason
             if j is not None:
@@ -213,7 +236,7 @@ class CampaignStore:
         j: int | None = None,
         t_ms: int | None = None,
     ) -> None:
-        with self.sessions.begin() as session:
+        with self._tx() as session:
             session.add(
                 Event(
                     campaign_id=self.campaign_id,
