@@ -43,12 +43,6 @@ def cli(*args: str) -> tuple[int, str]:
     return result.exit_code, result.stderr
 
 
-def gyrostand(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "gyrostand", *args], cwd=cwd, capture_output=True, text=True
-    )
-
-
 def start(*args: str, cwd: Path) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "gyrostand", *args],
@@ -133,9 +127,9 @@ def wait_for_observations(db: Path, n: int, proc: subprocess.Popen, limit_s: flo
 
 def test_sigterm_stops_the_stand_and_resume_finishes(tmp_path: Path) -> None:
     db = tmp_path / "db.sqlite"
-    plan = write_plan(tmp_path, speedup=100.0)
+    plan = write_plan(tmp_path, speedup=200.0)
     proc = start("campaign", "run", str(plan), "--quiet", cwd=tmp_path)
-    wait_for_observations(db, 4, proc)
+    wait_for_observations(db, 2, proc)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 1, err
@@ -148,12 +142,10 @@ def test_sigterm_stops_the_stand_and_resume_finishes(tmp_path: Path) -> None:
         messages = [r[0] for r in conn.execute(text("SELECT message FROM event ORDER BY id"))]
     engine.dispose()
     assert kinds[-3:-1] == ["interrupted", "command"] and messages[-2] == "stop"
-    out = gyrostand("campaign", "status", "1", "--db", str(db), cwd=tmp_path)
-    assert out.returncode == 0 and "stopped" in out.stdout and "next: trial" in out.stdout
-    out = gyrostand(
-        "campaign", "resume", "1", "--db", str(db), "--quiet", "--speedup", "400", cwd=tmp_path
-    )
-    assert out.returncode == 0, out.stderr
+    status = CliRunner().invoke(app, ["campaign", "status", "1", "--db", str(db)])
+    assert status.exit_code == 0 and "stopped" in status.stdout and "next: trial" in status.stdout
+    code, err = cli("campaign", "resume", "1", "--db", str(db), "--quiet", "--speedup", "1000")
+    assert code == 0, err
     after = rows(db)
     assert set(before) <= set(after) and len(after) == 2 * 2 * 3
     assert statuses(db)[0] == "completed"
@@ -164,8 +156,8 @@ def test_sigkill_at_random_moments_loses_nothing(tmp_path: Path) -> None:
     reference_dir.mkdir()
     killed_dir.mkdir()
     ref_plan = write_plan(reference_dir)
-    out = gyrostand("campaign", "run", str(ref_plan), "--quiet", cwd=reference_dir)
-    assert out.returncode == 0, out.stderr
+    code, err = cli("campaign", "run", str(ref_plan), "--quiet")
+    assert code == 0, err
     reference = rows(reference_dir / "db.sqlite")
 
     db = killed_dir / "db.sqlite"
@@ -188,8 +180,8 @@ def test_sigkill_at_random_moments_loses_nothing(tmp_path: Path) -> None:
         committed = now
         args = ["campaign", "resume", "1", "--db", str(db), "--quiet"]
     assert kills >= 2
-    out = gyrostand("campaign", "resume", "1", "--db", str(db), "--quiet", cwd=killed_dir)
-    assert out.returncode == 0, out.stderr
+    code, err = cli("campaign", "resume", "1", "--db", str(db), "--quiet")
+    assert code == 0, err
     final = rows(db)
     assert committed <= set(final)
     # same content as the uninterrupted run: the same observations (no gap, no duplicate) ...
