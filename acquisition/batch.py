@@ -32,6 +32,7 @@ class RawFrames:
     data: np.ndarray  # (n, 8) uint8, zero-padded
     is_error: np.ndarray  # bool
     is_remote: np.ndarray  # bool
+    is_extended: np.ndarray  # bool, 29-bit identifier
     timestamp: np.ndarray  # float64, receive time (informative only: windows use stand time)
 
     def __len__(self) -> int:
@@ -52,6 +53,7 @@ class RawFrames:
             data=np.frombuffer(payload, np.uint8).reshape(n, 8),
             is_error=np.fromiter((m.is_error_frame for m in messages), bool, n),
             is_remote=np.fromiter((m.is_remote_frame for m in messages), bool, n),
+            is_extended=np.fromiter((m.is_extended_id for m in messages), bool, n),
             timestamp=np.fromiter((m.timestamp for m in messages), np.float64, n),
         )
 
@@ -60,7 +62,7 @@ class RawFrames:
         return can.Message(
             timestamp=float(self.timestamp[row]),
             arbitration_id=int(self.arbitration_id[row]),
-            is_extended_id=bool(self.arbitration_id[row] > 0x7FF),
+            is_extended_id=bool(self.is_extended[row]),
             is_error_frame=bool(self.is_error[row]),
             is_remote_frame=bool(self.is_remote[row]),
             dlc=int(self.dlc[row]),

@@ -17,6 +17,8 @@ from typing import Any
 
 import can
 
+from acquisition.batch import RawFrames
+from acquisition.logfile import BatchBLFWriter, raw_log_writer
 from acquisition.plan import BusPlan, Plan, PlanError
 from stand.controller import StandController
 from stand.protocol import DBC_PATH, Codec, ProtocolError, SignalMap
@@ -78,7 +80,7 @@ class Recorder(can.Listener):
         self.maxsize = maxsize
         self._frames: deque[can.Message] = deque()
         self._ready = threading.Event()
-        self.writer = can.Logger(log_path) if log_path is not None else None
+        self.writer = raw_log_writer(log_path) if log_path is not None else None
         self.dropped = 0
         self.errors: list[Exception] = []  # from the bus, through the notifier
         self.log_error: Exception | None = None  # the raw log stopped being written
@@ -96,24 +98,25 @@ class Recorder(can.Listener):
         self.errors.append(exc)
 
     def drain(self, limit: int, timeout_s: float) -> list[can.Message]:
-        """Up to `limit` frames in arrival order (waits up to `timeout_s` for the first one);
-        they are written to the raw log before being handed over."""
+        """Up to `limit` frames in arrival order (waits up to `timeout_s` for the first one).
+        The caller logs them (`log`) before using them."""
         if not self._frames:
             self._ready.clear()
             if not self._frames:
                 self._ready.wait(timeout_s)
         pop = self._frames.popleft
-        out = [pop() for _ in range(min(len(self._frames), limit))]
-        self._log(out)
-        return out
+        return [pop() for _ in range(min(len(self._frames), limit))]
 
-    def _log(self, msgs: list[can.Message]) -> None:
+    def log(self, raw: RawFrames, msgs: list[can.Message]) -> None:
+        """Write drained frames to the raw log (BLF: the whole batch at once)."""
         if self.writer is None or self._stopped or self.log_error is not None:
             return
-        write = self.writer.on_message_received
         try:
-            for msg in msgs:
-                write(msg)
+            if isinstance(self.writer, BatchBLFWriter):
+                self.writer.write_frames(raw)
+            else:
+                for msg in msgs:
+                    self.writer.on_message_received(msg)
         except Exception as exc:  # the frames still reach the campaign
             self.log_error = exc
 
@@ -121,7 +124,8 @@ class Recorder(can.Listener):
         """Log what is still queued (frames of the campaign too), then close the log."""
         if self._stopped:
             return
-        self._log(list(self._frames))
+        rest = list(self._frames)
+        self.log(RawFrames.from_messages(0, rest), rest)
         if self.writer is not None:
             self.writer.stop()
         self._stopped = True

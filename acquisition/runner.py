@@ -160,6 +160,7 @@ def run_live(
                 if msgs:
                     last_frame = time.monotonic()
                     raw = RawFrames.from_messages(position, msgs)
+                    live.recorder.log(raw, msgs)
                     position += len(msgs)
                     engine.feed(decoder.decode(raw))
                 elif time.monotonic() - last_frame > silence_wall_s:

@@ -57,10 +57,12 @@ def ours(frames: list[can.Message], tmp: Path, raw_log: bool) -> tuple[float, in
         msgs = recorder.drain(50_000, 0.5)
         if not msgs:
             break
-        engine.feed(decoder.decode(RawFrames.from_messages(position, msgs)))
+        raw = RawFrames.from_messages(position, msgs)
+        recorder.log(raw, msgs)
+        engine.feed(decoder.decode(raw))
         position += len(msgs)
+    notifier.stop()  # and the raw log (its last container written)
     seconds = time.perf_counter() - t0
-    notifier.stop()
     rx.shutdown()
     tx.shutdown()
     return seconds, position, len(frames) - position + recorder.dropped

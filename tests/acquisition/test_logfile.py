@@ -89,3 +89,44 @@ def test_asc_goes_through_python_can(tmp_path: Path) -> None:
         for m in messages:
             writer.on_message_received(m)
     assert flat(read_raw_frames(path, chunk=64)) == expected(messages)
+
+
+def test_batch_blf_writer_equals_python_can_writer(tmp_path: Path) -> None:
+    from acquisition.batch import RawFrames
+    from acquisition.logfile import BatchBLFWriter
+
+    messages = sample_messages(5000)
+    for i, m in enumerate(messages):
+        m.timestamp = 1_700_000_000.0 + i * 0.001
+    ours, theirs = tmp_path / "ours.blf", tmp_path / "theirs.blf"
+    with BatchBLFWriter(ours) as writer:
+        for start in range(0, len(messages), 777):
+            writer.write_frames(RawFrames.from_messages(start, messages[start : start + 777]))
+    with can.BLFWriter(theirs) as writer:
+        for m in messages:
+            writer.on_message_received(m)
+    a, b = list(can.BLFReader(ours)), list(can.BLFReader(theirs))
+    assert [
+        (
+            m.arbitration_id,
+            m.is_extended_id,
+            m.is_error_frame,
+            m.is_remote_frame,
+            m.dlc,
+            bytes(m.data),
+            m.timestamp,
+        )
+        for m in a
+    ] == [
+        (
+            m.arbitration_id,
+            m.is_extended_id,
+            m.is_error_frame,
+            m.is_remote_frame,
+            m.dlc,
+            bytes(m.data),
+            m.timestamp,
+        )
+        for m in b
+    ]
+    assert ours.read_bytes()[144:] == theirs.read_bytes()[144:]  # same containers, byte for byte
