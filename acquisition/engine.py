@@ -185,6 +185,16 @@ def _compass_fault(frame: CompassStatusFrame) -> str:
     return ""
 
 
+def _drift(means: list[float]) -> float:
+    """Least-squares trend of equally spaced window means, times the span they cover: how far
+    a transient not yet over still moves the reading during the hold time."""
+    if len(means) < 3:
+        return 0.0
+    x = np.arange(len(means), dtype=float)
+    slope = np.polyfit(x, np.asarray(means), 1)[0]
+    return float(slope * len(means))
+
+
 def _is_bus_off(frame: InvalidFrame) -> bool:
     return frame.reason == "error frame" and bool(frame.arbitration_id & CAN_ERR_BUSOFF)
 
@@ -624,7 +634,7 @@ class Engine:
         if len(recent) == need and not any(math.isnan(m) for m in recent):
             centre = sum(recent) / need
             spread = max(abs(m - centre) for m in recent) / NANO
-            if spread <= settle.band_deg:
+            if spread <= settle.band_deg and abs(_drift(recent)) / NANO <= settle.drift_deg:
                 assert self._ref is not None
                 estimate = self._ref + centre / NANO
                 self._settle_durations.append(w.end_ms - self._settle_start)

@@ -6,6 +6,7 @@ Every problem is reported with its field path (``trials[3].period_s: must be > 0
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import tomllib
@@ -70,9 +71,12 @@ class ObservationPlan:
 
 @dataclass(frozen=True)
 class SettlePlan:
-    """Settled when the window means over the last `hold_s` stand seconds span <= `band_deg`."""
+    """Settled when the window means over the last `hold_s` stand seconds all lie within
+    +-`band_deg` of their mean and their least-squares trend moves the reading by at most
+    `drift_deg` over that time (a damped transient that is not over yet, seed 003)."""
 
     band_deg: float
+    drift_deg: float
     hold_s: float
     max_wait_s: float
 
@@ -322,10 +326,13 @@ def parse_plan(text: str) -> Plan:
     st = _Fields(problems, top.table_of("settle"), "settle")
     settle = SettlePlan(
         band_deg=st.number("band_deg", 0.02, gt=0),
+        drift_deg=st.number("drift_deg", None, gt=0),
         hold_s=st.number("hold_s", 600.0, ge=0),
         max_wait_s=st.number("max_wait_s", 4 * 3600.0, gt=0),
     )
     st.done()
+    if math.isnan(settle.drift_deg):  # not given: no trend condition
+        settle = dataclasses.replace(settle, drift_deg=math.inf)
     if settle.max_wait_s < settle.hold_s:
         problems.append("settle.max_wait_s: must be >= settle.hold_s")
 

@@ -39,7 +39,8 @@ def paper_plan_text(tmp: Path, *, speedup: float = 2000.0, seed: int = 3) -> str
         'raw_log_dir = "runs/raw"': f'raw_log_dir = "{tmp / "raw"}"',
         "still_window_s = 60.0": "still_window_s = 30.0",
         "rocking_window_periods = 8": "rocking_window_periods = 4",
-        "hold_s = 1200.0": "hold_s = 120.0",
+        "hold_s = 1800.0": "hold_s = 120.0",
+        "drift_deg = 0.006": "drift_deg = 0.05",
         "speedup = 1000.0": f"speedup = {speedup}",
         "seed = 1": f"seed = {seed}",
     }
