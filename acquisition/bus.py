@@ -178,7 +178,7 @@ class LiveBus:
             self.recorder = Recorder(plan.bus.queue_size, raw_log)
             self.controller = StandController(
                 RecordedSend(self.bus, self.recorder),  # type: ignore[arg-type]
-                codec,
+                codec_for(plan),  # its own: a Codec keeps decoding state per thread
                 ack_timeout_s=plan.timeouts.ack_s,
             )
             smap = codec.signal_map

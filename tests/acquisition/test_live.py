@@ -171,3 +171,20 @@ def test_settled_shift_matches_model_1_1(campaign) -> None:
         under = np.mean([r[3] for r in rows if r[0] == t.index and r[1] == 2])
         expected = truth.settled_shift_deg(t.direction_deg, t.amplitude_cm, t.period_s)
         assert under - before == pytest.approx(expected, abs=0.02), t
+
+
+def test_asc_raw_log_replays_to_the_same_campaign(tmp_path: Path) -> None:
+    from .harness import plan_text
+
+    text = plan_text(
+        database=str(tmp_path / "asc.sqlite"), raw_dir=str(tmp_path / "raw"), speedup=1000.0
+    )
+    text = text.replace('on_trial_failure = "continue"', 'raw_log_format = "asc"')
+    plan = parse_plan(text + FAST_SIM)
+    sessions = open_database(sqlite_url(tmp_path / "asc.sqlite"))
+    live = run_live(plan, CampaignStore.create(sessions, plan), quiet=True)
+    assert live.outcome == "completed" and live.raw_log is not None
+    assert live.raw_log.suffix == ".asc"
+    replayed = replay(plan, sessions, live.raw_log)
+    assert observations(sessions, replayed.campaign_id) == observations(sessions, live.campaign_id)
+    assert len(observations(sessions, live.campaign_id)) == 2 * 2 * 3
