@@ -14,7 +14,7 @@ from rich.table import Table
 from acquisition.plan import Plan, PlanError, load_plan
 from acquisition.runner import RunResult, prepare, replay, resume_store, run_live
 from acquisition.store import CampaignStore
-from db.queries import CampaignNotFound, campaign_summary
+from db.queries import CampaignNotFound, campaign_summary, first_incomplete_series
 from db.session import DatabaseVersionError, database_url, open_database
 from gyrostand.cmd_data import DEFAULT_DB
 from gyrostand.errors import EXIT_FAILED, fail
@@ -148,6 +148,12 @@ def register(app: typer.Typer) -> None:
         checked = _with_overrides(
             stored, interface=interface, channel=channel, db=db, speedup=speedup, seed=seed
         )
+        with sessions() as session:
+            left = first_incomplete_series(session, campaign_id)
+        if left is None:
+            store.set_status("completed")
+            _out.print(f"campaign {campaign_id}: nothing left to acquire")
+            return
         _report(_run(checked, store, quiet), db)
 
     @campaign_app.command("status")

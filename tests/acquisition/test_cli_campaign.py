@@ -149,6 +149,9 @@ def test_sigterm_stops_the_stand_and_resume_finishes(tmp_path: Path) -> None:
     after = rows(db)
     assert set(before) <= set(after) and len(after) == 2 * 2 * 3
     assert statuses(db)[0] == "completed"
+    again = CliRunner().invoke(app, ["campaign", "resume", "1", "--db", str(db)])
+    assert again.exit_code == 0 and "nothing left to acquire" in again.stdout
+    assert rows(db) == after
 
 
 def test_sigkill_at_random_moments_loses_nothing(tmp_path: Path) -> None:

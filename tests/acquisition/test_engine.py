@@ -191,3 +191,40 @@ def test_compass_fault_bits_fail_the_trial() -> None:
     assert failures[0][2] == "compass reports fault bits 0x04 (angle sensor)"
     events = [a for a in sink.of("event") if a[0] == "compass fault"]
     assert len(events) == 2 and events[0][1] == "error"
+
+
+def test_bus_off_error_frame_fails_the_trial() -> None:
+    import can
+
+    class BusOff(Lockstep):
+        def run(self, engine: Engine, max_stand_s: float = 200_000.0) -> None:
+            advance = self.stand.advance_to
+
+            def with_bus_off(t: float) -> list:
+                frames = advance(t)
+                if 200.0 < t <= 205.0:  # the controller reports bus-off (SocketCAN class bit)
+                    frames.append(can.Message(is_error_frame=True, arbitration_id=0x40))
+                return frames
+
+            self.stand.advance_to = with_bus_off  # type: ignore[method-assign]
+            super().run(engine, max_stand_s)
+
+    sink, sim = Recorder(), BusOff(quick_config())
+    engine = Engine(small_plan(), sink, sim)
+    sim.run(engine)
+    (trial, _, reason), *_ = failure_of(sink)
+    assert trial == 1 and reason == "bus-off reported by the CAN controller"
+    assert [a[0] for a in sink.of("event") if a[1] == "error"] == ["bus-off"]
+
+
+def test_recorder_counts_what_a_full_queue_drops(tmp_path) -> None:
+    import can
+
+    from acquisition.bus import Recorder as FrameRecorder
+
+    recorder = FrameRecorder(3, None)
+    for i in range(5):
+        recorder.on_message_received(can.Message(arbitration_id=i))
+    assert recorder.dropped == 2
+    assert [m.arbitration_id for m in recorder.drain(10, 0.0)] == [0, 1, 2]
+    assert recorder.drain(10, 0.01) == []
