@@ -427,15 +427,43 @@ class Engine:
 
     def _on_other(self, frame: Frame) -> None:
         if isinstance(frame, CommandFrame):
-            if self.phase is Phase.COMMANDS and frame.command == self._pending[0].kind:
+            if self.phase is Phase.COMMANDS and not self._sent and self._awaits(frame):
                 self._sent = True
                 self._phase_start_ms = self.now_ms
+            else:
+                self._foreign_command(frame)
         elif isinstance(frame, AckFrame):
             self._on_ack(frame)
         elif isinstance(frame, CompassStatusFrame) and _compass_fault(frame):
             self.fail(_compass_fault(frame), kind="compass fault")
         elif isinstance(frame, InvalidFrame) and _is_bus_off(frame):
             self.fail("bus-off reported by the CAN controller", kind="bus-off")
+
+    def _awaits(self, frame: CommandFrame) -> bool:
+        """Is this the command the engine has just sent (a set with the same K, A, tau)?"""
+        command = self._pending[0]
+        if frame.command != command.kind:
+            return False
+        if command.kind != "set":
+            return True
+        return (
+            abs(frame.direction_deg - command.direction_deg) < 0.01
+            and abs(frame.amplitude_cm - command.amplitude_cm) < 0.01
+            and abs(frame.period_s - command.period_s) < 0.002
+        )
+
+    def _foreign_command(self, frame: CommandFrame) -> None:
+        """A stand command this campaign did not send now: another controller on the bus, or
+        (replay) a log recorded with another plan."""
+        self.sink.event(
+            "foreign command",
+            "warning",
+            f"stand command '{frame.command}' on the bus not sent by this campaign at this point"
+            " (another controller, or a log recorded with another plan)",
+            self._tidx,
+            None,
+            self.now_ms,
+        )
 
     def _on_ack(self, ack: AckFrame) -> None:
         if self.phase is not Phase.COMMANDS or not self._sent:
@@ -564,6 +592,8 @@ class Engine:
         while self._oi < len(self._o) and self._o[self._oi][0] < limit:
             frame = self._o[self._oi][1]
             self._oi += 1
+            if isinstance(frame, CommandFrame):
+                self._foreign_command(frame)
             if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
                 self._series_errors += 1
             if isinstance(frame, InvalidFrame) and self._window is not None:

@@ -19,7 +19,7 @@ import uuid
 from pathlib import Path
 
 import can
-from common import campaign_frames, paper_plan
+from acquisition_stream import campaign_frames, paper_plan
 
 from acquisition.batch import BatchDecoder, RawFrames
 from acquisition.bus import Recorder

@@ -16,7 +16,7 @@ import threading
 import time
 from pathlib import Path
 
-from common import campaign_frames, paper_plan, rss_mib, write_log
+from acquisition_stream import campaign_frames, paper_plan, rss_mib, write_log
 
 from acquisition.batch import BatchDecoder
 from acquisition.logfile import read_raw_frames
@@ -29,11 +29,13 @@ FRAMES_PER_PAPER_CAMPAIGN = 643_000  # the six trials of examples/paper.toml at 
 
 def cached_log(frames: int) -> tuple[Path, int]:
     repeats = max(1, math.ceil(frames / FRAMES_PER_PAPER_CAMPAIGN))
-    path = Path(tempfile.gettempdir()) / f"gyrostand-bench-replay-x{repeats}.blf"
+    plan = paper_plan(":memory:", repeats)  # the log is only valid for this very plan
+    name = f"gyrostand-bench-replay-x{repeats}-{plan.sha256[:12]}.blf"
+    path = Path(tempfile.gettempdir()) / name
     if not path.exists():
         t0 = time.perf_counter()
         partial = path.with_suffix(".part.blf")
-        n = write_log(partial, campaign_frames(paper_plan(":memory:", repeats)))
+        n = write_log(partial, campaign_frames(plan))
         partial.rename(path)
         print(f"made {path} ({n:,} frames) in {time.perf_counter() - t0:.0f} s")
     return path, repeats
@@ -93,8 +95,8 @@ def main() -> None:
         f"({seconds:.1f} s; target >= 1,000,000) {'OK' if rate >= 1e6 else 'BELOW TARGET'}"
     )
     print(
-        f"campaign {result.outcome}: {result.trials_completed} trials, "
-        f"{result.observations} observations"
+        f"campaign {result.outcome}: {result.trials_completed} trials completed, "
+        f"{result.trials_failed} failed, {result.observations} observations"
     )
     print(
         f"resident memory: {base:.0f} MiB before, peak {rss.peak:.0f} MiB, growth "

@@ -228,3 +228,14 @@ def test_recorder_counts_what_a_full_queue_drops(tmp_path) -> None:
     assert recorder.dropped == 2
     assert [m.arbitration_id for m in recorder.drain(10, 0.0)] == [0, 1, 2]
     assert recorder.drain(10, 0.01) == []
+
+
+def test_replay_with_another_plan_is_flagged() -> None:
+    _, sim, _ = run()
+    sink = Recorder()
+    other = small_plan(trials=[(40.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "control")])
+    engine = Engine(other, sink, NoCommands())
+    decoder = BatchDecoder(Codec())
+    engine.feed(decoder.decode(RawFrames.from_messages(0, sim.stream)))
+    foreign = [a for a in sink.of("event") if a[0] == "foreign command"]
+    assert foreign and foreign[0][1] == "warning"
