@@ -24,7 +24,7 @@ from acquisition.runner import replay
 from db.session import open_database, sqlite_url
 from stand.protocol import Codec
 
-FRAMES_PER_PAPER_CAMPAIGN = 643_000  # the six trials of examples/paper.toml at 10 Hz
+FRAMES_PER_PAPER_CAMPAIGN = 900_000  # the six trials of examples/paper.toml at 10 Hz
 
 
 def cached_log(frames: int) -> tuple[Path, int]:
