@@ -103,6 +103,17 @@ class TimeoutsPlan:
 
 
 @dataclass(frozen=True)
+class AcceptancePlan:
+    """Optional acceptance by excursions (seed 004 eqs 8.79-8.88): the reading must stay within
+    +-`tolerance_deg` of its mean for `duration_s` stand seconds, with probability of at least
+    one excursion at most `max_risk`."""
+
+    tolerance_deg: float
+    duration_s: float
+    max_risk: float
+
+
+@dataclass(frozen=True)
 class BusPlan:
     """Where the frames come from: the in-process simulated stand, or a python-can bus."""
 
@@ -140,6 +151,7 @@ class Plan:
     bus: BusPlan
     dbc_path: str | None
     signals: Mapping[str, Any]
+    acceptance: AcceptancePlan | None = None
 
     @property
     def sha256(self) -> str:
@@ -362,6 +374,7 @@ def parse_plan(text: str) -> Plan:
     dbc_path = p.text("dbc_path", None)
     p.done()
     signals = top.table_of("signals")
+    acceptance = _acceptance(problems, top.table_of("acceptance")) if "acceptance" in doc else None
     top.done()
 
     if problems:
@@ -387,6 +400,7 @@ def parse_plan(text: str) -> Plan:
         bus=bus,
         dbc_path=dbc_path,
         signals=dict(signals),
+        acceptance=acceptance,
     )
 
 
@@ -410,6 +424,17 @@ def _trials(problems: list[str], raw: Any) -> tuple[TrialPlan, ...]:
     if trials and not any(t.role == "fit" for t in trials):
         problems.append("trials: at least one trial must have role 'fit'")
     return tuple(trials)
+
+
+def _acceptance(problems: list[str], raw: Mapping[str, Any]) -> AcceptancePlan:
+    a = _Fields(problems, raw, "acceptance")
+    acceptance = AcceptancePlan(
+        tolerance_deg=a.number("tolerance_deg", _REQUIRED, gt=0),
+        duration_s=a.number("duration_s", _REQUIRED, gt=0),
+        max_risk=a.number("max_risk", _REQUIRED, gt=0, lt=1),
+    )
+    a.done()
+    return acceptance
 
 
 def _bus(problems: list[str], raw: Mapping[str, Any]) -> BusPlan:
