@@ -6,8 +6,15 @@ from typing import Annotated
 
 import typer
 
-from gyrostand import __version__, cmd_analyze, cmd_campaign, cmd_data, cmd_report, cmd_simulate
-from gyrostand.errors import not_implemented
+from gyrostand import (
+    __version__,
+    cmd_analyze,
+    cmd_campaign,
+    cmd_data,
+    cmd_demo,
+    cmd_report,
+    cmd_simulate,
+)
 
 app = typer.Typer(
     name="gyrostand",
@@ -32,11 +39,5 @@ def main(
     """Rolling-stand tests of marine gyrocompasses."""
 
 
-for module in (cmd_simulate, cmd_campaign, cmd_analyze, cmd_report, cmd_data):
+for module in (cmd_simulate, cmd_campaign, cmd_analyze, cmd_report, cmd_data, cmd_demo):
     module.register(app)
-
-
-@app.command()
-def demo() -> None:
-    """Run the whole chain on the embedded defaults."""
-    not_implemented("demo")

@@ -19,7 +19,7 @@ from db.session import DatabaseVersionError, database_url, open_database
 from gyrostand.cmd_data import DEFAULT_DB
 from gyrostand.errors import EXIT_FAILED, fail
 
-_out = Console(highlight=False)
+_out = Console(highlight=False, soft_wrap=True)
 
 
 def _load(plan_path: Path) -> Plan:
@@ -29,7 +29,7 @@ def _load(plan_path: Path) -> Plan:
         fail(f"{plan_path}: invalid plan: " + "; ".join(exc.problems))
 
 
-def _with_overrides(
+def checked_plan(
     plan: Plan,
     *,
     interface: str | None,
@@ -62,7 +62,7 @@ def _with_overrides(
     return plan
 
 
-def _sessions(db: str, *, must_exist: bool):  # type: ignore[no-untyped-def]
+def open_sessions(db: str, *, must_exist: bool):  # type: ignore[no-untyped-def]
     if must_exist and "://" not in db and not Path(db).exists():
         fail(f"no database at {db}")
     try:
@@ -71,7 +71,7 @@ def _sessions(db: str, *, must_exist: bool):  # type: ignore[no-untyped-def]
         fail(str(exc))
 
 
-def _report(result: RunResult, db: str) -> None:
+def print_outcome(result: RunResult, db: str) -> None:
     _out.print(
         f"campaign {result.campaign_id} {result.outcome}: {result.trials_completed} trials "
         f"completed, {result.trials_failed} failed, {result.observations} observations in {db}"
@@ -83,7 +83,7 @@ def _report(result: RunResult, db: str) -> None:
         raise typer.Exit(EXIT_FAILED)
 
 
-def _run(plan: Plan, store: CampaignStore, quiet: bool) -> RunResult:
+def run_campaign(plan: Plan, store: CampaignStore, quiet: bool) -> RunResult:
     try:
         return run_live(plan, store, quiet=quiet)
     except (can.CanError, OSError, ValueError) as exc:
@@ -120,12 +120,12 @@ def register(app: typer.Typer) -> None:
         quiet: Quiet = False,
     ) -> None:
         """Run a campaign plan on the stand (the simulated stand when the plan says so)."""
-        checked = _with_overrides(
+        checked = checked_plan(
             _load(plan), interface=interface, channel=channel, db=db, speedup=speedup, seed=seed
         )
-        sessions = _sessions(checked.database, must_exist=False)
+        sessions = open_sessions(checked.database, must_exist=False)
         store = CampaignStore.create(sessions, checked)
-        _report(_run(checked, store, quiet), checked.database)
+        print_outcome(run_campaign(checked, store, quiet), checked.database)
 
     @campaign_app.command("resume")
     def campaign_resume(
@@ -138,14 +138,14 @@ def register(app: typer.Typer) -> None:
         quiet: Quiet = False,
     ) -> None:
         """Continue a campaign from its first incomplete series (re-settling first)."""
-        sessions = _sessions(db, must_exist=True)
+        sessions = open_sessions(db, must_exist=True)
         try:
             stored, store = resume_store(sessions, campaign_id)
         except LookupError as exc:
             fail(str(exc))
         except PlanError as exc:
             fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
-        checked = _with_overrides(
+        checked = checked_plan(
             stored, interface=interface, channel=channel, db=db, speedup=speedup, seed=seed
         )
         with sessions() as session:
@@ -154,7 +154,7 @@ def register(app: typer.Typer) -> None:
             store.set_status("completed")
             _out.print(f"campaign {campaign_id}: nothing left to acquire")
             return
-        _report(_run(checked, store, quiet), db)
+        print_outcome(run_campaign(checked, store, quiet), db)
 
     @campaign_app.command("status")
     def campaign_status(
@@ -162,7 +162,7 @@ def register(app: typer.Typer) -> None:
         db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
     ) -> None:
         """Show where a campaign stands."""
-        sessions = _sessions(db, must_exist=True)
+        sessions = open_sessions(db, must_exist=True)
         with sessions() as session:
             try:
                 s = campaign_summary(session, campaign_id)
@@ -200,14 +200,14 @@ def register(app: typer.Typer) -> None:
         ] = None,
     ) -> None:
         """Re-derive observations offline from a raw CAN log into a new campaign."""
-        checked = _with_overrides(
+        checked = checked_plan(
             _load(plan), interface=None, channel=None, db=db, speedup=None, seed=None
         )
         if not log.is_file():
             fail(f"no log file at {log}")
-        sessions = _sessions(checked.database, must_exist=False)
+        sessions = open_sessions(checked.database, must_exist=False)
         try:
             result = replay(checked, sessions, log)
         except (ValueError, OSError, can.CanError) as exc:
             fail(f"cannot read {log}: {exc}")
-        _report(result, checked.database)
+        print_outcome(result, checked.database)
