@@ -24,7 +24,7 @@ test: $(STAMP)
 	$(VENV)/bin/pytest
 
 bench: $(STAMP)
-	@for b in bench/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+	@for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 # The `socketcan` tests on a real SocketCAN bus: in a small Linux VM with vcan0 (tools/vcan-vm,
 # docs/socketcan.md). On a machine that has vcan0 itself: .venv/bin/pytest -m socketcan
