@@ -6,6 +6,7 @@ other fact the report shows, from the database and the raw CAN log.
     analyze_stored(session, campaign_id) -> StoredAnalysis
     report_inputs(session, campaign_id, database=...) -> ReportInputs
     campaign_report(session, campaign_id, database=..., profile=..., generated_at=...) -> Report
+    campaign_signal(session, campaign_id) -> SignalSection   (report section 10 alone)
 
 An analysis run is recorded once per distinct result: analysing an unchanged campaign again with
 the same software reuses the run already stored, so the database (and the report's JSON) does not
@@ -29,6 +30,7 @@ from acquisition.batch import BatchDecoder
 from acquisition.bus import codec_for
 from acquisition.logfile import read_raw_frames
 from acquisition.plan import Plan, PlanError, parse_plan
+from acquisition.signal_record import still_series_record
 from acquisition.store import software_version
 from analysis.campaign import CampaignAnalysis, analyze_campaign, json_safe
 from analysis.errors import AnalysisError
@@ -37,17 +39,20 @@ from analysis.report.build import Report, build_report
 from analysis.report.compliance import Profile
 from analysis.report.model import (
     EventRecord,
+    ExcursionCriterion,
     HeadingTrace,
     Identification,
     ObservationRecord,
     PlannedTrial,
     PlanSummary,
+    ReadingRecord,
     ReportInputs,
     SeriesRecord,
     Signatures,
     TrialAcquisition,
     TrialRecord,
 )
+from analysis.report.signal import SignalSection, signal_section
 from analysis.settings import SEED_000_SETTINGS, AnalysisSettings, settings_from_plan
 from analysis.trials import SeriesSummary, TrialInput
 from db.models import AnalysisRun, Campaign, Trial
@@ -445,21 +450,57 @@ def _records(
     return records, note
 
 
+def _plan(campaign: Campaign) -> Plan | None:
+    try:
+        return parse_plan(campaign.plan_toml)
+    except PlanError:  # e.g. the instrument/site metadata stored with an import
+        return None
+
+
+def _reading(
+    plan: Plan | None, log: Path | None, check: str, records: tuple[TrialRecord, ...]
+) -> tuple[ReadingRecord | None, str, ExcursionCriterion | None]:
+    """The stationary record of section 10 (from the raw log when it verifies), a note on it,
+    and the plan's acceptance by excursions."""
+    acceptance = None
+    if plan is not None and plan.acceptance is not None:
+        a = plan.acceptance
+        acceptance = ExcursionCriterion(a.tolerance_deg, a.duration_s, a.max_risk)
+    if plan is None:
+        return (
+            None,
+            "No raw reading: the data were imported (no stand, no raw CAN log).",
+            acceptance,
+        )
+    if log is None:
+        return None, f"No usable raw CAN log ({check}): no reading record.", acceptance
+    reading, note = still_series_record(log, codec_for(plan), records)
+    return reading, note, acceptance
+
+
+def campaign_signal(session: Session, campaign_id: int) -> SignalSection:
+    """Section 10 of a stored campaign's report alone (no analysis run, no heading traces)."""
+    campaign = load_campaign(session, campaign_id)
+    check, log = _raw_log_check(campaign)
+    records = tuple(TrialRecord(t.index, _series_records(t), None) for t in campaign.trials)
+    reading, note, acceptance = _reading(_plan(campaign), log, check, records)
+    return signal_section(reading, note, records, acceptance)
+
+
 def report_inputs(
     session: Session, campaign_id: int, stored: StoredAnalysis | None, *, database: str
 ) -> ReportInputs:
     """Everything the report shows besides the analysis results: identification, plan,
-    acquisition summary, every event, the heading records (from the raw log when it verifies)."""
+    acquisition summary, every event, the heading records and the stationary reading record
+    (from the raw log when it verifies), the plan's acceptance by excursions."""
     campaign = load_campaign(session, campaign_id)
     excluded = {t.index: "not analysed" for t in campaign.trials}
     if stored is not None:
         excluded = stored.inputs.excluded
-    try:
-        plan: Plan | None = parse_plan(campaign.plan_toml)
-    except PlanError:  # e.g. the instrument/site metadata stored with an import
-        plan = None
+    plan = _plan(campaign)
     check, log = _raw_log_check(campaign)
     records, note = _records(campaign, plan, log, check)
+    reading, reading_note, acceptance = _reading(plan, log, check, records)
     ident = Identification(
         campaign_id=campaign.id,
         instrument_model=campaign.instrument.model,
@@ -490,6 +531,9 @@ def report_inputs(
         records=records,
         raw_log_note=note,
         signatures=Signatures(tested_by=campaign.operator),
+        reading=reading,
+        reading_note=reading_note,
+        acceptance=acceptance,
     )
 
 

@@ -16,8 +16,9 @@ from analysis.forecast import (
 )
 from analysis.report.compliance import Compliance, Profile, assess
 from analysis.report.model import ReportInputs
+from analysis.report.signal import SignalSection, signal_section
 
-SCHEMA = "gyrostand.report/1"
+SCHEMA = "gyrostand.report/2"
 COURSE_STEP_DEG = 5.0  # forecast grid
 TABLE_COURSE_STEP_DEG = 15.0  # forecast table
 
@@ -78,7 +79,8 @@ class ForecastSection:
 @dataclass(frozen=True)
 class Report:
     """``analysis`` is None when the campaign could not be analysed (``analysis_error`` says
-    why): the report then documents the acquisition and assesses nothing."""
+    why): the report then documents the acquisition and assesses nothing of the fit. The
+    signal analysis (section 10) stands on the raw reading alone."""
 
     schema: str
     generated_at: str
@@ -88,6 +90,7 @@ class Report:
     trials: tuple[TrialRow, ...]
     forecast: ForecastSection | None
     compliance: Compliance
+    signal: SignalSection
 
 
 def trial_rows(analysis: CampaignAnalysis) -> tuple[TrialRow, ...]:
@@ -180,6 +183,7 @@ def build_report(
 ) -> Report:
     """Assemble the report; ``analysis`` is the analysis or, when it failed, the reason.
     ``generated_at`` is the report's only wall-clock field (ISO 8601 text)."""
+    signal = signal_section(inputs.reading, inputs.reading_note, inputs.records, inputs.acceptance)
     if isinstance(analysis, str):
         return Report(
             schema=SCHEMA,
@@ -190,6 +194,7 @@ def build_report(
             trials=(),
             forecast=None,
             compliance=assess(profile, None, None),
+            signal=signal,
         )
     section = (
         forecast_section(analysis, profile.envelope.forecast_periods_s)
@@ -205,4 +210,5 @@ def build_report(
         trials=trial_rows(analysis),
         forecast=section,
         compliance=assess(profile, analysis, None if section is None else section.grid),
+        signal=signal,
     )

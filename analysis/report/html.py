@@ -15,6 +15,7 @@ from analysis.report import plots
 from analysis.report.build import COURSE_STEP_DEG, Report
 from analysis.report.compliance import FAIL, NOT_ASSESSED, PASS
 from analysis.report.model import TrialAcquisition
+from analysis.report.signal import TIME_SAVED_NOTE
 
 TEMPLATES = files("analysis.report") / "templates"
 
@@ -83,6 +84,11 @@ def _figures(report: Report) -> dict[str, object]:
             if r.trace is not None or any(s.observations for s in r.series)
         },
     }
+    noise = report.signal.noise
+    if noise is not None:
+        figures["correlation"] = Markup(plots.correlation_plot(noise))
+        figures["spectrum"] = Markup(plots.spectrum_plot(noise))
+        figures["allan"] = Markup(plots.allan_plot(noise))
     a = report.analysis
     if a is None:
         return figures
@@ -112,12 +118,14 @@ def render_html(report: Report) -> str:
     return template.render(
         r=report,
         a=report.analysis,
+        sig=report.signal,
         inputs=report.inputs,
         ident=report.inputs.identification,
         figures=_figures(report),
         css=Markup(css),
         variance_basis=VARIANCE_BASIS,
         sign_convention=SIGN_CONVENTION,
+        time_saved_note=TIME_SAVED_NOTE,
         course_step_deg=COURSE_STEP_DEG,
         PASS=PASS,
         FAIL=FAIL,

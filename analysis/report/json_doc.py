@@ -1,7 +1,8 @@
 """The report as one JSON document: every number the report prints, for machines and for diffing
 two reports. Deterministic: the same database gives the same text except ``generated_at``.
 
-Schema ``gyrostand.report/1`` (plain JSON types; absent values are null):
+Schema ``gyrostand.report/2`` (plain JSON types; absent values are null). Version 2 added
+``signal``; everything else is as in version 1.
 
 - ``schema``, ``generated_at`` (the only wall-clock field);
 - ``identification``: the fields of `analysis.report.model.Identification`;
@@ -23,6 +24,20 @@ Schema ``gyrostand.report/1`` (plain JSON types; absent values are null):
   latitude_deg, alpha_deg, half_width_deg, bound_deg)};
 - ``compliance``: profile_id, profile_name, source, caution, envelope, site_latitude_deg, items
   (id, clause, requirement, evidence, limit_deg, limit_text, value_deg, verdict, detail);
+- ``signal`` (section 10, `analysis.report.signal.SignalSection.to_dict`): ``record`` {source,
+  start_ms, dt_s, n, duration_s, frames, filled} or null, record_note, trend_deg_per_h,
+  ``noise`` (`analysis.noise.NoiseCharacterisation.to_dict`: correlation {lag_s, covariance,
+  dt_s, n}, exponential and smooth models {variance, decay_per_s, frequency_rad_s,
+  white_variance, correlation_time_s, derivative_variance}, harmonics {frequency_hz, psd,
+  background, threshold, dof, false_alarm, harmonics [frequency_hz, amplitude,
+  amplitude_from_correlation, peak_to_background, false_alarm_probability]}, allan {tau_s,
+  deviation, n_terms}, sampling {interval_s, factor, ...}) or null with noise_error,
+  reading_interval_ok, ``observations`` (trial, j, window_s, step_s, correlation,
+  max_correlation, correlated), correlated_observations, ``settle`` (trial, j, started_ms,
+  done_ms, settle_s, estimate_deg, observed_mean_deg, offset_deg), settle_time_saved,
+  ``acceptance`` {criterion {tolerance_deg, duration_s, max_risk}, excursions (Rice's numbers,
+  `analysis.excursions.ExcursionAcceptance`), risk, tolerance_for_max_risk_deg, verdict, detail}
+  or null, acceptance_note;
 - ``signatures``: tested_by, checked_by, date.
 """
 
@@ -100,6 +115,7 @@ def report_document(report: Report) -> dict[str, Any]:
             "analysis_error": report.analysis_error,
             "forecast": forecast,
             "compliance": asdict(report.compliance),
+            "signal": report.signal.to_dict(),
             "signatures": asdict(inputs.signatures),
         }
     )

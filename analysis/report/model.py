@@ -144,6 +144,35 @@ class TrialRecord:
 
 
 @dataclass(frozen=True)
+class ReadingRecord:
+    """A stretch of the compass reading for the noise analysis (section 10), resampled on a
+    uniform grid: ``reading_deg`` (unwrapped, trend kept) every ``dt_s`` from stand time
+    ``start_ms``; ``frames`` valid heading frames behind it, ``filled`` grid points that had no
+    frame and were interpolated linearly."""
+
+    source: str  # which stretch, e.g. "trial 2, still series (j = 1): first to last window"
+    start_ms: float
+    dt_s: float
+    reading_deg: np.ndarray
+    frames: int
+    filled: int
+
+    @property
+    def duration_s(self) -> float:
+        return (self.reading_deg.size - 1) * self.dt_s
+
+
+@dataclass(frozen=True)
+class ExcursionCriterion:
+    """The plan's [acceptance] table: the reading must stay within +-``tolerance_deg`` of its
+    mean for ``duration_s`` with P(at least one excursion) <= ``max_risk``."""
+
+    tolerance_deg: float
+    duration_s: float
+    max_risk: float
+
+
+@dataclass(frozen=True)
 class Signatures:
     """Section 11. Empty strings leave a line to sign on."""
 
@@ -163,3 +192,6 @@ class ReportInputs:
     records: tuple[TrialRecord, ...]
     raw_log_note: str  # how the heading plots were made (raw log, observations only, nothing)
     signatures: Signatures
+    reading: ReadingRecord | None = None  # the stationary record of section 10
+    reading_note: str = "No reading record was given."  # where it came from, or why none
+    acceptance: ExcursionCriterion | None = None  # None: the plan asks for no acceptance

@@ -7,7 +7,10 @@ pyplot state, no display). Output is deterministic: fixed hash salt, no date in 
 - `measured_vs_model`: <delta_i> against alpha_i for every trial;
 - `residuals_plot`: v_i = <delta_i> - alpha_i per trial with the S_e bounds;
 - `forecast_plot`: alpha_p against the ship's course with its prediction band and the limit;
-- `iteration_path_plot`: the Gauss-Newton iterates in the (C, T) plane over contours of S^2.
+- `iteration_path_plot`: the Gauss-Newton iterates in the (C, T) plane over contours of S^2;
+- `correlation_plot`, `spectrum_plot`, `allan_plot`: the noise of the stationary reading
+  (section 10): correlation estimate with the fitted models, Welch spectrum with the detection
+  threshold and the harmonics found, Allan deviation.
 """
 
 import functools
@@ -24,6 +27,7 @@ from matplotlib.ticker import FuncFormatter
 
 from analysis.campaign import CampaignAnalysis
 from analysis.gyro_model import Conditions, RollingErrorModel
+from analysis.noise import NoiseCharacterisation
 from analysis.report.build import ForecastSection, TrialRow
 from analysis.report.model import SeriesRecord, TrialRecord
 
@@ -305,4 +309,100 @@ def iteration_path_plot(analysis: CampaignAnalysis) -> Figure:
     ax.set_ylabel("T, s")
     ax.set_title(r"Fit: iteration path over $S^2(C, T)$, deg$^2$ (eq 1.9)", loc="left")
     ax.legend(loc="best")
+    return fig
+
+
+HALF_IN = 3.45  # two figures side by side
+K_UNIT = 1e-4  # correlation plotted in 10^-4 deg^2
+
+
+@_styled
+def correlation_plot(noise: NoiseCharacterisation) -> Figure:
+    """K^(tau) (seed 004 eq 8.92) against the fitted exponential and smooth models (8.89), each
+    plus the cosines a^2/2 cos(nu tau) of the harmonics found (8.91), with tau_k marked."""
+    est, exp_model, smooth = noise.correlation, noise.exponential, noise.smooth
+    tau_k = exp_model.correlation_time_s
+    keep = est.lag_s <= min(est.lag_s[-1], 10 * tau_k)
+    tau = est.lag_s[keep]
+    periodic = sum(
+        (h.amplitude_from_correlation**2 / 2 * np.cos(2 * np.pi * h.frequency_hz * tau))
+        for h in noise.harmonics.harmonics
+        if np.isfinite(h.amplitude_from_correlation)
+    )
+    fig = _figure(2.7, HALF_IN)
+    ax = fig.add_subplot()
+    ax.plot(tau, est.covariance[keep] / K_UNIT, color="0.25", lw=0.9, label="estimate (eq 8.92)")
+    ax.plot(
+        tau,
+        (exp_model(tau) + periodic) / K_UNIT,
+        color="#1f77b4",
+        lw=1.2,
+        label=rf"$\sigma^2 e^{{-\mu\tau}}$, $\mu$ = {exp_model.decay_per_s:.3g} s$^{{-1}}$",
+    )
+    ax.plot(
+        tau, (smooth(tau) + periodic) / K_UNIT, color="#d95f02", lw=1.0, ls="--", label="smooth"
+    )
+    ax.axvline(tau_k, color="0.5", lw=0.8, ls=":", label=rf"$\tau_k$ = {tau_k:.3g} s")
+    ax.axhline(0, color="0.3", lw=0.6)
+    ax.set_xlabel(r"lag $\tau$, s")
+    ax.set_ylabel(r"$K(\tau)$, $10^{-4}$ deg$^2$")
+    ax.set_title("Correlation function (eqs 8.92, 8.89)", loc="left")
+    ax.legend(loc="upper right")
+    return fig
+
+
+@_styled
+def spectrum_plot(noise: NoiseCharacterisation) -> Figure:
+    """Welch spectral density with its running-median background, the detection threshold for
+    the false-alarm level, and the harmonics found (seed 004 eqs 8.90-8.91)."""
+    search = noise.harmonics
+    f = search.frequency_hz[1:]
+    fig = _figure(2.7, HALF_IN)
+    ax = fig.add_subplot()
+    ax.loglog(f, search.psd[1:], color="0.25", lw=0.7, label="Welch")
+    ax.loglog(f, search.background[1:], color="#1f77b4", lw=0.9, label="background")
+    ax.loglog(
+        f,
+        search.threshold[1:],
+        color="#d62728",
+        lw=0.8,
+        ls="--",
+        label=f"threshold, false alarm {search.false_alarm:g}",
+    )
+    for h in search.harmonics:
+        i = int(np.argmin(np.abs(search.frequency_hz - h.frequency_hz)))
+        ax.plot(
+            [search.frequency_hz[i]],
+            [search.psd[i] * 1.8],
+            marker="v",
+            color="#d62728",
+            ls="none",
+        )
+        ax.annotate(
+            f"{h.frequency_hz:.4g} Hz, {h.amplitude:.2g} deg",
+            (search.frequency_hz[i], search.psd[i] * 1.8),
+            xytext=(6, -2),
+            textcoords="offset points",
+            ha="left",
+            va="center",
+            fontsize=6.5,
+        )
+    ax.set_xlabel("frequency, Hz")
+    ax.set_ylabel(r"spectral density, deg$^2$/Hz")
+    ax.set_title("Spectrum and hidden harmonics", loc="left")
+    fig.legend(loc="outside lower center", ncols=3, fontsize=6)
+    return fig
+
+
+@_styled
+def allan_plot(noise: NoiseCharacterisation) -> Figure:
+    """Overlapping Allan deviation of the reading against the averaging time."""
+    allan = noise.allan
+    fig = _figure(2.5, HALF_IN)
+    ax = fig.add_subplot()
+    ax.loglog(allan.tau_s, allan.deviation, "o-", color="#1f77b4", ms=3, lw=1.0)
+    ax.set_xlabel(r"averaging time $\tau$, s")
+    ax.set_ylabel(r"Allan deviation $\sigma(\tau)$, deg")
+    ax.set_title("Allan deviation", loc="left")
+    ax.grid(True, which="both", alpha=0.3)
     return fig

@@ -63,11 +63,12 @@ def test_pdf_has_every_section_and_the_key_numbers(paper_files: Rendered) -> Non
         "7. Adequacy",
         "8. Control trials",
         "9. Forecast at sea",
-        "10. Compliance",
-        "11. Signatures",
+        "10. The reading's random part",
+        "11. Compliance",
+        "12. Signatures",
     ):
         assert heading in text
-    positions = [text.index(f"{n}. ") for n in range(1, 12)]
+    positions = [text.index(f"{n}. ") for n in range(1, 13)]
     assert positions == sorted(positions)
     for number in ("0.4936", "0.5175", "1.409", "-2.328", "0.534", "3.634"):
         assert number in text, number
@@ -101,7 +102,7 @@ def test_json_is_deterministic_and_the_run_is_recorded_once(paper: Stored) -> No
             select(func.count(AnalysisRun.id)).where(AnalysisRun.campaign_id == paper.campaign_id)
         )
     assert runs == 1
-    assert first["schema"] == "gyrostand.report/1"
+    assert first["schema"] == "gyrostand.report/2"
     assert first["analysis"]["cochran"]["g_ex"] == pytest.approx(REFERENCE["g_ex"], abs=1e-4)
     assert first["identification"]["analysis_run"] >= 1
 

@@ -1,0 +1,141 @@
+"""The stationary reading record of the signal analysis (report section 10) from a raw CAN log:
+valid heading frames by stand time, read with the vectorised log reader and batch decoder.
+
+    still_series_record(log, codec, records) -> (ReadingRecord | None, note)   # a campaign
+    log_record(log, codec, start_s=None, end_s=None) -> ReadingRecord           # a log alone
+
+A campaign's natural stationary record is a still series (j = 1) from its first to its last
+observation window: the compass has settled and the stand is still. The longest one is used; the
+series are not pooled, since the correlation estimate (seed 004 eq 8.92) is over one continuous
+realisation. A log without a campaign gives its longest still stretch by the stand's status frames
+(or a stand-time span asked for).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from acquisition.batch import BatchDecoder
+from acquisition.logfile import read_raw_frames
+from analysis.errors import AnalysisError
+from analysis.report.model import ReadingRecord, TrialRecord
+from analysis.report.signal import uniform_record
+from stand.protocol import Codec
+
+Span = tuple[float, float]  # stand ms, [start, end)
+
+
+def headings_in(
+    log: Path, codec: Codec, spans: dict[int, Span]
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Valid heading frames (stand ms, deg) of the log inside each span, in stream order."""
+    decoder = BatchDecoder(codec)
+    parts: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {key: [] for key in spans}
+    for raw in read_raw_frames(log):
+        headings = decoder.decode(raw).headings
+        t, h = headings.t_ms[headings.valid], headings.heading_deg[headings.valid]
+        for key, (start, end) in spans.items():
+            inside = (t >= start) & (t < end)
+            if inside.any():
+                parts[key].append((t[inside], h[inside]))
+    return {
+        key: (
+            np.concatenate([p[0] for p in chunks]) if chunks else np.empty(0),
+            np.concatenate([p[1] for p in chunks]) if chunks else np.empty(0),
+        )
+        for key, chunks in parts.items()
+    }
+
+
+def _still_spans(records: tuple[TrialRecord, ...]) -> dict[int, Span]:
+    """Per trial, its still series from the first window start to the last window end."""
+    spans = {}
+    for record in records:
+        for s in record.series:
+            timed = [o for o in s.observations if o.window_start_ms is not None]
+            ends = [o.window_end_ms for o in timed if o.window_end_ms is not None]
+            if s.j == 1 and timed and ends:
+                spans[record.index] = (min(o.window_start_ms for o in timed), max(ends))
+    return spans
+
+
+def still_series_record(
+    log: Path, codec: Codec, records: tuple[TrialRecord, ...]
+) -> tuple[ReadingRecord | None, str]:
+    """The longest still-series record of a campaign in its raw log (by heading frames), and a
+    note saying what it is, or why there is none."""
+    spans = _still_spans(records)
+    if not spans:
+        return None, "No still series with timed observation windows: no stationary record."
+    frames = headings_in(log, codec, spans)
+    index = max(sorted(frames), key=lambda i: frames[i][0].size)  # ties: the first trial
+    t, h = frames[index]
+    if t.size < 3:
+        return None, "The raw CAN log has no heading frames within the still series."
+    start, end = spans[index]
+    record = uniform_record(
+        t,
+        h,
+        f"trial {index}, still series (j = 1), stand time {start / 1000:.1f}-{end / 1000:.1f} s",
+    )
+    others = sum(1 for i, f in frames.items() if i != index and f[0].size)
+    note = (
+        f"The longest stationary record of the campaign: trial {index}'s still series (j = 1) "
+        "from its first to its last observation window, from the raw CAN log"
+        + (
+            f" ({others} other still series not pooled: the estimates assume one continuous "
+            "realisation)"
+            if others
+            else ""
+        )
+        + ". Linear trend removed before the analysis."
+    )
+    return record, note
+
+
+def still_stretch(log: Path, codec: Codec) -> Span | None:
+    """The longest run of stand status frames reporting no rocking, as a stand-time span
+    [first, last]; None when the log has no status frame at all."""
+    decoder = BatchDecoder(codec)
+    times, rocking = [], []
+    for raw in read_raw_frames(log):
+        statuses = decoder.decode(raw).statuses
+        times.append(statuses.t_ms)
+        rocking.append(statuses.rocking.astype(bool))
+    t = np.concatenate(times) if times else np.empty(0)
+    if not t.size:
+        return None
+    still = ~np.concatenate(rocking)
+    if not still.any():
+        raise AnalysisError(f"{log.name}: the stand rocks throughout: give a stand-time span")
+    edges = np.diff(np.concatenate([[0], still.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    longest = int(np.argmax(t[stops] - t[starts]))
+    return float(t[starts[longest]]), float(t[stops[longest]])
+
+
+def log_record(
+    log: Path, codec: Codec, start_s: float | None = None, end_s: float | None = None
+) -> ReadingRecord:
+    """The record of a raw log alone: the stand-time span asked for (seconds), else the
+    longest still stretch by the stand's status frames (the whole log when it has none).
+    AnalysisError when the span holds too few heading frames."""
+    if start_s is not None or end_s is not None:
+        span = (
+            -np.inf if start_s is None else start_s * 1000.0,
+            np.inf if end_s is None else end_s * 1000.0,
+        )
+        if not span[0] < span[1]:
+            raise AnalysisError(f"empty stand-time span {start_s} to {end_s} s")
+        what = "the stand-time span asked for"
+    elif (stretch := still_stretch(log, codec)) is not None:
+        span, what = (stretch[0], stretch[1] + 1.0), "the longest still stretch"
+    else:
+        span, what = (-np.inf, np.inf), "the whole log (no stand status frames)"
+    t, h = headings_in(log, codec, {0: span})[0]
+    if t.size < 3:
+        raise AnalysisError(f"{log.name}: {t.size} valid heading frames in {what}")
+    source = f"raw log {log.name}, {what}: stand time {t[0] / 1000:.1f}-{t[-1] / 1000:.1f} s"
+    return uniform_record(t, h, source)

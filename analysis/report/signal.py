@@ -1,0 +1,349 @@
+"""Section 10 of the report: the random part of the compass reading and what follows from it
+(seed 004, Sveshnikov §8.3), with the settle points stored per series (seed 003).
+
+    uniform_record(t_ms, heading_deg, source) -> ReadingRecord
+    signal_section(reading, note, records, acceptance) -> SignalSection
+
+From one stationary stretch of the reading (the longest still series of a campaign, or a stretch
+of a raw log), linear trend removed: the noise characterisation of `analysis.noise` (correlation
+8.92, exponential and smooth models 8.89, Welch spectrum and hidden harmonics 8.90-8.91, Allan
+deviation, sampling interval 8.94); the correlation of successive observations of every series
+(the window means that Cochran's and Fisher's tests take as independent); and the acceptance by
+excursions (8.79-8.88) when the plan asks for it. Renderers only format these numbers.
+"""
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from scipy.integrate import quad
+
+from analysis.campaign import json_safe
+from analysis.errors import AnalysisError
+from analysis.excursions import ExcursionAcceptance, excursion_acceptance, tolerance_for_risk
+from analysis.noise import CorrelationModel, NoiseCharacterisation, characterise_noise
+from analysis.report.compliance import FAIL, PASS
+from analysis.report.model import ExcursionCriterion, ReadingRecord, TrialRecord
+
+MIN_READINGS = 500  # below this the correlation estimate has fewer than 50 lags (N/10)
+TIME_SAVED_NOTE = (
+    "Time saved against waiting for the plan's band criterion: not recorded (the runner stores "
+    "no waiting-time reference for these series)."
+)
+NO_ACCEPTANCE = "The plan asks for no acceptance by excursions (no [acceptance] table)."
+
+
+def uniform_record(t_ms: np.ndarray, heading_deg: np.ndarray, source: str) -> ReadingRecord:
+    """Valid heading frames (stand ms, deg, in time order) on a uniform grid. The interval is
+    the median frame spacing; headings are taken about the first one, wrapped to +-180 deg (a
+    record crossing 0/360 deg stays continuous); grid points without a frame are interpolated
+    linearly. AnalysisError when there is no usable record."""
+    t, first = np.unique(np.asarray(t_ms, dtype=float), return_index=True)
+    h = np.asarray(heading_deg, dtype=float)[first]
+    if t.size < 3:
+        raise AnalysisError(f"{source}: {t.size} heading frames, too few for a reading record")
+    step_ms = float(np.median(np.diff(t)))
+    n = int(round((t[-1] - t[0]) / step_ms)) + 1
+    h = h[0] + (h - h[0] + 180.0) % 360.0 - 180.0
+    grid = t[0] + step_ms * np.arange(n)
+    return ReadingRecord(
+        source=source,
+        start_ms=float(t[0]),
+        dt_s=step_ms / 1000.0,
+        reading_deg=np.interp(grid, t, h),
+        frames=int(t.size),
+        filled=max(n - int(t.size), 0),
+    )
+
+
+# --- correlation of successive observations --------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ObservationCorrelation:
+    """Series j of a trial: its observations are means over windows of ``window_s`` whose starts
+    are ``step_s`` apart; ``correlation`` between successive ones from the fitted correlation;
+    ``correlated`` when it exceeds ``max_correlation`` (independence broken)."""
+
+    trial: int
+    j: int
+    window_s: float
+    step_s: float
+    correlation: float
+    max_correlation: float
+    correlated: bool
+
+
+def window_mean_correlation(
+    model: CorrelationModel, window_s: float, step_s: float, dt_s: float
+) -> float:
+    """Correlation of the means of two windows of length W whose starts are D apart, of a
+    reading with correlation ``model`` sampled every ``dt_s``: the double integral of K over the
+    two windows (as behind seed 004 eq 8.93),
+
+        cov = (1/W^2) integral_{-W}^{W} (W - |u|) K(D + u) du,
+
+    the variance the same at D = 0 plus the white part s_w^2 dt / W."""
+
+    def averaged(d: float) -> float:
+        points = sorted(u for u in {0.0, -d} if -window_s < u < window_s)  # kinks of |u|, K
+        integral = quad(
+            lambda u: (window_s - abs(u)) * model(d + u),
+            -window_s,
+            window_s,
+            points=points or None,
+            limit=200,
+        )[0]
+        return integral / window_s**2
+
+    variance = averaged(0.0) + model.white_variance * dt_s / window_s
+    return float(averaged(step_s) / variance)
+
+
+def _windows(record: TrialRecord, j: int) -> tuple[float, float] | None:
+    """Median window length and start-to-start step (s) of series j, when it has two timed
+    observations or more."""
+    series = next((s for s in record.series if s.j == j), None)
+    if series is None:
+        return None
+    timed = [o for o in series.observations if o.window_start_ms is not None]
+    timed = [o for o in timed if o.window_end_ms is not None]
+    if len(timed) < 2:
+        return None
+    starts = np.array([o.window_start_ms for o in timed], dtype=float)
+    lengths = np.array([o.window_end_ms for o in timed], dtype=float) - starts
+    return float(np.median(lengths)) / 1000.0, float(np.median(np.diff(starts))) / 1000.0
+
+
+def observation_correlations(
+    model: CorrelationModel, records: tuple[TrialRecord, ...], dt_s: float, max_correlation: float
+) -> tuple[ObservationCorrelation, ...]:
+    """`window_mean_correlation` for every series with timed observations."""
+    rows = []
+    for record in records:
+        for j in (1, 2):
+            windows = _windows(record, j)
+            if windows is None or windows[0] <= 0:
+                continue
+            rho = window_mean_correlation(model, *windows, dt_s)
+            rows.append(
+                ObservationCorrelation(
+                    record.index, j, *windows, rho, max_correlation, abs(rho) > max_correlation
+                )
+            )
+    return tuple(rows)
+
+
+# --- settle points ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SettleRow:
+    """The settle of one series as stored: start and end (stand ms), the settle time, the settle
+    estimate and how far the mean of the series' observations came out from it."""
+
+    trial: int
+    j: int
+    started_ms: int | None
+    done_ms: int | None
+    settle_s: float | None
+    estimate_deg: float | None
+    observed_mean_deg: float | None
+    offset_deg: float | None  # observed mean - estimate
+
+
+def settle_rows(records: tuple[TrialRecord, ...]) -> tuple[SettleRow, ...]:
+    """One row per stored series that recorded a settle (start, end or estimate)."""
+    rows = []
+    for record in records:
+        for s in record.series:
+            stored = (s.settle_started_ms, s.settle_done_ms, s.settle_estimate_deg)
+            if all(v is None for v in stored):
+                continue
+            values = [o.value_deg for o in s.observations]
+            mean = float(np.mean(values)) if values else None
+            known = s.settle_started_ms is not None and s.settle_done_ms is not None
+            rows.append(
+                SettleRow(
+                    trial=record.index,
+                    j=s.j,
+                    started_ms=s.settle_started_ms,
+                    done_ms=s.settle_done_ms,
+                    settle_s=(s.settle_done_ms - s.settle_started_ms) / 1000.0 if known else None,
+                    estimate_deg=s.settle_estimate_deg,
+                    observed_mean_deg=mean,
+                    offset_deg=None
+                    if mean is None or s.settle_estimate_deg is None
+                    else mean - s.settle_estimate_deg,
+                )
+            )
+    return tuple(rows)
+
+
+# --- acceptance by excursions -----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ExcursionVerdict:
+    """The plan's acceptance by excursions on the fitted smooth correlation: expected
+    excursions out of +-tolerance about the mean in the control time (Rice, 8.80-8.88),
+    ``risk`` = P(at least one) = 1 - e^(-n) (8.84), the tolerance that would give exactly the
+    allowed risk (inverse problem; None when no band can), and the verdict."""
+
+    criterion: ExcursionCriterion
+    excursions: ExcursionAcceptance
+    risk: float
+    tolerance_for_max_risk_deg: float | None
+    verdict: str
+    detail: str
+
+
+def excursion_verdict(model: CorrelationModel, criterion: ExcursionCriterion) -> ExcursionVerdict:
+    """PASS when the risk of an excursion in the control time is at most the plan's."""
+    eps, duration = criterion.tolerance_deg, criterion.duration_s
+    result = excursion_acceptance(model, -eps, eps, duration)
+    risk = float(-np.expm1(-result.mean_excursions))
+    try:
+        eps_risk: float | None = tolerance_for_risk(model, 1.0 - criterion.max_risk, duration)
+    except AnalysisError:
+        eps_risk = None
+    passed = risk <= criterion.max_risk
+    detail = (
+        f"P(excursion in {duration:g} s) = {risk:.3g} "
+        f"{'<=' if passed else '>'} the allowed {criterion.max_risk:g}."
+    )
+    if not result.poisson_valid:
+        detail += (
+            f" The Poisson assumption does not hold (mean time between excursions "
+            f"{result.mean_time_between_s:.3g} s < correlation time "
+            f"{result.correlation_time_s:.3g} s): the probability is a rough approximation."
+        )
+    return ExcursionVerdict(criterion, result, risk, eps_risk, PASS if passed else FAIL, detail)
+
+
+# --- the section ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SignalSection:
+    """Section 10. ``noise`` is None when there is no usable record (``record_note`` or
+    ``noise_error`` say why); then nothing that depends on it is assessed."""
+
+    record: ReadingRecord | None
+    record_note: str
+    trend_deg_per_h: float | None
+    noise: NoiseCharacterisation | None
+    noise_error: str | None
+    observations: tuple[ObservationCorrelation, ...]
+    settle: tuple[SettleRow, ...]
+    acceptance: ExcursionVerdict | None
+    acceptance_note: str
+
+    @property
+    def reading_interval_ok(self) -> bool | None:
+        """The record's reading interval is within the recommended Delta (8.94)."""
+        if self.noise is None or self.record is None:
+            return None
+        return self.record.dt_s <= self.noise.sampling.interval_s
+
+    @property
+    def correlated_observations(self) -> bool | None:
+        """Some series has correlated successive observations (None: not assessed)."""
+        if not self.observations:
+            return None
+        return any(o.correlated for o in self.observations)
+
+    def to_dict(self) -> dict[str, Any]:
+        r, a = self.record, self.acceptance
+        return json_safe(
+            {
+                "record": None
+                if r is None
+                else {
+                    "source": r.source,
+                    "start_ms": r.start_ms,
+                    "dt_s": r.dt_s,
+                    "n": int(r.reading_deg.size),
+                    "duration_s": r.duration_s,
+                    "frames": r.frames,
+                    "filled": r.filled,
+                },
+                "record_note": self.record_note,
+                "trend_deg_per_h": self.trend_deg_per_h,
+                "noise": None if self.noise is None else self.noise.to_dict(),
+                "noise_error": self.noise_error,
+                "reading_interval_ok": self.reading_interval_ok,
+                "observations": [asdict(o) for o in self.observations],
+                "correlated_observations": self.correlated_observations,
+                "settle": [asdict(s) for s in self.settle],
+                "settle_time_saved": "not recorded",
+                "acceptance": None
+                if a is None
+                else {
+                    "criterion": asdict(a.criterion),
+                    "excursions": a.excursions.to_dict(),
+                    "risk": a.risk,
+                    "tolerance_for_max_risk_deg": a.tolerance_for_max_risk_deg,
+                    "verdict": a.verdict,
+                    "detail": a.detail,
+                },
+                "acceptance_note": self.acceptance_note,
+            }
+        )
+
+
+def _characterise(reading: ReadingRecord) -> tuple[float, NoiseCharacterisation]:
+    """Trend (deg/h) and the characterisation of the detrended record (a settled compass still
+    creeps: a leftover of the damped transient, seed 003, would pass for correlated noise)."""
+    n = reading.reading_deg.size
+    if n < MIN_READINGS:
+        raise AnalysisError(f"{n} readings: too short for the noise analysis (need {MIN_READINGS})")
+    t = np.arange(n) * reading.dt_s
+    slope, intercept = np.polyfit(t, reading.reading_deg, 1)
+    residual = reading.reading_deg - (slope * t + intercept)
+    return float(slope * 3600.0), characterise_noise(residual, reading.dt_s)
+
+
+def signal_section(
+    reading: ReadingRecord | None,
+    note: str,
+    records: tuple[TrialRecord, ...],
+    acceptance: ExcursionCriterion | None,
+) -> SignalSection:
+    """Section 10 from the stationary record, the stored series and the plan's acceptance."""
+    settle = settle_rows(records)
+    trend, noise, error = None, None, None
+    if reading is not None:
+        try:
+            trend, noise = _characterise(reading)
+        except (AnalysisError, ValueError) as exc:
+            error = str(exc)
+    if noise is None or reading is None:
+        why = error or note
+        return SignalSection(
+            reading,
+            note,
+            trend,
+            None,
+            error,
+            (),
+            settle,
+            None,
+            NO_ACCEPTANCE if acceptance is None else f"Not assessed: {why}",
+        )
+    observations = observation_correlations(
+        noise.exponential, records, reading.dt_s, noise.sampling.max_correlation
+    )
+    verdict, acceptance_note = None, NO_ACCEPTANCE
+    if acceptance is not None:
+        try:
+            verdict = excursion_verdict(noise.smooth, acceptance)
+            acceptance_note = (
+                "Rice's formula on the smooth correlation model (the white part of the reading is "
+                "left out: it is the sensor's, not the instrument's motion)."
+            )
+        except (AnalysisError, ValueError) as exc:
+            acceptance_note = f"Not assessed: {exc}"
+    return SignalSection(
+        reading, note, trend, noise, None, observations, settle, verdict, acceptance_note
+    )
