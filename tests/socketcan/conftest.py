@@ -8,7 +8,7 @@ import pytest
 from tests.conftest import socketcan_channel
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def channel() -> str:
     """The SocketCAN channel under test (the `socketcan` marker already skips when none)."""
     name = socketcan_channel()

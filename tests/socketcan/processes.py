@@ -1,0 +1,165 @@
+"""The pieces of an end-to-end run on a SocketCAN channel: the simulated stand and the campaign
+as separate `gyrostand` processes, `candump`/`cansend`, and reading the campaign's SQLite file.
+
+The SQLite file is read with the standard library (not the project's ORM) so the checks are
+independent of the code under test, and cheap under software emulation."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from contextlib import closing
+from dataclasses import dataclass
+from pathlib import Path
+
+import can
+
+HEADING_ID = 0x100  # GYRO_HEADING in stand/gyrostand.dbc
+COMMAND_ID = 0x80  # STAND_COMMAND: sent by the campaign itself
+
+# The simulated unit: a short precession transient and slow frame rates, so a four-trial campaign
+# is ~25 stand-minutes and a few thousand frames (Python under software emulation is slow).
+TRUE_C_GCM2S2 = 6.0e7
+TRUE_T_S = 1.1
+SIM_OPTIONS = (
+    "--heading-rate-hz", "2", "--status-rate-hz", "0.5",
+    "--undamped-period-s", "240", "--damping-ratio", "0.8",
+    "--c-gcm2s2", str(TRUE_C_GCM2S2), "--t-s", str(TRUE_T_S),
+)  # fmt: skip
+
+PLAN = """
+[campaign]
+operator = "socketcan test"
+n_obs = 3
+database = "{folder}/campaign.sqlite"
+raw_log_dir = "{folder}/raw"
+on_trial_failure = "continue"
+
+[instrument]
+model = "simulated compass"
+serial = "VCAN-1"
+lp_gcm2s2 = 6.57e6
+h1_gcm2s = 1.55e8
+
+[site]
+latitude_deg = 46.5
+earth_rate_rad_s = 7.3e-5
+gravity_cm_s2 = 981.0
+
+[analysis]
+start_c = 7.0e7
+start_t_s = 0.55
+
+[forecast]
+roll_deg = 5.0
+arm_cm = 750.0
+period_s = 7.0
+course_deg = 45.0
+latitude_deg = 57.0
+
+[observation]
+still_window_s = 30.0
+rocking_window_periods = 4
+
+[settle]
+band_deg = {band_deg}
+hold_s = 60.0
+max_wait_s = 3600.0
+
+[tracking]
+confirm_s = 30.0
+
+[timeouts]
+ack_s = 5.0
+bus_silence_s = 5.0
+
+[bus]
+simulated = false
+interface = "socketcan"
+channel = "{channel}"
+"""
+
+TRIAL = """
+[[trials]]
+direction_deg = {0}
+amplitude_cm = {1}
+period_s = {2}
+role = "{3}"
+"""
+
+
+def plan_text(folder: Path, channel: str, trials: list[tuple], band_deg: float) -> str:
+    return PLAN.format(folder=folder, channel=channel, band_deg=band_deg) + "".join(
+        TRIAL.format(*t) for t in trials
+    )
+
+
+def gyrostand_command() -> list[str]:
+    """The installed `gyrostand` script next to this Python (as a user runs it)."""
+    script = Path(sys.executable).with_name("gyrostand")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "gyrostand"]
+
+
+@dataclass
+class Process:
+    """A background process whose output goes to files (read after it ends)."""
+
+    popen: subprocess.Popen
+    stdout: Path
+    stderr: Path
+
+    @classmethod
+    def start(cls, args: list[str], folder: Path, name: str) -> Process:
+        out, err = folder / f"{name}.out", folder / f"{name}.err"
+        with out.open("wb") as o, err.open("wb") as e:
+            popen = subprocess.Popen(args, cwd=folder, stdout=o, stderr=e, env=os.environ.copy())
+        return cls(popen, out, err)
+
+    def interrupt(self, timeout_s: float = 120.0) -> int:
+        """SIGINT (a clean stop, like Ctrl-C) and wait."""
+        if self.popen.poll() is None:
+            self.popen.send_signal(signal.SIGINT)
+        try:
+            return self.popen.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            self.popen.kill()
+            return self.popen.wait()
+
+    def output(self) -> str:
+        return f"stdout:\n{self.stdout.read_text()}\nstderr:\n{self.stderr.read_text()}"
+
+
+def wait_for_heading(channel: str, proc: Process, timeout_s: float) -> None:
+    """Block until a heading frame is on the bus (the simulator is up) or the process died."""
+    deadline = time.monotonic() + timeout_s
+    with can.Bus(
+        interface="socketcan",
+        channel=channel,
+        can_filters=[{"can_id": HEADING_ID, "can_mask": 0x7FF}],
+    ) as bus:
+        while bus.recv(timeout=1.0) is None:
+            assert proc.popen.poll() is None, f"simulator exited:\n{proc.output()}"
+            assert time.monotonic() < deadline, f"no heading frame in {timeout_s} s"
+
+
+def query(db: Path, sql: str, *params: object) -> list[tuple]:
+    with closing(sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=10)) as conn:
+        return conn.execute(sql, params).fetchall()
+
+
+def wait_until(db: Path, sql: str, proc: Process, timeout_s: float, poll_s: float = 0.1) -> None:
+    """Poll the campaign database until `sql` returns a row (or the campaign ended)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        assert proc.popen.poll() is None, f"campaign ended before {sql!r}:\n{proc.output()}"
+        assert time.monotonic() < deadline, f"{sql!r} not true within {timeout_s} s"
+        try:
+            if db.exists() and query(db, sql):
+                return
+        except sqlite3.OperationalError:  # schema not created yet, or locked for a moment
+            pass
+        time.sleep(poll_s)
