@@ -28,6 +28,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from acquisition.batch import FrameBatch, Headings, Statuses
+from acquisition.early_settle import EarlySettle, band_settled, hold_blocks
 from acquisition.plan import Plan, TrialPlan
 from stand.protocol import AckFrame, CommandFrame, CompassStatusFrame, Frame, InvalidFrame
 
@@ -185,16 +186,6 @@ def _compass_fault(frame: CompassStatusFrame) -> str:
     return ""
 
 
-def _drift(means: list[float]) -> float:
-    """Least-squares trend of equally spaced window means, times the span they cover: how far
-    a transient not yet over still moves the reading during the hold time."""
-    if len(means) < 3:
-        return 0.0
-    x = np.arange(len(means), dtype=float)
-    slope = np.polyfit(x, np.asarray(means), 1)[0]
-    return float(slope * len(means))
-
-
 def _is_bus_off(frame: InvalidFrame) -> bool:
     return frame.reason == "error frame" and bool(frame.arbitration_id & CAN_ERR_BUSOFF)
 
@@ -238,6 +229,7 @@ class Engine:
         self._window: _Window | None = None
         self._blocks: list[tuple[float, int]] = []  # (mean deviation ndeg, end ms) per block
         self._settle_start: int | None = None
+        self._early: EarlySettle | None = None  # settle.method = "estimate"
         self._series_errors = 0
         self._motion: list[tuple[float, float, float]] = []
         self._last_status_text = ""
@@ -299,6 +291,11 @@ class Engine:
             self._blocks = []
             self._window = None
             self._series_errors = 0
+            self._early = None
+            estimate = self.plan.settle.estimate
+            if estimate is not None:
+                step_ms = self._window_ms() + round(self.plan.observation.spacing_s * 1000)
+                self._early = EarlySettle(estimate, self.plan.n_obs * step_ms / 1000)
 
     @property
     def _tidx(self) -> int | None:
@@ -659,19 +656,26 @@ class Engine:
         self._blocks.append((w.mean_ndeg(), w.end_ms))
         width = w.end_ms - w.start_ms
         settle = self.plan.settle
-        need = max(1, math.ceil(settle.hold_s * 1000 / width))
-        recent = [m for m, _ in self._blocks[-need:]]
-        if len(recent) == need and not any(math.isnan(m) for m in recent):
-            centre = sum(recent) / need
-            spread = max(abs(m - centre) for m in recent) / NANO
-            if spread <= settle.band_deg and abs(_drift(recent)) / NANO <= settle.drift_deg:
+        need = hold_blocks(settle, width / 1000)
+        recent = [m / NANO for m, _ in self._blocks[-need:]]
+        band = len(recent) == need and not any(math.isnan(m) for m in recent)
+        band = band and band_settled(recent, settle)
+        estimate: float | None = None
+        if self._early is None:
+            if band:
                 assert self._ref is not None
-                estimate = self._ref + centre / NANO
-                self._settle_durations.append(w.end_ms - self._settle_start)
-                self.sink.series_settled(self._trial.index, self._j, w.end_ms, estimate)
-                self._enter(Phase.OBSERVE)
-                self._window = _Window(w.end_ms, w.end_ms + width)
-                return
+                estimate = self._ref + sum(recent) / need
+        elif w.used:  # (frames are only used once the reference heading is known)
+            start = self._settle_start
+            mid_s, end_s = ((w.start_ms + w.end_ms) / 2 - start) / 1000, (w.end_ms - start) / 1000
+            if self._early.add_block(mid_s, w.mean_ndeg() / NANO, end_s, band).ready:
+                estimate = self._early_settled(w)
+        if estimate is not None:
+            self._settle_durations.append(w.end_ms - self._settle_start)
+            self.sink.series_settled(self._trial.index, self._j, w.end_ms, estimate)
+            self._enter(Phase.OBSERVE)
+            self._window = _Window(w.end_ms, w.end_ms + width)
+            return
         if w.end_ms - self._settle_start > settle.max_wait_s * 1000:
             self.fail(f"not settled within {settle.max_wait_s:g} s", kind="settle timeout")
             return
@@ -679,6 +683,17 @@ class Engine:
         if self._last_t is not None and self._last_t >= next_start + width:  # skip empty blocks
             next_start += (self._last_t - next_start) // width * width
         self._window = _Window(next_start, next_start + width)
+
+    def _early_settled(self, w: _Window) -> float:
+        """Record how an early-settle series settled (an "early settle" event with the estimate
+        and the time saved against the band criterion); return the estimated settle point."""
+        assert self._early is not None and self._early.last is not None and self._ref is not None
+        means = [m / NANO for m, _ in self._blocks if not math.isnan(m)]
+        width_s = (w.end_ms - w.start_ms) / 1000
+        outcome = self._early.outcome(self._ref, means, width_s, self.plan.settle)
+        message = outcome.describe(self._early.last)
+        self.sink.event("early settle", "info", message, self._tidx, self._j, w.end_ms)
+        return outcome.estimate_deg
 
     def _close_observation(self, w: _Window) -> None:
         trial = self._trial

@@ -79,6 +79,37 @@ class SettlePlan:
     drift_deg: float
     hold_s: float
     max_wait_s: float
+    method: Literal["band", "estimate"] = "band"
+    estimate: EstimatePlan | None = None  # set when method = "estimate"
+
+
+@dataclass(frozen=True)
+class EstimatePlan:
+    """Early settle (seed 003): observe once the settle point estimated from the transient is
+    stable. The transient's undamped period 2 pi / omega0 and damping ratio xi / omega0 are
+    instrument data (`fit_transient` = true fits omega and xi too, starting from them); the
+    tolerance is `tolerance_fraction` x the expected S{<delta>}_e of seed 000 eq 2.6."""
+
+    undamped_period_s: float
+    damping_ratio: float
+    expected_se_deg: float
+    tolerance_fraction: float
+    stable_estimates: int
+    fit_transient: bool
+
+    @property
+    def tolerance_deg(self) -> float:
+        return self.tolerance_fraction * self.expected_se_deg
+
+    @property
+    def omega_rad_s(self) -> float:
+        """Damped angular frequency omega = sqrt(omega0^2 - xi^2) (seed 003 eq 2)."""
+        return 2.0 * math.pi / self.undamped_period_s * math.sqrt(1.0 - self.damping_ratio**2)
+
+    @property
+    def damping_per_s(self) -> float:
+        """xi of seed 003 eq 1."""
+        return 2.0 * math.pi / self.undamped_period_s * self.damping_ratio
 
 
 @dataclass(frozen=True)
@@ -341,7 +372,9 @@ def parse_plan(text: str) -> Plan:
         drift_deg=st.number("drift_deg", None, gt=0),
         hold_s=st.number("hold_s", 600.0, ge=0),
         max_wait_s=st.number("max_wait_s", 4 * 3600.0, gt=0),
+        method=st.text("method", "band", choices=("band", "estimate")),
     )
+    settle = dataclasses.replace(settle, estimate=_estimate(st, settle.method))
     st.done()
     if math.isnan(settle.drift_deg):  # not given: no trend condition
         settle = dataclasses.replace(settle, drift_deg=math.inf)
@@ -435,6 +468,35 @@ def _acceptance(problems: list[str], raw: Mapping[str, Any]) -> AcceptancePlan:
     )
     a.done()
     return acceptance
+
+
+_ESTIMATE_KEYS = (
+    "undamped_period_s",
+    "damping_ratio",
+    "expected_se_deg",
+    "tolerance_fraction",
+    "stable_estimates",
+    "fit_transient",
+)
+
+
+def _estimate(st: _Fields, method: str) -> EstimatePlan | None:
+    """The early-settle keys of [settle]: required with method = "estimate", refused with
+    "band" (and left alone when the method itself is invalid: that is the one problem)."""
+    if method != "estimate":
+        for key in [k for k in _ESTIMATE_KEYS if k in st.table]:
+            st.seen.add(key)
+            if method == "band":
+                st.bad(key, "only applies when settle.method = 'estimate'")
+        return None
+    return EstimatePlan(
+        undamped_period_s=st.number("undamped_period_s", _REQUIRED, gt=0),
+        damping_ratio=st.number("damping_ratio", _REQUIRED, ge=0, lt=1),
+        expected_se_deg=st.number("expected_se_deg", _REQUIRED, gt=0),
+        tolerance_fraction=st.number("tolerance_fraction", 1.0, gt=0, le=1),
+        stable_estimates=st.integer("stable_estimates", 3, ge=2),
+        fit_transient=st.flag("fit_transient", False),
+    )
 
 
 def _bus(problems: list[str], raw: Mapping[str, Any]) -> BusPlan:
