@@ -3,6 +3,7 @@ valid heading frames by stand time, read with the vectorised log reader and batc
 
     still_series_record(log, codec, records) -> (ReadingRecord | None, note)   # a campaign
     log_record(log, codec, start_s=None, end_s=None) -> ReadingRecord           # a log alone
+    log_signal(log, plan=None, start_s=None, end_s=None) -> SignalSection       # its section 10
 
 A campaign's natural stationary record is a still series (j = 1) from its first to its last
 observation window: the compass has settled and the stand is still. The longest one is used; the
@@ -18,10 +19,12 @@ from pathlib import Path
 import numpy as np
 
 from acquisition.batch import BatchDecoder
+from acquisition.bus import codec_for
 from acquisition.logfile import read_raw_frames
+from acquisition.plan import Plan
 from analysis.errors import AnalysisError
-from analysis.report.model import ReadingRecord, TrialRecord
-from analysis.report.signal import uniform_record
+from analysis.report.model import ExcursionCriterion, ReadingRecord, TrialRecord
+from analysis.report.signal import SignalSection, signal_section, uniform_record
 from stand.protocol import Codec
 
 Span = tuple[float, float]  # stand ms, [start, end)
@@ -139,3 +142,22 @@ def log_record(
         raise AnalysisError(f"{log.name}: {t.size} valid heading frames in {what}")
     source = f"raw log {log.name}, {what}: stand time {t[0] / 1000:.1f}-{t[-1] / 1000:.1f} s"
     return uniform_record(t, h, source)
+
+
+def log_signal(
+    log: Path, plan: Plan | None = None, start_s: float | None = None, end_s: float | None = None
+) -> SignalSection:
+    """Section 10 for a raw log alone: its record (`log_record`), decoded with the plan's
+    protocol and judged by the plan's [acceptance] when a plan is given."""
+    codec = Codec() if plan is None else codec_for(plan)
+    record = log_record(log, codec, start_s, end_s)
+    note = "A raw log without its campaign: no series, no settle points."
+    return signal_section(record, note, (), acceptance_of(plan))
+
+
+def acceptance_of(plan: Plan | None) -> ExcursionCriterion | None:
+    """The plan's [acceptance] table as the report's criterion (None: not asked for)."""
+    if plan is None or plan.acceptance is None:
+        return None
+    a = plan.acceptance
+    return ExcursionCriterion(a.tolerance_deg, a.duration_s, a.max_risk)

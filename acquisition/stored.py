@@ -30,7 +30,7 @@ from acquisition.batch import BatchDecoder
 from acquisition.bus import codec_for
 from acquisition.logfile import read_raw_frames
 from acquisition.plan import Plan, PlanError, parse_plan
-from acquisition.signal_record import still_series_record
+from acquisition.signal_record import acceptance_of, still_series_record
 from acquisition.store import software_version
 from analysis.campaign import CampaignAnalysis, analyze_campaign, json_safe
 from analysis.errors import AnalysisError
@@ -462,10 +462,7 @@ def _reading(
 ) -> tuple[ReadingRecord | None, str, ExcursionCriterion | None]:
     """The stationary record of section 10 (from the raw log when it verifies), a note on it,
     and the plan's acceptance by excursions."""
-    acceptance = None
-    if plan is not None and plan.acceptance is not None:
-        a = plan.acceptance
-        acceptance = ExcursionCriterion(a.tolerance_deg, a.duration_s, a.max_risk)
+    acceptance = acceptance_of(plan)
     if plan is None:
         return (
             None,

@@ -4,21 +4,31 @@
 constants, start values, admissible region and ship forecast are used (a note on stderr says so).
 `gyrostand analyze CAMPAIGN_ID [--db URL_OR_PATH] [--json]` analyses a campaign in the database
 with its stored plan's settings and records the run (`acquisition.stored.analyze_stored`).
+`gyrostand analyze CAMPAIGN_ID --signal` and `gyrostand analyze --signal --log FILE.blf|.asc
+[--plan PLAN.toml] [--from S] [--to S]` print the signal analysis of the reading (report section
+10: noise, hidden harmonics, sampling interval, settle points, acceptance by excursions); they
+read the database and the raw log only.
 The pieces are separate functions so other sources (a campaign in the database) can reuse them:
 `settings_from_plan` -> `AnalysisSettings`, `run_analysis`, `emit`.
 """
 
 import json
+import struct
+import zlib
 from pathlib import Path
 from typing import Annotated
 
 import typer
 from sqlalchemy.exc import OperationalError
 
-from acquisition.stored import analyze_stored
+from acquisition.plan import PlanError, load_plan
+from acquisition.signal_record import log_signal
+from acquisition.stored import analyze_stored, campaign_signal
 from analysis.campaign import CampaignAnalysis, analyze_campaign
 from analysis.csv_input import read_trials_csv
 from analysis.errors import AnalysisError
+from analysis.report.signal import SignalSection
+from analysis.report.signal_text import render_signal_text
 from analysis.settings import SEED_000_SETTINGS, AnalysisSettings
 from analysis.settings import settings_from_plan as plan_settings
 from analysis.text_report import render_text
@@ -32,6 +42,7 @@ PAPER_NOTE = (
     "forecast (Potemkin 1982)"
 )
 PAPER_SETTINGS = SEED_000_SETTINGS
+SIGNAL_SCHEMA = "gyrostand.signal/1"  # the report JSON's "signal" object, with this key added
 
 
 def settings_from_plan(path: Path) -> AnalysisSettings:
@@ -87,9 +98,35 @@ def register(app: typer.Typer) -> None:
             typer.Option("--plan", help="Campaign plan TOML: constants, start, forecast."),
         ] = None,
         as_json: Annotated[bool, typer.Option("--json", help="Print one JSON document.")] = False,
+        signal: Annotated[
+            bool,
+            typer.Option(
+                "--signal",
+                help="Signal analysis of the reading (noise, harmonics, sampling, settle, "
+                "excursions) of a CAMPAIGN or of --log FILE.",
+            ),
+        ] = False,
+        log: Annotated[
+            Path | None,
+            typer.Option("--log", help="With --signal: a raw CAN log (.blf or .asc)."),
+        ] = None,
+        start_s: Annotated[
+            float | None,
+            typer.Option("--from", help="With --log: start of the record, stand seconds."),
+        ] = None,
+        end_s: Annotated[
+            float | None,
+            typer.Option("--to", help="With --log: end of the record, stand seconds."),
+        ] = None,
     ) -> None:
         """Analyse a stored campaign or a CSV of trials (Cochran, fit, adequacy, control,
-        forecast). A stored campaign's analysis is recorded in the database."""
+        forecast). A stored campaign's analysis is recorded in the database. With --signal:
+        the signal analysis of a campaign's raw reading or of a raw log (nothing recorded)."""
+        if signal:
+            emit_signal(signal_of(campaign, db, csv, plan, log, start_s, end_s), as_json)
+            return
+        if log is not None or start_s is not None or end_s is not None:
+            fail("--log, --from and --to go with --signal")
         if campaign is not None:
             if csv is not None or plan is not None:
                 fail("give a CAMPAIGN id or --csv FILE [--plan PLAN], not both")
@@ -120,3 +157,58 @@ def analyze_stored_campaign(db: str, campaign_id: int) -> CampaignAnalysis:
         fail(str(exc))
     except OperationalError as exc:
         fail(f"the database refused the analysis run: {exc.orig}")
+
+
+def signal_of(
+    campaign: int | None,
+    db: str,
+    csv: Path | None,
+    plan: Path | None,
+    log: Path | None,
+    start_s: float | None,
+    end_s: float | None,
+) -> SignalSection:
+    """The signal analysis the --signal options ask for; one-line CLI errors."""
+    if csv is not None:
+        fail("--signal reads a raw CAN log (a CAMPAIGN's or --log FILE), not --csv")
+    if campaign is not None:
+        if log is not None or plan is not None or start_s is not None or end_s is not None:
+            fail("give a CAMPAIGN id or --log FILE [--plan PLAN] [--from S] [--to S], not both")
+        return campaign_signal_of(db, campaign)
+    if log is None:
+        fail("--signal needs a CAMPAIGN id or --log FILE (.blf or .asc)")
+    if not log.is_file():
+        fail(f"raw log {log}: not found")
+    try:
+        section = log_signal(log, None if plan is None else load_plan(plan), start_s, end_s)
+    except PlanError as exc:
+        fail(f"plan {plan}: {exc}")
+    except AnalysisError as exc:
+        fail(str(exc))
+    except (OSError, ValueError, EOFError, struct.error, zlib.error) as exc:
+        fail(f"raw log {log}: cannot read it ({exc})")
+    if section.noise is None:
+        fail(f"raw log {log}: {section.noise_error}")
+    return section
+
+
+def campaign_signal_of(db: str, campaign_id: int) -> SignalSection:
+    """The signal analysis of a stored campaign (read only); fails when it has no record."""
+    sessions = open_db(db, must_exist=True)
+    try:
+        with sessions() as session:
+            section = campaign_signal(session, campaign_id)
+    except (AnalysisError, CampaignNotFound) as exc:
+        fail(str(exc))
+    if section.noise is None:
+        fail(f"campaign {campaign_id}: {section.noise_error or section.record_note}")
+    return section
+
+
+def emit_signal(section: SignalSection, as_json: bool) -> None:
+    """Print the signal analysis as text, or as one JSON document (report section 10's keys)."""
+    if as_json:
+        document = {"schema": SIGNAL_SCHEMA, **section.to_dict()}
+        typer.echo(json.dumps(document, indent=2, allow_nan=False))
+    else:
+        typer.echo(render_signal_text(section), nl=False)
