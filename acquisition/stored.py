@@ -28,6 +28,7 @@ from sqlalchemy.orm import Session
 
 from acquisition.batch import BatchDecoder
 from acquisition.bus import codec_for
+from acquisition.early_settle import parse_outcome
 from acquisition.logfile import read_raw_frames
 from acquisition.plan import Plan, PlanError, parse_plan
 from acquisition.signal_record import acceptance_of, still_series_record
@@ -48,6 +49,7 @@ from analysis.report.model import (
     ReadingRecord,
     ReportInputs,
     SeriesRecord,
+    SettleOutcome,
     Signatures,
     TrialAcquisition,
     TrialRecord,
@@ -316,7 +318,32 @@ def _events(campaign: Campaign) -> tuple[EventRecord, ...]:
     )
 
 
-def _series_records(trial: Trial) -> tuple[SeriesRecord, ...]:
+def settle_outcomes(campaign: Campaign, plan: Plan | None) -> dict[int, SettleOutcome]:
+    """How each settled series settled, by series id: from its "early settle" event when the
+    plan settles by the estimate (the last one, after a resume), by the band criterion when the
+    plan waits for it (nothing saved); none for imports (no plan)."""
+    if plan is None:
+        return {}
+    outcomes = {}
+    if plan.settle.method == "band":
+        for s in (s for t in campaign.trials for s in t.series):
+            if s.settle_started_ms is not None and s.settle_done_ms is not None:
+                waited = (s.settle_done_ms - s.settle_started_ms) / 1000
+                outcomes[s.id] = SettleOutcome("band", None, waited, True, 0.0)
+    for e in campaign.events:
+        found = parse_outcome(e.message) if e.kind == "early settle" else None
+        if found is not None and e.series_id is not None:
+            outcomes[e.series_id] = SettleOutcome(
+                "estimate",
+                found.standard_error_deg,
+                found.band_s,
+                found.band_measured,
+                found.saved_s,
+            )
+    return outcomes
+
+
+def _series_records(trial: Trial, outcomes: dict[int, SettleOutcome]) -> tuple[SeriesRecord, ...]:
     return tuple(
         SeriesRecord(
             j=s.j,
@@ -327,6 +354,7 @@ def _series_records(trial: Trial) -> tuple[SeriesRecord, ...]:
                 ObservationRecord(o.k, o.value_deg, o.window_start_ms, o.window_end_ms)
                 for o in s.observations
             ),
+            settle=outcomes.get(s.id),
         )
         for s in trial.series
     )
@@ -405,7 +433,8 @@ def _records(
 ) -> tuple[tuple[TrialRecord, ...], str]:
     """Per trial its series and (from the raw log) its heading trace; and how the plots were
     made."""
-    series = {t.index: _series_records(t) for t in campaign.trials}
+    outcomes = settle_outcomes(campaign, plan)
+    series = {t.index: _series_records(t, outcomes) for t in campaign.trials}
     has_observations = any(s.observations for rows in series.values() for s in rows)
     event_times: dict[int, list[int]] = {t.index: [] for t in campaign.trials}
     by_id = {t.id: t.index for t in campaign.trials}
@@ -479,8 +508,12 @@ def campaign_signal(session: Session, campaign_id: int) -> SignalSection:
     """Section 10 of a stored campaign's report alone (no analysis run, no heading traces)."""
     campaign = load_campaign(session, campaign_id)
     check, log = _raw_log_check(campaign)
-    records = tuple(TrialRecord(t.index, _series_records(t), None) for t in campaign.trials)
-    reading, note, acceptance = _reading(_plan(campaign), log, check, records)
+    plan = _plan(campaign)
+    outcomes = settle_outcomes(campaign, plan)
+    records = tuple(
+        TrialRecord(t.index, _series_records(t, outcomes), None) for t in campaign.trials
+    )
+    reading, note, acceptance = _reading(plan, log, check, records)
     return signal_section(reading, note, records, acceptance)
 
 

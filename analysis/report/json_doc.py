@@ -11,7 +11,8 @@ Schema ``gyrostand.report/2`` (plain JSON types; absent values are null). Versio
 - ``acquisition``: ``trials`` (`TrialAcquisition` each: commanded and measured K/A/tau, status,
   observations per series, frames used/lost, flagged observations, analysed), ``events``
   (`EventRecord` each), ``raw_log_note``, ``records`` (per trial: series with settle start/end
-  ms, settle estimate, observations k/value/window; ``trace``: {frames, bins, t_first_ms,
+  ms, settle estimate, observations k/value/window, ``settle``: how it settled {criterion,
+  standard_error_deg, band_s, band_measured, saved_s} or null; ``trace``: {frames, bins, t_first_ms,
   t_last_ms} or null: the binned heading itself is only plotted);
 - ``trial_table``: `analysis.report.build.TrialRow` each;
 - ``analysis``: `CampaignAnalysis.to_dict()` (schema gyrostand.analysis/1, keys documented in
@@ -34,7 +35,8 @@ Schema ``gyrostand.report/2`` (plain JSON types; absent values are null). Versio
   deviation, n_terms}, sampling {interval_s, factor, ...}) or null with noise_error,
   reading_interval_ok, ``observations`` (trial, j, window_s, step_s, correlation,
   max_correlation, correlated), correlated_observations, ``settle`` (trial, j, started_ms,
-  done_ms, settle_s, estimate_deg, observed_mean_deg, offset_deg), settle_time_saved,
+  done_ms, settle_s, estimate_deg, observed_mean_deg, offset_deg, criterion,
+  standard_error_deg, band_s, band_measured, saved_s), time_saved_s (sum of the known savings),
   ``acceptance`` {criterion {tolerance_deg, duration_s, max_risk}, excursions (Rice's numbers,
   `analysis.excursions.ExcursionAcceptance`), risk, tolerance_for_max_risk_deg, verdict, detail}
   or null, acceptance_note;

@@ -111,14 +111,31 @@ class ObservationRecord:
 
 
 @dataclass(frozen=True)
+class SettleOutcome:
+    """How a series settled, as acquisition recorded it: by the plan's band criterion (it
+    waited) or by the settle point estimated from the transient (seed 003, early settle). For
+    an early settle: the estimate's standard error, when the band criterion held on the readings
+    (``band_measured``) or is predicted to hold on the fitted transient (stand seconds from the
+    settle start; None: not within the plan's max_wait_s), and the stand seconds saved."""
+
+    criterion: str  # "band" or "estimate"
+    standard_error_deg: float | None
+    band_s: float | None
+    band_measured: bool
+    saved_s: float | None
+
+
+@dataclass(frozen=True)
 class SeriesRecord:
-    """Series j of a trial: settle start/end (stand ms), settle estimate and observations."""
+    """Series j of a trial: settle start/end (stand ms), settle estimate and observations;
+    ``settle`` None when no settle criterion is recorded (e.g. imported data)."""
 
     j: int
     settle_started_ms: int | None
     settle_done_ms: int | None
     settle_estimate_deg: float | None
     observations: tuple[ObservationRecord, ...]
+    settle: SettleOutcome | None = None
 
 
 @dataclass(frozen=True)

@@ -27,8 +27,11 @@ from analysis.report.model import ExcursionCriterion, ReadingRecord, TrialRecord
 
 MIN_READINGS = 500  # below this the correlation estimate has fewer than 50 lags (N/10)
 TIME_SAVED_NOTE = (
-    "Time saved against waiting for the plan's band criterion: not recorded (the runner stores "
-    "no waiting-time reference for these series)."
+    "Time saved: stand seconds from the moment a series began observing to the moment the plan's "
+    "band criterion held on the readings or, when observation began before that, is predicted "
+    "to hold on the fitted transient (a noise-free continuation: the saving errs low). A series "
+    "that waited for the band criterion saved nothing; unknown: the band criterion is not "
+    "predicted within the plan's max_wait_s; not recorded: no settle criterion is recorded."
 )
 NO_ACCEPTANCE = "The plan asks for no acceptance by excursions (no [acceptance] table)."
 
@@ -140,7 +143,10 @@ def observation_correlations(
 @dataclass(frozen=True)
 class SettleRow:
     """The settle of one series as stored: start and end (stand ms), the settle time, the settle
-    estimate and how far the mean of the series' observations came out from it."""
+    estimate and how far the mean of the series' observations came out from it; by which
+    criterion it settled (None: not recorded), the estimate's standard error (early settle),
+    when the band criterion held or is predicted to hold (s from the settle start) and the
+    stand seconds saved against waiting for it (see ``TIME_SAVED_NOTE``)."""
 
     trial: int
     j: int
@@ -150,6 +156,11 @@ class SettleRow:
     estimate_deg: float | None
     observed_mean_deg: float | None
     offset_deg: float | None  # observed mean - estimate
+    criterion: str | None
+    standard_error_deg: float | None
+    band_s: float | None
+    band_measured: bool | None
+    saved_s: float | None
 
 
 def settle_rows(records: tuple[TrialRecord, ...]) -> tuple[SettleRow, ...]:
@@ -163,6 +174,7 @@ def settle_rows(records: tuple[TrialRecord, ...]) -> tuple[SettleRow, ...]:
             values = [o.value_deg for o in s.observations]
             mean = float(np.mean(values)) if values else None
             known = s.settle_started_ms is not None and s.settle_done_ms is not None
+            how = s.settle
             rows.append(
                 SettleRow(
                     trial=record.index,
@@ -175,6 +187,11 @@ def settle_rows(records: tuple[TrialRecord, ...]) -> tuple[SettleRow, ...]:
                     offset_deg=None
                     if mean is None or s.settle_estimate_deg is None
                     else mean - s.settle_estimate_deg,
+                    criterion=None if how is None else how.criterion,
+                    standard_error_deg=None if how is None else how.standard_error_deg,
+                    band_s=None if how is None else how.band_s,
+                    band_measured=None if how is None else how.band_measured,
+                    saved_s=None if how is None else how.saved_s,
                 )
             )
     return tuple(rows)
@@ -247,6 +264,12 @@ class SignalSection:
         return self.record.dt_s <= self.noise.sampling.interval_s
 
     @property
+    def time_saved_s(self) -> float | None:
+        """Stand seconds saved over the series whose saving is known (None: none is)."""
+        saved = [r.saved_s for r in self.settle if r.saved_s is not None]
+        return float(sum(saved)) if saved else None
+
+    @property
     def correlated_observations(self) -> bool | None:
         """Some series has correlated successive observations (None: not assessed)."""
         if not self.observations:
@@ -276,7 +299,7 @@ class SignalSection:
                 "observations": [asdict(o) for o in self.observations],
                 "correlated_observations": self.correlated_observations,
                 "settle": [asdict(s) for s in self.settle],
-                "settle_time_saved": "not recorded",
+                "time_saved_s": self.time_saved_s,
                 "acceptance": None
                 if a is None
                 else {

@@ -83,17 +83,23 @@ def render_signal_text(section: SignalSection) -> str:
     out += ["", "SETTLE POINTS"]
     if section.settle:
         out.append(
-            f"  {'trial':>5}{'j':>3}{'from, s':>10}{'at, s':>10}{'settle, s':>11}"
-            f"{'estimate, deg':>15}{'obs. mean, deg':>16}{'mean - est.':>13}"
+            f"  {'trial':>5}{'j':>3}{'from, s':>10}{'at, s':>10}{'took, s':>9}  {'by':<9}"
+            f"{'estimate, deg':>14}{'SE, deg':>9}{'mean-est.':>10}{'band, s':>9}{'saved, s':>13}"
         )
         for row in section.settle:
+            saved = _num(row.saved_s, ".1f")
+            if row.saved_s is None:
+                saved = "unknown" if row.criterion else "not recorded"
             out.append(
                 f"  {row.trial:>5}{row.j:>3}"
                 f"{_num(None if row.started_ms is None else row.started_ms / 1000, '.1f'):>10}"
                 f"{_num(None if row.done_ms is None else row.done_ms / 1000, '.1f'):>10}"
-                f"{_num(row.settle_s, '.1f'):>11}{_num(row.estimate_deg, '.4f'):>15}"
-                f"{_num(row.observed_mean_deg, '.4f'):>16}{_num(row.offset_deg, '+.4f'):>13}"
+                f"{_num(row.settle_s, '.1f'):>9}  {row.criterion or '-':<9}"
+                f"{_num(row.estimate_deg, '.4f'):>14}{_num(row.standard_error_deg, '.4f'):>9}"
+                f"{_num(row.offset_deg, '+.4f'):>10}{_num(row.band_s, '.1f'):>9}{saved:>13}"
             )
+        if section.time_saved_s is not None:
+            out.append(f"  stand time saved: {section.time_saved_s:.1f} s")
         out.append(f"  {TIME_SAVED_NOTE}")
     else:
         out.append("  not recorded")

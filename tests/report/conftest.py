@@ -8,6 +8,7 @@
 
 import hashlib
 import subprocess
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -104,11 +105,12 @@ class Simulated(Stored):
     stream: tuple[can.Message, ...]
 
 
-def run_simulated(folder: Path) -> Simulated:
-    """The lockstep simulated stand through the real engine and store, frames to a BLF log."""
+def run_simulated(folder: Path, edit: Callable[[str], str] = str) -> Simulated:
+    """The lockstep simulated stand through the real engine and store, frames to a BLF log;
+    `edit` changes the plan's TOML text first."""
     path = folder / "sim.sqlite"
     sessions = open_database(sqlite_url(path))
-    plan = parse_plan(plan_text(SIM_TRIALS, n_obs=4, database=str(path)))
+    plan = parse_plan(edit(plan_text(SIM_TRIALS, n_obs=4, database=str(path))))
     store = CampaignStore.create(sessions, plan)
     sim = Lockstep(quick_config(seed=3))
     engine = Engine(plan, store, sim, store.progress())

@@ -1,0 +1,96 @@
+"""A simulated campaign run with early settle ([settle] method = "estimate", seed 003) produces a
+report whose section 10 gives each series' settle point, its standard error and the time saved,
+as the series rows and the "early settle" events record them; a campaign that waited for the band
+criterion saved nothing."""
+
+import re
+
+import pytest
+from typer.testing import CliRunner
+
+from analysis.report.build import Report
+from analysis.report.html import render_html
+from analysis.report.json_doc import report_document
+from db.models import Event, Series
+from gyrostand.cli import app
+
+from .conftest import SIM_TRIALS, Simulated, run_simulated
+
+EARLY = """[settle]
+method = "estimate"
+undamped_period_s = 240.0
+damping_ratio = 0.8
+expected_se_deg = 0.02
+tolerance_fraction = 1.0
+stable_estimates = 3
+"""
+
+
+def early_plan(text: str) -> str:
+    """The simulated compass's transient (quick_config: 240 s, 0.8) as instrument data, and a
+    band criterion that would hold the reading for 300 s."""
+    text = text.replace("hold_s = 60.0", "hold_s = 300.0")
+    return text.replace("[settle]\n", EARLY)
+
+
+@pytest.fixture(scope="module")
+def early(tmp_path_factory: pytest.TempPathFactory) -> Simulated:
+    return run_simulated(tmp_path_factory.mktemp("early"), early_plan)
+
+
+@pytest.fixture(scope="module")
+def early_report(early: Simulated) -> Report:
+    return early.report()
+
+
+def test_every_series_settled_early_as_recorded(early: Simulated, early_report: Report) -> None:
+    rows = early_report.signal.settle
+    assert len(rows) == 2 * len(SIM_TRIALS)
+    with early.sessions() as session:
+        series = {s.id: s for s in session.query(Series)}
+        events = session.query(Event).filter_by(kind="early settle").all()
+        assert len(events) == len(rows)
+        by_series = {(series[e.series_id].trial.index, series[e.series_id].j): e for e in events}
+        for row in rows:
+            message = by_series[(row.trial, row.j)].message
+            took = float(re.search(r"after ([\d.]+) s", message)[1])
+            band = float(
+                re.search(r"band criterion (?:held|predicted) after ([\d.]+) s", message)[1]
+            )
+            assert row.criterion == "estimate"
+            assert row.settle_s == pytest.approx(took, abs=0.05)  # the series row's own times
+            assert row.band_s == band and row.saved_s == pytest.approx(band - took, abs=0.05)
+            assert row.saved_s > 0  # observing began before a 300 s hold could have ended
+            assert f"settle point {row.estimate_deg:.5f} deg" in message
+            assert row.standard_error_deg <= 0.02  # within the plan's tolerance
+    assert early_report.signal.time_saved_s == pytest.approx(sum(r.saved_s for r in rows))
+
+
+def test_the_report_shows_the_saving(early_report: Report) -> None:
+    html = render_html(early_report)
+    section = early_report.signal
+    assert f"Stand time saved: {section.time_saved_s:.1f} s" in html
+    assert html.count("<td>estimate</td>") == len(section.settle)
+    assert section.noise is not None and "10. The reading's random part" in html
+    doc = report_document(early_report)["signal"]
+    assert doc["time_saved_s"] == section.time_saved_s
+    assert [r["criterion"] for r in doc["settle"]] == ["estimate"] * len(section.settle)
+
+
+def test_waiting_for_the_band_saves_nothing(simulated_report: Report) -> None:
+    rows = simulated_report.signal.settle
+    assert rows and all(r.criterion == "band" and r.saved_s == 0.0 for r in rows)
+    assert all(r.band_s == r.settle_s for r in rows)
+    assert simulated_report.signal.time_saved_s == 0.0
+
+
+def test_imported_series_record_no_criterion(paper_report: Report) -> None:
+    assert all(s.settle is None for r in paper_report.inputs.records for s in r.series)
+
+
+def test_the_time_saved_is_in_the_cli_text(early: Simulated, early_report: Report) -> None:
+    result = CliRunner().invoke(
+        app, ["analyze", str(early.campaign_id), "--db", early.url, "--signal"]
+    )
+    assert result.exit_code == 0, result.output
+    assert f"stand time saved: {early_report.signal.time_saved_s:.1f} s" in result.stdout

@@ -1,0 +1,186 @@
+"""Report section 10 of the simulated campaign (tests/report/conftest.py): the stationary record
+against the raw log decoded frame by frame with cantools, the observation correlations against
+their closed form, settle rows against the database, the section in HTML, PDF and JSON, and
+`gyrostand analyze CAMPAIGN --signal`."""
+
+import json
+import math
+import subprocess
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from analysis.noise import characterise_noise
+from analysis.report.build import Report, build_report
+from analysis.report.compliance import load_profile
+from analysis.report.html import render_html
+from analysis.report.json_doc import report_document
+from analysis.report.model import ExcursionCriterion
+from analysis.report.writer import write_report
+from db.models import Series, Trial
+from gyrostand.cli import app
+from stand.protocol import Codec, HeadingFrame
+
+from .conftest import GENERATED, Simulated, Stored
+
+runner = CliRunner()
+CRITERION = ExcursionCriterion(tolerance_deg=0.05, duration_s=600.0, max_risk=0.01)
+
+
+def still_span(report: Report, index: int) -> tuple[int, int]:
+    record = next(r for r in report.inputs.records if r.index == index)
+    (series,) = [s for s in record.series if s.j == 1]
+    return series.observations[0].window_start_ms, series.observations[-1].window_end_ms
+
+
+def decoded(simulated: Simulated, span: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Valid heading frames in [start, end), decoded one by one by the cantools codec."""
+    codec = Codec()
+    frames = [
+        f
+        for f in (codec.decode(m) for m in simulated.stream)
+        if isinstance(f, HeadingFrame) and f.valid and span[0] <= f.stand_time_ms < span[1]
+    ]
+    return np.array([f.stand_time_ms for f in frames]), np.array([f.heading_deg for f in frames])
+
+
+def test_the_record_is_the_longest_still_series(
+    simulated: Simulated, simulated_report: Report
+) -> None:
+    section = simulated_report.signal
+    counts = {
+        r.index: decoded(simulated, still_span(simulated_report, r.index))[0].size
+        for r in simulated_report.inputs.records
+    }
+    longest = max(sorted(counts), key=counts.get)
+    assert section.record.source.startswith(f"trial {longest}, still series (j = 1)")
+    t, heading = decoded(simulated, still_span(simulated_report, longest))
+    assert section.record.frames == t.size == section.record.reading_deg.size  # no frame lost
+    assert section.record.start_ms == t[0] and section.record.dt_s == 0.1
+    assert section.record.reading_deg == pytest.approx(heading, abs=1e-9)  # far from north
+    # the characterisation is that of the detrended record
+    x = heading - np.polyval(np.polyfit((t - t[0]) / 1000, heading, 1), (t - t[0]) / 1000)
+    direct = characterise_noise(x, 0.1)
+    assert section.noise.exponential.decay_per_s == pytest.approx(
+        direct.exponential.decay_per_s, rel=1e-6
+    )
+    assert section.noise.allan.deviation == pytest.approx(direct.allan.deviation, rel=1e-9)
+
+
+def test_observation_correlations_follow_the_closed_form(simulated_report: Report) -> None:
+    section = simulated_report.signal
+    model = section.noise.exponential
+    assert len(section.observations) == 2 * len(simulated_report.inputs.records)
+    for o in section.observations:
+        periods = next(
+            t.cmd_period_s for t in simulated_report.inputs.acquisition if t.index == o.trial
+        )
+        assert o.window_s == pytest.approx(30.0 if o.j == 1 else 4 * periods, abs=0.05)
+        # K = sigma^2 e^(-mu|tau|) averaged over windows W, starts D apart (D >= W)
+        x, s2 = model.decay_per_s * o.window_s, model.variance
+        variance = 2 * s2 * (x - 1 + math.exp(-x)) / x**2 + model.white_variance * 0.1 / o.window_s
+        covariance = s2 * math.exp(-model.decay_per_s * o.step_s) * (2 * math.cosh(x) - 2) / x**2
+        assert o.correlation == pytest.approx(covariance / variance, rel=1e-6)
+        assert o.correlated == (abs(o.correlation) > 0.1)
+
+
+def test_settle_rows_are_the_stored_series(simulated: Simulated, simulated_report: Report) -> None:
+    with simulated.sessions() as session:
+        stored = {
+            (t.index, s.j): s
+            for t in session.query(Trial).filter_by(campaign_id=simulated.campaign_id)
+            for s in session.query(Series).filter_by(trial_id=t.id)
+        }
+        rows = simulated_report.signal.settle
+        assert {(r.trial, r.j) for r in rows} == set(stored)
+        for r in rows:
+            s = stored[(r.trial, r.j)]
+            assert r.settle_s == (s.settle_done_ms - s.settle_started_ms) / 1000
+            assert r.estimate_deg == s.settle_estimate_deg
+            values = [o.value_deg for o in s.observations]
+            assert r.offset_deg == pytest.approx(np.mean(values) - s.settle_estimate_deg)
+
+
+@pytest.fixture(scope="module")
+def with_acceptance(simulated_report: Report) -> Report:
+    inputs = replace(simulated_report.inputs, acceptance=CRITERION)
+    return build_report(inputs, simulated_report.analysis, load_profile(), generated_at=GENERATED)
+
+
+def test_html_and_json_carry_the_section(with_acceptance: Report) -> None:
+    html = render_html(with_acceptance)
+    section = with_acceptance.signal
+    for text in (
+        "10. The reading's random part",
+        "Hidden harmonics",
+        "Sampling interval and independence",
+        "Settle points",
+        "Acceptance by excursions",
+        "11. Compliance",
+        "12. Signatures",
+        f"{section.noise.exponential.decay_per_s:.4g}",
+        f"{section.noise.sampling.interval_s:.3g} s",
+    ):
+        assert text in html, text
+    assert html.index("10. The reading") < html.index("11. Compliance")
+    doc = report_document(with_acceptance)
+    assert doc["schema"] == "gyrostand.report/2"
+    assert doc["signal"]["acceptance"]["verdict"] == section.acceptance.verdict
+    assert doc["signal"]["noise"]["exponential"]["variance"] == section.noise.exponential.variance
+    again = build_report(
+        with_acceptance.inputs, with_acceptance.analysis, load_profile(), generated_at="later"
+    )
+    assert report_document(again)["signal"] == doc["signal"]  # deterministic
+
+
+def test_pdf_shows_the_section(with_acceptance: Report, tmp_path: Path) -> None:
+    files = write_report(with_acceptance, tmp_path, ("pdf",))
+    text = subprocess.run(
+        ["pdftotext", "-layout", str(files["pdf"]), "-"], check=True, capture_output=True
+    ).stdout.decode()
+    section = with_acceptance.signal
+    for needle in (
+        "10. The reading's random part",
+        "Correlation function (eqs 8.92, 8.89)",
+        "Spectrum and hidden harmonics",
+        "Allan deviation",
+        "Settle points",
+        "Acceptance by excursions",
+        section.acceptance.verdict,
+        f"{section.noise.exponential.decay_per_s:.4g}",
+    ):
+        assert needle in text, needle
+
+
+def test_cli_prints_the_campaign_section(simulated: Simulated, simulated_report: Report) -> None:
+    args = ["analyze", str(simulated.campaign_id), "--db", simulated.url, "--signal"]
+    text = runner.invoke(app, args)
+    assert text.exit_code == 0, text.output
+    assert simulated_report.signal.record.source in text.stdout
+    assert "SETTLE POINTS" in text.stdout and "stand time saved: 0.0 s" in text.stdout
+    result = runner.invoke(app, [*args, "--json"])
+    doc = json.loads(result.stdout)
+    assert doc.pop("schema") == "gyrostand.signal/1"
+    assert doc == report_document(simulated_report)["signal"]
+
+
+def test_cli_errors_for_a_campaign(paper: Stored, simulated: Simulated) -> None:
+    cases = [
+        (["analyze", "99", "--db", simulated.url, "--signal"], "campaign 99"),
+        (["analyze", str(paper.campaign_id), "--db", paper.url, "--signal"], "imported"),
+    ]
+    for args, message in cases:
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, result.output
+        (line,) = result.stderr.strip().splitlines()
+        assert line.startswith("gyrostand: error: ") and message in line
+
+
+def test_an_imported_campaign_has_no_record(paper_report: Report) -> None:
+    section = paper_report.signal
+    assert section.record is None and section.noise is None and section.settle == ()
+    html = render_html(paper_report)
+    assert "Noise not characterised" in html and "Settle points: not recorded" in html
