@@ -13,15 +13,24 @@ Rule. With tol = tolerance_fraction x the plan's expected S{<delta>}_e (seed 000
 series observes from the end of the first block at which
 
 1. the least-squares fit of the record so far (seed 003 eqs 5-6, damped basis of eq 3 with the
-   plan's omega and xi, or all five unknowns when `fit_transient`) gives R^ a standard error
-   <= tol,
+   plan's omega and xi) gives R^ a standard error <= tol,
 2. the last `stable_estimates` estimates R^ lie within tol of each other (max - min), and
 3. the fitted transient, predicted over the N observation windows to come, stays within +-tol
    of R^: the observations are measured readings, so this is what keeps each of them within
-   tol of the settle point;
+   tol of the settle point.
 
-or at which the band criterion holds, whichever comes first (a transient the model does not
-describe falls back to waiting).
+Condition 3 is what takes the time: the estimate is typically stable after ~20 minutes of an
+84-minute compass, the reading needs ~40 to come within 0.015 deg of it. The band criterion is
+not a fallback (it may hold on the overshoot of a damped transient, 4.6 % of the step for
+xi/omega0 = 0.7, before the estimate does); it is only evaluated to record the time saved:
+measured when it held before, else predicted from the fitted transient. A transient the model
+does not describe (wrong period or damping in the plan) keeps the standard error up and ends in
+the settle timeout.
+
+omega and xi come from the plan (instrument data), not from the record: fitting them too
+(`analysis.settle.estimate_settle_point_free`) on records shorter than a period gave confident but
+wrong fits (on the paper campaign, 4 of 12 series started within 10 minutes, 0.10-0.28 deg off)
+at ~100 times the cost. Fit them once on a whole recorded transient instead.
 """
 
 from __future__ import annotations
@@ -35,7 +44,7 @@ import numpy as np
 
 from acquisition.plan import EstimatePlan, SettlePlan
 from analysis.errors import AnalysisError
-from analysis.settle import SettleEstimate, estimate_settle_point, estimate_settle_point_free
+from analysis.settle import SettleEstimate, estimate_settle_point
 
 MIN_BLOCKS = 6  # 3 state parameters + 3 degrees of freedom for S^2 and the noise correlation
 _PREDICTION_POINTS = 64  # grid on which the transient is predicted over the observation span
@@ -98,6 +107,7 @@ class SettleOutcome:
     estimate_deg: float
     standard_error_deg: float
     stable_since_s: float
+    stable_estimate_deg: float
     band_s: float | None
     band_measured: bool
 
@@ -111,7 +121,8 @@ class SettleOutcome:
         text = (
             f"settled by the estimate after {self.settle_s:.1f} s: settle point "
             f"{self.estimate_deg:.5f} deg (SE {self.standard_error_deg:.5f} deg, stable since "
-            f"{self.stable_since_s:.1f} s, last estimates within {check.spread_deg:.5f} deg, "
+            f"{self.stable_since_s:.1f} s at {self.stable_estimate_deg:.5f} deg, last estimates "
+            f"within {check.spread_deg:.5f} deg, "
             f"predicted transient over the observations {check.transient_deg:.5f} deg; "
             f"tolerance {check.tolerance_deg:.5f} deg); "
         )
@@ -123,7 +134,7 @@ class SettleOutcome:
 
 _OUTCOME = re.compile(
     r"settled by the estimate after (?P<settle>[\d.]+) s: settle point (?P<est>-?[\d.]+) deg "
-    r"\(SE (?P<se>[\d.]+) deg, stable since (?P<stable>[\d.]+) s"
+    r"\(SE (?P<se>[\d.]+) deg, stable since (?P<stable>[\d.]+) s at (?P<at>-?[\d.]+) deg"
 )
 _BAND = re.compile(r"band criterion (?P<how>held|predicted) after (?P<band>[\d.]+) s")
 
@@ -139,6 +150,7 @@ def parse_outcome(message: str) -> SettleOutcome | None:
         estimate_deg=float(m["est"]),
         standard_error_deg=float(m["se"]),
         stable_since_s=float(m["stable"]),
+        stable_estimate_deg=float(m["at"]),
         band_s=None if band is None else float(band["band"]),
         band_measured=band is not None and band["how"] == "held",
     )
@@ -154,7 +166,7 @@ class EarlySettle:
         self._mean_deg: list[float] = []
         self._estimates_deg: list[float] = []
         self.last: SettleCheck | None = None
-        self.stable_since_s: float | None = None  # first block end with conditions 1-2
+        self.stable: SettleCheck | None = None  # first check meeting conditions 1-2
         self.band_s: float | None = None  # first block end where the band criterion held
 
     def add_block(self, mid_s: float, mean_deg: float, end_s: float, band: bool) -> SettleCheck:
@@ -176,15 +188,13 @@ class EarlySettle:
             ahead = np.linspace(end_s, end_s + self.observe_span_s, _PREDICTION_POINTS)
             transient = float(np.max(np.abs(estimate.predict(ahead) - r)))
         self.last = SettleCheck(end_s, estimate, spread, transient, tol)
-        if self.last.stable and self.stable_since_s is None:
-            self.stable_since_s = end_s
+        if self.last.stable and self.stable is None:
+            self.stable = self.last
         return self.last
 
     def _fit(self) -> SettleEstimate | None:
         t, y, p = np.array(self._t_s), np.array(self._mean_deg), self.plan
         try:
-            if p.fit_transient:
-                return estimate_settle_point_free(t, y, p.omega_rad_s, p.damping_per_s)
             return estimate_settle_point(t, y, p.omega_rad_s, p.damping_per_s)
         except AnalysisError:  # too short or degenerate yet: no estimate at this block
             return None
@@ -194,9 +204,9 @@ class EarlySettle:
     ) -> SettleOutcome:
         """The outcome once `last` is ready; `means_deg` are all block means of the series (for
         the band prediction), `reference_deg` turns deviations into headings."""
-        check = self.last
+        check, stable = self.last, self.stable
         assert check is not None and check.ready and check.estimate is not None
-        assert self.stable_since_s is not None
+        assert stable is not None and stable.estimate is not None
         band_s = self.band_s
         if band_s is None:
             band_s = predict_band_settle_s(means_deg, width_s, check.t_s, check.estimate, settle)
@@ -204,7 +214,8 @@ class EarlySettle:
             settle_s=check.t_s,
             estimate_deg=reference_deg + check.estimate.settle_point_deg,
             standard_error_deg=check.estimate.standard_error_deg,
-            stable_since_s=self.stable_since_s,
+            stable_since_s=stable.t_s,
+            stable_estimate_deg=reference_deg + stable.estimate.settle_point_deg,
             band_s=band_s,
             band_measured=self.band_s is not None,
         )

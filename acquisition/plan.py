@@ -87,15 +87,14 @@ class SettlePlan:
 class EstimatePlan:
     """Early settle (seed 003): observe once the settle point estimated from the transient is
     stable. The transient's undamped period 2 pi / omega0 and damping ratio xi / omega0 are
-    instrument data (`fit_transient` = true fits omega and xi too, starting from them); the
-    tolerance is `tolerance_fraction` x the expected S{<delta>}_e of seed 000 eq 2.6."""
+    instrument data; the tolerance is `tolerance_fraction` x the expected S{<delta>}_e of
+    seed 000 eq 2.6."""
 
     undamped_period_s: float
     damping_ratio: float
     expected_se_deg: float
     tolerance_fraction: float
     stable_estimates: int
-    fit_transient: bool
 
     @property
     def tolerance_deg(self) -> float:
@@ -476,7 +475,6 @@ _ESTIMATE_KEYS = (
     "expected_se_deg",
     "tolerance_fraction",
     "stable_estimates",
-    "fit_transient",
 )
 
 
@@ -493,9 +491,8 @@ def _estimate(st: _Fields, method: str) -> EstimatePlan | None:
         undamped_period_s=st.number("undamped_period_s", _REQUIRED, gt=0),
         damping_ratio=st.number("damping_ratio", _REQUIRED, ge=0, lt=1),
         expected_se_deg=st.number("expected_se_deg", _REQUIRED, gt=0),
-        tolerance_fraction=st.number("tolerance_fraction", 1.0, gt=0, le=1),
+        tolerance_fraction=st.number("tolerance_fraction", 0.5, gt=0, le=1),
         stable_estimates=st.integer("stable_estimates", 3, ge=2),
-        fit_transient=st.flag("fit_transient", False),
     )
 
 
