@@ -129,7 +129,7 @@ def test_excursion_verdict_against_rice_and_its_inverse() -> None:
 
 
 def test_a_frequent_excursion_breaks_the_poisson_assumption() -> None:
-    ringing = CorrelationModel(4e-5, 0.02, 1.0)  # lightly damped: tau_k ~ 30 s, ~3 s apart
+    ringing = CorrelationModel(4e-5, 0.1, 0.8)  # lightly damped: tau_k 6.5 s, ~4 s apart
     verdict = excursion_verdict(ringing, ExcursionCriterion(0.001, 600.0, 0.05))
     assert verdict.verdict == FAIL and not verdict.excursions.poisson_valid
     assert "Poisson assumption does not hold" in verdict.detail

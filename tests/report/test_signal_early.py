@@ -4,18 +4,23 @@ as the series rows and the "early settle" events record them; a campaign that wa
 criterion saved nothing."""
 
 import re
+import subprocess
+from dataclasses import replace
 
 import pytest
 from typer.testing import CliRunner
 
-from analysis.report.build import Report
-from analysis.report.html import render_html
+from analysis.report.build import Report, build_report
+from analysis.report.compliance import load_profile
 from analysis.report.json_doc import report_document
+from analysis.report.model import ExcursionCriterion
+from analysis.report.writer import write_report
 from db.models import Event, Series
 from gyrostand.cli import app
 
-from .conftest import SIM_TRIALS, Simulated, run_simulated
+from .conftest import GENERATED, SIM_TRIALS, Rendered, Simulated, run_simulated
 
+CRITERION = ExcursionCriterion(tolerance_deg=0.03, duration_s=600.0, max_risk=0.01)
 EARLY = """[settle]
 method = "estimate"
 undamped_period_s = 240.0
@@ -40,7 +45,19 @@ def early(tmp_path_factory: pytest.TempPathFactory) -> Simulated:
 
 @pytest.fixture(scope="module")
 def early_report(early: Simulated) -> Report:
-    return early.report()
+    """The early-settle campaign's report, judged by an [acceptance] table as well."""
+    report = early.report()
+    inputs = replace(report.inputs, acceptance=CRITERION)
+    return build_report(inputs, report.analysis, load_profile(), generated_at=GENERATED)
+
+
+@pytest.fixture(scope="module")
+def early_files(early_report: Report, tmp_path_factory: pytest.TempPathFactory) -> Rendered:
+    files = write_report(early_report, tmp_path_factory.mktemp("early-report"), ("html", "pdf"))
+    text = subprocess.run(
+        ["pdftotext", "-layout", str(files["pdf"]), "-"], check=True, capture_output=True
+    ).stdout.decode()
+    return Rendered(files, text, 0)
 
 
 def test_every_series_settled_early_as_recorded(early: Simulated, early_report: Report) -> None:
@@ -66,8 +83,8 @@ def test_every_series_settled_early_as_recorded(early: Simulated, early_report: 
     assert early_report.signal.time_saved_s == pytest.approx(sum(r.saved_s for r in rows))
 
 
-def test_the_report_shows_the_saving(early_report: Report) -> None:
-    html = render_html(early_report)
+def test_html_and_json_show_the_saving(early_report: Report, early_files: Rendered) -> None:
+    html = early_files.files["html"].read_text()
     section = early_report.signal
     assert f"Stand time saved: {section.time_saved_s:.1f} s" in html
     assert html.count("<td>estimate</td>") == len(section.settle)
@@ -75,6 +92,25 @@ def test_the_report_shows_the_saving(early_report: Report) -> None:
     doc = report_document(early_report)["signal"]
     assert doc["time_saved_s"] == section.time_saved_s
     assert [r["criterion"] for r in doc["settle"]] == ["estimate"] * len(section.settle)
+
+
+def test_pdf_shows_the_new_sections(early_report: Report, early_files: Rendered) -> None:
+    section = early_report.signal
+    for needle in (
+        "10. The reading's random part",
+        "Correlation function (eqs 8.92, 8.89)",
+        "Spectrum and hidden harmonics",
+        "Allan deviation",
+        "Sampling interval and independence",
+        f"{section.noise.sampling.interval_s:.3g} s",
+        "Settle points",
+        f"Stand time saved: {section.time_saved_s:.1f} s",
+        "Acceptance by excursions",
+        f"{section.acceptance.verdict} P(excursion",
+        f"{section.noise.exponential.decay_per_s:.4g}",
+        "11. Compliance",
+    ):
+        assert needle in early_files.pdf_text, needle
 
 
 def test_waiting_for_the_band_saves_nothing(simulated_report: Report) -> None:

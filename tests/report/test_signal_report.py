@@ -1,13 +1,11 @@
 """Report section 10 of the simulated campaign (tests/report/conftest.py): the stationary record
 against the raw log decoded frame by frame with cantools, the observation correlations against
 their closed form, settle rows against the database, the section in HTML, PDF and JSON, and
-`gyrostand analyze CAMPAIGN --signal`."""
+`gyrostand analyze CAMPAIGN --signal`. The PDF is looked at in test_signal_early.py."""
 
 import json
 import math
-import subprocess
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,12 +17,11 @@ from analysis.report.compliance import load_profile
 from analysis.report.html import render_html
 from analysis.report.json_doc import report_document
 from analysis.report.model import ExcursionCriterion
-from analysis.report.writer import write_report
 from db.models import Series, Trial
 from gyrostand.cli import app
 from stand.protocol import Codec, HeadingFrame
 
-from .conftest import GENERATED, Simulated, Stored
+from .conftest import GENERATED, Rendered, Simulated, Stored
 
 runner = CliRunner()
 CRITERION = ExcursionCriterion(tolerance_deg=0.05, duration_s=600.0, max_risk=0.01)
@@ -136,25 +133,6 @@ def test_html_and_json_carry_the_section(with_acceptance: Report) -> None:
     assert report_document(again)["signal"] == doc["signal"]  # deterministic
 
 
-def test_pdf_shows_the_section(with_acceptance: Report, tmp_path: Path) -> None:
-    files = write_report(with_acceptance, tmp_path, ("pdf",))
-    text = subprocess.run(
-        ["pdftotext", "-layout", str(files["pdf"]), "-"], check=True, capture_output=True
-    ).stdout.decode()
-    section = with_acceptance.signal
-    for needle in (
-        "10. The reading's random part",
-        "Correlation function (eqs 8.92, 8.89)",
-        "Spectrum and hidden harmonics",
-        "Allan deviation",
-        "Settle points",
-        "Acceptance by excursions",
-        section.acceptance.verdict,
-        f"{section.noise.exponential.decay_per_s:.4g}",
-    ):
-        assert needle in text, needle
-
-
 def test_cli_prints_the_campaign_section(simulated: Simulated, simulated_report: Report) -> None:
     args = ["analyze", str(simulated.campaign_id), "--db", simulated.url, "--signal"]
     text = runner.invoke(app, args)
@@ -179,8 +157,8 @@ def test_cli_errors_for_a_campaign(paper: Stored, simulated: Simulated) -> None:
         assert line.startswith("gyrostand: error: ") and message in line
 
 
-def test_an_imported_campaign_has_no_record(paper_report: Report) -> None:
+def test_an_imported_campaign_has_no_record(paper_report: Report, paper_files: Rendered) -> None:
     section = paper_report.signal
     assert section.record is None and section.noise is None and section.settle == ()
-    html = render_html(paper_report)
+    html = paper_files.files["html"].read_text()
     assert "Noise not characterised" in html and "Settle points: not recorded" in html
