@@ -95,7 +95,11 @@ def register(app: typer.Typer) -> None:
         ] = None,
         plan: Annotated[
             Path | None,
-            typer.Option("--plan", help="Campaign plan TOML: constants, start, forecast."),
+            typer.Option(
+                "--plan",
+                help="Campaign plan TOML: constants, start, forecast (with --csv); protocol "
+                "and [acceptance] (with --signal --log).",
+            ),
         ] = None,
         as_json: Annotated[bool, typer.Option("--json", help="Print one JSON document.")] = False,
         signal: Annotated[

@@ -12,7 +12,7 @@ deviation, sampling interval 8.94); the correlation of successive observations o
 excursions (8.79-8.88) when the plan asks for it. Renderers only format these numbers.
 """
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -34,6 +34,11 @@ TIME_SAVED_NOTE = (
     "predicted within the plan's max_wait_s; not recorded: no settle criterion is recorded."
 )
 NO_ACCEPTANCE = "The plan asks for no acceptance by excursions (no [acceptance] table)."
+RICE_NOTE = (
+    "Rice's formula on the smooth correlation model. The white part of the reading is left out: "
+    "Rice needs a differentiable reading, and the excursions of uncorrelated sensor noise depend "
+    "only on how often it is sampled."
+)
 
 
 def uniform_record(t_ms: np.ndarray, heading_deg: np.ndarray, source: str) -> ReadingRecord:
@@ -341,32 +346,31 @@ def signal_section(
             trend, noise = _characterise(reading)
         except (AnalysisError, ValueError) as exc:
             error = str(exc)
-    if noise is None or reading is None:
-        why = error or note
-        return SignalSection(
-            reading,
-            note,
-            trend,
-            None,
-            error,
-            (),
-            settle,
-            None,
-            NO_ACCEPTANCE if acceptance is None else f"Not assessed: {why}",
-        )
-    observations = observation_correlations(
-        noise.exponential, records, reading.dt_s, noise.sampling.max_correlation
+    unassessed = SignalSection(
+        record=reading,
+        record_note=note,
+        trend_deg_per_h=trend,
+        noise=None,
+        noise_error=error,
+        observations=(),
+        settle=settle,
+        acceptance=None,
+        acceptance_note=NO_ACCEPTANCE if acceptance is None else f"Not assessed: {error or note}",
     )
+    if noise is None or reading is None:
+        return unassessed
     verdict, acceptance_note = None, NO_ACCEPTANCE
     if acceptance is not None:
         try:
-            verdict = excursion_verdict(noise.smooth, acceptance)
-            acceptance_note = (
-                "Rice's formula on the smooth correlation model (the white part of the reading is "
-                "left out: it is the sensor's, not the instrument's motion)."
-            )
+            verdict, acceptance_note = excursion_verdict(noise.smooth, acceptance), RICE_NOTE
         except (AnalysisError, ValueError) as exc:
             acceptance_note = f"Not assessed: {exc}"
-    return SignalSection(
-        reading, note, trend, noise, None, observations, settle, verdict, acceptance_note
+    return replace(
+        unassessed,
+        noise=noise,
+        observations=observation_correlations(
+            noise.exponential, records, reading.dt_s, noise.sampling.max_correlation
+        ),
+        acceptance=verdict,
+        acceptance_note=acceptance_note,
     )

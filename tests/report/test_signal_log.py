@@ -17,7 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from acquisition.plan import parse_plan
-from acquisition.signal_record import log_signal, still_stretch
+from acquisition.signal_record import log_record, log_signal, still_stretch
 from analysis.report.signal import SignalSection
 from gyrostand.cli import app
 from stand.engine import StandEngine
@@ -91,6 +91,18 @@ def test_fitted_noise_matches_the_simulator(section: SignalSection) -> None:
     assert harmonic.false_alarm_probability < 1e-6
     assert section.reading_interval_ok  # 0.1 s readings, Delta of seconds
     assert noise.sampling.interval_s > 10 * section.record.dt_s
+
+
+def test_an_asc_log_gives_the_same_record(tmp_path: Path) -> None:
+    stand = StandEngine(SimConfig(compass=CompassParams(transient=False), noise=NOISE, seed=2))
+    frames = stand.advance_to(120.0)
+    for path, writer in ((tmp_path / "a.blf", can.BLFWriter), (tmp_path / "a.asc", can.ASCWriter)):
+        with writer(path) as w:
+            for frame in frames:
+                w.on_message_received(frame)
+    blf, asc = (log_record(tmp_path / name, Codec()) for name in ("a.blf", "a.asc"))
+    assert asc.reading_deg.size == blf.reading_deg.size == 1201
+    assert asc.reading_deg == pytest.approx(blf.reading_deg, abs=1e-12)
 
 
 def test_no_harmonic_is_reported_in_plain_noise(tmp_path: Path) -> None:
