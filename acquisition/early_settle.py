@@ -7,7 +7,8 @@ reading's components at the rocking frequency p and 2p, and averages the sensor'
 noise (20 s correlation time against 30-60 s blocks). One estimate per block: a modest cadence
 (every 30-60 stand seconds) on a record of at most a few hundred points. The mean over a block of
 e^(-xi t) (A_c sin(omega t) + A_s cos(omega t)) is again of that form at the block's middle (other
-A_c, A_s), so the block means fitted at their mid times leave the settle point R unbiased.
+A_c, A_s), so the block means fitted at their mid times leave the settle point R unbiased, and
+the fitted model predicts window means: what an observation is.
 
 Rule. With tol = tolerance_fraction x the plan's expected S{<delta>}_e (seed 000 eq 2.6), the
 series observes from the end of the first block at which
