@@ -74,8 +74,10 @@ max_wait_s = 3600.0
 confirm_s = 30.0
 
 [timeouts]
-ack_s = 5.0
-bus_silence_s = 5.0
+# The campaign judges the ack in stand time as ack_s x the plan's speedup, which is 1 on a real
+# interface: the simulator's clock runs SPEEDUP x faster, so 120 s here is 3 wall seconds.
+ack_s = 120.0
+bus_silence_s = 10.0
 
 [bus]
 simulated = false
