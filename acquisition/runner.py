@@ -50,11 +50,9 @@ def prepare(plan: Plan) -> None:
 
 
 def sha256_of(path: Path) -> str:
-    digest = hashlib.sha256()
+    """The SHA-256 of a file (the raw log's fingerprint stored with the campaign)."""
     with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+        return hashlib.file_digest(f, "sha256").hexdigest()
 
 
 class LiveCommander:

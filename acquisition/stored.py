@@ -31,6 +31,7 @@ from acquisition.bus import codec_for
 from acquisition.early_settle import parse_outcome
 from acquisition.logfile import read_raw_frames
 from acquisition.plan import Plan, PlanError, parse_plan
+from acquisition.runner import sha256_of
 from acquisition.signal_record import acceptance_of, still_series_record
 from acquisition.store import software_version
 from analysis.campaign import CampaignAnalysis, analyze_campaign, json_safe
@@ -207,14 +208,6 @@ def _when(value: datetime | None) -> str | None:
     return None if value is None else value.isoformat(sep=" ", timespec="seconds")
 
 
-def sha256_file(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def _raw_log_check(campaign: Campaign) -> tuple[str, Path | None]:
     """How the recorded raw log checks out, and its path when it can be used."""
     if not campaign.raw_log_path:
@@ -222,7 +215,7 @@ def _raw_log_check(campaign: Campaign) -> tuple[str, Path | None]:
     path = Path(campaign.raw_log_path)
     if not path.is_file():
         return "file not found", None
-    actual = sha256_file(path)
+    actual = sha256_of(path)
     if actual != campaign.raw_log_sha256:
         return f"MISMATCH: the file's SHA-256 is {actual}", None
     return "verified", path
