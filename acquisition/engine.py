@@ -7,6 +7,10 @@ how the stream is cut into batches nor on how fast it arrives. Per trial i (seed
     stand still -> settle -> N observations, series j = 1 -> set K, A, tau + start -> confirm the
     stand tracks it -> settle -> N observations, series j = 2 -> stop
 
+Settled means the plan's band criterion holds over the settle blocks (window-long means), or,
+with `[settle] method = "estimate"`, that the settle point estimated online from the transient
+is stable and the reading predicted to stay near it (`acquisition.early_settle`, seed 003).
+
 Commands go out through a `Commander` (the live one talks to the stand; replay's does nothing):
 in both cases the engine waits for the stand's acknowledgement IN THE STREAM, so a replay of the
 raw log takes exactly the same decisions as the live run did. Results go to a `Sink` (the
@@ -677,12 +681,26 @@ class Engine:
             self._window = _Window(w.end_ms, w.end_ms + width)
             return
         if w.end_ms - self._settle_start > settle.max_wait_s * 1000:
-            self.fail(f"not settled within {settle.max_wait_s:g} s", kind="settle timeout")
+            self.fail(
+                f"not settled within {settle.max_wait_s:g} s{self._why_not()}",
+                kind="settle timeout",
+            )
             return
         next_start = w.end_ms
         if self._last_t is not None and self._last_t >= next_start + width:  # skip empty blocks
             next_start += (self._last_t - next_start) // width * width
         self._window = _Window(next_start, next_start + width)
+
+    def _why_not(self) -> str:
+        """What the early-settle rule last saw, for the settle timeout message."""
+        check = None if self._early is None else self._early.last
+        if check is None or check.estimate is None:
+            return ""
+        return (
+            f" (estimate: SE {check.estimate.standard_error_deg:.5f} deg, last estimates within "
+            f"{check.spread_deg:.5f} deg, predicted transient {check.transient_deg:.5f} deg; "
+            f"tolerance {check.tolerance_deg:.5f} deg)"
+        )
 
     def _early_settled(self, w: _Window) -> float:
         """Record how an early-settle series settled (an "early settle" event with the estimate

@@ -71,9 +71,11 @@ class ObservationPlan:
 
 @dataclass(frozen=True)
 class SettlePlan:
-    """Settled when the window means over the last `hold_s` stand seconds all lie within
-    +-`band_deg` of their mean and their least-squares trend moves the reading by at most
-    `drift_deg` over that time (a damped transient that is not over yet, seed 003)."""
+    """Settled (method "band") when the window means over the last `hold_s` stand seconds all
+    lie within +-`band_deg` of their mean and their least-squares trend moves the reading by at
+    most `drift_deg` over that time (a damped transient that is not over yet, seed 003). Method
+    "estimate" settles by `estimate` instead; the band criterion then only measures the time
+    saved. `max_wait_s` bounds both."""
 
     band_deg: float
     drift_deg: float

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from sqlalchemy import select
 
+from acquisition.batch import BatchDecoder, RawFrames
 from acquisition.early_settle import (
     MIN_BLOCKS,
     EarlySettle,
@@ -36,9 +37,10 @@ from acquisition.stored import campaign_report
 from analysis.report.compliance import load_profile
 from db.models import Event, Series, Trial
 from db.session import open_database, sqlite_url
+from stand.protocol import Codec
 from stand.simconfig import CompassParams, SimConfig
 
-from .harness import ROOT, Lockstep, Recorder, plan_text
+from .harness import ROOT, Lockstep, NoCommands, Recorder, plan_text
 
 # --- the rule on exact block means ------------------------------------------------------------
 
@@ -313,3 +315,31 @@ def test_bad_early_settle_keys_are_one_clear_error(edit: tuple[str, str], expect
         assert all(re.fullmatch(r"settle\.\w+: only applies .*", p) for p in problems)
     else:
         assert problems == [expected]
+
+
+def test_replay_in_other_batches_takes_the_same_decisions(early) -> None:
+    live, sim, _ = early
+    sink = Recorder()
+    engine = Engine(parse_plan(scaled_plan(EARLY_SETTLE)), sink, NoCommands())
+    decoder = BatchDecoder(Codec())
+    for start in range(0, len(sim.stream), 977):
+        chunk = sim.stream[start : start + 977]
+        engine.feed(decoder.decode(RawFrames.from_messages(start, chunk)))
+    assert engine.outcome == "completed"
+    assert sink.calls == live.calls
+
+
+def test_timeout_says_what_the_estimate_last_saw() -> None:
+    """A plan claiming a transient four times slower than the compass's never trusts the
+    estimate within the wait: the trial fails with the rule's last figures."""
+    settle = EARLY_SETTLE.replace(f"undamped_period_s = {SCALED_T0_S}", "undamped_period_s = 4800")
+    text = scaled_plan(settle).replace("max_wait_s = 3600.0", "max_wait_s = 1500.0")
+    sink, sim = Recorder(), Lockstep(scaled_config())
+    engine = Engine(parse_plan(text), sink, sim)
+    sim.run(engine)
+    failures = [a[2] for a in sink.of("event") if a[0] == "settle timeout"]
+    assert failures and all(
+        re.fullmatch(r"not settled within 1500 s \(estimate: SE [\d.]+ deg, .*tolerance "
+                     r"0\.01500 deg\)", f)
+        for f in failures
+    )  # fmt: skip
