@@ -31,7 +31,9 @@ the settle timeout.
 omega and xi come from the plan (instrument data), not from the record: fitting them too
 (`analysis.settle.estimate_settle_point_free`) on records shorter than a period gave confident but
 wrong fits (on the paper campaign, 4 of 12 series started within 10 minutes, 0.10-0.28 deg off)
-at ~100 times the cost. Fit them once on a whole recorded transient instead.
+at ~100 times the cost. Fit them once on a whole recorded transient instead, and know them well:
+a plan 10 % short on the period, or 0.05 low on the damping ratio, about doubles the error of the
+series means; as much the other way only costs time (bench/bench_early_settle.py).
 """
 
 from __future__ import annotations
