@@ -30,4 +30,4 @@ bench: $(STAMP)
 # docs/socketcan.md). On a machine that has vcan0 itself: .venv/bin/pytest -m socketcan
 .PHONY: test-socketcan
 test-socketcan: $(STAMP)
-	tools/vcan-vm run $(VENV)/bin/pytest -p no:cacheprovider -m socketcan tests/socketcan
+	tools/vcan-vm run $(VENV)/bin/pytest -m socketcan --durations=5 tests/socketcan
