@@ -37,7 +37,7 @@ operator = "socketcan test"
 n_obs = 3
 database = "{folder}/campaign.sqlite"
 raw_log_dir = "{folder}/raw"
-on_trial_failure = "continue"
+on_trial_failure = "{on_failure}"
 
 [instrument]
 model = "simulated compass"
@@ -94,10 +94,11 @@ role = "{3}"
 """
 
 
-def plan_text(folder: Path, channel: str, trials: list[tuple], band_deg: float) -> str:
-    return PLAN.format(folder=folder, channel=channel, band_deg=band_deg) + "".join(
-        TRIAL.format(*t) for t in trials
-    )
+def plan_text(
+    folder: Path, channel: str, trials: list[tuple], band_deg: float, on_failure: str = "continue"
+) -> str:
+    head = PLAN.format(folder=folder, channel=channel, band_deg=band_deg, on_failure=on_failure)
+    return head + "".join(TRIAL.format(*t) for t in trials)
 
 
 def gyrostand_command() -> list[str]:

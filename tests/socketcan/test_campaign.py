@@ -165,15 +165,17 @@ def test_malformed_heading_frame_is_recorded_as_an_acquisition_event(run: Run) -
     assert "Traceback" not in run.campaign.stderr.read_text()
 
 
-def test_interface_down_mid_campaign_is_recorded_and_handled_cleanly(
+def test_interface_down_mid_campaign_fails_the_trial_then_resume_recovers(
     tmp_path_factory, channel, stand
 ) -> None:
-    """`ip link set <channel> down` during trial 2, up again a second later."""
+    """`ip link set <channel> down` during trial 2 and up a second later, with
+    on_trial_failure = "pause": trial 2 fails naming the kernel's ENETDOWN, the campaign pauses
+    cleanly, and `gyrostand campaign resume` on the restored interface completes trial 3."""
     if os.geteuid() != 0:
         pytest.skip("taking the interface down needs root")
     folder = tmp_path_factory.mktemp("link-down")
     plan = folder / "plan.toml"
-    plan.write_text(plan_text(folder, channel, TRIALS[:3], BAND_DEG))
+    plan.write_text(plan_text(folder, channel, TRIALS[:3], BAND_DEG, on_failure="pause"))
     db = folder / "campaign.sqlite"
     campaign = Process.start([*gyrostand_command(), "campaign", "run", str(plan), "--quiet"],
                              folder, "campaign")  # fmt: skip
@@ -187,17 +189,27 @@ def test_interface_down_mid_campaign_is_recorded_and_handled_cleanly(
     finally:
         subprocess.run(["ip", "link", "set", channel, "up"], check=False)
         campaign.interrupt()
-    err = campaign.stderr.read_text()
-    assert code in (0, 1) and "Traceback" not in err, campaign.output()
-    ((status,),) = query(db, "SELECT status FROM campaign")
-    assert status in ("completed", "paused", "failed", "stopped")
-    trials = query(db, 'SELECT "index", status, failure_reason FROM trial ORDER BY "index"')
-    assert trials[0][1] == "completed"  # before the interface went down
-    for _, trial_status, reason in trials[1:]:
-        assert trial_status == "completed" or (trial_status == "failed" and reason), trials
+    assert code == 1 and "Traceback" not in campaign.stderr.read_text(), campaign.output()
+    assert "gyrostand campaign resume 1" in campaign.stdout.read_text()
+    trials_sql = 'SELECT "index", status, failure_reason FROM trial ORDER BY "index"'
+    assert query(db, "SELECT status FROM campaign") == [("paused",)]
+    (first, second, third) = query(db, trials_sql)
+    assert first == (1, "completed", None)
+    assert second[1] == "failed" and "Network is down" in second[2], second
+    assert third == (3, "pending", None)
     events = query(db, "SELECT kind, message FROM event WHERE severity = 'error'")
-    assert any("Network is down" in m for _, m in events), events  # the kernel's ENETDOWN
-    assert trials[1][1] == "completed" or "Network is down" in trials[1][2], trials
+    assert any(kind == "bus error" and "Network is down" in m for kind, m in events), events
+
+    resume = subprocess.run(
+        [*gyrostand_command(), "campaign", "resume", "1", "--db", str(db), "--quiet"],
+        cwd=folder,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+    )
+    assert resume.returncode == 0, resume.stdout + resume.stderr
+    assert query(db, "SELECT status FROM campaign") == [("completed",)]
+    assert query(db, trials_sql) == [first, second, (3, "completed", None)]
 
 
 def test_campaign_over_socketcan_completes_into_sqlite_and_is_analysed(run: Run) -> None:
