@@ -228,7 +228,8 @@ def _live(config: SimConfig, run: dict[str, Any], bus: can.BusABC) -> None:
             if recorder is not None:
                 recorder.stop()
     _out.print(
-        f"sent {simulator.frames_sent} frames ({simulator.frames_failed} failed), "
+        f"sent {simulator.frames_sent} frames ({simulator.frames_failed} failed, "
+        f"{simulator.receive_errors} receive errors), "
         f"stand time {simulator.stand_time_s:.1f} s"
     )
 

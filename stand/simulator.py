@@ -6,6 +6,7 @@ as they arrive. Frames carry stand time, so a receiver behaves the same at any s
 
 from __future__ import annotations
 
+import errno
 import logging
 import threading
 import time
@@ -56,6 +57,7 @@ class Simulator:
         self.error: BaseException | None = None
         self.frames_sent = 0
         self.frames_failed = 0
+        self.receive_errors = 0
         interval_wall_s = 1.0 / (config.heading_rate_hz * config.speedup)
         self._batch_wall_s = min(max(interval_wall_s, _MIN_BATCH_WALL_S), _MAX_BATCH_WALL_S)
 
@@ -94,14 +96,25 @@ class Simulator:
             wall0 = time.monotonic()
             while not self._stop.is_set():
                 self._send(self._advance(wall0))
-                msg = self.bus.recv(timeout=self._batch_wall_s)
+                msg = self._recv(self._batch_wall_s)
                 while msg is not None:  # answer each command at the stand time it arrives
                     self._send(self._advance(wall0))
                     self._send(self.engine.receive(msg))
-                    msg = self.bus.recv(timeout=0)
+                    msg = self._recv(0)
         except Exception as exc:  # reported by stop(); the thread must not die silently
             log.exception("simulator stopped")
             self.error = exc
+
+    def _recv(self, timeout_s: float) -> can.Message | None:
+        """The next command, or None. A receive error (e.g. the kernel's ENETDOWN while the link
+        is down) is logged and counted and the stand keeps running, as a real stand does."""
+        try:
+            return self.bus.recv(timeout=timeout_s)
+        except can.CanOperationError as exc:
+            self.receive_errors += 1
+            log.warning("receive failed: %s", exc)
+            self._stop.wait(self._batch_wall_s)
+            return None
 
     def _advance(self, wall0: float) -> list[can.Message]:
         return self.engine.advance_to((time.monotonic() - wall0) * self.config.speedup)
@@ -122,8 +135,9 @@ class Simulator:
             try:
                 self.bus.send(msg)
                 return True
-            except can.CanOperationError as exc:  # e.g. a full SocketCAN transmit queue
-                if time.monotonic() > deadline or self._stop.is_set():
+            except can.CanOperationError as exc:
+                queue_full = exc.error_code in (None, errno.ENOBUFS)  # worth retrying
+                if not queue_full or time.monotonic() > deadline or self._stop.is_set():
                     log.warning("frame 0x%X not sent: %s", msg.arbitration_id, exc)
                     return False
                 time.sleep(0.001)

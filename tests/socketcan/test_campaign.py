@@ -191,6 +191,7 @@ def test_interface_down_mid_campaign_fails_the_trial_then_resume_recovers(
         campaign.interrupt()
     assert code == 1 and "Traceback" not in campaign.stderr.read_text(), campaign.output()
     assert "gyrostand campaign resume 1" in campaign.stdout.read_text()
+    assert stand.popen.poll() is None, f"the stand died with the link:\n{stand.output()}"
     trials_sql = 'SELECT "index", status, failure_reason FROM trial ORDER BY "index"'
     assert query(db, "SELECT status FROM campaign") == [("paused",)]
     (first, second, third) = query(db, trials_sql)
@@ -207,7 +208,7 @@ def test_interface_down_mid_campaign_fails_the_trial_then_resume_recovers(
         text=True,
         timeout=TIMEOUT_S,
     )
-    assert resume.returncode == 0, resume.stdout + resume.stderr
+    assert resume.returncode == 0, f"{resume.stdout}{resume.stderr}{query(db, trials_sql)}"
     assert query(db, "SELECT status FROM campaign") == [("completed",)]
     assert query(db, trials_sql) == [first, second, (3, "completed", None)]
 

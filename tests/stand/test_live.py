@@ -1,5 +1,6 @@
 """Controller + simulator in-process on python-can's `virtual` bus (one channel per test)."""
 
+import errno
 import threading
 import time
 import uuid
@@ -8,6 +9,7 @@ from collections.abc import Iterator
 import can
 import numpy as np
 import pytest
+from can.interfaces.virtual import VirtualBus
 
 from stand.controller import StandController, StandError, StandRefused, StandTimeout
 from stand.protocol import Codec, HeadingFrame, Reason
@@ -56,10 +58,11 @@ class Rig:
         ack_timeout_s: float = 2.0,
         interface: str = "virtual",
         channel: str | None = None,
+        sim_bus: can.BusABC | None = None,
         **groups,
     ) -> None:
         channel = channel or f"gyrostand-test-{uuid.uuid4()}"
-        self.sim_bus = can.Bus(interface=interface, channel=channel)
+        self.sim_bus = sim_bus or can.Bus(interface=interface, channel=channel)
         self.bus = can.Bus(interface=interface, channel=channel)
         self.codec = Codec()
         self.controller = StandController(self.bus, self.codec, ack_timeout_s=ack_timeout_s)
@@ -166,6 +169,39 @@ def test_stopping_the_notifier_does_not_command_the_stand(rig: Rig) -> None:
     rig.notifier.stop()  # python-can calls Listener.stop() here: it must not wait for an ack
     assert time.monotonic() - started < 1.0
     assert rig.simulator.engine.rocking
+
+
+class LinkDownOnce(VirtualBus):
+    """A virtual bus whose first receive and first send fail as python-can's SocketCAN bus does
+    on a downed link (ENETDOWN)."""
+
+    def __init__(self, channel: str) -> None:
+        super().__init__(channel=channel)
+        self.recv_failures = self.send_failures = 1
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self.recv_failures:
+            self.recv_failures -= 1
+            raise can.CanOperationError("Error receiving: Network is down", errno.ENETDOWN)
+        return super()._recv_internal(timeout)
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if self.send_failures:
+            self.send_failures -= 1
+            raise can.CanOperationError("Failed to transmit: Network is down", errno.ENETDOWN)
+        super().send(msg, timeout)
+
+
+def test_stand_keeps_running_through_a_link_down() -> None:
+    """ENETDOWN on receive is counted, not fatal; a frame that meets ENETDOWN is dropped at once
+    (only a full transmit queue is retried); commands are answered afterwards."""
+    channel = f"gyrostand-test-{uuid.uuid4()}"
+    with Rig(speedup=200, channel=channel, sim_bus=LinkDownOnce(channel)) as rig:
+        rig.controller.set_rocking(31.0, 23.5, 6.2)
+        rig.controller.start()
+        rig.wait_status(lambda s: s.rocking)
+        assert (rig.simulator.receive_errors, rig.simulator.frames_failed) == (1, 1)
+        assert rig.simulator.error is None
 
 
 @pytest.mark.socketcan
