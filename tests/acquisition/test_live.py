@@ -3,13 +3,17 @@ speed-up: the paper's design runs to completion, the database holds N observatio
 the fitted C and T cover the simulator's true values, and a replay of the raw log re-derives
 exactly the same campaign."""
 
+import errno
 from pathlib import Path
 
+import can
 import numpy as np
 import pytest
+from can.interfaces.virtual import VirtualBus
 from scipy import stats
 from sqlalchemy import select
 
+from acquisition.bus import LiveBus
 from acquisition.plan import parse_plan
 from acquisition.runner import replay, run_live
 from acquisition.store import CampaignStore
@@ -21,6 +25,8 @@ from db.session import open_database, sqlite_url
 from stand.simconfig import CompassParams
 
 from .harness import ROOT
+
+ACK_ID = 0x81  # STAND_ACK in stand/gyrostand.dbc
 
 FAST_SIM = """
 [bus.simulator]
@@ -188,3 +194,48 @@ def test_asc_raw_log_replays_to_the_same_campaign(tmp_path: Path) -> None:
     replayed = replay(plan, sessions, live.raw_log)
     assert observations(sessions, replayed.campaign_id) == observations(sessions, live.campaign_id)
     assert len(observations(sessions, live.campaign_id)) == 2 * 2 * 3
+
+
+class LinkDropsAfterAcks(VirtualBus):
+    """The campaign's bus: after the stand's `after`-th ack, one receive fails with ENETDOWN, as
+    python-can's SocketCAN bus does when the link goes down."""
+
+    def __init__(self, channel: str, after: int) -> None:
+        super().__init__(channel=channel)
+        self.acks, self.after, self.failed = 0, after, False
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self.acks == self.after and not self.failed:
+            self.failed = True
+            raise can.CanOperationError("Error receiving: Network is down", errno.ENETDOWN)
+        msg, filtered = super()._recv_internal(timeout)
+        if msg is not None and msg.arbitration_id == ACK_ID:
+            self.acks += 1
+        return msg, filtered
+
+
+def test_bus_error_fails_one_trial_and_the_campaign_continues(tmp_path: Path, monkeypatch) -> None:
+    """on_trial_failure = "continue": the trial running when the bus fails is failed with the
+    bus's reason, recorded as a bus error event, and the following trials complete."""
+    opened = LiveBus._open
+
+    def flaky(self: LiveBus, bus_plan) -> can.BusABC:
+        opened(self, bus_plan)
+        return LinkDropsAfterAcks(
+            self._channel, after=5
+        )  # trial 1: set, start, stop; 2: set, start
+
+    monkeypatch.setattr(LiveBus, "_open", flaky)
+    plan = parse_plan(paper_plan_text(tmp_path))
+    sessions = open_database(sqlite_url(tmp_path / "live.sqlite"))
+    store = CampaignStore.create(sessions, plan)
+    result = run_live(plan, store, quiet=True)
+    with sessions() as session:
+        trials = session.execute(
+            select(Trial.index, Trial.status, Trial.failure_reason).order_by(Trial.index)
+        ).all()
+        errors = session.scalars(select(Event.message).where(Event.kind == "bus error")).all()
+    assert [status for _, status, _ in trials] == ["completed", "failed"] + ["completed"] * 4
+    assert "Network is down" in trials[1][2]
+    assert len(errors) == 1 and "Network is down" in errors[0]
+    assert (result.trials_completed, result.trials_failed) == (5, 1)
