@@ -98,7 +98,7 @@ def register(app: typer.Typer) -> None:
             typer.Option(
                 "--plan",
                 help="Campaign plan TOML: constants, start, forecast (with --csv); protocol "
-                "and [acceptance] (with --signal --log).",
+                "and \\[acceptance] (with --signal --log).",
             ),
         ] = None,
         as_json: Annotated[bool, typer.Option("--json", help="Print one JSON document.")] = False,

@@ -1,8 +1,12 @@
 """The CLI skeleton: version, help, and honest non-zero exits for what is not built."""
 
+import re
 import subprocess
 import sys
+from collections.abc import Iterator
+from typing import Any
 
+import typer
 from typer.testing import CliRunner
 
 from gyrostand import __version__
@@ -33,3 +37,25 @@ def test_help_lists_command_groups() -> None:
         "demo",
     ):
         assert group in result.output
+
+
+def _commands(command: Any, path: tuple[str, ...] = ()) -> Iterator[tuple[tuple[str, ...], Any]]:
+    yield path, command
+    for name, sub in getattr(command, "commands", {}).items():
+        yield from _commands(sub, (*path, name))
+
+
+def test_help_keeps_bracketed_words() -> None:
+    """Rich reads "[word]" as markup and drops it: every bracketed word of a command's or an
+    option's help (plan tables such as [acceptance]) must reach the rendered --help."""
+    checked = 0
+    for path, command in _commands(typer.main.get_command(app)):
+        texts = [command.help or "", *(getattr(p, "help", None) or "" for p in command.params)]
+        wanted = [word for text in texts for word in re.findall(r"\[[a-z_]+\]", text)]
+        if not wanted:
+            continue
+        output = runner.invoke(app, [*path, "--help"], terminal_width=200).output
+        for word in wanted:
+            assert word in output, f"{' '.join(path)} --help lost {word}"
+            checked += 1
+    assert checked > 0
