@@ -12,41 +12,37 @@ The pieces are separate functions so other sources (a campaign in the database) 
 `settings_from_plan` -> `AnalysisSettings`, `run_analysis`, `emit`.
 """
 
+from __future__ import annotations
+
 import json
 import struct
 import zlib
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
-from sqlalchemy.exc import OperationalError
 
-from acquisition.plan import PlanError, load_plan
-from acquisition.signal_record import log_signal
-from acquisition.stored import analyze_stored, campaign_signal
-from analysis.campaign import CampaignAnalysis, analyze_campaign
-from analysis.csv_input import read_trials_csv
 from analysis.errors import AnalysisError
-from analysis.report.signal import SignalSection
-from analysis.report.signal_text import render_signal_text
-from analysis.settings import SEED_000_SETTINGS, AnalysisSettings
-from analysis.settings import settings_from_plan as plan_settings
-from analysis.text_report import render_text
-from analysis.trials import TrialInput
-from db.queries import CampaignNotFound
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
 from gyrostand.errors import fail
+
+if TYPE_CHECKING:
+    from analysis.campaign import CampaignAnalysis
+    from analysis.report.signal import SignalSection
+    from analysis.settings import AnalysisSettings
+    from analysis.trials import TrialInput
 
 PAPER_NOTE = (
     "note: no --plan given: using the seed-000 example constants, start values and ship "
     "forecast (Potemkin 1982)"
 )
-PAPER_SETTINGS = SEED_000_SETTINGS
 SIGNAL_SCHEMA = "gyrostand.signal/1"  # the report JSON's "signal" object, with this key added
 
 
 def settings_from_plan(path: Path) -> AnalysisSettings:
     """Read [instrument], [site], [analysis] and the optional [forecast] of a campaign plan."""
+    from analysis.settings import settings_from_plan as plan_settings
+
     try:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as exc:
@@ -59,6 +55,8 @@ def settings_from_plan(path: Path) -> AnalysisSettings:
 
 def run_analysis(trials: list[TrialInput], settings: AnalysisSettings) -> CampaignAnalysis:
     """The analysis, with analysis errors turned into one-line CLI failures."""
+    from analysis.campaign import analyze_campaign
+
     try:
         return analyze_campaign(
             trials,
@@ -74,6 +72,8 @@ def run_analysis(trials: list[TrialInput], settings: AnalysisSettings) -> Campai
 
 def emit(analysis: CampaignAnalysis, as_json: bool) -> None:
     """Print the analysis as text sections, or as one JSON document (keys: analysis.campaign)."""
+    from analysis.text_report import render_text
+
     if as_json:
         typer.echo(json.dumps(analysis.to_dict(), indent=2, allow_nan=False))
     else:
@@ -138,9 +138,12 @@ def register(app: typer.Typer) -> None:
             return
         if csv is None:
             fail("no source given: use --csv FILE (see examples/paper.csv) or a CAMPAIGN id")
+        from analysis.csv_input import read_trials_csv
+        from analysis.settings import SEED_000_SETTINGS
+
         if plan is None:
             typer.echo(PAPER_NOTE, err=True)
-            settings = PAPER_SETTINGS
+            settings = SEED_000_SETTINGS
         else:
             settings = settings_from_plan(plan)
         try:
@@ -153,6 +156,11 @@ def register(app: typer.Typer) -> None:
 def analyze_stored_campaign(db: str, campaign_id: int) -> CampaignAnalysis:
     """Analyse a campaign stored in the database (settings from its plan, constants from the
     campaign) and record the analysis run; one-line CLI errors."""
+    from sqlalchemy.exc import OperationalError
+
+    from acquisition.stored import analyze_stored
+    from db.queries import CampaignNotFound
+
     sessions = open_db(db, must_exist=True)
     try:
         with sessions.begin() as session:
@@ -173,6 +181,9 @@ def signal_of(
     end_s: float | None,
 ) -> SignalSection:
     """The signal analysis the --signal options ask for; one-line CLI errors."""
+    from acquisition.plan import PlanError, load_plan
+    from acquisition.signal_record import log_signal
+
     if csv is not None:
         fail("--signal reads a raw CAN log (a CAMPAIGN's or --log FILE), not --csv")
     if campaign is not None:
@@ -198,6 +209,9 @@ def signal_of(
 
 def campaign_signal_of(db: str, campaign_id: int) -> SignalSection:
     """The signal analysis of a stored campaign (read only); fails when it has no record."""
+    from acquisition.stored import campaign_signal
+    from db.queries import CampaignNotFound
+
     sessions = open_db(db, must_exist=True)
     try:
         with sessions() as session:
@@ -211,6 +225,8 @@ def campaign_signal_of(db: str, campaign_id: int) -> SignalSection:
 
 def emit_signal(section: SignalSection, as_json: bool) -> None:
     """Print the signal analysis as text, or as one JSON document (report section 10's keys)."""
+    from analysis.report.signal_text import render_signal_text
+
     if as_json:
         document = {"schema": SIGNAL_SCHEMA, **section.to_dict()}
         typer.echo(json.dumps(document, indent=2, allow_nan=False))

@@ -4,20 +4,19 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
-import can
 import typer
 from rich.console import Console
 from rich.table import Table
 
 from acquisition.plan import Plan, PlanError, load_plan
-from acquisition.runner import RunResult, prepare, replay, resume_store, run_live
-from acquisition.store import CampaignStore
-from db.queries import CampaignNotFound, campaign_summary, first_incomplete_series
-from db.session import DatabaseVersionError, database_url, open_database
-from gyrostand.cmd_data import DEFAULT_DB
+from gyrostand.cmd_data import DEFAULT_DB, open_db
 from gyrostand.errors import EXIT_FAILED, fail
+
+if TYPE_CHECKING:
+    from acquisition.runner import RunResult
+    from acquisition.store import CampaignStore
 
 _out = Console(highlight=False, soft_wrap=True)
 
@@ -38,6 +37,8 @@ def checked_plan(
     speedup: float | None,
     seed: int | None,
 ) -> Plan:
+    from acquisition.runner import prepare
+
     bus = plan.bus
     if interface is not None or channel is not None:
         if speedup is not None or seed is not None:
@@ -62,15 +63,6 @@ def checked_plan(
     return plan
 
 
-def open_sessions(db: str, *, must_exist: bool):  # type: ignore[no-untyped-def]
-    if must_exist and "://" not in db and not Path(db).exists():
-        fail(f"no database at {db}")
-    try:
-        return open_database(database_url(db))
-    except DatabaseVersionError as exc:
-        fail(str(exc))
-
-
 def print_outcome(result: RunResult, db: str) -> None:
     _out.print(
         f"campaign {result.campaign_id} {result.outcome}: {result.trials_completed} trials "
@@ -84,6 +76,10 @@ def print_outcome(result: RunResult, db: str) -> None:
 
 
 def run_campaign(plan: Plan, store: CampaignStore, quiet: bool) -> RunResult:
+    import can
+
+    from acquisition.runner import run_live
+
     try:
         return run_live(plan, store, quiet=quiet)
     except (can.CanError, OSError, ValueError) as exc:
@@ -120,10 +116,12 @@ def register(app: typer.Typer) -> None:
         quiet: Quiet = False,
     ) -> None:
         """Run a campaign plan on the stand (the simulated stand when the plan says so)."""
+        from acquisition.store import CampaignStore
+
         checked = checked_plan(
             _load(plan), interface=interface, channel=channel, db=db, speedup=speedup, seed=seed
         )
-        sessions = open_sessions(checked.database, must_exist=False)
+        sessions = open_db(checked.database, must_exist=False)
         store = CampaignStore.create(sessions, checked)
         print_outcome(run_campaign(checked, store, quiet), checked.database)
 
@@ -138,7 +136,10 @@ def register(app: typer.Typer) -> None:
         quiet: Quiet = False,
     ) -> None:
         """Continue a campaign from its first incomplete series (re-settling first)."""
-        sessions = open_sessions(db, must_exist=True)
+        from acquisition.runner import resume_store
+        from db.queries import first_incomplete_series
+
+        sessions = open_db(db, must_exist=True)
         try:
             stored, store = resume_store(sessions, campaign_id)
         except LookupError as exc:
@@ -162,7 +163,9 @@ def register(app: typer.Typer) -> None:
         db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
     ) -> None:
         """Show where a campaign stands."""
-        sessions = open_sessions(db, must_exist=True)
+        from db.queries import CampaignNotFound, campaign_summary
+
+        sessions = open_db(db, must_exist=True)
         with sessions() as session:
             try:
                 s = campaign_summary(session, campaign_id)
@@ -200,12 +203,16 @@ def register(app: typer.Typer) -> None:
         ] = None,
     ) -> None:
         """Re-derive observations offline from a raw CAN log into a new campaign."""
+        import can
+
+        from acquisition.runner import replay
+
         checked = checked_plan(
             _load(plan), interface=None, channel=None, db=db, speedup=None, seed=None
         )
         if not log.is_file():
             fail(f"no log file at {log}")
-        sessions = open_sessions(checked.database, must_exist=False)
+        sessions = open_db(checked.database, must_exist=False)
         try:
             result = replay(checked, sessions, log)
         except (ValueError, OSError, can.CanError) as exc:

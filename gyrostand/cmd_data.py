@@ -1,28 +1,19 @@
 """CLI: import historical measurements, export a campaign (CSV, Parquet, Excel)."""
 
+from __future__ import annotations
+
 import tomllib
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-from sqlalchemy.exc import OperationalError
-from sqlalchemy.orm import Session, sessionmaker
 
-from db.io import (
-    SEED_000_METADATA,
-    ImportFileError,
-    MetadataError,
-    check_metadata,
-    export_campaign,
-    export_paths,
-    read_import_file,
-    store_import,
-)
-from db.queries import CampaignNotFound
-from db.session import DatabaseVersionError, database_url, open_database
 from gyrostand import __version__
 from gyrostand.errors import fail
+
+if TYPE_CHECKING:
+    from sqlalchemy.orm import Session, sessionmaker
 
 DEFAULT_DB = "runs/gyrostand.sqlite"
 PLAN_KEYS = {
@@ -43,6 +34,8 @@ class ExportFormat(StrEnum):
 
 def open_db(db: str, *, must_exist: bool = False) -> sessionmaker[Session]:
     """The database's session factory, or a one-line error (missing file, wrong schema)."""
+    from db.session import DatabaseVersionError, database_url, open_database
+
     if must_exist and "://" not in db and not Path(db).exists():
         fail(f"no database at {db}")
     try:
@@ -96,6 +89,17 @@ def register(app: typer.Typer) -> None:
         """Import historical manual measurements: per observation, per series (mean, variance,
         N) or per trial as the paper's table prints it. Nothing is written unless the whole
         file is valid."""
+        from sqlalchemy.exc import OperationalError
+
+        from db.io import (
+            SEED_000_METADATA,
+            ImportFileError,
+            MetadataError,
+            check_metadata,
+            read_import_file,
+            store_import,
+        )
+
         metadata = dict(SEED_000_METADATA) if plan is None else plan_metadata(plan)
         if operator is not None:
             metadata["operator"] = operator
@@ -136,6 +140,9 @@ def register(app: typer.Typer) -> None:
         db: DbOption = DEFAULT_DB,
     ) -> None:
         """Export a campaign's observations and series/trial summaries (CSV, Parquet, Excel)."""
+        from db.io import export_campaign, export_paths
+        from db.queries import CampaignNotFound
+
         fmt = format.value
         out = out or Path("runs/export") / f"campaign-{campaign}.{fmt}"
         sessions = open_db(db, must_exist=True)

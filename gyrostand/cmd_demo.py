@@ -7,8 +7,8 @@ from importlib.resources import files
 import typer
 
 from acquisition.plan import PlanError, parse_plan
-from acquisition.store import CampaignStore
-from gyrostand.cmd_campaign import checked_plan, open_sessions, print_outcome, run_campaign
+from gyrostand.cmd_campaign import checked_plan, print_outcome, run_campaign
+from gyrostand.cmd_data import open_db
 from gyrostand.cmd_report import DEFAULT_OUT, write_campaign_report
 from gyrostand.errors import fail
 
@@ -23,6 +23,8 @@ def register(app: typer.Typer) -> None:
         quiet: bool = typer.Option(False, "--quiet", help="No live progress display."),
     ) -> None:
         """Run the paper's campaign on the simulated stand, analyse it, write its report."""
+        from acquisition.store import CampaignStore
+
         try:
             plan = parse_plan(DEMO_PLAN.read_text())
         except PlanError as exc:  # the shipped plan is tested; this guards a broken install
@@ -32,7 +34,7 @@ def register(app: typer.Typer) -> None:
             f"1/2 campaign: {len(plan.trials)} trials of the seed-000 example on the simulated "
             f"stand (virtual CAN bus, {plan.bus.speedup:g}x stand time) into {plan.database}"
         )
-        store = CampaignStore.create(open_sessions(plan.database, must_exist=False), plan)
+        store = CampaignStore.create(open_db(plan.database, must_exist=False), plan)
         print_outcome(run_campaign(plan, store, quiet), plan.database)
         typer.echo("2/2 analysis and report")
         written = write_campaign_report(plan.database, store.campaign_id, DEFAULT_OUT)

@@ -11,13 +11,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from sqlalchemy.exc import OperationalError
 
-from acquisition.stored import campaign_report
-from analysis.errors import AnalysisError
-from analysis.report.compliance import SHIPPED, load_profile
-from analysis.report.writer import FORMATS, write_report
-from db.queries import CampaignNotFound
+from analysis.report import FORMATS
+from analysis.report.compliance import SHIPPED
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
 from gyrostand.errors import fail
 
@@ -32,6 +28,14 @@ def write_campaign_report(
     profile: str = SHIPPED,
 ) -> dict[str, Path]:
     """Analyse and report one campaign; the files written by format (one-line CLI errors)."""
+    from sqlalchemy.exc import OperationalError
+
+    from acquisition.stored import campaign_report
+    from analysis.errors import AnalysisError
+    from analysis.report.compliance import load_profile
+    from analysis.report.writer import write_report
+    from db.queries import CampaignNotFound
+
     sessions = open_db(db, must_exist=True)
     try:
         limits = load_profile(profile)

@@ -20,14 +20,8 @@ from rich.console import Console
 
 from gyrostand.errors import fail
 from stand.schedule import LOG_SUFFIXES, ScheduleError, Step, load_schedule, run_schedule
-from stand.simulator import (
-    CompassParams,
-    FaultParams,
-    NoiseParams,
-    SimConfig,
-    Simulator,
-    StandParams,
-)
+from stand.simconfig import CompassParams, FaultParams, NoiseParams, SimConfig, StandParams
+from stand.simulator import Simulator
 
 _out = Console(stderr=True, highlight=False)
 

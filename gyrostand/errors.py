@@ -8,7 +8,6 @@ from rich.console import Console
 _err = Console(stderr=True, highlight=False, soft_wrap=True)
 
 EXIT_BAD_INPUT = 2
-EXIT_NOT_IMPLEMENTED = 3
 EXIT_FAILED = 1
 
 
@@ -16,9 +15,3 @@ def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
     """Print `gyrostand: error: <message>` to stderr and exit with `code`."""
     _err.print(f"gyrostand: error: {message}", markup=False)
     raise typer.Exit(code)
-
-
-def not_implemented(what: str) -> NoReturn:
-    """Say plainly that a command is not built yet and exit non-zero (no fake output)."""
-    _err.print(f"gyrostand: {what} is not implemented yet", markup=False)
-    raise typer.Exit(EXIT_NOT_IMPLEMENTED)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter
 
 
 def rolling_error_rad(
@@ -95,6 +94,8 @@ class CorrelatedNoise:
         w = self.rng.standard_normal(n)
         if n == 0 or self.sigma == 0.0:
             return np.zeros(n)
+        from scipy.signal import lfilter  # here: importing scipy.signal takes ~1 s (CLI start)
+
         drive = self.sigma * math.sqrt(1.0 - self.r**2) * w
         if self._zi is None:  # start in the stationary distribution
             drive[0] = self.sigma * w[0]

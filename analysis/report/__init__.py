@@ -11,3 +11,5 @@ inputs, the CLI (`gyrostand report`) composes.
   `json_doc`: `report_document` / `report_json` (schema gyrostand.report/1); `csv_table`;
 - `writer`: `write_report(report, out_dir, formats) -> {format: path}`.
 """
+
+FORMATS = ("html", "pdf", "json", "csv")  # what `writer.write_report` writes

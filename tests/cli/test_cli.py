@@ -59,3 +59,12 @@ def test_help_keeps_bracketed_words() -> None:
             assert word in output, f"{' '.join(path)} --help lost {word}"
             checked += 1
     assert checked > 0
+
+
+def test_help_does_not_load_the_heavy_libraries() -> None:
+    """`gyrostand --help` stays quick: the commands import the layers when they run, so the CLI
+    module alone loads neither scipy, matplotlib, pandas nor SQLAlchemy (about 2 s together)."""
+    heavy = ("scipy", "matplotlib", "pandas", "sqlalchemy", "alembic")
+    code = f"import sys, gyrostand.cli; print([m for m in {heavy!r} if m in sys.modules])"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
