@@ -17,7 +17,8 @@ import can
 import numpy as np
 
 from acquisition.vectordecode import SignalLayout, VectorDecoder
-from stand.protocol import Codec, Frame, StandStatusFrame
+from stand.protocol import ClockFrame, Codec, Frame, ProtocolError, StandStatusFrame
+from stand.virtual_time import check_free, clock_message
 
 _STATUS_FIELDS = ("time", "rocking", "direction", "amplitude", "period")
 
@@ -56,6 +57,10 @@ class RawFrames:
             is_extended=np.fromiter((m.is_extended_id for m in messages), bool, n),
             timestamp=np.fromiter((m.timestamp for m in messages), np.float64, n),
         )
+
+    def head(self, n: int) -> RawFrames:
+        """The first n frames."""
+        return RawFrames(self.start, *(getattr(self, f.name)[:n] for f in fields(self)[1:]))
 
     def message(self, row: int) -> can.Message:
         """Row `row` as a python-can message (for the rare frames decoded one by one)."""
@@ -195,6 +200,14 @@ class BatchDecoder:
         self.compass_id = compass_msg.frame_id
         self._compass_keys = (rotor.signal, faults.signal)
         self._compass = VectorDecoder(compass_msg, list(self._compass_keys))
+        # virtual time's SIM_CLOCK (always the shipped DBC's; not when a lab DBC reuses its ID)
+        clock = clock_message()
+        self.clock_id = clock.frame_id
+        self._clock: VectorDecoder | None = VectorDecoder(clock, ["STAND_TIME"])
+        try:
+            check_free(db)
+        except ProtocolError:
+            self._clock = None
 
     def decode(self, raw: RawFrames) -> FrameBatch:
         ids, ok = raw.arbitration_id, ~(raw.is_error | raw.is_remote)
@@ -204,9 +217,19 @@ class BatchDecoder:
         rows, values = self._fast_rows(raw, ids == self.compass_id, ok, self._compass)
         rotor, faults = (values[k] for k in self._compass_keys)
         slow[rows[(rotor == 1) & (faults == 0)]] = False  # faulty ones: the codec's frame
+        clocks: dict[int, int] = {}
+        if self._clock is not None:
+            rows, values = self._fast_rows(raw, ids == self.clock_id, ok, self._clock)
+            times = values["STAND_TIME"].astype(np.int64).tolist()
+            clocks = dict(zip(rows.tolist(), times, strict=True))
         others: list[tuple[int, Frame]] = []
         for row in np.flatnonzero(slow).tolist():
-            frame = self.codec.decode(raw.message(row))
+            clock_ms = clocks.get(row)
+            frame = (
+                ClockFrame(clock_ms)
+                if clock_ms is not None
+                else self.codec.decode(raw.message(row))
+            )
             if frame is not None and not isinstance(frame, StandStatusFrame):
                 others.append((raw.start + row, frame))
         return FrameBatch(headings, statuses, tuple(others), raw.start + len(raw))

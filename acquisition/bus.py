@@ -40,7 +40,7 @@ def sim_config(bus: BusPlan) -> SimConfig:
     overrides: dict[str, Any] = dict(bus.simulator)
     problems: list[str] = []
     base = SimConfig()
-    values: dict[str, Any] = {"speedup": bus.speedup, "seed": bus.seed}
+    values: dict[str, Any] = {"speedup": bus.speedup, "seed": bus.seed, "timing": bus.timing}
     for f in dataclasses.fields(SimConfig):
         if f.name not in overrides:
             continue
@@ -76,8 +76,9 @@ class Recorder(can.Listener):
     A deque with an explicit bound instead of `queue.Queue`: the notifier thread's cost per frame
     drops from a lock/condition round trip to one atomic append (about 3x the ingest rate)."""
 
-    def __init__(self, maxsize: int, log_path: Path | None) -> None:
+    def __init__(self, maxsize: int, log_path: Path | None, *, log_rest: bool = True) -> None:
         self.maxsize = maxsize
+        self.log_rest = log_rest  # on stop, log frames never drained (not in virtual time)
         self._frames: deque[can.Message] = deque()
         self._ready = threading.Event()
         self.writer = raw_log_writer(log_path) if log_path is not None else None
@@ -124,8 +125,9 @@ class Recorder(can.Listener):
         """Log what is still queued (frames of the campaign too), then close the log."""
         if self._stopped:
             return
-        rest = list(self._frames)
-        self.log(RawFrames.from_messages(0, rest), rest)
+        if self.log_rest:
+            rest = list(self._frames)
+            self.log(RawFrames.from_messages(0, rest), rest)
         if self.writer is not None:
             self.writer.stop()
         self._stopped = True
@@ -168,6 +170,7 @@ class LiveBus:
 
     def __init__(self, plan: Plan, codec: Codec, raw_log: Path | None) -> None:
         self.plan = plan
+        self.virtual = plan.bus.timing == "virtual"
         self.simulator: Simulator | None = None
         config = sim_config(plan.bus) if plan.bus.simulated else None
         self.bus = self._open(plan.bus)
@@ -175,9 +178,12 @@ class LiveBus:
             if config is not None:
                 self._sim_bus = can.Bus(interface="virtual", channel=self._channel)
                 self.simulator = Simulator(self._sim_bus, config, codec=codec_for(plan))
-            self.recorder = Recorder(plan.bus.queue_size, raw_log)
+            self.recorder = Recorder(plan.bus.queue_size, raw_log, log_rest=not self.virtual)
+            # in virtual time the stand repeats each command in the stream at the stand time it
+            # takes effect (stand.virtual_time); otherwise the stream records what we send
+            sender = self.bus if self.virtual else RecordedSend(self.bus, self.recorder)
             self.controller = StandController(
-                RecordedSend(self.bus, self.recorder),  # type: ignore[arg-type]
+                sender,  # type: ignore[arg-type]
                 codec_for(plan),  # its own: a Codec keeps decoding state per thread
                 ack_timeout_s=plan.timeouts.ack_s,
             )

@@ -34,7 +34,14 @@ import numpy as np
 from acquisition.batch import FrameBatch, Headings, Statuses
 from acquisition.early_settle import EarlySettle, band_settled, hold_blocks
 from acquisition.plan import Plan, TrialPlan
-from stand.protocol import AckFrame, CommandFrame, CompassStatusFrame, Frame, InvalidFrame
+from stand.protocol import (
+    AckFrame,
+    ClockFrame,
+    CommandFrame,
+    CompassStatusFrame,
+    Frame,
+    InvalidFrame,
+)
 
 NANO = 1_000_000_000  # deviations are summed as integer nano-degrees
 CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the error frame's identifier
@@ -85,7 +92,7 @@ class Measured:
 
 
 class Commander(Protocol):
-    def issue(self, command: Command) -> None: ...
+    def issue(self, command: Command, now_ms: int) -> None: ...
 
 
 class Sink(Protocol):
@@ -216,7 +223,8 @@ class Engine:
         self.outcome: Literal["running", "completed", "paused", "stopped"] = "running"
         self.phase = Phase.DONE
         self.now_ms = 0
-        self._last_t: int | None = None
+        self._last_t: int | None = None  # stand time of the last heading frame
+        self._heard_ms: int | None = None  # SIM_CLOCK: silence counts from here without one
         self._last_counter: int | None = None
         self._stopped = False  # the stand acknowledged a stop since the last start
         self._trial: TrialPlan | None = None
@@ -283,7 +291,7 @@ class Engine:
         self._sent = False
         self.sink.event("command", "info", command.describe(), self._tidx, None, self.now_ms)
         try:
-            self.commander.issue(command)
+            self.commander.issue(command, self.now_ms)
         except CommandNotSent as exc:
             self.fail(f"could not send '{command.kind}': {exc}", kind="bus error")
 
@@ -324,6 +332,19 @@ class Engine:
             else:
                 self._step()
 
+    @property
+    def consumed(self) -> int:
+        """Stream position after the last frame the engine has taken in (where it stopped when
+        it finished inside a batch)."""
+        nxt = [self._end]
+        if self._hi < len(self._h):
+            nxt.append(int(self._h.pos[self._hi]))
+        if self._si < len(self._s):
+            nxt.append(int(self._s.pos[self._si]))
+        if self._oi < len(self._o):
+            nxt.append(self._o[self._oi][0])
+        return min(nxt)
+
     def fail(self, reason: str, kind: str = "fault") -> None:
         """A fatal problem for the current trial (also called by the live driver)."""
         if self.phase is Phase.DONE or self._trial is None:
@@ -345,7 +366,7 @@ class Engine:
         """Best effort on the way out: nothing waits for this ack."""
         self.sink.event("command", "info", "stop", self._tidx, None, self.now_ms)
         try:
-            self.commander.issue(Command("stop"))
+            self.commander.issue(Command("stop"), self.now_ms)
         except CommandNotSent as exc:
             self.sink.event("command", "error", f"could not send 'stop': {exc}", self._tidx)
 
@@ -406,6 +427,24 @@ class Engine:
     def _silence_ms(self) -> int:
         return round(self.plan.timeouts.bus_silence_s * 1000)
 
+    def _clock_silence(self, t_ms: int, last_heading_ms: int | None = None) -> str | None:
+        """Virtual time: at a SIM_CLOCK tick t_ms, the bus-silence reason when no heading frame
+        has come for longer than the plan allows (else None)."""
+        last = last_heading_ms if last_heading_ms is not None else self._last_t
+        since = last if last is not None else self._heard_ms
+        if since is None or t_ms - since <= self._silence_ms:
+            return None
+        return f"bus silence: no heading frame for {(t_ms - since) / 1000:g} s of stand time"
+
+    def _on_clock(self, t_ms: int, reason: str | None) -> None:
+        """A SIM_CLOCK tick: the clock moves on; after a silence, it counts again from here."""
+        self.now_ms = max(self.now_ms, t_ms)
+        if self._heard_ms is None:
+            self._heard_ms = t_ms
+        if reason is not None:
+            self._last_t = self._heard_ms = t_ms
+            self.fail(reason, kind="bus silence")
+
     def _check_wait_timeout(self) -> None:
         waited_s = (self.now_ms - self._phase_start_ms) / 1000
         if self.phase is Phase.COMMANDS:
@@ -435,6 +474,8 @@ class Engine:
                 self._foreign_command(frame)
         elif isinstance(frame, AckFrame):
             self._on_ack(frame)
+        elif isinstance(frame, ClockFrame):
+            self._on_clock(frame.stand_time_ms, self._clock_silence(frame.stand_time_ms))
         elif isinstance(frame, CompassStatusFrame) and _compass_fault(frame):
             self.fail(_compass_fault(frame), kind="compass fault")
         elif isinstance(frame, InvalidFrame) and _is_bus_off(frame):
@@ -544,7 +585,11 @@ class Engine:
             self._close_window()
         elif fatal_reason is not None:
             self._skip_to(fatal_pos + 1)
-            self.fail(fatal_reason, kind=fatal_kind)
+            frame = self._o[self._oi - 1][1] if self._oi else None
+            if isinstance(frame, ClockFrame) and fatal_kind == "bus silence":
+                self._on_clock(frame.stand_time_ms, fatal_reason)
+            else:
+                self.fail(fatal_reason, kind=fatal_kind)
 
     def _first_fatal(self) -> tuple[int, str | None, str]:
         """Position and reason of the first status or frame that ends this series."""
@@ -561,6 +606,13 @@ class Engine:
         for pos, frame in self._o[self._oi :]:
             if pos >= best[0]:
                 break
+            if isinstance(frame, ClockFrame):
+                h = self._h
+                before = self._hi + int(np.searchsorted(h.pos[self._hi :], pos)) - 1
+                last = int(h.t_ms[before]) if before >= self._hi else None
+                reason = self._clock_silence(frame.stand_time_ms, last)
+                if reason is not None:
+                    return pos, reason, "bus silence"
             if isinstance(frame, CompassStatusFrame) and _compass_fault(frame):
                 return pos, _compass_fault(frame), "compass fault"
             if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
@@ -595,6 +647,8 @@ class Engine:
             self._oi += 1
             if isinstance(frame, CommandFrame):
                 self._foreign_command(frame)
+            if isinstance(frame, ClockFrame):
+                self._on_clock(frame.stand_time_ms, None)
             if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
                 self._series_errors += 1
             if isinstance(frame, InvalidFrame) and self._window is not None:

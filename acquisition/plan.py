@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from stand.simconfig import TIMINGS
+
 Role = Literal["fit", "control"]
 
 
@@ -153,6 +155,7 @@ class BusPlan:
     interface: str | None = None
     channel: str | None = None
     bitrate: int | None = None
+    timing: Literal["virtual", "realtime"] = "realtime"  # virtual: stand.virtual_time
     speedup: float = 1.0
     seed: int = 0
     simulator: Mapping[str, Any] = field(default_factory=dict)
@@ -506,6 +509,7 @@ def _bus(problems: list[str], raw: Mapping[str, Any]) -> BusPlan:
     if channel is not None and not isinstance(channel, str | int):
         b.bad("channel", "must be a string or an integer")
     bitrate = b.integer("bitrate", None, ge=1) or None
+    timing = b.text("timing", "virtual" if simulated else "realtime", choices=TIMINGS)
     speedup = b.number("speedup", 1.0, gt=0)
     seed = b.integer("seed", 0, ge=0)
     simulator = b.table_of("simulator")
@@ -515,11 +519,14 @@ def _bus(problems: list[str], raw: Mapping[str, Any]) -> BusPlan:
         b.bad("interface", "must be absent when bus.simulated = true")
     if not simulated and speedup != 1.0:
         b.bad("speedup", "only applies when bus.simulated = true")
+    elif timing == "virtual" and speedup != 1.0:
+        b.bad("speedup", 'only applies with timing = "realtime" (virtual time runs at full speed)')
     return BusPlan(
         simulated=simulated,
         interface=interface,
         channel=None if channel is None else str(channel),
         bitrate=bitrate,
+        timing=timing,  # type: ignore[arg-type]
         speedup=speedup,
         seed=seed,
         simulator=dict(simulator),

@@ -15,6 +15,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+import can
+import numpy as np
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -25,10 +27,12 @@ from acquisition.logfile import read_raw_frames
 from acquisition.plan import Plan
 from acquisition.progress import ProgressDisplay
 from acquisition.store import CampaignStore
+from acquisition.virtual_time import Grants, StreamClock
 from db.models import Campaign, Observation, Series, Trial
-from stand.controller import StandController, StandError, StandRefused, StandTimeout
+from stand.controller import StandController, StandError
 
 BATCH_FRAMES = 50_000
+VIRTUAL_STALL_WALL_S = 60.0  # virtual time: no frame at all for this long = no simulator
 
 
 @dataclass(frozen=True)
@@ -56,25 +60,23 @@ def sha256_of(path: Path) -> str:
 
 
 class LiveCommander:
-    """Sends the engine's commands through the stand controller. Acks and refusals are judged by
-    the engine from the stream (as in replay), so only a failure to send is reported here."""
+    """Sends the engine's commands through the stand controller without waiting: acks and
+    refusals are judged by the engine from the stream (as in replay), so only a failure to send
+    is reported here. In virtual time each command follows a SIM_SYNC naming the stand time the
+    engine had reached when it decided."""
 
-    def __init__(self, controller: StandController) -> None:
+    def __init__(self, controller: StandController, grants: Grants | None) -> None:
         self.controller = controller
+        self.grants = grants
 
-    def issue(self, command: Command) -> None:
+    def issue(self, command: Command, now_ms: int) -> None:
         try:
-            if command.kind == "set":
-                self.controller.set_rocking(
-                    command.direction_deg, command.amplitude_cm, command.period_s
-                )
-            elif command.kind == "start":
-                self.controller.start()
-            else:
-                self.controller.stop()
-        except (StandRefused, StandTimeout):
-            pass  # the engine sees the refusal, or waits out the ack timeout in stand time
-        except StandError as exc:
+            if self.grants is not None:
+                self.grants.sync(now_ms)
+            self.controller.post(
+                command.kind, command.direction_deg, command.amplitude_cm, command.period_s
+            )
+        except (StandError, can.CanError) as exc:
             raise CommandNotSent(str(exc)) from exc
 
 
@@ -130,9 +132,19 @@ def run_live(
         store.set_raw_log(str(raw_log), None)
     store.set_status("running")
     live = LiveBus(plan, codec, raw_log)
-    engine = Engine(plan, store, LiveCommander(live.controller), store.progress())
+    grants = Grants(live.bus) if live.virtual else None
+    stream_clock = StreamClock()
+    engine = Engine(plan, store, LiveCommander(live.controller, grants), store.progress())
     decoder = BatchDecoder(codec)
-    silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
+    if grants is None:
+        silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
+        silence = f"bus silence: no frame at all for {silence_wall_s:g} s (wall clock)"
+    else:  # the stand's own silence shows in stand time (SIM_CLOCK); this is a dead simulator
+        silence_wall_s = VIRTUAL_STALL_WALL_S
+        silence = (
+            f"bus silence: the simulated stand sent nothing for {silence_wall_s:g} s of wall "
+            "time (is it running, in virtual time?)"
+        )
     position, dropped, errors, log_failed = 0, 0, 0, False
     last_frame = time.monotonic()
     try:
@@ -155,18 +167,28 @@ def run_live(
                     exc = live.recorder.errors[errors]
                     errors += 1
                     engine.fail(f"bus or listener error: {exc!r}", kind="bus error")
+                if live.simulator is not None and live.simulator.error is not None:
+                    engine.interrupt(f"simulated stand failed: {live.simulator.error!r}")
+                    break
                 if msgs:
                     last_frame = time.monotonic()
                     raw = RawFrames.from_messages(position, msgs)
+                    batch = decoder.decode(raw)
+                    engine.feed(batch)
+                    if grants is not None:  # the log ends where the campaign did
+                        keep = engine.consumed - position
+                        times_s = stream_clock.times_s(batch, position)[:keep]
+                        raw, msgs = raw.head(keep), msgs[:keep]
+                        restamp(raw, msgs, times_s)
+                        grants.progress(engine.now_ms)
                     live.recorder.log(raw, msgs)
                     position += len(msgs)
-                    engine.feed(decoder.decode(raw))
-                elif time.monotonic() - last_frame > silence_wall_s:
-                    engine.fail(
-                        f"bus silence: no frame at all for {silence_wall_s:g} s (wall clock)",
-                        kind="bus silence",
-                    )
-                    last_frame = time.monotonic()
+                else:
+                    if grants is not None:
+                        grants.idle()
+                    if time.monotonic() - last_frame > silence_wall_s:
+                        engine.fail(silence, kind="bus silence")
+                        last_frame = time.monotonic()
                 display.update(engine.snapshot())
     finally:
         live.close()
@@ -177,6 +199,13 @@ def run_live(
         outcome = engine.outcome if engine.outcome != "running" else "stopped"
         store.set_status(outcome)
     return result(store, outcome, raw_log, sha)
+
+
+def restamp(raw: RawFrames, msgs: list[can.Message], times_s: np.ndarray) -> None:
+    """Give the frames their stream times (virtual time: the raw log's timestamps)."""
+    raw.timestamp[:] = times_s
+    for msg, t in zip(msgs, times_s.tolist(), strict=True):
+        msg.timestamp = t
 
 
 def result(store: CampaignStore, outcome: str, raw_log: Path | None, sha: str | None) -> RunResult:
@@ -218,7 +247,7 @@ def observation_count(session: Session, campaign_id: int) -> int:
 class _NoCommands:
     """Replay's commander: the commands were sent live; their acks are in the log."""
 
-    def issue(self, command: Command) -> None:
+    def issue(self, command: Command, now_ms: int) -> None:
         pass
 
 

@@ -41,7 +41,7 @@ class _Stand:
         self.stand = StandEngine(config, Codec())
         self.pending: list[can.Message] = []
 
-    def issue(self, command: Command) -> None:
+    def issue(self, command: Command, now_ms: int = 0) -> None:
         if command.kind == "set":
             msg = self.codec.encode_command_set(
                 command.direction_deg, command.amplitude_cm, command.period_s

@@ -13,6 +13,7 @@ from rich.table import Table
 from acquisition.plan import Plan, PlanError, load_plan
 from gyrostand.cmd_data import DEFAULT_DB, open_db
 from gyrostand.errors import EXIT_FAILED, fail
+from stand.simconfig import TIMINGS
 
 if TYPE_CHECKING:
     from acquisition.runner import RunResult
@@ -36,23 +37,35 @@ def checked_plan(
     db: str | None,
     speedup: float | None,
     seed: int | None,
+    timing: str | None = None,
 ) -> Plan:
     from acquisition.runner import prepare
 
     bus = plan.bus
+    if timing is not None and timing not in TIMINGS:
+        fail(f"--timing must be one of {', '.join(TIMINGS)}, not {timing!r}")
+    if timing == "virtual" and speedup is not None:
+        fail("--speedup paces the simulated stand in real time: it excludes --timing virtual")
     if interface is not None or channel is not None:
         if speedup is not None or seed is not None:
             fail("--speedup and --seed apply to the simulated stand, not to --interface/--channel")
         bus = dataclasses.replace(
-            bus, simulated=False, interface=interface, channel=channel, speedup=1.0
+            bus,
+            simulated=False,
+            interface=interface,
+            channel=channel,
+            speedup=1.0,
+            timing=timing or "realtime",  # type: ignore[arg-type]
         )
     else:
+        if timing is not None:
+            bus = dataclasses.replace(bus, timing=timing)  # type: ignore[arg-type]
         if (speedup is not None or seed is not None) and not bus.simulated:
             fail("--speedup and --seed apply only when the plan's bus is simulated")
         if speedup is not None:
             if not speedup > 0:
                 fail("--speedup must be > 0")
-            bus = dataclasses.replace(bus, speedup=speedup)
+            bus = dataclasses.replace(bus, timing="realtime", speedup=speedup)
         if seed is not None:
             bus = dataclasses.replace(bus, seed=seed)
     plan = dataclasses.replace(plan, bus=bus, database=db or plan.database)
@@ -92,8 +105,22 @@ Interface = Annotated[
     typer.Option(help="python-can interface (e.g. socketcan); default: the plan's bus."),
 ]
 Channel = Annotated[str | None, typer.Option(help="python-can channel (e.g. can0).")]
-Speedup = Annotated[float | None, typer.Option(help="Simulated stand: stand s per wall s.")]
+Speedup = Annotated[
+    float | None,
+    typer.Option(
+        help="Simulated stand in real time at this many stand s per wall s "
+        "(default: the plan's timing; virtual time runs as fast as the CPU allows)."
+    ),
+]
 Seed = Annotated[int | None, typer.Option(help="Simulated stand: random seed.")]
+Timing = Annotated[
+    str | None,
+    typer.Option(
+        help="virtual: the stand is simulated in virtual time (in process, or `gyrostand "
+        "simulate` on --interface/--channel); realtime: a real stand, or the simulated one "
+        "paced by the wall clock. Default: the plan's (realtime with --interface)."
+    ),
+]
 Quiet = Annotated[bool, typer.Option("--quiet", help="No live progress display.")]
 
 
@@ -113,13 +140,20 @@ def register(app: typer.Typer) -> None:
         ] = None,
         speedup: Speedup = None,
         seed: Seed = None,
+        timing: Timing = None,
         quiet: Quiet = False,
     ) -> None:
         """Run a campaign plan on the stand (the simulated stand when the plan says so)."""
         from acquisition.store import CampaignStore
 
         checked = checked_plan(
-            _load(plan), interface=interface, channel=channel, db=db, speedup=speedup, seed=seed
+            _load(plan),
+            interface=interface,
+            channel=channel,
+            db=db,
+            speedup=speedup,
+            seed=seed,
+            timing=timing,
         )
         sessions = open_db(checked.database, must_exist=False)
         store = CampaignStore.create(sessions, checked)
@@ -133,6 +167,7 @@ def register(app: typer.Typer) -> None:
         channel: Channel = None,
         speedup: Speedup = None,
         seed: Seed = None,
+        timing: Timing = None,
         quiet: Quiet = False,
     ) -> None:
         """Continue a campaign from its first incomplete series (re-settling first)."""
@@ -147,7 +182,13 @@ def register(app: typer.Typer) -> None:
         except PlanError as exc:
             fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
         checked = checked_plan(
-            stored, interface=interface, channel=channel, db=db, speedup=speedup, seed=seed
+            stored,
+            interface=interface,
+            channel=channel,
+            db=db,
+            speedup=speedup,
+            seed=seed,
+            timing=timing,
         )
         with sessions() as session:
             left = first_incomplete_series(session, campaign_id)

@@ -1,9 +1,10 @@
 """CLI: `gyrostand simulate` -- the simulated gyrocompass + roll stand.
 
-Two modes: live (join a python-can bus, answer stand commands, publish at `--speedup` x real
-time) and standalone (play a scripted schedule as fast as possible into a BLF/ASC log). Every
-physics, noise, stand and fault parameter is an option generated from the config dataclasses,
-whose field help is the single source of its documentation."""
+Two modes: live (join a python-can bus, answer stand commands; in virtual time by default, at
+`--speedup` x real time with `--timing realtime`) and standalone (play a scripted schedule as
+fast as possible into a BLF/ASC log). Every physics, noise, stand and fault parameter is an
+option generated from the config dataclasses, whose field help is the single source of its
+documentation."""
 
 from __future__ import annotations
 
@@ -139,8 +140,10 @@ _RUN_NAMES = [p.name for p in _RUN_PARAMETERS]
 _HELP = (
     "Run the simulated gyrocompass + roll stand.\n\n"
     "Live: --interface virtual|socketcan|... --channel ... joins that bus, answers stand "
-    "commands and publishes heading and status at --speedup x real time until --duration-s or "
-    "Ctrl-C.\n\n"
+    "commands and publishes heading and status until --duration-s or Ctrl-C: in virtual time "
+    "(the default) as far as the controller's SIM_SYNC frames allow, for `gyrostand campaign "
+    "run --timing virtual --interface ... --channel ...`; with --timing realtime at --speedup x "
+    "real time.\n\n"
     "Standalone: --schedule FILE.toml and/or --step ... plays the schedule with no partner on "
     "the bus, as fast as possible, into --log FILE.blf|.asc (and onto the bus when --interface "
     "is given)."
@@ -199,9 +202,8 @@ def _live(config: SimConfig, run: dict[str, Any], bus: can.BusABC) -> None:
         fail(f"--log must end in {' or '.join(LOG_SUFFIXES)}")
     recorder = can.Logger(str(log)) if log is not None else None
     simulator = Simulator(bus, config, recorder=recorder, start_epoch_s=run["start_epoch"])
-    _out.print(
-        f"simulating on {run['interface']}:{run['channel']} at {config.speedup:g}x (Ctrl-C to stop)"
-    )
+    pace = "in virtual time" if config.timing == "virtual" else f"at {config.speedup:g}x"
+    _out.print(f"simulating on {run['interface']}:{run['channel']} {pace} (Ctrl-C to stop)")
     deadline = None if run["duration_s"] is None else time.monotonic() + run["duration_s"]
     simulator.start()
     try:

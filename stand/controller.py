@@ -8,7 +8,6 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import can
@@ -83,16 +82,11 @@ class StandController(can.Listener):
     # ------------------------------------------------------------------------------ commands
     def set_rocking(self, direction_deg: float, amplitude_cm: float, period_s: float) -> None:
         """Configure K (deg), A (cm) and tau (s); raises StandTimeout / StandRefused."""
-        self._command(
-            "set",
-            lambda seq: self._codec.encode_command_set(
-                direction_deg, amplitude_cm, period_s, seq=seq
-            ),
-        )
+        self._command("set", direction_deg, amplitude_cm, period_s)
 
     def start(self) -> None:
         """Start rocking with the configured motion."""
-        self._command("start", lambda seq: self._codec.encode_command_start(seq=seq))
+        self._command("start")
 
     def stop(self) -> None:
         """Stop rocking (accepted when already still).
@@ -101,19 +95,47 @@ class StandController(can.Listener):
         receive thread has ended, when no ack could arrive any more: that call is ignored."""
         if sys._getframe(1).f_code is can.Notifier.stop.__code__:
             return
-        self._command("stop", lambda seq: self._codec.encode_command_stop(seq=seq))
+        self._command("stop")
 
-    def _command(self, name: str, encode: Callable[[int], can.Message]) -> AckFrame:
+    def post(
+        self,
+        name: str,
+        direction_deg: float = 0.0,
+        amplitude_cm: float = 0.0,
+        period_s: float = 0.0,
+    ) -> int:
+        """Send one command ("set" with K, A, tau; "start"; "stop") without waiting for the ack
+        (for a caller that reads the acks from the stream itself); its sequence number."""
         with self._command_lock:
-            self._seq = (self._seq + 1) % 16
-            seq = self._seq
-            msg = encode(seq)  # ProtocolError (a ValueError) for out-of-range values
-            with self._cond:
-                self._acks.clear()
-            try:
-                self._bus.send(msg)
-            except can.CanError as exc:
-                raise StandError(f"could not send {name!r} to the stand: {exc}") from exc
+            return self._send(name, direction_deg, amplitude_cm, period_s)
+
+    def _send(self, name: str, direction_deg: float, amplitude_cm: float, period_s: float) -> int:
+        self._seq = (self._seq + 1) % 16
+        seq = self._seq
+        # ProtocolError (a ValueError) for out-of-range values
+        if name == "set":
+            msg = self._codec.encode_command_set(direction_deg, amplitude_cm, period_s, seq=seq)
+        elif name == "start":
+            msg = self._codec.encode_command_start(seq=seq)
+        else:
+            msg = self._codec.encode_command_stop(seq=seq)
+        with self._cond:
+            self._acks.clear()
+        try:
+            self._bus.send(msg)
+        except can.CanError as exc:
+            raise StandError(f"could not send {name!r} to the stand: {exc}") from exc
+        return seq
+
+    def _command(
+        self,
+        name: str,
+        direction_deg: float = 0.0,
+        amplitude_cm: float = 0.0,
+        period_s: float = 0.0,
+    ) -> AckFrame:
+        with self._command_lock:
+            seq = self._send(name, direction_deg, amplitude_cm, period_s)
             ack = self._wait_ack(name, seq)
             if not ack.accepted:
                 raise StandRefused(name, ack.reason)

@@ -115,6 +115,13 @@ class CommandFrame:
 
 
 @dataclass(frozen=True)
+class ClockFrame:
+    """SIM_CLOCK: the simulation's clock in virtual time (`stand.virtual_time`)."""
+
+    stand_time_ms: int
+
+
+@dataclass(frozen=True)
 class InvalidFrame:
     arbitration_id: int
     reason: str
@@ -122,7 +129,13 @@ class InvalidFrame:
 
 
 Frame = (
-    HeadingFrame | StandStatusFrame | AckFrame | CompassStatusFrame | CommandFrame | InvalidFrame
+    HeadingFrame
+    | StandStatusFrame
+    | AckFrame
+    | CompassStatusFrame
+    | CommandFrame
+    | ClockFrame
+    | InvalidFrame
 )
 
 
@@ -340,6 +353,10 @@ class Codec:
     @property
     def heading_arbitration_id(self) -> int:
         return self._heading.frame_id
+
+    @property
+    def command_arbitration_id(self) -> int:
+        return self._command.frame_id
 
     @property
     def ack_arbitration_id(self) -> int:

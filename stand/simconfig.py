@@ -9,6 +9,8 @@ from typing import Any
 
 from stand.physics import rolling_error_rad
 
+TIMINGS = ("virtual", "realtime")
+
 
 def param(default: Any, help: str) -> Any:
     """A dataclass field with its help text."""
@@ -130,7 +132,12 @@ class SimConfig:
     compass: CompassParams = field(default_factory=CompassParams)
     noise: NoiseParams = field(default_factory=NoiseParams)
     faults: FaultParams = field(default_factory=FaultParams)
-    speedup: float = param(1.0, "stand seconds per wall second (1 = real time)")
+    timing: str = param(
+        "virtual",
+        "virtual: the stand runs as far as the controller's SIM_SYNC allows (same seed, same "
+        "frames, as fast as the CPU allows); realtime: at --speedup x the wall clock",
+    )
+    speedup: float = param(1.0, "stand seconds per wall second with --timing realtime")
     heading_rate_hz: float = param(10.0, "GYRO_HEADING rate, Hz of stand time")
     status_rate_hz: float = param(2.0, "STAND_STATUS/STAND_MOTION/GYRO_STATUS rate, Hz")
     seed: int = param(0, "random seed: equal seeds and schedules give equal frames")
@@ -149,6 +156,10 @@ class SimConfig:
         for name, value in positive.items():
             if not (value > 0 and math.isfinite(value)):
                 raise ValueError(f"{name} must be a positive number, got {value}")
+        if self.timing not in TIMINGS:
+            raise ValueError(f"timing must be one of {', '.join(TIMINGS)}, got {self.timing!r}")
+        if self.timing == "virtual" and self.speedup != 1.0:
+            raise ValueError("speedup applies only with timing realtime")
         if not self.compass.damping_ratio >= 0.0:
             raise ValueError("damping_ratio must be >= 0")
         if self.compass.undamped_period_s * self.heading_rate_hz < 20:

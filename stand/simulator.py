@@ -1,8 +1,15 @@
 """The HIL twin: a simulated gyrocompass + roll stand on any python-can bus.
 
-A background thread advances the `StandEngine` so that stand time runs at `speedup` x wall time,
-sending the due frames in batches (not one sleep per frame), and answers stand commands as soon
-as they arrive. Frames carry stand time, so a receiver behaves the same at any speed-up."""
+A background thread advances the `StandEngine` and answers stand commands. Two timings:
+
+- virtual (the default): stand time advances only as far as the controller's SIM_SYNC frames
+  allow, and each command takes effect at the stand time its SIM_SYNC names
+  (`stand.virtual_time`). Same seed and same controller decisions give the same frames at any
+  host load, as fast as both sides can go.
+- realtime: stand time runs at `speedup` x wall time, sending the due frames in batches (not one
+  sleep per frame), and commands take effect when they arrive (rehearsals, hardware-like timing).
+
+Frames carry stand time, so a receiver behaves the same at any speed-up."""
 
 from __future__ import annotations
 
@@ -17,6 +24,7 @@ import can
 from stand.engine import StandEngine
 from stand.protocol import Codec
 from stand.simconfig import CompassParams, FaultParams, NoiseParams, SimConfig, StandParams
+from stand.virtual_time import ClockEncoder, decode_sync
 
 __all__ = [
     "CompassParams",
@@ -60,6 +68,14 @@ class Simulator:
         self.receive_errors = 0
         interval_wall_s = 1.0 / (config.heading_rate_hz * config.speedup)
         self._batch_wall_s = min(max(interval_wall_s, _MIN_BATCH_WALL_S), _MAX_BATCH_WALL_S)
+        # virtual time: how far the controller lets the stand run, when the next command takes
+        # effect, the commands waiting for their stand time, the controller's last progress
+        self._clock = ClockEncoder()
+        self._horizon_ms = 0
+        self._apply_ms: int | None = None
+        self._commands: list[tuple[int, can.Message]] = []
+        self._processed_ms: int | None = None
+        self.late_commands = 0
 
     @property
     def stand_time_s(self) -> float:
@@ -93,17 +109,72 @@ class Simulator:
 
     def _run(self) -> None:
         try:
-            wall0 = time.monotonic()
-            while not self._stop.is_set():
-                self._send(self._advance(wall0))
-                msg = self._recv(self._batch_wall_s)
-                while msg is not None:  # answer each command at the stand time it arrives
-                    self._send(self._advance(wall0))
-                    self._send(self.engine.receive(msg))
-                    msg = self._recv(0)
+            if self.config.timing == "virtual":
+                self._run_virtual()
+            else:
+                self._run_realtime()
         except Exception as exc:  # reported by stop(); the thread must not die silently
             log.exception("simulator stopped")
             self.error = exc
+
+    def _run_realtime(self) -> None:
+        wall0 = time.monotonic()
+        while not self._stop.is_set():
+            self._send(self._advance(wall0))
+            msg = self._recv(self._batch_wall_s)
+            while msg is not None:  # answer each command at the stand time it arrives
+                self._send(self._advance(wall0))
+                self._send(self.engine.receive(msg))
+                msg = self._recv(0)
+
+    def _run_virtual(self) -> None:
+        while not self._stop.is_set():
+            msg = self._recv(self._batch_wall_s)
+            while msg is not None:
+                self._on_virtual(msg)
+                msg = self._recv(0)
+            for at_ms, command in self._commands:
+                self._run_to(at_ms / 1000)
+                # the command on the bus at the stand time it takes effect, then the answer
+                echo = can.Message(
+                    arbitration_id=command.arbitration_id,
+                    is_extended_id=command.is_extended_id,
+                    data=command.data,
+                    timestamp=self.engine.stand_time_s,
+                )
+                self._send([echo, *self.engine.receive(command)])
+            self._commands.clear()
+            self._run_to(self._horizon_ms / 1000)
+
+    def _on_virtual(self, msg: can.Message) -> None:
+        """Take in a SIM_SYNC (how far to run, when the next command applies) or a command."""
+        sync = decode_sync(msg)
+        if sync is not None:
+            if self._processed_ms is not None and sync.processed_ms < self._processed_ms:
+                # a new controller (resume): tell it where the stand clock is
+                self._send([self._clock.now(self.engine.stand_time_s)])
+            self._processed_ms = sync.processed_ms
+            self._horizon_ms = max(self._horizon_ms, sync.horizon_ms)
+            self._apply_ms = sync.horizon_ms
+            return
+        if msg.is_error_frame or msg.arbitration_id != self.engine.codec.command_arbitration_id:
+            return
+        now_ms = round(self.engine.stand_time_s * 1000)
+        at_ms = self._apply_ms if self._apply_ms is not None else now_ms
+        if at_ms < now_ms:  # no SIM_SYNC before it (another controller): as soon as possible
+            self.late_commands += 1
+            log.warning("command 0x%X after its stand time: applied now", msg.arbitration_id)
+            at_ms = now_ms
+        self._commands.append((at_ms, msg))
+        self._apply_ms = None  # one SIM_SYNC per command
+
+    def _run_to(self, t_s: float) -> None:
+        """Advance the stand to t_s, sending its frames and the SIM_CLOCK ticks in time order."""
+        if t_s <= self.engine.stand_time_s:
+            return
+        frames = self.engine.advance_to(t_s) + self._clock.until(t_s)
+        frames.sort(key=lambda m: m.timestamp)  # stable: a tick after the stand's same-instant
+        self._send(frames)
 
     def _recv(self, timeout_s: float) -> can.Message | None:
         """The next command, or None. A receive error (e.g. the kernel's ENETDOWN while the link

@@ -67,8 +67,7 @@ bus_silence_s = 5.0
 
 [bus]
 simulated = true
-speedup = {speedup}
-seed = {seed}
+{timing}seed = {seed}
 {bus_extra}
 {trials}
 """
@@ -90,7 +89,7 @@ def plan_text(
     on_failure: str = "continue",
     hold_s: float = 60.0,
     spacing_s: float = 0.0,
-    speedup: float = 1000.0,
+    speedup: float | None = None,
     seed: int = 1,
     raw_dir: str = "runs/raw",
     bus_extra: str = "",
@@ -103,7 +102,7 @@ def plan_text(
         on_failure=on_failure,
         hold_s=hold_s,
         spacing_s=spacing_s,
-        speedup=speedup,
+        timing="" if speedup is None else f'timing = "realtime"\nspeedup = {speedup}\n',
         seed=seed,
         raw_dir=raw_dir,
         bus_extra=bus_extra,
@@ -161,7 +160,7 @@ class Lockstep:
         self.stream: list[can.Message] = []
         self._pending: list[can.Message] = []
 
-    def issue(self, command: Command) -> None:
+    def issue(self, command: Command, now_ms: int = 0) -> None:
         if command.kind == "set":
             msg = self.codec.encode_command_set(
                 command.direction_deg, command.amplitude_cm, command.period_s
@@ -190,7 +189,7 @@ class Lockstep:
 class NoCommands:
     """Replay's commander: the decisions were taken live; the log holds the stand's answers."""
 
-    def issue(self, command: Command) -> None:
+    def issue(self, command: Command, now_ms: int = 0) -> None:
         pass
 
 

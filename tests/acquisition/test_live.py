@@ -38,7 +38,7 @@ damping_ratio = 0.8
 """
 
 
-def paper_plan_text(tmp: Path, *, speedup: float = 2000.0, seed: int = 3) -> str:
+def paper_plan_text(tmp: Path, *, seed: int = 3) -> str:
     text = (ROOT / "examples" / "paper.toml").read_text()
     replacements = {
         'database = "runs/gyrostand.sqlite"': f'database = "{tmp / "live.sqlite"}"',
@@ -47,7 +47,6 @@ def paper_plan_text(tmp: Path, *, speedup: float = 2000.0, seed: int = 3) -> str
         "rocking_window_periods = 8": "rocking_window_periods = 4",
         "hold_s = 1800.0": "hold_s = 120.0",
         "drift_deg = 0.006": "drift_deg = 0.05",
-        "speedup = 1000.0": f"speedup = {speedup}",
         "seed = 1": f"seed = {seed}",
     }
     for old, new in replacements.items():
@@ -182,9 +181,7 @@ def test_settled_shift_matches_model_1_1(campaign) -> None:
 def test_asc_raw_log_replays_to_the_same_campaign(tmp_path: Path) -> None:
     from .harness import plan_text
 
-    text = plan_text(
-        database=str(tmp_path / "asc.sqlite"), raw_dir=str(tmp_path / "raw"), speedup=1000.0
-    )
+    text = plan_text(database=str(tmp_path / "asc.sqlite"), raw_dir=str(tmp_path / "raw"))
     text = text.replace('on_trial_failure = "continue"', 'raw_log_format = "asc"')
     plan = parse_plan(text + FAST_SIM)
     sessions = open_database(sqlite_url(tmp_path / "asc.sqlite"))

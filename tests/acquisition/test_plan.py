@@ -71,8 +71,22 @@ def test_syntax_error_is_one_problem() -> None:
 def test_bus_consistency() -> None:
     text = PAPER.read_text().replace("simulated = true", 'simulated = true\ninterface = "pcan"')
     assert _broken(text) == ["bus.interface: must be absent when bus.simulated = true"]
-    text = PAPER.read_text().replace("simulated = true", "simulated = false")
+    text = PAPER.read_text().replace("simulated = true", "simulated = false\nspeedup = 5.0")
+    text = text.replace('timing = "virtual"', 'timing = "realtime"')
     assert _broken(text) == ["bus.speedup: only applies when bus.simulated = true"]
+    text = PAPER.read_text().replace("simulated = true", "simulated = true\nspeedup = 5.0")
+    assert _broken(text) == [
+        'bus.speedup: only applies with timing = "realtime" (virtual time runs at full speed)'
+    ]
+    text = PAPER.read_text().replace('timing = "virtual"', 'timing = "fast"')
+    assert _broken(text) == ["bus.timing: must be one of 'virtual', 'realtime', not 'fast'"]
+
+
+def test_timing_defaults_to_virtual_for_the_simulated_stand_only() -> None:
+    text = PAPER.read_text().replace('timing = "virtual"', "")
+    assert parse_plan(text).bus.timing == "virtual"
+    text = text.replace("simulated = true", "simulated = false")
+    assert parse_plan(text).bus.timing == "realtime"
 
 
 def test_control_only_design_is_refused() -> None:

@@ -67,7 +67,8 @@ class Rig:
         self.codec = Codec()
         self.controller = StandController(self.bus, self.codec, ack_timeout_s=ack_timeout_s)
         self.collector = Collector(self.codec)
-        self.simulator = Simulator(self.sim_bus, config(**groups))
+        # the wall-clock timing (virtual time is tested with the acquisition that drives it)
+        self.simulator = Simulator(self.sim_bus, config(timing="realtime", **groups))
 
     def __enter__(self) -> "Rig":
         self.notifier = can.Notifier(self.bus, [self.controller, self.collector], timeout=0.05)

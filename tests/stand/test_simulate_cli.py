@@ -132,7 +132,21 @@ def test_refused_step_is_reported_as_a_warning(tmp_path: Path) -> None:
         (["--schedule", "{tmp}/absent.toml", "--log", "{tmp}/x.blf"], "cannot read schedule"),
         ([], "give --interface/--channel to join a bus"),
         (["--interface", "nonexistent", "--channel", "x"], "cannot open CAN bus"),
-        (["--step", "still 1", "--log", "{tmp}/x.blf", "--speedup", "-1"], "speedup must be"),
+        (
+            [
+                "--step",
+                "still 1",
+                "--log",
+                "{tmp}/x.blf",
+                "--timing",
+                "realtime",
+                "--speedup",
+                "-1",
+            ],
+            "speedup must be",
+        ),
+        (["--step", "still 1", "--log", "{tmp}/x.blf", "--speedup", "5"], "only with timing"),
+        (["--step", "still 1", "--log", "{tmp}/x.blf", "--timing", "fast"], "timing must be"),
         (["--step", "still 1", "--log", "{tmp}/x.blf", "--drop-rate", "2"], "drop_rate must be"),
     ],
 )
@@ -154,7 +168,7 @@ def test_live_mode_on_a_virtual_bus(tmp_path: Path) -> None:
         collect.start()
         log = tmp_path / "live.asc"
         args = ["--interface", "virtual", "--channel", channel, "--duration-s", "0.4"]
-        result = invoke(*args, "--speedup", "100", "--log", str(log))
+        result = invoke(*args, "--timing", "realtime", "--speedup", "100", "--log", str(log))
         collect.join()
     assert result.exit_code == 0, result.output
     heading = [m for m in received if m.arbitration_id == 0x100]
