@@ -10,7 +10,7 @@ import itertools
 import signal
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -180,12 +180,12 @@ def run_live(
                         times_s = stream_clock.times_s(batch, position)[:keep]
                         raw, msgs = raw.head(keep), msgs[:keep]
                         restamp(raw, msgs, times_s)
-                        grants.progress(engine.now_ms)
+                        _granted(engine, grants.progress, engine.now_ms)
                     live.recorder.log(raw, msgs)
                     position += len(msgs)
                 else:
                     if grants is not None:
-                        grants.idle()
+                        _granted(engine, grants.idle)
                     if time.monotonic() - last_frame > silence_wall_s:
                         engine.fail(silence, kind="bus silence")
                         last_frame = time.monotonic()
@@ -199,6 +199,14 @@ def run_live(
         outcome = engine.outcome if engine.outcome != "running" else "stopped"
         store.set_status(outcome)
     return result(store, outcome, raw_log, sha)
+
+
+def _granted(engine: Engine, send: Callable[..., None], *args: int) -> None:
+    """Send a SIM_SYNC; a bus that refuses it fails the trial (as a failed command does)."""
+    try:
+        send(*args)
+    except can.CanError as exc:
+        engine.fail(f"could not send SIM_SYNC: {exc}", kind="bus error")
 
 
 def restamp(raw: RawFrames, msgs: list[can.Message], times_s: np.ndarray) -> None:

@@ -225,13 +225,23 @@ def _stand(campaign: Campaign, plan: Plan | None) -> str:
     if campaign.source == "import" or plan is None:
         return "none: measurements imported from a file (see the import event)"
     bus = plan.bus
+    timing = (
+        "virtual time (stand time follows the acquisition: repeatable for a seed)"
+        if bus.timing == "virtual"
+        else f"real time x{bus.speedup:g}"
+    )
     if bus.simulated:
-        where = f"simulated stand (HIL twin), seed {bus.seed}, speed-up x{bus.speedup:g}"
+        where = f"simulated stand (HIL twin), seed {bus.seed}, {timing}"
     else:
         where = (
             f"python-can interface {bus.interface or '(from python-can configuration)'}, "
             f"channel {bus.channel or '(default)'}"
             + (f", {bus.bitrate} bit/s" if bus.bitrate else "")
+            + (
+                f", simulated stand (gyrostand simulate) in {timing}"
+                if bus.timing == "virtual"
+                else ""
+            )
         )
     return (
         f"offline replay of the raw log; recorded on: {where}"

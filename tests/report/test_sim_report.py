@@ -44,7 +44,10 @@ def test_heading_records_come_from_the_raw_log(
 ) -> None:
     ident = simulated_report.inputs.identification
     assert ident.raw_log_check == "verified" and ident.source == "stand"
-    assert "simulated stand" in ident.stand
+    assert ident.stand == (
+        "simulated stand (HIL twin), seed 1, "
+        "virtual time (stand time follows the acquisition: repeatable for a seed)"
+    )
     assert len(simulated_report.inputs.records) == len(SIM_TRIALS)
     for record in simulated_report.inputs.records:
         trace = record.trace
