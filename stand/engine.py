@@ -103,11 +103,7 @@ class StandEngine:
         """The compass reading at the sample times, before sensor faults."""
         compass, noise = self.config.compass, self.config.noise
         n = len(t)
-        deviation = np.zeros(n)
-        if compass.transient:
-            for i in range(n):
-                deviation[i] = self._precession.x_rad
-                self._precession.step()
+        deviation = self._precession.run(n) if compass.transient else np.zeros(n)
         reading = compass.heading_deg + self._equilibrium_deg + np.degrees(deviation)
         if self.rocking:
             _, amplitude, period = self._actual_motion()

@@ -33,7 +33,7 @@ from stand.packing import BatchEncoder
 from stand.protocol import DBC_PATH, ProtocolError
 
 CLOCK_INTERVAL_MS = 1000  # SIM_CLOCK period in stand time
-DEFAULT_LEAD_MS = 20_000  # how far the stand may run ahead of the controller (= command latency)
+DEFAULT_LEAD_MS = 60_000  # how far the stand may run ahead of the controller (= command latency)
 
 
 @dataclass(frozen=True)
