@@ -32,7 +32,7 @@ def register(app: typer.Typer) -> None:
         plan = checked_plan(plan, interface=None, channel=None, db=None, speedup=None, seed=None)
         typer.echo(
             f"1/2 campaign: {len(plan.trials)} trials of the seed-000 example on the simulated "
-            f"stand (virtual CAN bus, {plan.bus.speedup:g}x stand time) into {plan.database}"
+            f"stand (virtual CAN bus, {plan.bus.timing} time) into {plan.database}"
         )
         store = CampaignStore.create(open_db(plan.database, must_exist=False), plan)
         print_outcome(run_campaign(plan, store, quiet), plan.database)

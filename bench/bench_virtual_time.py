@@ -1,0 +1,82 @@
+"""The paper campaign (examples/paper.toml) on the in-process simulated stand in virtual time:
+wall time of the acquisition stage, frames/s end to end (stand -> bus -> acquisition -> SQLite +
+raw BLF), and the ratio to the ingest path alone on the same machine in the same run
+(bench_ingest.py's measurement, 300 000 campaign frames, not pinned here). Then the same
+campaign with the other core kept busy: the stored observations must be identical.
+
+Targets (issue 14): acquisition <= 8 s on a 2-core machine; bounded by ingest, not by a speed-up.
+
+Run: .venv/bin/python bench/bench_virtual_time.py"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import sqlite3
+import subprocess
+import sys
+import tempfile
+import time
+from contextlib import closing
+from pathlib import Path
+
+from acquisition_stream import campaign_frames, paper_plan
+from bench_ingest import ours
+
+from acquisition.logfile import read_raw_frames
+from acquisition.plan import load_plan
+from acquisition.runner import run_live
+from acquisition.store import CampaignStore
+from db.session import open_database, sqlite_url
+
+ROOT = Path(__file__).resolve().parents[1]
+INGEST_FRAMES = 300_000  # bench_ingest.py's default
+
+
+def campaign(folder: Path) -> tuple[float, int, list[tuple]]:
+    """Run the paper plan into `folder`: (wall seconds of run_live, frames, observations)."""
+    plan = load_plan(ROOT / "examples" / "paper.toml")
+    db = folder / "paper.sqlite"
+    plan = dataclasses.replace(plan, database=str(db), raw_log_dir=str(folder / "raw"))
+    store = CampaignStore.create(open_database(sqlite_url(db)), plan)
+    start = time.perf_counter()
+    result = run_live(plan, store, quiet=True)
+    wall = time.perf_counter() - start
+    assert result.outcome == "completed", result
+    assert result.raw_log is not None
+    frames = sum(len(raw) for raw in read_raw_frames(result.raw_log))
+    with closing(sqlite3.connect(db)) as conn:
+        rows = conn.execute(
+            "SELECT series_id, k, value_deg FROM observation ORDER BY id"
+        ).fetchall()
+    return wall, frames, rows
+
+
+def main() -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        (folder / "idle").mkdir()
+        wall, frames, idle_rows = campaign(folder / "idle")
+        print(f"paper campaign, virtual time: {frames:,} frames in {wall:.2f} s wall")
+        rate = frames / wall
+        print(f"end to end (stand -> bus -> acquisition -> SQLite + BLF): {rate:,.0f} frames/s")
+        stream = list(itertools.islice(campaign_frames(paper_plan(":memory:")), INGEST_FRAMES))
+        seconds, done, _ = ours(stream, folder, True)
+        ingest = done / seconds
+        print(f"ingest alone (bench_ingest's path, {done:,} frames): {ingest:,.0f} frames/s")
+        print(f"end to end / ingest: {rate / ingest:.2f}")
+        print(f"target acquisition <= 8 s: {'OK' if wall <= 8 else 'ABOVE TARGET'}")
+        (folder / "busy").mkdir()
+        hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+        try:
+            busy_wall, busy_frames, busy_rows = campaign(folder / "busy")
+        finally:
+            hog.kill()
+        print(
+            f"with the other core busy: {busy_frames:,} frames in {busy_wall:.2f} s wall; "
+            f"observations {'identical' if busy_rows == idle_rows else 'DIFFERENT'}"
+        )
+
+
+if __name__ == "__main__":
+    main()
