@@ -97,19 +97,19 @@ class StandController(can.Listener):
             return
         self._command("stop")
 
-    def post(
+    def post(self, name: str, *motion: float) -> int:
+        """Send one command ("set" with motion K deg, A cm, tau s; "start"; "stop") without
+        waiting for the ack (the caller reads acks from the stream); its sequence number."""
+        with self._command_lock:
+            return self._send(name, *motion)
+
+    def _send(
         self,
         name: str,
         direction_deg: float = 0.0,
         amplitude_cm: float = 0.0,
         period_s: float = 0.0,
     ) -> int:
-        """Send one command ("set" with K, A, tau; "start"; "stop") without waiting for the ack
-        (for a caller that reads the acks from the stream itself); its sequence number."""
-        with self._command_lock:
-            return self._send(name, direction_deg, amplitude_cm, period_s)
-
-    def _send(self, name: str, direction_deg: float, amplitude_cm: float, period_s: float) -> int:
         self._seq = (self._seq + 1) % 16
         seq = self._seq
         # ProtocolError (a ValueError) for out-of-range values
@@ -127,15 +127,10 @@ class StandController(can.Listener):
             raise StandError(f"could not send {name!r} to the stand: {exc}") from exc
         return seq
 
-    def _command(
-        self,
-        name: str,
-        direction_deg: float = 0.0,
-        amplitude_cm: float = 0.0,
-        period_s: float = 0.0,
-    ) -> AckFrame:
+    def _command(self, name: str, *motion: float) -> AckFrame:
+        """Send like `post` (motion: K, A, tau for "set"), then wait for the ack."""
         with self._command_lock:
-            seq = self._send(name, direction_deg, amplitude_cm, period_s)
+            seq = self._send(name, *motion)
             ack = self._wait_ack(name, seq)
             if not ack.accepted:
                 raise StandRefused(name, ack.reason)

@@ -9,7 +9,9 @@ import pytest
 from analysis import FitResult, fit_nonlinear
 from analysis.errors import AnalysisError, NonFiniteError, TooFewTrialsError
 
-NIST = json.loads(Path("/work/shared/reference/nist-strd-nonlinear.json").read_text())
+# NIST StRD nonlinear regression problems with their certified values (public; each problem
+# names its NIST source page in "source")
+NIST = json.loads((Path(__file__).parent / "data" / "nist-strd-nonlinear.json").read_text())
 
 
 def nist_model(expression: str):
