@@ -19,21 +19,13 @@ from typing import Any
 import can
 from can.interfaces.virtual import VirtualBus
 
-from acquisition.batch import RawFrames
-from acquisition.logfile import BatchBLFWriter, raw_log_writer
-from acquisition.plan import BusPlan, Plan, PlanError
-from stand.controller import StandController
-from stand.protocol import DBC_PATH, Codec, ProtocolError, SignalMap
-from stand.simulator import SimConfig, Simulator
-
-
-def codec_for(plan: Plan) -> Codec:
-    """The plan's DBC and signal map as a codec (PlanError naming the problem)."""
-    try:
-        dbc = Path(plan.dbc_path) if plan.dbc_path else DBC_PATH
-        return Codec(dbc, SignalMap.from_mapping(plan.signals))
-    except ProtocolError as exc:
-        raise PlanError([str(exc)]) from None
+from gyrostand.frames.batch import RawFrames
+from gyrostand.frames.logfile import BatchBLFWriter, raw_log_writer
+from gyrostand.plan.codec import codec_for
+from gyrostand.plan.model import BusPlan, Plan, PlanError
+from gyrostand.stand.controller import StandController
+from gyrostand.stand.protocol import Codec
+from gyrostand.stand.simulator import SimConfig, Simulator
 
 
 def sim_config(bus: BusPlan) -> SimConfig:

@@ -45,9 +45,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from acquisition.plan import EstimatePlan, SettlePlan
-from analysis.errors import AnalysisError
-from analysis.settle import SettleEstimate, estimate_settle_point
+from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.settle import SettleEstimate, estimate_settle_point
+from gyrostand.plan.model import EstimatePlan, SettlePlan
 
 MIN_BLOCKS = 6  # 3 state parameters + 3 degrees of freedom for S^2 and the noise correlation
 _PREDICTION_POINTS = 64  # grid on which the transient is predicted over the observation span

@@ -31,10 +31,10 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from acquisition.batch import FrameBatch, Headings, Statuses
-from acquisition.early_settle import EarlySettle, band_settled, hold_blocks
-from acquisition.plan import Plan, TrialPlan
-from stand.protocol import (
+from gyrostand.acquisition.early_settle import EarlySettle, band_settled, hold_blocks
+from gyrostand.frames.batch import FrameBatch, Headings, Statuses
+from gyrostand.plan.model import Plan, TrialPlan
+from gyrostand.stand.protocol import (
     AckFrame,
     ClockFrame,
     CommandFrame,

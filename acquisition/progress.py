@@ -10,7 +10,7 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from acquisition.engine import Phase, Snapshot
+from gyrostand.acquisition.engine import Phase, Snapshot
 
 
 def _duration(seconds: float) -> str:

@@ -5,7 +5,6 @@ Live and replay share everything downstream of the frames: `BatchDecoder` -> `En
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import signal
 import threading
@@ -20,16 +19,17 @@ import numpy as np
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from acquisition.batch import BatchDecoder, RawFrames
-from acquisition.bus import LiveBus, codec_for, sim_config
-from acquisition.engine import Command, CommandNotSent, Engine, Phase
-from acquisition.logfile import read_raw_frames
-from acquisition.plan import Plan
-from acquisition.progress import ProgressDisplay
-from acquisition.store import CampaignStore
-from acquisition.virtual_time import Grants, StreamClock
-from db.models import Campaign, Observation, Series, Trial
-from stand.controller import StandController, StandError
+from gyrostand.acquisition.bus import LiveBus, sim_config
+from gyrostand.acquisition.engine import Command, CommandNotSent, Engine, Phase
+from gyrostand.acquisition.progress import ProgressDisplay
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.acquisition.virtual_time import Grants, StreamClock
+from gyrostand.db.models import Campaign, Observation, Series, Trial
+from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.frames.logfile import read_raw_frames, sha256_of
+from gyrostand.plan.codec import codec_for
+from gyrostand.plan.model import Plan
+from gyrostand.stand.controller import StandController, StandError
 
 BATCH_FRAMES = 50_000
 VIRTUAL_STALL_WALL_S = 60.0  # virtual time: no frame at all for this long = no simulator
@@ -51,12 +51,6 @@ def prepare(plan: Plan) -> None:
     codec_for(plan)
     if plan.bus.simulated:
         sim_config(plan.bus)
-
-
-def sha256_of(path: Path) -> str:
-    """The SHA-256 of a file (the raw log's fingerprint stored with the campaign)."""
-    with path.open("rb") as f:
-        return hashlib.file_digest(f, "sha256").hexdigest()
 
 
 class LiveCommander:
@@ -287,7 +281,7 @@ def replay(plan: Plan, sessions: sessionmaker[Session], log: Path) -> RunResult:
 
 def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Plan, CampaignStore]:
     """The plan stored with a campaign and a store to continue it."""
-    from acquisition.plan import parse_plan
+    from gyrostand.plan.model import parse_plan
 
     with sessions() as session:
         campaign = session.get(Campaign, campaign_id)

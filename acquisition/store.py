@@ -6,22 +6,15 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
-from importlib.metadata import PackageNotFoundError, version
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from acquisition.engine import Measured, ObservationResult, TrialState
-from acquisition.plan import Plan
-from db.models import Campaign, Event, Observation, Series, Trial
-from db.queries import instrument_for
-
-
-def software_version() -> str:
-    try:
-        return f"gyrostand {version('gyrostand')}"
-    except PackageNotFoundError:  # running from a source tree that is not installed
-        return "gyrostand (not installed)"
+from gyrostand import SOFTWARE_VERSION
+from gyrostand.acquisition.engine import Measured, ObservationResult, TrialState
+from gyrostand.db.models import Campaign, Event, Observation, Series, Trial
+from gyrostand.db.queries import instrument_for
+from gyrostand.plan.model import Plan
 
 
 class CampaignStore:
@@ -69,7 +62,7 @@ class CampaignStore:
                 status="running",
                 source=source,
                 started_at=datetime.now(UTC),
-                software_version=software_version(),
+                software_version=SOFTWARE_VERSION,
             )
             session.add(campaign)
             for t in plan.trials:

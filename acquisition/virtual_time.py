@@ -9,9 +9,9 @@ import time
 import can
 import numpy as np
 
-from acquisition.batch import FrameBatch
-from stand.protocol import ClockFrame
-from stand.virtual_time import DEFAULT_LEAD_MS, encode_sync
+from gyrostand.frames.batch import FrameBatch
+from gyrostand.stand.protocol import ClockFrame
+from gyrostand.stand.virtual_time import DEFAULT_LEAD_MS, encode_sync
 
 RESEND_WALL_S = 0.5  # idle: repeat the last SIM_SYNC (a stand process started after us)
 

@@ -8,10 +8,10 @@ from importlib import import_module
 from typing import Any
 
 _EXPORTS = {
-    "cochran_critical": "analysis.cochran",
-    "cochran_test": "analysis.cochran",
-    "fit_nonlinear": "analysis.nlsq",
-    "FitResult": "analysis.nlsq",
+    "cochran_critical": "gyrostand.analysis.cochran",
+    "cochran_test": "gyrostand.analysis.cochran",
+    "fit_nonlinear": "gyrostand.analysis.nlsq",
+    "FitResult": "gyrostand.analysis.nlsq",
 }
 
 __all__ = sorted(_EXPORTS)

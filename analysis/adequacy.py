@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from analysis.forecast import Predictor
-from analysis.gyro_model import Conditions
+from gyrostand.analysis.forecast import Predictor
+from gyrostand.analysis.gyro_model import Conditions
 
 
 @dataclass(frozen=True)

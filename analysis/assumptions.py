@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from analysis.cochran import CochranResult
-from analysis.trials import TrialInput
+from gyrostand.analysis.cochran import CochranResult
+from gyrostand.analysis.trials import TrialInput
 
 
 @dataclass(frozen=True)

@@ -47,15 +47,15 @@ from typing import Any
 
 import numpy as np
 
-from analysis.adequacy import Adequacy, ControlResult, adequacy_test, judge_controls
-from analysis.assumptions import (
+from gyrostand.analysis.adequacy import Adequacy, ControlResult, adequacy_test, judge_controls
+from gyrostand.analysis.assumptions import (
     AssumptionCheck,
     homogeneity_check,
     independence_check,
     normality_check,
 )
-from analysis.cochran import CochranResult, cochran_test
-from analysis.errors import (
+from gyrostand.analysis.cochran import CochranResult, cochran_test
+from gyrostand.analysis.errors import (
     AnalysisError,
     ConvergenceError,
     MissingDataError,
@@ -63,10 +63,16 @@ from analysis.errors import (
     TooFewTrialsError,
     ZeroVarianceError,
 )
-from analysis.forecast import SIGN_CONVENTION, Forecast, Predictor, ShipConditions, forecast_ship
-from analysis.gyro_model import PARAMETERS, Conditions, KnownConstants, RollingErrorModel
-from analysis.nlsq import COND_LIMIT, FitResult, fit_nonlinear
-from analysis.trials import TrialInput, TrialStats, trial_statistics
+from gyrostand.analysis.forecast import (
+    SIGN_CONVENTION,
+    Forecast,
+    Predictor,
+    ShipConditions,
+    forecast_ship,
+)
+from gyrostand.analysis.gyro_model import PARAMETERS, Conditions, KnownConstants, RollingErrorModel
+from gyrostand.analysis.nlsq import COND_LIMIT, FitResult, fit_nonlinear
+from gyrostand.analysis.trials import TrialInput, TrialStats, trial_statistics
 
 VARIANCE_BASIS = (
     "S^2{<delta_i>} = S1^2 + S2^2 (eq 2.3, single-observation variances) for Cochran, S_e and "

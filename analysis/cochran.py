@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from analysis.errors import (
+from gyrostand.analysis.errors import (
     AnalysisError,
     NonFiniteError,
     TooFewTrialsError,

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis.errors import AnalysisError, MissingDataError
-from analysis.trials import TrialInput
+from gyrostand.analysis.errors import AnalysisError, MissingDataError
+from gyrostand.analysis.trials import TrialInput
 
 COLUMNS = (
     "trial",

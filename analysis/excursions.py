@@ -13,8 +13,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from analysis.errors import AnalysisError
-from analysis.noise import CorrelationModel
+from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.noise import CorrelationModel
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from analysis.errors import AnalysisError, NonFiniteError
-from analysis.gyro_model import Conditions, KnownConstants, RollingErrorModel
+from gyrostand.analysis.errors import AnalysisError, NonFiniteError
+from gyrostand.analysis.gyro_model import Conditions, KnownConstants, RollingErrorModel
 
 MOTIONS = ("roll", "pitch")
 SIGN_CONVENTION = (

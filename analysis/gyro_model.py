@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.errors import AnalysisError, NonFiniteError
+from gyrostand.analysis.errors import AnalysisError, NonFiniteError
 
 PARAMETERS = ("C_gcm2s2", "T_s")
 """Names of the two estimated parameters: the reduced elastic compliance coefficient C and the

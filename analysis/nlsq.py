@@ -38,7 +38,7 @@ import numpy as np
 from scipy import linalg
 from scipy.optimize import least_squares
 
-from analysis.errors import AnalysisError, NonFiniteError, TooFewTrialsError
+from gyrostand.analysis.errors import AnalysisError, NonFiniteError, TooFewTrialsError
 
 Model = Callable[..., np.ndarray]
 """``model(x, **theta) -> (n,)`` array."""

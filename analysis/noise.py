@@ -11,8 +11,8 @@ from scipy import signal, stats
 from scipy.integrate import quad
 from scipy.optimize import brentq, curve_fit
 
-from analysis.allan import AllanDeviation, allan_deviation
-from analysis.errors import AnalysisError
+from gyrostand.analysis.allan import AllanDeviation, allan_deviation
+from gyrostand.analysis.errors import AnalysisError
 
 
 def _lists(obj: object) -> dict:

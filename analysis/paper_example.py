@@ -1,9 +1,9 @@
 """The worked example of seed 000 (Potemkin 1982): constants, start, admissible region, stopping
 thresholds and ship forecast, as the paper states them (CGS units)."""
 
-from analysis.campaign import AdmissibleRegion
-from analysis.forecast import ShipConditions
-from analysis.gyro_model import KnownConstants
+from gyrostand.analysis.campaign import AdmissibleRegion
+from gyrostand.analysis.forecast import ShipConditions
+from gyrostand.analysis.gyro_model import KnownConstants
 
 CONSTANTS = KnownConstants(
     lP_gcm2s2=6.57e6,

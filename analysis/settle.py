@@ -24,8 +24,8 @@ import numpy as np
 from scipy import fft as sp_fft
 from scipy.integrate import quad
 
-from analysis.errors import NonFiniteError, SingularDesignError
-from analysis.nlsq import fit_nonlinear
+from gyrostand.analysis.errors import NonFiniteError, SingularDesignError
+from gyrostand.analysis.nlsq import fit_nonlinear
 
 _PHASE_TOL_RAD = 1e-9
 

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.gyro_model import Conditions, KnownConstants, RollingErrorModel
-from analysis.trials import TrialInput
+from gyrostand.analysis.gyro_model import Conditions, KnownConstants, RollingErrorModel
+from gyrostand.analysis.trials import TrialInput
 
 
 @dataclass(frozen=True)

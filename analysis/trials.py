@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.errors import (
+from gyrostand.analysis.errors import (
     AnalysisError,
     MissingDataError,
     NonFiniteError,

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import can
 
-from acquisition.batch import BatchDecoder, RawFrames
-from acquisition.engine import Command, Engine, Phase
-from acquisition.plan import Plan, parse_plan
-from stand.engine import StandEngine
-from stand.protocol import Codec
-from stand.simconfig import SimConfig
+from gyrostand.acquisition.engine import Command, Engine, Phase
+from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.plan.model import Plan, parse_plan
+from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.protocol import Codec
+from gyrostand.stand.simconfig import SimConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -13,12 +13,12 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from analysis import cochran_test, fit_nonlinear  # noqa: E402
-from analysis.campaign import analyze_campaign  # noqa: E402
-from analysis.gyro_model import RollingErrorModel  # noqa: E402
-from analysis.paper_example import CONSTANTS  # noqa: E402
-from analysis.synthetic import Design, synthetic_readings, synthetic_trials  # noqa: E402
-from analysis.trials import difference_statistics  # noqa: E402
+from gyrostand.analysis import cochran_test, fit_nonlinear  # noqa: E402
+from gyrostand.analysis.campaign import analyze_campaign  # noqa: E402
+from gyrostand.analysis.gyro_model import RollingErrorModel  # noqa: E402
+from gyrostand.analysis.paper_example import CONSTANTS  # noqa: E402
+from gyrostand.analysis.synthetic import Design, synthetic_readings, synthetic_trials  # noqa: E402
+from gyrostand.analysis.trials import difference_statistics  # noqa: E402
 
 TRIALS, READINGS, REPEATS = 10_000, 50, 7
 

@@ -30,12 +30,12 @@ from dataclasses import dataclass
 import numpy as np
 from acquisition_stream import ROOT, _Stand
 
-from acquisition.batch import BatchDecoder, RawFrames
-from acquisition.early_settle import parse_outcome
-from acquisition.engine import Engine, ObservationResult, Phase
-from acquisition.plan import Plan, parse_plan
-from stand.protocol import Codec
-from stand.simconfig import CompassParams, SimConfig
+from gyrostand.acquisition.early_settle import parse_outcome
+from gyrostand.acquisition.engine import Engine, ObservationResult, Phase
+from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.plan.model import Plan, parse_plan
+from gyrostand.stand.protocol import Codec
+from gyrostand.stand.simconfig import CompassParams, SimConfig
 
 SEEDS = (1, 2, 3)
 STEP_S = 20.0  # stand seconds per lockstep step

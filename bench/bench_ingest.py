@@ -21,13 +21,13 @@ from pathlib import Path
 import can
 from acquisition_stream import campaign_frames, paper_plan
 
-from acquisition.batch import BatchDecoder, RawFrames
-from acquisition.bus import Recorder
-from acquisition.engine import Engine
-from acquisition.runner import _NoCommands
-from acquisition.store import CampaignStore
-from db.session import open_database, sqlite_url
-from stand.protocol import Codec
+from gyrostand.acquisition.bus import Recorder
+from gyrostand.acquisition.engine import Engine
+from gyrostand.acquisition.runner import _NoCommands
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.stand.protocol import Codec
 
 
 def loaded_bus(frames: list[can.Message]) -> tuple[can.BusABC, can.BusABC]:

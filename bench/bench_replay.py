@@ -18,11 +18,11 @@ from pathlib import Path
 
 from acquisition_stream import campaign_frames, paper_plan, rss_mib, write_log
 
-from acquisition.batch import BatchDecoder
-from acquisition.logfile import read_raw_frames
-from acquisition.runner import replay
-from db.session import open_database, sqlite_url
-from stand.protocol import Codec
+from gyrostand.acquisition.runner import replay
+from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.frames.batch import BatchDecoder
+from gyrostand.frames.logfile import read_raw_frames
+from gyrostand.stand.protocol import Codec
 
 FRAMES_PER_PAPER_CAMPAIGN = 900_000  # the six trials of examples/paper.toml at 10 Hz
 

@@ -19,9 +19,9 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.signal import lfilter  # noqa: E402
 
-from analysis.errors import AnalysisError  # noqa: E402
-from analysis.kalman import SettleKalman  # noqa: E402
-from analysis.settle import estimate_settle_point, estimate_settle_point_free  # noqa: E402
+from gyrostand.analysis.errors import AnalysisError  # noqa: E402
+from gyrostand.analysis.kalman import SettleKalman  # noqa: E402
+from gyrostand.analysis.settle import estimate_settle_point, estimate_settle_point_free  # noqa: E402
 
 T0_S = 5064.0
 OMEGA0 = 2 * math.pi / T0_S

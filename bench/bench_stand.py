@@ -10,11 +10,11 @@ from tempfile import TemporaryDirectory
 
 import can
 
-from stand.controller import StandController
-from stand.engine import StandEngine
-from stand.protocol import Codec, HeadingFrame
-from stand.schedule import Step, run_schedule
-from stand.simulator import SimConfig, Simulator
+from gyrostand.stand.controller import StandController
+from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.protocol import Codec, HeadingFrame
+from gyrostand.stand.schedule import Step, run_schedule
+from gyrostand.stand.simulator import SimConfig, Simulator
 
 SETTLE_S = 45 * 60  # per equilibrium change with the default 84-min, 0.7-damped compass
 OBSERVE_S = 5 * 30  # 5 observations of ~30 s

@@ -23,11 +23,11 @@ from pathlib import Path
 from acquisition_stream import campaign_frames, paper_plan
 from bench_ingest import ours
 
-from acquisition.logfile import read_raw_frames
-from acquisition.plan import load_plan
-from acquisition.runner import run_live
-from acquisition.store import CampaignStore
-from db.session import open_database, sqlite_url
+from gyrostand.acquisition.runner import run_live
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.frames.logfile import read_raw_frames
+from gyrostand.plan.model import load_plan
 
 ROOT = Path(__file__).resolve().parents[1]
 INGEST_FRAMES = 300_000  # bench_ingest.py's default

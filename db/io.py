@@ -29,8 +29,8 @@ from typing import Any
 import pandas as pd
 from sqlalchemy.orm import Session, sessionmaker
 
-from db.models import TRIAL_ROLES, Campaign, Event, Observation, Series, Trial
-from db.queries import instrument_for, load_campaign
+from gyrostand.db.models import TRIAL_ROLES, Campaign, Event, Observation, Series, Trial
+from gyrostand.db.queries import instrument_for, load_campaign
 
 COMMON_COLUMNS = ("trial", "role", "direction_deg", "amplitude_cm", "period_s")
 FORM_COLUMNS = {

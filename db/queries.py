@@ -9,7 +9,7 @@ from datetime import datetime
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, selectinload
 
-from db.models import (
+from gyrostand.db.models import (
     EVENT_SEVERITIES,
     SERIES_J,
     Campaign,

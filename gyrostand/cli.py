@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from gyrostand import (
-    __version__,
+    SOFTWARE_VERSION,
     cmd_analyze,
     cmd_campaign,
     cmd_data,
@@ -28,7 +28,7 @@ app = typer.Typer(
 
 def _version(value: bool) -> None:
     if value:
-        typer.echo(f"gyrostand {__version__}")
+        typer.echo(SOFTWARE_VERSION)
         raise typer.Exit()
 
 

@@ -3,7 +3,7 @@
 `gyrostand analyze --csv FILE [--plan PLAN.toml] [--json]`. Without --plan the seed-000 example
 constants, start values, admissible region and ship forecast are used (a note on stderr says so).
 `gyrostand analyze CAMPAIGN_ID [--db URL_OR_PATH] [--json]` analyses a campaign in the database
-with its stored plan's settings and records the run (`acquisition.stored.analyze_stored`).
+with its stored plan's settings and records the run (`report.stored.analyze_stored`).
 `gyrostand analyze CAMPAIGN_ID --signal` and `gyrostand analyze --signal --log FILE.blf|.asc
 [--plan PLAN.toml] [--from S] [--to S]` print the signal analysis of the reading (report section
 10: noise, hidden harmonics, sampling interval, settle points, acceptance by excursions); they
@@ -22,15 +22,15 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from analysis.errors import AnalysisError
+from gyrostand.analysis.errors import AnalysisError
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
 from gyrostand.errors import fail
 
 if TYPE_CHECKING:
-    from analysis.campaign import CampaignAnalysis
-    from analysis.report.signal import SignalSection
-    from analysis.settings import AnalysisSettings
-    from analysis.trials import TrialInput
+    from gyrostand.analysis.campaign import CampaignAnalysis
+    from gyrostand.analysis.trials import TrialInput
+    from gyrostand.report.settings import AnalysisSettings
+    from gyrostand.report.signal import SignalSection
 
 PAPER_NOTE = (
     "note: no --plan given: using the seed-000 example constants, start values and ship "
@@ -41,7 +41,7 @@ SIGNAL_SCHEMA = "gyrostand.signal/1"  # the report JSON's "signal" object, with 
 
 def settings_from_plan(path: Path) -> AnalysisSettings:
     """Read [instrument], [site], [analysis] and the optional [forecast] of a campaign plan."""
-    from analysis.settings import settings_from_plan as plan_settings
+    from gyrostand.report.settings import settings_from_plan as plan_settings
 
     try:
         text = path.read_text()
@@ -55,7 +55,7 @@ def settings_from_plan(path: Path) -> AnalysisSettings:
 
 def run_analysis(trials: list[TrialInput], settings: AnalysisSettings) -> CampaignAnalysis:
     """The analysis, with analysis errors turned into one-line CLI failures."""
-    from analysis.campaign import analyze_campaign
+    from gyrostand.analysis.campaign import analyze_campaign
 
     try:
         return analyze_campaign(
@@ -72,7 +72,7 @@ def run_analysis(trials: list[TrialInput], settings: AnalysisSettings) -> Campai
 
 def emit(analysis: CampaignAnalysis, as_json: bool) -> None:
     """Print the analysis as text sections, or as one JSON document (keys: analysis.campaign)."""
-    from analysis.text_report import render_text
+    from gyrostand.report.text import render_text
 
     if as_json:
         typer.echo(json.dumps(analysis.to_dict(), indent=2, allow_nan=False))
@@ -138,8 +138,8 @@ def register(app: typer.Typer) -> None:
             return
         if csv is None:
             fail("no source given: use --csv FILE (see examples/paper.csv) or a CAMPAIGN id")
-        from analysis.csv_input import read_trials_csv
-        from analysis.settings import SEED_000_SETTINGS
+        from gyrostand.analysis.csv_input import read_trials_csv
+        from gyrostand.report.settings import SEED_000_SETTINGS
 
         if plan is None:
             typer.echo(PAPER_NOTE, err=True)
@@ -158,8 +158,8 @@ def analyze_stored_campaign(db: str, campaign_id: int) -> CampaignAnalysis:
     campaign) and record the analysis run; one-line CLI errors."""
     from sqlalchemy.exc import OperationalError
 
-    from acquisition.stored import analyze_stored
-    from db.queries import CampaignNotFound
+    from gyrostand.db.queries import CampaignNotFound
+    from gyrostand.report.stored import analyze_stored
 
     sessions = open_db(db, must_exist=True)
     try:
@@ -181,8 +181,8 @@ def signal_of(
     end_s: float | None,
 ) -> SignalSection:
     """The signal analysis the --signal options ask for; one-line CLI errors."""
-    from acquisition.plan import PlanError, load_plan
-    from acquisition.signal_record import log_signal
+    from gyrostand.plan.model import PlanError, load_plan
+    from gyrostand.report.signal_record import log_signal
 
     if csv is not None:
         fail("--signal reads a raw CAN log (a CAMPAIGN's or --log FILE), not --csv")
@@ -209,8 +209,8 @@ def signal_of(
 
 def campaign_signal_of(db: str, campaign_id: int) -> SignalSection:
     """The signal analysis of a stored campaign (read only); fails when it has no record."""
-    from acquisition.stored import campaign_signal
-    from db.queries import CampaignNotFound
+    from gyrostand.db.queries import CampaignNotFound
+    from gyrostand.report.stored import campaign_signal
 
     sessions = open_db(db, must_exist=True)
     try:
@@ -225,7 +225,7 @@ def campaign_signal_of(db: str, campaign_id: int) -> SignalSection:
 
 def emit_signal(section: SignalSection, as_json: bool) -> None:
     """Print the signal analysis as text, or as one JSON document (report section 10's keys)."""
-    from analysis.report.signal_text import render_signal_text
+    from gyrostand.report.signal_text import render_signal_text
 
     if as_json:
         document = {"schema": SIGNAL_SCHEMA, **section.to_dict()}

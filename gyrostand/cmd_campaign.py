@@ -10,14 +10,14 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from acquisition.plan import Plan, PlanError, load_plan
 from gyrostand.cmd_data import DEFAULT_DB, open_db
 from gyrostand.errors import EXIT_FAILED, fail
-from stand.simconfig import TIMINGS
+from gyrostand.plan.model import Plan, PlanError, load_plan
+from gyrostand.stand.simconfig import TIMINGS
 
 if TYPE_CHECKING:
-    from acquisition.runner import RunResult
-    from acquisition.store import CampaignStore
+    from gyrostand.acquisition.runner import RunResult
+    from gyrostand.acquisition.store import CampaignStore
 
 _out = Console(highlight=False, soft_wrap=True)
 
@@ -39,7 +39,7 @@ def checked_plan(
     seed: int | None,
     timing: str | None = None,
 ) -> Plan:
-    from acquisition.runner import prepare
+    from gyrostand.acquisition.runner import prepare
 
     bus = plan.bus
     if timing is not None and timing not in TIMINGS:
@@ -91,7 +91,7 @@ def print_outcome(result: RunResult, db: str) -> None:
 def run_campaign(plan: Plan, store: CampaignStore, quiet: bool) -> RunResult:
     import can
 
-    from acquisition.runner import run_live
+    from gyrostand.acquisition.runner import run_live
 
     try:
         return run_live(plan, store, quiet=quiet)
@@ -144,7 +144,7 @@ def register(app: typer.Typer) -> None:
         quiet: Quiet = False,
     ) -> None:
         """Run a campaign plan on the stand (the simulated stand when the plan says so)."""
-        from acquisition.store import CampaignStore
+        from gyrostand.acquisition.store import CampaignStore
 
         checked = checked_plan(
             _load(plan),
@@ -171,8 +171,8 @@ def register(app: typer.Typer) -> None:
         quiet: Quiet = False,
     ) -> None:
         """Continue a campaign from its first incomplete series (re-settling first)."""
-        from acquisition.runner import resume_store
-        from db.queries import first_incomplete_series
+        from gyrostand.acquisition.runner import resume_store
+        from gyrostand.db.queries import first_incomplete_series
 
         sessions = open_db(db, must_exist=True)
         try:
@@ -204,7 +204,7 @@ def register(app: typer.Typer) -> None:
         db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
     ) -> None:
         """Show where a campaign stands."""
-        from db.queries import CampaignNotFound, campaign_summary
+        from gyrostand.db.queries import CampaignNotFound, campaign_summary
 
         sessions = open_db(db, must_exist=True)
         with sessions() as session:
@@ -246,7 +246,7 @@ def register(app: typer.Typer) -> None:
         """Re-derive observations offline from a raw CAN log into a new campaign."""
         import can
 
-        from acquisition.runner import replay
+        from gyrostand.acquisition.runner import replay
 
         checked = checked_plan(
             _load(plan), interface=None, channel=None, db=db, speedup=None, seed=None

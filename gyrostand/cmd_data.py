@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from gyrostand import __version__
+from gyrostand import SOFTWARE_VERSION
 from gyrostand.errors import fail
 
 if TYPE_CHECKING:
@@ -34,7 +34,7 @@ class ExportFormat(StrEnum):
 
 def open_db(db: str, *, must_exist: bool = False) -> sessionmaker[Session]:
     """The database's session factory, or a one-line error (missing file, wrong schema)."""
-    from db.session import DatabaseVersionError, database_url, open_database
+    from gyrostand.db.session import DatabaseVersionError, database_url, open_database
 
     if must_exist and "://" not in db and not Path(db).exists():
         fail(f"no database at {db}")
@@ -91,7 +91,7 @@ def register(app: typer.Typer) -> None:
         file is valid."""
         from sqlalchemy.exc import OperationalError
 
-        from db.io import (
+        from gyrostand.db.io import (
             SEED_000_METADATA,
             ImportFileError,
             MetadataError,
@@ -103,7 +103,7 @@ def register(app: typer.Typer) -> None:
         metadata = dict(SEED_000_METADATA) if plan is None else plan_metadata(plan)
         if operator is not None:
             metadata["operator"] = operator
-        metadata["software_version"] = __version__
+        metadata["software_version"] = SOFTWARE_VERSION
         try:
             check_metadata(metadata)
             data = read_import_file(file)
@@ -140,8 +140,8 @@ def register(app: typer.Typer) -> None:
         db: DbOption = DEFAULT_DB,
     ) -> None:
         """Export a campaign's observations and series/trial summaries (CSV, Parquet, Excel)."""
-        from db.io import export_campaign, export_paths
-        from db.queries import CampaignNotFound
+        from gyrostand.db.io import export_campaign, export_paths
+        from gyrostand.db.queries import CampaignNotFound
 
         fmt = format.value
         out = out or Path("runs/export") / f"campaign-{campaign}.{fmt}"

@@ -6,11 +6,11 @@ from importlib.resources import files
 
 import typer
 
-from acquisition.plan import PlanError, parse_plan
 from gyrostand.cmd_campaign import checked_plan, print_outcome, run_campaign
 from gyrostand.cmd_data import open_db
 from gyrostand.cmd_report import DEFAULT_OUT, write_campaign_report
 from gyrostand.errors import fail
+from gyrostand.plan.model import PlanError, parse_plan
 
 DEMO_PLAN = files("gyrostand") / "plans" / "paper.toml"  # also examples/paper.toml
 
@@ -23,7 +23,7 @@ def register(app: typer.Typer) -> None:
         quiet: bool = typer.Option(False, "--quiet", help="No live progress display."),
     ) -> None:
         """Run the paper's campaign on the simulated stand, analyse it, write its report."""
-        from acquisition.store import CampaignStore
+        from gyrostand.acquisition.store import CampaignStore
 
         try:
             plan = parse_plan(DEMO_PLAN.read_text())

@@ -12,10 +12,10 @@ from typing import Annotated
 
 import typer
 
-from analysis.report import FORMATS
-from analysis.report.compliance import SHIPPED
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
 from gyrostand.errors import fail
+from gyrostand.report import FORMATS
+from gyrostand.report.compliance import SHIPPED
 
 DEFAULT_OUT = Path("runs/reports")
 
@@ -30,11 +30,11 @@ def write_campaign_report(
     """Analyse and report one campaign; the files written by format (one-line CLI errors)."""
     from sqlalchemy.exc import OperationalError
 
-    from acquisition.stored import campaign_report
-    from analysis.errors import AnalysisError
-    from analysis.report.compliance import load_profile
-    from analysis.report.writer import write_report
-    from db.queries import CampaignNotFound
+    from gyrostand.analysis.errors import AnalysisError
+    from gyrostand.db.queries import CampaignNotFound
+    from gyrostand.report.compliance import load_profile
+    from gyrostand.report.stored import campaign_report
+    from gyrostand.report.writer import write_report
 
     sessions = open_db(db, must_exist=True)
     try:

@@ -20,9 +20,15 @@ import typer
 from rich.console import Console
 
 from gyrostand.errors import fail
-from stand.schedule import LOG_SUFFIXES, ScheduleError, Step, load_schedule, run_schedule
-from stand.simconfig import CompassParams, FaultParams, NoiseParams, SimConfig, StandParams
-from stand.simulator import Simulator
+from gyrostand.stand.schedule import LOG_SUFFIXES, ScheduleError, Step, load_schedule, run_schedule
+from gyrostand.stand.simconfig import (
+    CompassParams,
+    FaultParams,
+    NoiseParams,
+    SimConfig,
+    StandParams,
+)
+from gyrostand.stand.simulator import Simulator
 
 _out = Console(stderr=True, highlight=False)
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import can
 
-from stand.protocol import AckFrame, Codec, StandStatusFrame
+from gyrostand.stand.protocol import AckFrame, Codec, StandStatusFrame
 
 
 class StandError(Exception):

@@ -13,10 +13,10 @@ import math
 import can
 import numpy as np
 
-from stand.packing import BatchEncoder
-from stand.physics import CorrelatedNoise, DampedPrecession
-from stand.protocol import HEADING_KEYS, STATUS_KEYS, Codec, CommandFrame, Reason
-from stand.simconfig import SimConfig
+from gyrostand.stand.packing import BatchEncoder
+from gyrostand.stand.physics import CorrelatedNoise, DampedPrecession
+from gyrostand.stand.protocol import HEADING_KEYS, STATUS_KEYS, Codec, CommandFrame, Reason
+from gyrostand.stand.simconfig import SimConfig
 
 # columns of the per-sample uniform draws for the fault knobs (always drawn, so switching one
 # knob on does not change the noise or the other faults)

@@ -14,7 +14,7 @@ import numpy as np
 from cantools.database.can import Message as DbcMessage
 from cantools.database.can import Signal
 
-from stand.protocol import CRC8_J1850_TABLE, ProtocolError
+from gyrostand.stand.protocol import CRC8_J1850_TABLE, ProtocolError
 
 _CRC_TABLE = np.array(CRC8_J1850_TABLE, dtype=np.uint8)
 

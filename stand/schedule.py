@@ -15,9 +15,9 @@ from pathlib import Path
 
 import can
 
-from stand.engine import StandEngine
-from stand.protocol import AckFrame, Codec
-from stand.simconfig import SimConfig
+from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.protocol import AckFrame, Codec
+from gyrostand.stand.simconfig import SimConfig
 
 LOG_SUFFIXES = (".blf", ".asc")
 _CHUNK_S = 60.0  # stand seconds generated per batch

@@ -7,7 +7,7 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from stand.physics import rolling_error_rad
+from gyrostand.stand.physics import rolling_error_rad
 
 TIMINGS = ("virtual", "realtime")
 

@@ -21,10 +21,16 @@ from types import TracebackType
 
 import can
 
-from stand.engine import StandEngine
-from stand.protocol import Codec
-from stand.simconfig import CompassParams, FaultParams, NoiseParams, SimConfig, StandParams
-from stand.virtual_time import ClockEncoder, decode_sync
+from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.protocol import Codec
+from gyrostand.stand.simconfig import (
+    CompassParams,
+    FaultParams,
+    NoiseParams,
+    SimConfig,
+    StandParams,
+)
+from gyrostand.stand.virtual_time import ClockEncoder, decode_sync
 
 __all__ = [
     "CompassParams",

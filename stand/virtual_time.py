@@ -29,8 +29,8 @@ import cantools
 import numpy as np
 from cantools.database.can import Message as DbcMessage
 
-from stand.packing import BatchEncoder
-from stand.protocol import DBC_PATH, ProtocolError
+from gyrostand.stand.packing import BatchEncoder
+from gyrostand.stand.protocol import DBC_PATH, ProtocolError
 
 CLOCK_INTERVAL_MS = 1000  # SIM_CLOCK period in stand time
 DEFAULT_LEAD_MS = 60_000  # how far the stand may run ahead of the controller (= command latency)

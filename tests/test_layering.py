@@ -1,5 +1,15 @@
-"""The layering is one-way: analysis and db import no internal package, stand imports no
-acquisition, acquisition may import stand/db/analysis, only the CLI (gyrostand) imports all."""
+"""The layering is one-way, and every internal import goes through the `gyrostand` namespace (the
+folders stay at the top of the repository; pyproject maps them to `gyrostand.<folder>`):
+
+- `analysis` (pure computation) and `db` (schema, persistence) import no internal package;
+- `stand` (protocol, simulator) imports analysis's pure helpers only;
+- `plan` (the one plan model) imports stand; `frames` (raw log, vectorised decoder) imports stand;
+- `acquisition` (the write side) imports stand, db, analysis, plan, frames;
+- `report` (the read side: stored campaign -> analysis -> report/export) imports db, analysis,
+  plan, frames, stand and never acquisition;
+- the CLI modules in `gyrostand/` import everything. The package root (`from gyrostand import
+  SOFTWARE_VERSION`) is importable from every layer.
+"""
 
 import ast
 from pathlib import Path
@@ -7,34 +17,46 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-INTERNAL = {"gyrostand", "acquisition", "analysis", "stand", "db"}
+CLI = "gyrostand"
 ALLOWED = {
     "analysis": set(),
     "db": set(),
-    "stand": set(),
-    "acquisition": {"stand", "db", "analysis"},
-    "gyrostand": {"acquisition", "analysis", "stand", "db"},
+    "stand": {"analysis"},
+    "plan": {"stand"},
+    "frames": {"stand"},
+    "acquisition": {"stand", "db", "analysis", "plan", "frames"},
+    "report": {"db", "analysis", "plan", "frames", "stand"},
+    CLI: {"acquisition", "analysis", "stand", "db", "plan", "frames", "report"},
 }
+LAYERS = set(ALLOWED) - {CLI}
 
 
-def imported_packages(source: str) -> set[str]:
-    """Top-level internal packages imported anywhere in a module (absolute imports)."""
+def imported_layers(source: str) -> set[str]:
+    """The layers a module imports (absolute imports); a bare `from analysis import ...` (outside
+    the namespace) is reported as "bare analysis"."""
     found: set[str] = set()
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
-            names = [alias.name for alias in node.names]
+            modules = [(alias.name, ()) for alias in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            names = [node.module]
+            modules = [(node.module, tuple(alias.name for alias in node.names))]
         else:
             continue
-        found.update(n.split(".")[0] for n in names if n.split(".")[0] in INTERNAL)
+        for module, names in modules:
+            parts = module.split(".")
+            if parts[0] in LAYERS:
+                found.add(f"bare {parts[0]}")
+            elif parts[0] == "gyrostand" and len(parts) > 1:
+                found.add(parts[1] if parts[1] in LAYERS else CLI)
+            elif parts[0] == "gyrostand":  # from gyrostand import X: a layer, CLI module or root
+                found.update(n if n in LAYERS else CLI for n in names if n != "SOFTWARE_VERSION")
     return found
 
 
 def violations(package: str, root: Path = ROOT) -> list[str]:
     bad = []
     for path in sorted((root / package).rglob("*.py")):
-        for imported in imported_packages(path.read_text()) - ALLOWED[package] - {package}:
+        for imported in sorted(imported_layers(path.read_text()) - ALLOWED[package] - {package}):
             bad.append(f"{path.relative_to(root)} imports {imported}")
     return bad
 
@@ -47,6 +69,25 @@ def test_package_respects_layering(package: str) -> None:
 
 def test_checker_catches_a_violation(tmp_path: Path) -> None:
     (tmp_path / "analysis").mkdir()
-    (tmp_path / "analysis" / "bad.py").write_text("import numpy\nfrom db.schema import Trial\n")
-    (tmp_path / "analysis" / "ok.py").write_text("from analysis import x\nfrom . import y\n")
-    assert violations("analysis", tmp_path) == ["analysis/bad.py imports db"]
+    (tmp_path / "analysis" / "bad.py").write_text(
+        "import numpy\nfrom gyrostand.db.schema import Trial\nfrom stand import protocol\n"
+    )
+    (tmp_path / "analysis" / "ok.py").write_text(
+        "from gyrostand.analysis import x\nfrom . import y\n"
+        "from gyrostand import SOFTWARE_VERSION\n"
+    )
+    assert violations("analysis", tmp_path) == [
+        "analysis/bad.py imports bare stand",
+        "analysis/bad.py imports db",
+    ]
+
+
+def test_every_layer_is_installed_under_the_namespace() -> None:
+    """pyproject maps each layer folder to `gyrostand.<folder>`: nothing generic is installed."""
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert project["package-dir"] == {"gyrostand": "gyrostand"} | {
+        f"gyrostand.{layer}": layer for layer in LAYERS
+    }
+    assert all(p == "gyrostand" or p.startswith("gyrostand.") for p in project["packages"])

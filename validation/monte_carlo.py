@@ -22,11 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from analysis.campaign import analyze_campaign
-from analysis.errors import AnalysisError
-from analysis.gyro_model import RollingErrorModel
-from analysis.paper_example import CONSTANTS
-from analysis.synthetic import Design, synthetic_trials
+from gyrostand.analysis.campaign import analyze_campaign
+from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.gyro_model import RollingErrorModel
+from gyrostand.analysis.paper_example import CONSTANTS
+from gyrostand.analysis.synthetic import Design, synthetic_trials
 
 TRUE = {"C_gcm2s2": 6e7, "T_s": 1.15}
 START = (7e7, 0.55)

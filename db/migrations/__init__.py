@@ -2,7 +2,7 @@
 (no alembic.ini). To add a revision after changing `db/models.py`:
 
     from alembic import command
-    from db.session import alembic_config, open_database
+    from gyrostand.db.session import alembic_config, open_database
 
     engine = open_database("sqlite:////tmp/gyrostand-head.sqlite").kw["bind"]  # at head
     config = alembic_config()

@@ -9,12 +9,12 @@ from typing import Any
 
 import can
 
-from acquisition.batch import BatchDecoder, RawFrames
-from acquisition.engine import Command, Engine, Measured, ObservationResult
-from acquisition.plan import Plan, parse_plan
-from stand.engine import StandEngine
-from stand.protocol import Codec
-from stand.simconfig import CompassParams, FaultParams, NoiseParams, SimConfig
+from gyrostand.acquisition.engine import Command, Engine, Measured, ObservationResult
+from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.plan.model import Plan, parse_plan
+from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.protocol import Codec
+from gyrostand.stand.simconfig import CompassParams, FaultParams, NoiseParams, SimConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 

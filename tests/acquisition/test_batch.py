@@ -7,8 +7,8 @@ import can
 import numpy as np
 from crccheck.crc import Crc8SaeJ1850
 
-from acquisition.batch import BatchDecoder, RawFrames, crc8_sae_j1850
-from stand.protocol import Codec, CompassStatusFrame, HeadingFrame, StandStatusFrame
+from gyrostand.frames.batch import BatchDecoder, RawFrames, crc8_sae_j1850
+from gyrostand.stand.protocol import Codec, CompassStatusFrame, HeadingFrame, StandStatusFrame
 
 
 def random_stream(seed: int, n: int) -> list[can.Message]:

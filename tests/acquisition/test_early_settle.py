@@ -21,8 +21,7 @@ import numpy as np
 import pytest
 from sqlalchemy import select
 
-from acquisition.batch import BatchDecoder, RawFrames
-from acquisition.early_settle import (
+from gyrostand.acquisition.early_settle import (
     MIN_BLOCKS,
     EarlySettle,
     band_settled,
@@ -30,15 +29,16 @@ from acquisition.early_settle import (
     parse_outcome,
     predict_band_settle_s,
 )
-from acquisition.engine import Engine
-from acquisition.plan import EstimatePlan, PlanError, load_plan, parse_plan
-from acquisition.store import CampaignStore
-from acquisition.stored import campaign_report
-from analysis.report.compliance import load_profile
-from db.models import Event, Series, Trial
-from db.session import open_database, sqlite_url
-from stand.protocol import Codec
-from stand.simconfig import CompassParams, SimConfig
+from gyrostand.acquisition.engine import Engine
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.db.models import Event, Series, Trial
+from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.plan.model import EstimatePlan, PlanError, load_plan, parse_plan
+from gyrostand.report.compliance import load_profile
+from gyrostand.report.stored import campaign_report
+from gyrostand.stand.protocol import Codec
+from gyrostand.stand.simconfig import CompassParams, SimConfig
 
 from .harness import ROOT, Lockstep, NoCommands, Recorder, plan_text
 

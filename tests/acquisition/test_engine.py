@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from acquisition.batch import BatchDecoder, RawFrames
-from acquisition.engine import Engine
-from stand.protocol import Codec
+from gyrostand.acquisition.engine import Engine
+from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.stand.protocol import Codec
 
 from .harness import Lockstep, NoCommands, Recorder, quick_config, small_plan
 
@@ -168,7 +168,7 @@ def test_too_many_error_frames_fail_the_trial() -> None:
 
 
 def test_resume_continues_at_the_first_incomplete_series() -> None:
-    from acquisition.engine import TrialState
+    from gyrostand.acquisition.engine import TrialState
 
     plan = small_plan()
     progress = {
@@ -220,7 +220,7 @@ def test_bus_off_error_frame_fails_the_trial() -> None:
 def test_recorder_counts_what_a_full_queue_drops(tmp_path) -> None:
     import can
 
-    from acquisition.bus import Recorder as FrameRecorder
+    from gyrostand.acquisition.bus import Recorder as FrameRecorder
 
     recorder = FrameRecorder(3, None)
     for i in range(5):

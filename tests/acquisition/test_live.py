@@ -13,16 +13,16 @@ from can.interfaces.virtual import VirtualBus
 from scipy import stats
 from sqlalchemy import select
 
-from acquisition.bus import LiveBus
-from acquisition.plan import parse_plan
-from acquisition.runner import replay, run_live
-from acquisition.store import CampaignStore
-from analysis.campaign import analyze_campaign
-from analysis.settings import settings_from_plan
-from analysis.trials import TrialInput
-from db.models import Campaign, Event, Observation, Series, Trial
-from db.session import open_database, sqlite_url
-from stand.simconfig import CompassParams
+from gyrostand.acquisition.bus import LiveBus
+from gyrostand.acquisition.runner import replay, run_live
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.analysis.campaign import analyze_campaign
+from gyrostand.analysis.trials import TrialInput
+from gyrostand.db.models import Campaign, Event, Observation, Series, Trial
+from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.plan.model import parse_plan
+from gyrostand.report.settings import settings_from_plan
+from gyrostand.stand.simconfig import CompassParams
 
 from .harness import ROOT
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import can
 import numpy as np
 
-from acquisition.logfile import read_blf, read_raw_frames
+from gyrostand.frames.logfile import read_blf, read_raw_frames
 
 
 def sample_messages(n: int) -> list[can.Message]:
@@ -92,8 +92,8 @@ def test_asc_goes_through_python_can(tmp_path: Path) -> None:
 
 
 def test_batch_blf_writer_equals_python_can_writer(tmp_path: Path) -> None:
-    from acquisition.batch import RawFrames
-    from acquisition.logfile import BatchBLFWriter
+    from gyrostand.frames.batch import RawFrames
+    from gyrostand.frames.logfile import BatchBLFWriter
 
     messages = sample_messages(5000)
     for i, m in enumerate(messages):

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from acquisition.plan import PlanError, load_plan, parse_plan
+from gyrostand.plan.model import PlanError, load_plan, parse_plan
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "examples" / "paper.toml"

@@ -8,7 +8,7 @@ from cantools.database.conversion import BaseConversion
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from acquisition.vectordecode import VectorDecoder
+from gyrostand.frames.vectordecode import VectorDecoder
 
 
 @st.composite

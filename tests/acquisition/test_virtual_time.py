@@ -15,13 +15,13 @@ from pathlib import Path
 import cantools
 import pytest
 
-from acquisition.logfile import read_raw_frames
-from acquisition.plan import parse_plan
-from acquisition.runner import RunResult, run_live
-from acquisition.store import CampaignStore
-from db.session import open_database, sqlite_url
-from stand.protocol import DBC_PATH
-from stand.virtual_time import DEFAULT_LEAD_MS
+from gyrostand.acquisition.runner import RunResult, run_live
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.frames.logfile import read_raw_frames
+from gyrostand.plan.model import parse_plan
+from gyrostand.stand.protocol import DBC_PATH
+from gyrostand.stand.virtual_time import DEFAULT_LEAD_MS
 
 from .harness import plan_text
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from analysis.allan import allan_deviation
+from gyrostand.analysis.allan import allan_deviation
 
 
 def test_white_reading_falls_as_one_over_root_tau() -> None:

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from analysis.assumptions import independence_check, ljung_box_lag1, normality_check
-from analysis.trials import TrialInput
+from gyrostand.analysis.assumptions import independence_check, ljung_box_lag1, normality_check
+from gyrostand.analysis.trials import TrialInput
 
 
 def trials_from(series: np.ndarray) -> list[TrialInput]:

@@ -5,10 +5,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis import paper_example as paper
-from analysis.campaign import analyze_campaign
-from analysis.csv_input import read_trials_csv
-from analysis.errors import (
+from gyrostand.analysis import paper_example as paper
+from gyrostand.analysis.campaign import analyze_campaign
+from gyrostand.analysis.csv_input import read_trials_csv
+from gyrostand.analysis.errors import (
     AnalysisError,
     MissingDataError,
     NonFiniteError,
@@ -18,8 +18,8 @@ from analysis.errors import (
     UnequalDegreesOfFreedomError,
     ZeroVarianceError,
 )
-from analysis.synthetic import Design, synthetic_trials
-from analysis.trials import TrialInput
+from gyrostand.analysis.synthetic import Design, synthetic_trials
+from gyrostand.analysis.trials import TrialInput
 
 CSV = Path(__file__).resolve().parents[2] / "examples" / "paper.csv"
 TRUE = {"C_gcm2s2": 6e7, "T_s": 1.15}

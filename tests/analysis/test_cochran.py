@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from analysis import cochran_critical
-from analysis.cochran import cochran_test
-from analysis.errors import AnalysisError, UnequalDegreesOfFreedomError, ZeroVarianceError
+from gyrostand.analysis import cochran_critical
+from gyrostand.analysis.cochran import cochran_test
+from gyrostand.analysis.errors import AnalysisError, UnequalDegreesOfFreedomError, ZeroVarianceError
 
 # q = 0.05, (k variances, nu = n - 1 dof): UK National Measurement System table (3 decimals),
 # http://www.nmschembio.org.uk/GenericArticle.aspx?m=395&amid=5622

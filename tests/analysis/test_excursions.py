@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from analysis.errors import AnalysisError
-from analysis.excursions import excursion_acceptance, tolerance_for_risk
-from analysis.noise import CorrelationModel
+from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.excursions import excursion_acceptance, tolerance_for_risk
+from gyrostand.analysis.noise import CorrelationModel
 
 MODEL = CorrelationModel(variance=1.0, decay_per_s=1.0, frequency_rad_s=2.0)
 

@@ -6,11 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis import paper_example as paper
-from analysis.campaign import analyze_campaign
-from analysis.csv_input import read_trials_csv
-from analysis.errors import AnalysisError, NonFiniteError
-from analysis.forecast import Predictor, ShipConditions, forecast_grid, forecast_ship
+from gyrostand.analysis import paper_example as paper
+from gyrostand.analysis.campaign import analyze_campaign
+from gyrostand.analysis.csv_input import read_trials_csv
+from gyrostand.analysis.errors import AnalysisError, NonFiniteError
+from gyrostand.analysis.forecast import Predictor, ShipConditions, forecast_grid, forecast_ship
 
 CSV = Path(__file__).resolve().parents[2] / "examples" / "paper.csv"
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from analysis.kalman import SettleKalman
-from analysis.settle import estimate_settle_point, observation_rows
+from gyrostand.analysis.kalman import SettleKalman
+from gyrostand.analysis.settle import estimate_settle_point, observation_rows
 
 T0_S = 84 * 60.0
 OMEGA = 2 * np.pi / T0_S

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis import FitResult, fit_nonlinear
-from analysis.errors import AnalysisError, NonFiniteError, TooFewTrialsError
+from gyrostand.analysis import FitResult, fit_nonlinear
+from gyrostand.analysis.errors import AnalysisError, NonFiniteError, TooFewTrialsError
 
 # NIST StRD nonlinear regression problems with their certified values (public; each problem
 # names its NIST source page in "source")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from analysis.noise import (
+from gyrostand.analysis.noise import (
     CorrelationModel,
     characterise_noise,
     correlation_estimate_variance,

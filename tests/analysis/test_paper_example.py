@@ -6,11 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis import paper_example as paper
-from analysis.campaign import CampaignAnalysis, analyze_campaign
-from analysis.csv_input import read_trials_csv
-from analysis.gyro_model import Conditions, RollingErrorModel
-from analysis.text_report import render_text
+from gyrostand.analysis import paper_example as paper
+from gyrostand.analysis.campaign import CampaignAnalysis, analyze_campaign
+from gyrostand.analysis.csv_input import read_trials_csv
+from gyrostand.analysis.gyro_model import Conditions, RollingErrorModel
+from gyrostand.report.text import render_text
 
 CSV = Path(__file__).resolve().parents[2] / "examples" / "paper.csv"
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from analysis.errors import SingularDesignError
-from analysis.settle import estimate_settle_point, estimate_settle_point_free
+from gyrostand.analysis.errors import SingularDesignError
+from gyrostand.analysis.settle import estimate_settle_point, estimate_settle_point_free
 
 T0_S = 84 * 60.0
 OMEGA = 2 * np.pi / T0_S

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad, solve_ivp
 
-from analysis.settle import (
+from gyrostand.analysis.settle import (
     d1_discrete,
     d1_limit,
     d2_discrete,

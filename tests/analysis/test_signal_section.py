@@ -1,4 +1,4 @@
-"""Report section 10 as pure computation (analysis.report.signal): the uniform record, the
+"""Report section 10 as pure computation (report.signal): the uniform record, the
 correlation of successive window means against its closed form, settle rows, the excursion
 verdict against Rice's closed form (seed 004 eq 8.88), and what is left unassessed."""
 
@@ -7,16 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from analysis.noise import CorrelationModel
-from analysis.report.compliance import FAIL, PASS
-from analysis.report.model import (
+from gyrostand.analysis.noise import CorrelationModel
+from gyrostand.report.compliance import FAIL, PASS
+from gyrostand.report.model import (
     ExcursionCriterion,
     ObservationRecord,
     ReadingRecord,
     SeriesRecord,
     TrialRecord,
 )
-from analysis.report.signal import (
+from gyrostand.report.signal import (
     MIN_READINGS,
     excursion_verdict,
     observation_correlations,

@@ -4,13 +4,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.errors import (
+from gyrostand.analysis.errors import (
     AnalysisError,
     MissingDataError,
     NonFiniteError,
     TooFewObservationsError,
 )
-from analysis.trials import (
+from gyrostand.analysis.trials import (
     SeriesSummary,
     TrialInput,
     difference_statistics,

@@ -2,8 +2,8 @@
 
 from pathlib import Path
 
-from acquisition.plan import parse_plan
 from gyrostand.cmd_demo import DEMO_PLAN
+from gyrostand.plan.model import parse_plan
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -5,8 +5,8 @@ from pathlib import Path
 import pytest
 from sqlalchemy.orm import Session, sessionmaker
 
-from db.models import Campaign, Instrument, Series, Trial
-from db.session import open_database, sqlite_url
+from gyrostand.db.models import Campaign, Instrument, Series, Trial
+from gyrostand.db.session import open_database, sqlite_url
 
 
 @pytest.fixture

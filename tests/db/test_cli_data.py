@@ -8,9 +8,9 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from db.models import Campaign
-from db.session import open_database, sqlite_url
 from gyrostand.cli import app
+from gyrostand.db.models import Campaign
+from gyrostand.db.session import open_database, sqlite_url
 from tests.db.test_io import PAPER_CSV, dump, observation_rows
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -147,7 +147,7 @@ def test_locked_database_is_a_clean_error_and_nothing_is_written(
 ) -> None:
     assert gyrostand("import", paper, "--db", db_path)[0] == 0
     before = dump(db_path)
-    monkeypatch.setattr("db.session.BUSY_TIMEOUT_MS", 50)
+    monkeypatch.setattr("gyrostand.db.session.BUSY_TIMEOUT_MS", 50)
     other_writer = sqlite3.connect(db_path, isolation_level=None)
     other_writer.execute("BEGIN IMMEDIATE")  # e.g. a running campaign holding the write lock
     try:

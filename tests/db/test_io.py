@@ -12,7 +12,7 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
-from db.io import (
+from gyrostand.db.io import (
     SEED_000_METADATA,
     ImportedFile,
     ImportedTrial,
@@ -24,8 +24,8 @@ from db.io import (
     import_file,
     read_import_file,
 )
-from db.models import Campaign, Event, Instrument
-from db.queries import load_campaign
+from gyrostand.db.models import Campaign, Event, Instrument
+from gyrostand.db.queries import load_campaign
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -387,7 +387,7 @@ def test_a_failure_while_storing_rolls_everything_back(
         for i, direction in ((1, 10.0), (2, 20.0), (3, 400.0))
     )
     data = ImportedFile(tmp_path / "x.csv", "0" * 64, "trials", 5, trials)
-    from db.io import store_import
+    from gyrostand.db.io import store_import
 
     before = dump(db_path)
     with pytest.raises(IntegrityError, match="ck_trial_cmd_direction"), sessions.begin() as session:

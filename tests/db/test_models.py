@@ -7,7 +7,7 @@ from sqlalchemy import func, select, text
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
-from db.models import AnalysisRun, Campaign, Event, Observation, Series, Trial
+from gyrostand.db.models import AnalysisRun, Campaign, Event, Observation, Series, Trial
 from tests.db.conftest import make_campaign
 
 

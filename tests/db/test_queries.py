@@ -3,8 +3,8 @@
 import pytest
 from sqlalchemy.orm import Session, sessionmaker
 
-from db.models import Event, Observation, Series
-from db.queries import (
+from gyrostand.db.models import Event, Observation, Series
+from gyrostand.db.queries import (
     CampaignNotFound,
     ResumePoint,
     campaign_constants,

@@ -10,8 +10,8 @@ from alembic.migration import MigrationContext
 from sqlalchemy import create_engine, text
 from sqlalchemy.orm import Session, sessionmaker
 
-from db.models import Base
-from db.session import (
+from gyrostand.db.models import Base
+from gyrostand.db.session import (
     MIGRATIONS_DIR,
     DatabaseVersionError,
     _configure_sqlite,

@@ -16,15 +16,15 @@ import can
 import pytest
 from sqlalchemy.orm import Session, sessionmaker
 
-from acquisition.engine import Engine
-from acquisition.plan import parse_plan
-from acquisition.store import CampaignStore
-from acquisition.stored import campaign_report
-from analysis.report.build import Report
-from analysis.report.compliance import load_profile
-from analysis.report.writer import write_report
-from db.io import SEED_000_METADATA, import_file
-from db.session import open_database, sqlite_url
+from gyrostand.acquisition.engine import Engine
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.db.io import SEED_000_METADATA, import_file
+from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.plan.model import parse_plan
+from gyrostand.report.build import Report
+from gyrostand.report.compliance import load_profile
+from gyrostand.report.stored import campaign_report
+from gyrostand.report.writer import write_report
 from tests.acquisition.harness import Lockstep, plan_text, quick_config
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -7,8 +7,8 @@ import pytest
 from sqlalchemy import func, select
 from typer.testing import CliRunner
 
-from db.models import AnalysisRun
 from gyrostand.cli import app
+from gyrostand.db.models import AnalysisRun
 
 from .conftest import Stored, import_paper
 

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.campaign import analyze_campaign
-from analysis.csv_input import read_trials_csv
-from analysis.report.build import Report, forecast_section
-from analysis.report.compliance import (
+from gyrostand.analysis.campaign import analyze_campaign
+from gyrostand.analysis.csv_input import read_trials_csv
+from gyrostand.report.build import Report, forecast_section
+from gyrostand.report.compliance import (
     EVIDENCE,
     FAIL,
     NOT_ASSESSED,
@@ -19,13 +19,13 @@ from analysis.report.compliance import (
     assess,
     load_profile,
 )
-from analysis.report.errors import ReportError
-from analysis.settings import SEED_000_SETTINGS
+from gyrostand.report.errors import ReportError
+from gyrostand.report.settings import SEED_000_SETTINGS
 
 from .conftest import PAPER_CSV
 
 PROFILE = (
-    Path(__file__).resolve().parents[2] / "analysis/report/profiles/imo-a424.toml"
+    Path(__file__).resolve().parents[2] / "report/profiles/imo-a424.toml"
 ).read_text()
 
 
@@ -40,7 +40,7 @@ def test_shipped_profile_states_its_source_and_clauses() -> None:
     assert profile.envelope.period_s == (6.0, 15.0)
     assert all(r.clause.startswith("A.424(XI) Annex 4.") for r in profile.requirements)
     assert {r.evidence for r in profile.requirements} == set(EVIDENCE)
-    assert load_profile(Path(__file__).parents[2] / "analysis/report/profiles/imo-a424.toml")
+    assert load_profile(Path(__file__).parents[2] / "report/profiles/imo-a424.toml")
 
 
 def test_paper_verdicts(paper_report: Report) -> None:

@@ -12,11 +12,11 @@ from pathlib import Path
 import pytest
 from sqlalchemy import func, select
 
-from analysis.report.build import Report
-from analysis.report.errors import ReportError
-from analysis.report.json_doc import report_json
-from analysis.report.writer import write_report
-from db.models import AnalysisRun
+from gyrostand.db.models import AnalysisRun
+from gyrostand.report.build import Report
+from gyrostand.report.errors import ReportError
+from gyrostand.report.json_doc import report_json
+from gyrostand.report.writer import write_report
 
 from .conftest import GENERATED, OPERATOR, PAPER_CSV, Rendered, Stored
 

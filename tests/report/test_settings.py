@@ -1,11 +1,11 @@
-"""analysis.settings: a plan's TOML text -> analysis settings, with typed errors."""
+"""report.settings: a plan's TOML text -> analysis settings, with typed errors."""
 
 from pathlib import Path
 
 import pytest
 
-from analysis.errors import AnalysisError
-from analysis.settings import SEED_000_SETTINGS, settings_from_plan
+from gyrostand.analysis.errors import AnalysisError
+from gyrostand.report.settings import SEED_000_SETTINGS, settings_from_plan
 
 ROOT = Path(__file__).resolve().parents[2]
 

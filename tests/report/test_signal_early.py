@@ -10,13 +10,13 @@ from dataclasses import replace
 import pytest
 from typer.testing import CliRunner
 
-from analysis.report.build import Report, build_report
-from analysis.report.compliance import load_profile
-from analysis.report.json_doc import report_document
-from analysis.report.model import ExcursionCriterion
-from analysis.report.writer import write_report
-from db.models import Event, Series
 from gyrostand.cli import app
+from gyrostand.db.models import Event, Series
+from gyrostand.report.build import Report, build_report
+from gyrostand.report.compliance import load_profile
+from gyrostand.report.json_doc import report_document
+from gyrostand.report.model import ExcursionCriterion
+from gyrostand.report.writer import write_report
 
 from .conftest import GENERATED, SIM_TRIALS, Rendered, Simulated, run_simulated
 

@@ -16,13 +16,13 @@ import can
 import pytest
 from typer.testing import CliRunner
 
-from acquisition.plan import parse_plan
-from acquisition.signal_record import log_record, log_signal, still_stretch
-from analysis.report.signal import SignalSection
 from gyrostand.cli import app
-from stand.engine import StandEngine
-from stand.protocol import Codec
-from stand.simconfig import CompassParams, NoiseParams, SimConfig
+from gyrostand.plan.model import parse_plan
+from gyrostand.report.signal import SignalSection
+from gyrostand.report.signal_record import log_record, log_signal, still_stretch
+from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.protocol import Codec
+from gyrostand.stand.simconfig import CompassParams, NoiseParams, SimConfig
 from tests.acquisition.harness import plan_text
 
 NOISE = NoiseParams(

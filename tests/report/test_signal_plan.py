@@ -2,7 +2,7 @@
 
 import pytest
 
-from acquisition.plan import AcceptancePlan, PlanError, parse_plan
+from gyrostand.plan.model import AcceptancePlan, PlanError, parse_plan
 from tests.acquisition.harness import plan_text
 
 

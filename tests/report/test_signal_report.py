@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from analysis.noise import characterise_noise
-from analysis.report.build import Report, build_report
-from analysis.report.compliance import load_profile
-from analysis.report.html import render_html
-from analysis.report.json_doc import report_document
-from analysis.report.model import ExcursionCriterion
-from db.models import Series, Trial
+from gyrostand.analysis.noise import characterise_noise
 from gyrostand.cli import app
-from stand.protocol import Codec, HeadingFrame
+from gyrostand.db.models import Series, Trial
+from gyrostand.report.build import Report, build_report
+from gyrostand.report.compliance import load_profile
+from gyrostand.report.html import render_html
+from gyrostand.report.json_doc import report_document
+from gyrostand.report.model import ExcursionCriterion
+from gyrostand.stand.protocol import Codec, HeadingFrame
 
 from .conftest import GENERATED, Rendered, Simulated, Stored
 

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.report.build import Report
-from analysis.report.html import render_html
-from analysis.report.json_doc import report_json
-from stand.protocol import Codec, HeadingFrame
+from gyrostand.report.build import Report
+from gyrostand.report.html import render_html
+from gyrostand.report.json_doc import report_json
+from gyrostand.stand.protocol import Codec, HeadingFrame
 
 from .conftest import SIM_TRIALS, Simulated, run_simulated
 

@@ -1,4 +1,4 @@
-"""acquisition.stored: trial inputs from each stored form, settings from the stored plan, the
+"""report.stored: trial inputs from each stored form, settings from the stored plan, the
 analysis run recorded once per distinct result, and reports of campaigns that cannot be analysed."""
 
 import json
@@ -6,14 +6,14 @@ from pathlib import Path
 
 from sqlalchemy import func, select
 
-from acquisition.stored import analyze_stored, stored_inputs, trial_input
-from analysis.report.compliance import NOT_ASSESSED
-from analysis.report.html import render_html
-from analysis.report.json_doc import report_json
-from analysis.settings import SEED_000_SETTINGS
-from analysis.trials import SeriesSummary
-from db.models import AnalysisRun, Observation, Series, Trial
-from db.queries import load_campaign
+from gyrostand.analysis.trials import SeriesSummary
+from gyrostand.db.models import AnalysisRun, Observation, Series, Trial
+from gyrostand.db.queries import load_campaign
+from gyrostand.report.compliance import NOT_ASSESSED
+from gyrostand.report.html import render_html
+from gyrostand.report.json_doc import report_json
+from gyrostand.report.settings import SEED_000_SETTINGS
+from gyrostand.report.stored import analyze_stored, stored_inputs, trial_input
 
 from .conftest import Stored, import_paper
 

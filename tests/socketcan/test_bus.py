@@ -6,7 +6,7 @@ import can
 import cantools
 import pytest
 
-from stand.protocol import DBC_PATH, Codec, HeadingFrame, InvalidFrame
+from gyrostand.stand.protocol import DBC_PATH, Codec, HeadingFrame, InvalidFrame
 from tests.socketcan.frames import drain, messages
 
 pytestmark = pytest.mark.socketcan

@@ -19,7 +19,7 @@ import can
 import cantools
 import pytest
 
-from stand.protocol import DBC_PATH
+from gyrostand.stand.protocol import DBC_PATH
 from tests.socketcan.processes import (
     COMMAND_ID,
     HEADING_ID,

@@ -5,9 +5,9 @@ from dataclasses import replace
 import can
 import numpy as np
 
-from stand.engine import StandEngine
-from stand.protocol import Codec, HeadingFrame, InvalidFrame, StandStatusFrame
-from stand.simconfig import CompassParams, FaultParams, NoiseParams, SimConfig
+from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.protocol import Codec, HeadingFrame, InvalidFrame, StandStatusFrame
+from gyrostand.stand.simconfig import CompassParams, FaultParams, NoiseParams, SimConfig
 
 CODEC = Codec()
 QUIET = NoiseParams(corr_sigma_deg=0.0, white_sigma_deg=0.0, quantum_deg=0.0)

@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from stand.engine import StandEngine
-from stand.packing import BatchEncoder
-from stand.protocol import HEADING_KEYS, STATUS_KEYS, AckFrame, Reason
-from stand.simconfig import CompassParams, SimConfig
+from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.packing import BatchEncoder
+from gyrostand.stand.protocol import HEADING_KEYS, STATUS_KEYS, AckFrame, Reason
+from gyrostand.stand.simconfig import CompassParams, SimConfig
 from tests.stand.frames import CODEC, command, config, decoded_headings, headings, invalid, statuses
 
 N = 20_000  # heading samples in the fault tests (2000 s at 10 Hz)

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from can.interfaces.virtual import VirtualBus
 
-from stand.controller import StandController, StandError, StandRefused, StandTimeout
-from stand.protocol import Codec, HeadingFrame, Reason
-from stand.simulator import CompassParams, Simulator
+from gyrostand.stand.controller import StandController, StandError, StandRefused, StandTimeout
+from gyrostand.stand.protocol import Codec, HeadingFrame, Reason
+from gyrostand.stand.simulator import CompassParams, Simulator
 from tests.conftest import socketcan_channel
 from tests.stand.frames import config
 

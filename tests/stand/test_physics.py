@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from stand.engine import StandEngine
-from stand.physics import CorrelatedNoise, DampedPrecession, rolling_error_rad
-from stand.simconfig import CompassParams
+from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.physics import CorrelatedNoise, DampedPrecession, rolling_error_rad
+from gyrostand.stand.simconfig import CompassParams
 from tests.stand.frames import QUIET, command, config, headings
 
 PAPER = {  # seed 000, example: known constants B

@@ -10,7 +10,7 @@ from crccheck.crc import Crc8SaeJ1850
 from hypothesis import given
 from hypothesis import strategies as st
 
-from stand.protocol import (
+from gyrostand.stand.protocol import (
     COMMANDS,
     DBC_PATH,
     AckFrame,

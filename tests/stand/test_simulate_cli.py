@@ -13,8 +13,14 @@ import typer
 from typer.testing import CliRunner
 
 from gyrostand import cmd_simulate
-from stand.protocol import DBC_PATH
-from stand.simulator import CompassParams, FaultParams, NoiseParams, SimConfig, StandParams
+from gyrostand.stand.protocol import DBC_PATH
+from gyrostand.stand.simulator import (
+    CompassParams,
+    FaultParams,
+    NoiseParams,
+    SimConfig,
+    StandParams,
+)
 
 runner = CliRunner()
 app = typer.Typer()

@@ -1,6 +1,6 @@
 """The report's own error: a bad compliance profile, a missing PDF engine, an unwritable file."""
 
-from analysis.errors import AnalysisError
+from gyrostand.analysis.errors import AnalysisError
 
 
 class ReportError(AnalysisError):

@@ -7,16 +7,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.campaign import CampaignAnalysis
-from analysis.forecast import (
+from gyrostand.analysis.campaign import CampaignAnalysis
+from gyrostand.analysis.forecast import (
     Forecast,
     ForecastGrid,
     acceleration_direction_deg,
     forecast_grid,
 )
-from analysis.report.compliance import Compliance, Profile, assess
-from analysis.report.model import ReportInputs
-from analysis.report.signal import SignalSection, signal_section
+from gyrostand.report.compliance import Compliance, Profile, assess
+from gyrostand.report.model import ReportInputs
+from gyrostand.report.signal import SignalSection, signal_section
 
 SCHEMA = "gyrostand.report/2"
 COURSE_STEP_DEG = 5.0  # forecast grid

@@ -16,9 +16,9 @@ from dataclasses import dataclass, fields
 import can
 import numpy as np
 
-from acquisition.vectordecode import SignalLayout, VectorDecoder
-from stand.protocol import ClockFrame, Codec, Frame, ProtocolError, StandStatusFrame
-from stand.virtual_time import check_free, clock_message
+from gyrostand.frames.vectordecode import SignalLayout, VectorDecoder
+from gyrostand.stand.protocol import ClockFrame, Codec, Frame, ProtocolError, StandStatusFrame
+from gyrostand.stand.virtual_time import check_free, clock_message
 
 _STATUS_FIELDS = ("time", "rocking", "direction", "amplitude", "period")
 

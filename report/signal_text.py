@@ -1,7 +1,7 @@
 """Section 10 (`SignalSection`) as plain text for the terminal (`gyrostand analyze --signal`).
 Formats the section's numbers only; the JSON form is `SignalSection.to_dict`."""
 
-from analysis.report.signal import TIME_SAVED_NOTE, SignalSection
+from gyrostand.report.signal import TIME_SAVED_NOTE, SignalSection
 
 
 def _num(value: float | None, spec: str = ".4g") -> str:

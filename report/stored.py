@@ -26,20 +26,21 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from acquisition.batch import BatchDecoder
-from acquisition.bus import codec_for
-from acquisition.early_settle import parse_outcome
-from acquisition.logfile import read_raw_frames
-from acquisition.plan import Plan, PlanError, parse_plan
-from acquisition.runner import sha256_of
-from acquisition.signal_record import acceptance_of, still_series_record
-from acquisition.store import software_version
-from analysis.campaign import CampaignAnalysis, analyze_campaign, json_safe
-from analysis.errors import AnalysisError
-from analysis.gyro_model import KnownConstants
-from analysis.report.build import Report, build_report
-from analysis.report.compliance import Profile
-from analysis.report.model import (
+from gyrostand import SOFTWARE_VERSION
+from gyrostand.acquisition.early_settle import parse_outcome
+from gyrostand.analysis.campaign import CampaignAnalysis, analyze_campaign, json_safe
+from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.gyro_model import KnownConstants
+from gyrostand.analysis.trials import SeriesSummary, TrialInput
+from gyrostand.db.models import AnalysisRun, Campaign, Trial
+from gyrostand.db.queries import campaign_constants, load_campaign
+from gyrostand.frames.batch import BatchDecoder
+from gyrostand.frames.logfile import read_raw_frames, sha256_of
+from gyrostand.plan.codec import codec_for
+from gyrostand.plan.model import Plan, PlanError, parse_plan
+from gyrostand.report.build import Report, build_report
+from gyrostand.report.compliance import Profile
+from gyrostand.report.model import (
     EventRecord,
     ExcursionCriterion,
     HeadingTrace,
@@ -55,11 +56,9 @@ from analysis.report.model import (
     TrialAcquisition,
     TrialRecord,
 )
-from analysis.report.signal import SignalSection, signal_section
-from analysis.settings import SEED_000_SETTINGS, AnalysisSettings, settings_from_plan
-from analysis.trials import SeriesSummary, TrialInput
-from db.models import AnalysisRun, Campaign, Trial
-from db.queries import campaign_constants, load_campaign
+from gyrostand.report.settings import SEED_000_SETTINGS, AnalysisSettings, settings_from_plan
+from gyrostand.report.signal import SignalSection, signal_section
+from gyrostand.report.signal_record import acceptance_of, still_series_record
 
 TRACE_BINS = 600  # per trial: enough for a page-wide plot, small enough for inline SVG
 
@@ -179,7 +178,7 @@ def analyze_stored(session: Session, campaign_id: int) -> StoredAnalysis:
         admissible=s.admissible,
         forecast=s.forecast,
     )
-    results, digest, version = analysis.to_dict(), inputs.sha256(), software_version()
+    results, digest, version = analysis.to_dict(), inputs.sha256(), SOFTWARE_VERSION
     run = session.scalars(
         select(AnalysisRun)
         .where(
@@ -547,7 +546,7 @@ def report_inputs(
         latitude_deg=campaign.latitude_deg,
         stand=_stand(campaign, plan),
         acquisition_software=campaign.software_version,
-        analysis_software=software_version(),
+        analysis_software=SOFTWARE_VERSION,
         analysis_run=None if stored is None else stored.run_id,
         inputs_sha256=None if stored is None else stored.inputs.sha256(),
         database=database,

@@ -3,13 +3,13 @@
 from collections.abc import Iterable
 from pathlib import Path
 
-from analysis.report import FORMATS
-from analysis.report.build import Report
-from analysis.report.csv_table import trial_table_csv
-from analysis.report.errors import ReportError
-from analysis.report.html import render_html
-from analysis.report.json_doc import report_json
-from analysis.report.pdf import write_pdf
+from gyrostand.report import FORMATS
+from gyrostand.report.build import Report
+from gyrostand.report.csv_table import trial_table_csv
+from gyrostand.report.errors import ReportError
+from gyrostand.report.html import render_html
+from gyrostand.report.json_doc import report_json
+from gyrostand.report.pdf import write_pdf
 
 
 def report_paths(out_dir: Path, campaign_id: int) -> dict[str, Path]:

@@ -9,15 +9,15 @@ from importlib.resources import files
 from jinja2 import Environment, StrictUndefined
 from markupsafe import Markup, escape
 
-from analysis.campaign import VARIANCE_BASIS
-from analysis.forecast import SIGN_CONVENTION
-from analysis.report import plots
-from analysis.report.build import COURSE_STEP_DEG, Report
-from analysis.report.compliance import FAIL, NOT_ASSESSED, PASS
-from analysis.report.model import TrialAcquisition
-from analysis.report.signal import TIME_SAVED_NOTE
+from gyrostand.analysis.campaign import VARIANCE_BASIS
+from gyrostand.analysis.forecast import SIGN_CONVENTION
+from gyrostand.report import plots
+from gyrostand.report.build import COURSE_STEP_DEG, Report
+from gyrostand.report.compliance import FAIL, NOT_ASSESSED, PASS
+from gyrostand.report.model import TrialAcquisition
+from gyrostand.report.signal import TIME_SAVED_NOTE
 
-TEMPLATES = files("analysis.report") / "templates"
+TEMPLATES = files("gyrostand.report") / "templates"
 
 
 def fmt(value: float | int | None, spec: str = "g", scale: float = 1.0) -> str:

@@ -12,11 +12,11 @@ import tomllib
 from dataclasses import dataclass
 from typing import Any
 
-from analysis import paper_example
-from analysis.campaign import AdmissibleRegion
-from analysis.errors import AnalysisError
-from analysis.forecast import ShipConditions
-from analysis.gyro_model import KnownConstants
+from gyrostand.analysis import paper_example
+from gyrostand.analysis.campaign import AdmissibleRegion
+from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.forecast import ShipConditions
+from gyrostand.analysis.gyro_model import KnownConstants
 
 
 @dataclass(frozen=True)

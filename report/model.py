@@ -1,6 +1,6 @@
 """The report's inputs as plain frozen dataclasses: what the campaign was (identification, plan),
 how it was acquired (per-trial commanded vs measured motion, frame counts, every event) and the
-heading record the plots show. `acquisition.stored` fills them from the database and the raw CAN
+heading record the plots show. `report.stored` fills them from the database and the raw CAN
 log; the renderers never see the database.
 
 Times: stand times in milliseconds of the stand's clock (``*_ms``), wall times as ISO 8601 text.

@@ -18,12 +18,16 @@ from typing import Any
 import numpy as np
 from scipy.integrate import quad
 
-from analysis.campaign import json_safe
-from analysis.errors import AnalysisError
-from analysis.excursions import ExcursionAcceptance, excursion_acceptance, tolerance_for_risk
-from analysis.noise import CorrelationModel, NoiseCharacterisation, characterise_noise
-from analysis.report.compliance import FAIL, PASS
-from analysis.report.model import ExcursionCriterion, ReadingRecord, TrialRecord
+from gyrostand.analysis.campaign import json_safe
+from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.excursions import (
+    ExcursionAcceptance,
+    excursion_acceptance,
+    tolerance_for_risk,
+)
+from gyrostand.analysis.noise import CorrelationModel, NoiseCharacterisation, characterise_noise
+from gyrostand.report.compliance import FAIL, PASS
+from gyrostand.report.model import ExcursionCriterion, ReadingRecord, TrialRecord
 
 MIN_READINGS = 500  # below this the correlation estimate has fewer than 50 lags (N/10)
 TIME_SAVED_NOTE = (

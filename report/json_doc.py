@@ -5,7 +5,7 @@ Schema ``gyrostand.report/2`` (plain JSON types; absent values are null). Versio
 ``signal``; everything else is as in version 1.
 
 - ``schema``, ``generated_at`` (the only wall-clock field);
-- ``identification``: the fields of `analysis.report.model.Identification`;
+- ``identification``: the fields of `report.model.Identification`;
 - ``plan``: `PlanSummary` (n_obs, trials [index, role, direction_deg, amplitude_cm, period_s],
   windows, settle criterion, notes, plan_toml);
 - ``acquisition``: ``trials`` (`TrialAcquisition` each: commanded and measured K/A/tau, status,
@@ -14,7 +14,7 @@ Schema ``gyrostand.report/2`` (plain JSON types; absent values are null). Versio
   ms, settle estimate, observations k/value/window, ``settle``: how it settled {criterion,
   standard_error_deg, band_s, band_measured, saved_s} or null; ``trace``: {frames, bins, t_first_ms,
   t_last_ms} or null: the binned heading itself is only plotted);
-- ``trial_table``: `analysis.report.build.TrialRow` each;
+- ``trial_table``: `report.build.TrialRow` each;
 - ``analysis``: `CampaignAnalysis.to_dict()` (schema gyrostand.analysis/1, keys documented in
   `analysis.campaign`), or null with ``analysis_error`` saying why the campaign could not be
   analysed;
@@ -25,7 +25,7 @@ Schema ``gyrostand.report/2`` (plain JSON types; absent values are null). Versio
   latitude_deg, alpha_deg, half_width_deg, bound_deg)};
 - ``compliance``: profile_id, profile_name, source, caution, envelope, site_latitude_deg, items
   (id, clause, requirement, evidence, limit_deg, limit_text, value_deg, verdict, detail);
-- ``signal`` (section 10, `analysis.report.signal.SignalSection.to_dict`): ``record`` {source,
+- ``signal`` (section 10, `report.signal.SignalSection.to_dict`): ``record`` {source,
   start_ms, dt_s, n, duration_s, frames, filled} or null, record_note, trend_deg_per_h,
   ``noise`` (`analysis.noise.NoiseCharacterisation.to_dict`: correlation {lag_s, covariance,
   dt_s, n}, exponential and smooth models {variance, decay_per_s, frequency_rad_s,
@@ -47,9 +47,9 @@ import json
 from dataclasses import asdict
 from typing import Any
 
-from analysis.campaign import json_safe
-from analysis.report.build import GridPoint, Report
-from analysis.report.model import TrialRecord
+from gyrostand.analysis.campaign import json_safe
+from gyrostand.report.build import GridPoint, Report
+from gyrostand.report.model import TrialRecord
 
 
 def _point(p: GridPoint) -> dict[str, Any]:

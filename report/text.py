@@ -3,8 +3,8 @@ log, adequacy, control trials, assumption checks, forecasts and warnings."""
 
 from collections.abc import Sequence
 
-from analysis.campaign import VARIANCE_BASIS, CampaignAnalysis
-from analysis.forecast import SIGN_CONVENTION
+from gyrostand.analysis.campaign import VARIANCE_BASIS, CampaignAnalysis
+from gyrostand.analysis.forecast import SIGN_CONVENTION
 
 
 def _table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:

@@ -1,6 +1,6 @@
 """The stand report: the certification document of a campaign, in HTML, PDF, JSON and CSV.
 
-Pure rendering over plain dataclasses (no database, no bus): `acquisition.stored` gathers the
+Pure rendering over plain dataclasses (no database, no bus): `report.stored` gathers the
 inputs, the CLI (`gyrostand report`) composes.
 
 - `model`: the report's inputs (`ReportInputs`: identification, plan, acquisition, events,

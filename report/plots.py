@@ -25,11 +25,11 @@ from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
-from analysis.campaign import CampaignAnalysis
-from analysis.gyro_model import Conditions, RollingErrorModel
-from analysis.noise import NoiseCharacterisation
-from analysis.report.build import ForecastSection, TrialRow
-from analysis.report.model import SeriesRecord, TrialRecord
+from gyrostand.analysis.campaign import CampaignAnalysis
+from gyrostand.analysis.gyro_model import Conditions, RollingErrorModel
+from gyrostand.analysis.noise import NoiseCharacterisation
+from gyrostand.report.build import ForecastSection, TrialRow
+from gyrostand.report.model import SeriesRecord, TrialRecord
 
 STYLE = {
     "svg.hashsalt": "gyrostand-report",

@@ -4,7 +4,7 @@ import csv
 import io
 from dataclasses import fields
 
-from analysis.report.build import TrialRow
+from gyrostand.report.build import TrialRow
 
 COLUMNS = tuple(f.name for f in fields(TrialRow))
 

@@ -30,11 +30,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from analysis.report.errors import ReportError
+from gyrostand.report.errors import ReportError
 
 if TYPE_CHECKING:  # annotations only: the CLI reads SHIPPED without loading scipy
-    from analysis.campaign import CampaignAnalysis
-    from analysis.forecast import ForecastGrid
+    from gyrostand.analysis.campaign import CampaignAnalysis
+    from gyrostand.analysis.forecast import ForecastGrid
 
 PASS, FAIL, NOT_ASSESSED = "PASS", "FAIL", "NOT ASSESSED"
 SHIPPED = "imo-a424"
@@ -144,7 +144,7 @@ def load_profile(name_or_path: str | Path = SHIPPED) -> Profile:
     if candidate.suffix == ".toml" or candidate.exists():
         path, text = str(candidate), _read(candidate)
     else:
-        resource = files("analysis.report") / "profiles" / f"{name_or_path}.toml"
+        resource = files("gyrostand.report") / "profiles" / f"{name_or_path}.toml"
         if not resource.is_file():
             raise ReportError(f"no compliance profile named {str(name_or_path)!r}")
         path, text = f"{name_or_path} (shipped)", resource.read_text(encoding="utf-8")

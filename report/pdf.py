@@ -3,7 +3,7 @@ fonts from the system; without them its import fails, and the error says how to 
 
 from pathlib import Path
 
-from analysis.report.errors import ReportError
+from gyrostand.report.errors import ReportError
 
 INSTALL_HINT = (
     "PDF output needs WeasyPrint (pip install 'gyrostand[pdf]') and its system libraries "

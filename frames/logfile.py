@@ -9,6 +9,7 @@ one `can.Message` per frame, ~10^5 frames/s: a 10^7-frame replay would take minu
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import struct
 import zlib
@@ -18,9 +19,16 @@ from pathlib import Path
 import can
 import numpy as np
 
-from acquisition.batch import RawFrames
+from gyrostand.frames.batch import RawFrames
 
 CHUNK_FRAMES = 200_000
+
+
+def sha256_of(path: Path) -> str:
+    """The SHA-256 of a file (the raw log's fingerprint stored with the campaign)."""
+    with path.open("rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
+
 
 # BLF layout (the same constants python-can's can/io/blf.py uses)
 _FILE_HEADER = struct.Struct("<4sLBBBBBBBBQQLL8H8H")

@@ -18,14 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition.batch import BatchDecoder
-from acquisition.bus import codec_for
-from acquisition.logfile import read_raw_frames
-from acquisition.plan import Plan
-from analysis.errors import AnalysisError
-from analysis.report.model import ExcursionCriterion, ReadingRecord, TrialRecord
-from analysis.report.signal import SignalSection, signal_section, uniform_record
-from stand.protocol import Codec
+from gyrostand.analysis.errors import AnalysisError
+from gyrostand.frames.batch import BatchDecoder
+from gyrostand.frames.logfile import read_raw_frames
+from gyrostand.plan.codec import codec_for
+from gyrostand.plan.model import Plan
+from gyrostand.report.model import ExcursionCriterion, ReadingRecord, TrialRecord
+from gyrostand.report.signal import SignalSection, signal_section, uniform_record
+from gyrostand.stand.protocol import Codec
 
 Span = tuple[float, float]  # stand ms, [start, end)
 

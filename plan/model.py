@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from stand.simconfig import TIMINGS
+from gyrostand.stand.simconfig import TIMINGS
 
 Role = Literal["fit", "control"]
 
