@@ -39,14 +39,13 @@ series means; as much the other way only costs time (bench/bench_early_settle.py
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from gyrostand.analysis.errors import AnalysisError
-from gyrostand.analysis.settle import SettleEstimate, estimate_settle_point
+from gyrostand.analysis.settle import SettleEstimate, SettleOutcome, estimate_settle_point
 from gyrostand.plan.model import EstimatePlan, SettlePlan
 
 MIN_BLOCKS = 6  # 3 state parameters + 3 degrees of freedom for S^2 and the noise correlation
@@ -99,63 +98,22 @@ class SettleCheck:
         return self.stable and self.transient_deg <= self.tolerance_deg
 
 
-@dataclass(frozen=True)
-class SettleOutcome:
-    """How an early-settle series settled, as its "early settle" event records it: after
-    ``settle_s`` stand seconds from the settle start, the settle point (deg) and its standard
-    error, since when the estimate was stable (conditions 1-2), and when the band criterion held
-    on the readings (``band_measured``) or is predicted to hold (None: not within max_wait_s)."""
-
-    settle_s: float
-    estimate_deg: float
-    standard_error_deg: float
-    stable_since_s: float
-    stable_estimate_deg: float
-    band_s: float | None
-    band_measured: bool
-
-    @property
-    def saved_s(self) -> float | None:
-        """Stand seconds saved against waiting for the band criterion (None: unknown)."""
-        return None if self.band_s is None else self.band_s - self.settle_s
-
-    def describe(self, check: SettleCheck) -> str:
-        """The event message (`parse_outcome` reads it back); `check` adds the rule's figures."""
-        text = (
-            f"settled by the estimate after {self.settle_s:.1f} s: settle point "
-            f"{self.estimate_deg:.5f} deg (SE {self.standard_error_deg:.5f} deg, stable since "
-            f"{self.stable_since_s:.1f} s at {self.stable_estimate_deg:.5f} deg, last estimates "
-            f"within {check.spread_deg:.5f} deg, "
-            f"predicted transient over the observations {check.transient_deg:.5f} deg; "
-            f"tolerance {check.tolerance_deg:.5f} deg); "
-        )
-        if self.band_s is None:
-            return text + "band criterion not predicted within max_wait_s: time saved unknown"
-        how = "held" if self.band_measured else "predicted"
-        return text + f"band criterion {how} after {self.band_s:.1f} s: {self.saved_s:.1f} s saved"
-
-
-_OUTCOME = re.compile(
-    r"settled by the estimate after (?P<settle>[\d.]+) s: settle point (?P<est>-?[\d.]+) deg "
-    r"\(SE (?P<se>[\d.]+) deg, stable since (?P<stable>[\d.]+) s at (?P<at>-?[\d.]+) deg"
-)
-_BAND = re.compile(r"band criterion (?P<how>held|predicted) after (?P<band>[\d.]+) s")
-
-
-def parse_outcome(message: str) -> SettleOutcome | None:
-    """The `SettleOutcome` of an "early settle" event message (None when it is not one)."""
-    m = _OUTCOME.match(message)
-    if m is None:
-        return None
-    band = _BAND.search(message)
-    return SettleOutcome(
-        settle_s=float(m["settle"]),
-        estimate_deg=float(m["est"]),
-        standard_error_deg=float(m["se"]),
-        stable_since_s=float(m["stable"]),
-        stable_estimate_deg=float(m["at"]),
-        band_s=None if band is None else float(band["band"]),
-        band_measured=band is not None and band["how"] == "held",
+def describe(outcome: SettleOutcome, check: SettleCheck) -> str:
+    """The "early settle" event message (for people: the series stores `outcome` itself);
+    `check` adds the rule's figures."""
+    text = (
+        f"settled by the estimate after {outcome.settle_s:.1f} s: settle point "
+        f"{outcome.estimate_deg:.5f} deg (SE {outcome.standard_error_deg:.5f} deg, stable since "
+        f"{outcome.stable_since_s:.1f} s at {outcome.stable_estimate_deg:.5f} deg, last estimates "
+        f"within {check.spread_deg:.5f} deg, "
+        f"predicted transient over the observations {check.transient_deg:.5f} deg; "
+        f"tolerance {check.tolerance_deg:.5f} deg); "
+    )
+    if outcome.band_s is None:
+        return text + "band criterion not predicted within max_wait_s: time saved unknown"
+    how = "held" if outcome.band_measured else "predicted"
+    return (
+        text + f"band criterion {how} after {outcome.band_s:.1f} s: {outcome.saved_s:.1f} s saved"
     )
 
 
@@ -214,6 +172,7 @@ class EarlySettle:
         if band_s is None:
             band_s = predict_band_settle_s(means_deg, width_s, check.t_s, check.estimate, settle)
         return SettleOutcome(
+            criterion="estimate",
             settle_s=check.t_s,
             estimate_deg=reference_deg + check.estimate.settle_point_deg,
             standard_error_deg=check.estimate.standard_error_deg,

@@ -31,7 +31,9 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from gyrostand.acquisition.early_settle import EarlySettle, band_settled, hold_blocks
+from gyrostand.acquisition.early_settle import EarlySettle, band_settled, describe, hold_blocks
+from gyrostand.analysis.angles import wrap180
+from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.frames.batch import FrameBatch, Headings, Statuses
 from gyrostand.plan.model import Plan, TrialPlan
 from gyrostand.stand.protocol import (
@@ -98,7 +100,7 @@ class Commander(Protocol):
 class Sink(Protocol):
     def trial_started(self, trial: int) -> None: ...
     def series_settling(self, trial: int, j: int, t_ms: int) -> None: ...
-    def series_settled(self, trial: int, j: int, t_ms: int, estimate_deg: float) -> None: ...
+    def series_settled(self, trial: int, j: int, t_ms: int, outcome: SettleOutcome) -> None: ...
     def observation(self, obs: ObservationResult) -> None: ...
     def series_completed(self, trial: int, j: int) -> None: ...
     def trial_completed(self, trial: int, measured: Measured | None) -> None: ...
@@ -183,10 +185,6 @@ class Snapshot:
     remaining_ms: int
 
 
-def _wrap180(x: np.ndarray) -> np.ndarray:
-    return (x + 180.0) % 360.0 - 180.0
-
-
 def _compass_fault(frame: CompassStatusFrame) -> str:
     """Why the compass's own status makes its readings unusable ("" when it does not)."""
     if not frame.rotor_running:
@@ -199,10 +197,6 @@ def _compass_fault(frame: CompassStatusFrame) -> str:
 
 def _is_bus_off(frame: InvalidFrame) -> bool:
     return frame.reason == "error frame" and bool(frame.arbitration_id & CAN_ERR_BUSOFF)
-
-
-def _circular_diff_deg(a: float, b: float) -> float:
-    return abs((a - b + 180.0) % 360.0 - 180.0)
 
 
 class Engine:
@@ -541,7 +535,7 @@ class Engine:
         if self._j == 1 or self.phase is Phase.STILL:
             return s.rocking.copy()
         tol = self.plan.tracking
-        direction = np.abs((s.direction_deg - t.direction_deg + 180.0) % 360.0 - 180.0)
+        direction = np.abs(wrap180(s.direction_deg - t.direction_deg))
         return (
             ~s.rocking
             | (np.abs(s.amplitude_cm - t.amplitude_cm) > tol.amplitude_rel * t.amplitude_cm)
@@ -565,7 +559,7 @@ class Engine:
             return f"amplitude {amplitude:g} cm, commanded {t.amplitude_cm:g} cm"
         if abs(period - t.period_s) > tol.period_rel * t.period_s:
             return f"period {period:g} s, commanded {t.period_s:g} s"
-        if _circular_diff_deg(direction, t.direction_deg) > tol.direction_deg:
+        if abs(wrap180(direction - t.direction_deg)) > tol.direction_deg:
             return f"direction {direction:g} deg, commanded {t.direction_deg:g} deg"
         return None
 
@@ -695,7 +689,7 @@ class Engine:
             inside = t[:end] >= w.start_ms
             valid = seg.valid[:end] & inside
             if self._ref is not None:
-                dev = np.rint(_wrap180(seg.heading_deg[:end][valid] - self._ref) * NANO)
+                dev = np.rint(wrap180(seg.heading_deg[:end][valid] - self._ref) * NANO)
                 w.add(dev.astype(np.int64), int(lost[inside].sum()), int((inside & ~valid).sum()))
             self._last_t, self._last_counter = int(t[end - 1]), int(seg.counter[end - 1])
             self.now_ms = max(self.now_ms, self._last_t)
@@ -718,19 +712,22 @@ class Engine:
         recent = [m / NANO for m, _ in self._blocks[-need:]]
         band = len(recent) == need and not any(math.isnan(m) for m in recent)
         band = band and band_settled(recent, settle)
-        estimate: float | None = None
+        outcome: SettleOutcome | None = None
+        waited_s = (w.end_ms - self._settle_start) / 1000
         if self._early is None:
             if band:
                 assert self._ref is not None
-                estimate = self._ref + sum(recent) / need
+                outcome = SettleOutcome(
+                    "band", waited_s, self._ref + sum(recent) / need, band_s=waited_s
+                )
         elif w.used:  # (frames are only used once the reference heading is known)
             start = self._settle_start
             mid_s, end_s = ((w.start_ms + w.end_ms) / 2 - start) / 1000, (w.end_ms - start) / 1000
             if self._early.add_block(mid_s, w.mean_ndeg() / NANO, end_s, band).ready:
-                estimate = self._early_settled(w)
-        if estimate is not None:
+                outcome = self._early_settled(w)
+        if outcome is not None:
             self._settle_durations.append(w.end_ms - self._settle_start)
-            self.sink.series_settled(self._trial.index, self._j, w.end_ms, estimate)
+            self.sink.series_settled(self._trial.index, self._j, w.end_ms, outcome)
             self._enter(Phase.OBSERVE)
             self._window = _Window(w.end_ms, w.end_ms + width)
             return
@@ -756,16 +753,16 @@ class Engine:
             f"tolerance {check.tolerance_deg:.5f} deg)"
         )
 
-    def _early_settled(self, w: _Window) -> float:
-        """Record how an early-settle series settled (an "early settle" event with the estimate
-        and the time saved against the band criterion); return the estimated settle point."""
+    def _early_settled(self, w: _Window) -> SettleOutcome:
+        """How an early-settle series settled (also told in an "early settle" event with the
+        estimate and the time saved against the band criterion)."""
         assert self._early is not None and self._early.last is not None and self._ref is not None
         means = [m / NANO for m, _ in self._blocks if not math.isnan(m)]
         width_s = (w.end_ms - w.start_ms) / 1000
         outcome = self._early.outcome(self._ref, means, width_s, self.plan.settle)
-        message = outcome.describe(self._early.last)
+        message = describe(outcome, self._early.last)
         self.sink.event("early settle", "info", message, self._tidx, self._j, w.end_ms)
-        return outcome.estimate_deg
+        return outcome
 
     def _close_observation(self, w: _Window) -> None:
         trial = self._trial

@@ -280,7 +280,8 @@ def replay(plan: Plan, sessions: sessionmaker[Session], log: Path) -> RunResult:
 
 
 def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Plan, CampaignStore]:
-    """The plan stored with a campaign and a store to continue it."""
+    """The plan stored with a campaign and a store to continue it (trials acquired but not
+    marked completed are completed first: `CampaignStore.complete_acquired`)."""
     from gyrostand.plan.model import parse_plan
 
     with sessions() as session:
@@ -288,4 +289,6 @@ def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Pla
         if campaign is None:
             raise LookupError(f"no campaign {campaign_id} in the database")
         text = campaign.plan_toml
-    return parse_plan(text), CampaignStore(sessions, campaign_id)
+    plan, store = parse_plan(text), CampaignStore(sessions, campaign_id)
+    store.complete_acquired()
+    return plan, store

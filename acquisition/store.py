@@ -7,13 +7,19 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
 
-from sqlalchemy import func, select
+from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand import SOFTWARE_VERSION
 from gyrostand.acquisition.engine import Measured, ObservationResult, TrialState
+from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.db.models import Campaign, Event, Observation, Series, Trial
-from gyrostand.db.queries import instrument_for
+from gyrostand.db.queries import (
+    CampaignHeader,
+    new_campaign,
+    reference_heading,
+    trial_progress,
+)
 from gyrostand.plan.model import Plan
 
 
@@ -43,28 +49,21 @@ class CampaignStore:
         cls, sessions: sessionmaker[Session], plan: Plan, *, source: str = "stand"
     ) -> CampaignStore:
         """A new campaign (status running) with its instrument and pending trials."""
+        header = CampaignHeader(
+            model=plan.instrument.model,
+            serial=plan.instrument.serial,
+            lp_gcm2s2=plan.instrument.lp_gcm2s2,
+            h1_gcm2s=plan.instrument.h1_gcm2s,
+            latitude_deg=plan.site.latitude_deg,
+            earth_rate_rad_s=plan.site.earth_rate_rad_s,
+            gravity_cm_s2=plan.site.gravity_cm_s2,
+            plan_toml=plan.text,
+            operator=plan.operator,
+            n_obs=plan.n_obs,
+            software_version=SOFTWARE_VERSION,
+        )
         with sessions.begin() as session:
-            instrument = instrument_for(
-                session,
-                plan.instrument.model,
-                plan.instrument.serial,
-                {"lp_gcm2s2": plan.instrument.lp_gcm2s2, "h1_gcm2s": plan.instrument.h1_gcm2s},
-            )
-            campaign = Campaign(
-                instrument=instrument,
-                plan_toml=plan.text,
-                plan_hash=plan.sha256,
-                operator=plan.operator,
-                latitude_deg=plan.site.latitude_deg,
-                earth_rate_rad_s=plan.site.earth_rate_rad_s,
-                gravity_cm_s2=plan.site.gravity_cm_s2,
-                n_obs=plan.n_obs,
-                status="running",
-                source=source,
-                started_at=datetime.now(UTC),
-                software_version=SOFTWARE_VERSION,
-            )
-            session.add(campaign)
+            campaign = new_campaign(session, header, status="running", source=source)
             for t in plan.trials:
                 session.add(
                     Trial(
@@ -103,41 +102,39 @@ class CampaignStore:
 
     # ------------------------------------------------------------------------ campaign level
     def progress(self) -> dict[int, TrialState]:
-        """What is stored per trial, for the engine to resume after. A series holding N
-        observations counts as done; failed trials are not retried (their reason stays)."""
+        """What is stored per trial, for the engine to resume after, by the one resume rule
+        (`db.queries.TrialProgress`)."""
         with self.sessions() as session:
-            n_obs = session.get_one(Campaign, self.campaign_id).n_obs
-            trials = session.scalars(select(Trial).where(Trial.campaign_id == self.campaign_id))
-            state: dict[int, TrialState] = {}
-            for trial in trials:
-                committed = {
-                    j: k
-                    for j, k in session.execute(
-                        select(Series.j, func.max(Observation.k))
-                        .join(Observation, Observation.series_id == Series.id)
-                        .where(Series.trial_id == trial.id)
-                        .group_by(Series.j)
-                    )
-                }
-                done = {
-                    s.j
-                    for s in trial.series
-                    if s.status == "completed" or committed.get(s.j, 0) >= n_obs
-                }
-                first = session.scalar(
-                    select(Observation.value_deg)
-                    .join(Series, Series.id == Observation.series_id)
-                    .where(Series.trial_id == trial.id)
-                    .order_by(Series.j, Observation.k)
-                    .limit(1)
+            return {
+                t.index: TrialState(
+                    completed=t.acquired,
+                    series_done=t.series_done,
+                    committed=t.last_k,
+                    reference_deg=None if t.acquired else reference_heading(session, t.trial_id),
                 )
-                state[trial.index] = TrialState(
-                    completed=trial.status in ("completed", "failed"),
-                    series_done=frozenset(done),
-                    committed=committed,
-                    reference_deg=first,
-                )
-            return state
+                for t in trial_progress(session, self.campaign_id)
+            }
+
+    def complete_acquired(self) -> None:
+        """Mark completed the trials whose two series hold N observations but that were not
+        marked (the process stopped between the last observation and the stand's stop
+        acknowledgement), each with an event; their measured motion was not recorded."""
+        with self.sessions() as session:
+            left = [
+                t
+                for t in trial_progress(session, self.campaign_id)
+                if t.acquired and t.status not in ("completed", "failed")
+            ]
+        for t in left:
+            self.trial_completed(t.index, None)
+            self.event(
+                "resume",
+                "warning",
+                f"trial {t.index} completed on resume: both series held their "
+                f"{t.n_obs} observations when the previous run stopped; the stand's measured "
+                "motion of this trial was not recorded (commanded values apply)",
+                t.index,
+            )
 
     def set_status(self, status: str) -> None:
         with self._tx() as session:
@@ -178,11 +175,12 @@ class CampaignStore:
             series = self._series(session, trial, j)
             series.status, series.settle_started_ms, series.settle_done_ms = "settling", t_ms, None
 
-    def series_settled(self, trial: int, j: int, t_ms: int, estimate_deg: float) -> None:
+    def series_settled(self, trial: int, j: int, t_ms: int, outcome: SettleOutcome) -> None:
         with self._tx() as session:
             series = self._series(session, trial, j)
             series.status, series.settle_done_ms = "observing", t_ms
-            series.settle_estimate_deg = estimate_deg
+            series.settle_estimate_deg = outcome.estimate_deg
+            series.settle_outcome = outcome.to_dict()
 
     def observation(self, obs: ObservationResult) -> None:
         with self._tx() as session:

@@ -16,6 +16,7 @@ faster: 12.5 us per reading against 21.7 us for filterpy's update (3 states, num
 import math
 
 import numpy as np
+from gyrostand.analysis.angles import about
 
 
 class SettleKalman:
@@ -51,7 +52,7 @@ class SettleKalman:
         if self._t0 is None:
             self._t0, self._last = float(t_s), float(heading_deg)
             self._x[0] = self._last
-        y = self._last + (float(heading_deg) - self._last + 180.0) % 360.0 - 180.0
+        y = about(self._last, float(heading_deg))
         self._last = y
         tau = float(t_s) - self._t0
         decay = math.exp(-self.damping_per_s * tau)

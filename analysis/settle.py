@@ -19,6 +19,7 @@ its own non-isochronism p = omega_0 (1 - A^2/16) is that of ``omega_0^2 sin alph
 
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from typing import Self
 
 import numpy as np
 from scipy import fft as sp_fft
@@ -28,6 +29,40 @@ from gyrostand.analysis.errors import NonFiniteError, SingularDesignError
 from gyrostand.analysis.nlsq import fit_nonlinear
 
 _PHASE_TOL_RAD = 1e-9
+SETTLE_CRITERIA = ("band", "estimate")
+
+
+@dataclass(frozen=True)
+class SettleOutcome:
+    """How a series settled, as acquisition records it with the series: by the plan's band
+    criterion (``criterion`` "band": it waited ``settle_s``) or by the settle point estimated
+    from the transient ("estimate", Bezvesilna & Gura). ``settle_s`` counts stand seconds from
+    the settle start; ``estimate_deg`` is the settle point the series starts from. For an early
+    settle: the estimate's standard error, since when it was stable and where, and when the band
+    criterion held on the readings (``band_measured``) or is predicted to hold on the fitted
+    transient (None: not within the plan's max_wait_s)."""
+
+    criterion: str
+    settle_s: float
+    estimate_deg: float
+    standard_error_deg: float | None = None
+    stable_since_s: float | None = None
+    stable_estimate_deg: float | None = None
+    band_s: float | None = None
+    band_measured: bool = True
+
+    @property
+    def saved_s(self) -> float | None:
+        """Stand seconds saved against waiting for the band criterion (None: unknown)."""
+        return None if self.band_s is None else self.band_s - self.settle_s
+
+    def to_dict(self) -> dict[str, object]:
+        """The stored record (the series' settle_outcome JSON column)."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, record: dict[str, object]) -> Self:
+        return cls(**record)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from gyrostand.analysis.angles import about, wrap180
 from gyrostand.analysis.errors import (
     AnalysisError,
     MissingDataError,
@@ -140,14 +141,18 @@ class DifferenceStats:
 
 
 def series_moments(observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Mean (2.1) and sample variance with N-1 (2.2) along the last axis."""
-    return observations.mean(axis=-1), observations.var(axis=-1, ddof=1)
+    """Mean (2.1) and sample variance with N-1 (2.2) along the last axis, of headings taken on
+    the branch of each series' first reading (a series across north, 359.9 and 0.1 deg, has the
+    mean and variance of its readings)."""
+    headings = about(observations[..., :1], observations)
+    return headings.mean(axis=-1), headings.var(axis=-1, ddof=1)
 
 
 def combine_series(m1: Any, v1: Any, n1: Any, m2: Any, v2: Any, n2: Any) -> tuple[Any, ...]:
     """From the series' means, variances and counts (scalars or arrays): <delta_i> = <delta_2i> -
-    <delta_1i>, its variance by eq 2.3, the variance of the mean difference, and dof by eq 2.4."""
-    return m2 - m1, v1 + v2, v1 / n1 + v2 / n2, n1 + n2 - 2
+    <delta_1i> wrapped to [-180, 180) (headings), its variance by eq 2.3, the variance of the
+    mean difference, and dof by eq 2.4."""
+    return wrap180(m2 - m1), v1 + v2, v1 / n1 + v2 / n2, n1 + n2 - 2
 
 
 def difference_statistics(before: np.ndarray, under: np.ndarray) -> DifferenceStats:

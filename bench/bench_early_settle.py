@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from acquisition_stream import ROOT, _Stand
 
-from gyrostand.acquisition.early_settle import parse_outcome
 from gyrostand.acquisition.engine import Engine, ObservationResult, Phase
+from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.plan.model import Plan, parse_plan
 from gyrostand.stand.protocol import Codec
@@ -70,22 +70,17 @@ class _Record:
 
     def __init__(self) -> None:
         self.started: dict[tuple[int, int], int] = {}
-        self.settled: dict[tuple[int, int], tuple[int, float]] = {}
+        self.settled: dict[tuple[int, int], tuple[int, SettleOutcome]] = {}
         self.values: dict[tuple[int, int], list[float]] = {}
-        self.events: dict[tuple[int, int], str] = {}
 
     def series_settling(self, trial: int, j: int, t_ms: int) -> None:
         self.started[(trial, j)] = t_ms
 
-    def series_settled(self, trial: int, j: int, t_ms: int, estimate_deg: float) -> None:
-        self.settled[(trial, j)] = (t_ms, estimate_deg)
+    def series_settled(self, trial: int, j: int, t_ms: int, outcome: SettleOutcome) -> None:
+        self.settled[(trial, j)] = (t_ms, outcome)
 
     def observation(self, obs: ObservationResult) -> None:
         self.values.setdefault((obs.trial, obs.j), []).append(obs.value_deg)
-
-    def event(self, kind, severity, message, trial=None, j=None, t_ms=None) -> None:  # noqa: ANN001
-        if kind == "early settle":
-            self.events[(trial, j)] = message
 
     def __getattr__(self, name: str):  # trial_started, series_completed, ...: not needed
         return lambda *args, **kwargs: None
@@ -145,8 +140,8 @@ def run(label: str, seed: int) -> Run:
             if key not in sink.settled or len(sink.values.get(key, [])) < plan.n_obs:
                 continue
             truth = c.heading_deg + (shifts[trial.index - 1] if j == 2 else 0.0)
-            done_ms, estimate_deg = sink.settled[key]
-            outcome = parse_outcome(sink.events.get(key, ""))
+            done_ms, settled = sink.settled[key]
+            outcome = settled if settled.criterion == "estimate" else None
             oracle = None
             if estimate is not None:
                 previous = shifts[trial.index - 2] if trial.index > 1 else 0.0
@@ -160,7 +155,7 @@ def run(label: str, seed: int) -> Run:
                     j=j,
                     settle_s=(done_ms - sink.started[key]) / 1000,
                     error_deg=float(np.mean(sink.values[key])) - truth,
-                    estimate_error_deg=estimate_deg - truth,
+                    estimate_error_deg=settled.estimate_deg - truth,
                     stable_s=None if outcome is None else outcome.stable_since_s,
                     stable_error_deg=None
                     if outcome is None

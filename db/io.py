@@ -1,4 +1,5 @@
-"""Import of historical manual measurements and export of campaigns (pandas: CSV, Parquet, Excel).
+"""Import of historical manual measurements (pandas: CSV, Parquet, Excel); report/export.py
+writes the same forms back.
 
 Three file forms, detected from the columns (extra per-observation columns are optional):
 
@@ -30,7 +31,7 @@ import pandas as pd
 from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand.db.models import TRIAL_ROLES, Campaign, Event, Observation, Series, Trial
-from gyrostand.db.queries import instrument_for, load_campaign
+from gyrostand.db.queries import CampaignHeader, new_campaign
 
 COMMON_COLUMNS = ("trial", "role", "direction_deg", "amplitude_cm", "period_s")
 FORM_COLUMNS = {
@@ -40,7 +41,6 @@ FORM_COLUMNS = {
 }
 OBSERVATION_EXTRAS = ("window_start_ms", "window_end_ms", "frames_used", "frames_lost", "flags")
 OBS_FIELDS = ("k", "value_deg") + OBSERVATION_EXTRAS
-EXPORT_FORMATS = ("csv", "parquet", "xlsx")
 MAX_REPORTED = 10
 
 # seed 000 example: known constants B of the two-rotor gyrocompass and the site
@@ -473,24 +473,20 @@ def store_import(session: Session, data: ImportedFile, metadata: Mapping[str, An
     optional operator, software_version, plan_toml (default: `metadata_toml(metadata)`)."""
     check_metadata(metadata)
     plan_toml = metadata.get("plan_toml") or metadata_toml(metadata)
-    campaign = Campaign(
-        instrument=instrument_for(
-            session,
-            metadata["model"],
-            metadata["serial"],
-            {"lp_gcm2s2": float(metadata["lp_gcm2s2"]), "h1_gcm2s": float(metadata["h1_gcm2s"])},
-        ),
-        plan_toml=plan_toml,
-        plan_hash=hashlib.sha256(plan_toml.encode()).hexdigest(),
-        operator=metadata.get("operator", "unknown"),
+    header = CampaignHeader(
+        model=metadata["model"],
+        serial=metadata["serial"],
+        lp_gcm2s2=float(metadata["lp_gcm2s2"]),
+        h1_gcm2s=float(metadata["h1_gcm2s"]),
         latitude_deg=float(metadata["latitude_deg"]),
         earth_rate_rad_s=float(metadata["earth_rate_rad_s"]),
         gravity_cm_s2=float(metadata["gravity_cm_s2"]),
+        plan_toml=plan_toml,
+        operator=metadata.get("operator", "unknown"),
         n_obs=data.n_obs,
-        status="completed",
-        source="import",
         software_version=metadata.get("software_version", "unknown"),
     )
+    campaign = new_campaign(session, header, status="completed", source="import")
     for trial in data.trials:
         campaign.trials.append(
             Trial(
@@ -539,104 +535,3 @@ def import_file(sessions: sessionmaker[Session], path: Path, metadata: Mapping[s
 
 
 # ---------------------------------------------------------------- export
-
-
-@dataclass(frozen=True)
-class CampaignFrames:
-    """A campaign as three tables in the import forms' columns (so every export re-imports)."""
-
-    observations: pd.DataFrame
-    series: pd.DataFrame
-    trials: pd.DataFrame
-
-    def tables(self) -> dict[str, pd.DataFrame]:
-        return {"observations": self.observations, "series": self.series, "trials": self.trials}
-
-
-def campaign_frames(session: Session, campaign_id: int) -> CampaignFrames:
-    """Observations as stored; series and trial summaries from the observations (seed 000
-    eq 2.1-2.3) or, for pre-averaged imports, as imported. K, A, tau are the applied values
-    (stand-measured, else commanded)."""
-    campaign = load_campaign(session, campaign_id)
-    observations, series, trials = [], [], []
-    for trial in campaign.trials:
-        common = {
-            "trial": trial.index,
-            "role": trial.role,
-            "direction_deg": trial.direction_deg,
-            "amplitude_cm": trial.amplitude_cm,
-            "period_s": trial.period_s,
-        }
-        stats: dict[int, tuple[float, float, int]] = {}
-        for s in trial.series:
-            values = pd.Series([o.value_deg for o in s.observations], dtype=float)
-            observations += [
-                {**common, "j": s.j, **{name: getattr(o, name) for name in OBS_FIELDS}}
-                for o in s.observations
-            ]
-            if s.observations:
-                # seed 000 eq 2.1 (mean) and eq 2.2 (variance, N - 1 in the denominator)
-                stats[s.j] = (values.mean(), values.var(ddof=1), len(values))
-            elif s.summary_mean_deg is not None:
-                stats[s.j] = (s.summary_mean_deg, s.summary_variance_deg2, s.summary_n)
-            if s.j in stats:
-                mean, var, n = stats[s.j]
-                series.append(
-                    {**common, "j": s.j, "mean_deg": mean, "variance_deg2": var, "n_obs": n}
-                )
-        if trial.summary_delta_mean_deg is not None:
-            delta = (trial.summary_delta_mean_deg, trial.summary_delta_var_deg2, trial.summary_n)
-        elif 1 in stats and 2 in stats:
-            (m1, v1, n1), (m2, v2, n2) = stats[1], stats[2]
-            # <delta_i> = <delta_2i> - <delta_1i> (wrapped to [-180, 180): headings);
-            # seed 000 eq 2.3: S^2{<delta_i>} = S^2{<delta_1i>} + S^2{<delta_2i>}
-            delta = ((m2 - m1 + 180.0) % 360.0 - 180.0, v1 + v2, n1 if n1 == n2 else None)
-        else:
-            continue
-        trials.append(dict(zip(FORM_COLUMNS["trials"], (*common.values(), *delta), strict=True)))
-    integer_columns = ("window_start_ms", "window_end_ms", "frames_used", "frames_lost", "n_obs")
-    frames = []
-    for rows, columns in (
-        (observations, FORM_COLUMNS["observations"] + OBSERVATION_EXTRAS),
-        (series, FORM_COLUMNS["series"]),
-        (trials, FORM_COLUMNS["trials"]),
-    ):
-        frame = pd.DataFrame(rows, columns=list(columns))
-        for column in frame.columns:
-            if column in integer_columns:
-                frame[column] = frame[column].astype("Int64")
-        frames.append(frame)
-    return CampaignFrames(*frames)
-
-
-def export_paths(out: Path, fmt: str) -> dict[str, Path]:
-    """Where `export_campaign` writes: for xlsx one workbook (sheets observations, series, trials);
-    for csv/parquet `out` holds the observations, `<stem>.series<ext>` and `<stem>.trials<ext>`
-    the summaries."""
-    if fmt == "xlsx":
-        return dict.fromkeys(("observations", "series", "trials"), out)
-    return {
-        "observations": out,
-        "series": out.with_name(f"{out.stem}.series{out.suffix}"),
-        "trials": out.with_name(f"{out.stem}.trials{out.suffix}"),
-    }
-
-
-def export_campaign(session: Session, campaign_id: int, fmt: str, out: Path) -> CampaignFrames:
-    """Write the campaign's three tables in `fmt` (csv, parquet, xlsx) to `export_paths(out)`."""
-    if fmt not in EXPORT_FORMATS:
-        raise ValueError(f"unknown export format {fmt!r} (one of {', '.join(EXPORT_FORMATS)})")
-    frames = campaign_frames(session, campaign_id)
-    tables = frames.tables()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    if fmt == "xlsx":
-        with pd.ExcelWriter(out, engine="openpyxl") as workbook:
-            for name, frame in tables.items():
-                frame.to_excel(workbook, sheet_name=name, index=False)
-        return frames
-    for name, path in export_paths(out, fmt).items():
-        if fmt == "csv":
-            tables[name].to_csv(path, index=False)
-        else:
-            tables[name].to_parquet(path, index=False)
-    return frames

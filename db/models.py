@@ -233,6 +233,8 @@ class Series(Base):
     settle_started_ms: Mapped[int | None] = mapped_column(BigInteger)
     settle_done_ms: Mapped[int | None] = mapped_column(BigInteger)
     settle_estimate_deg: Mapped[float | None] = mapped_column(Float)
+    # how it settled (analysis.settle.SettleOutcome as a dict; None: not settled or imported)
+    settle_outcome: Mapped[dict[str, Any] | None] = mapped_column(JSON)
     summary_mean_deg: Mapped[float | None] = mapped_column(Float)
     summary_variance_deg2: Mapped[float | None] = mapped_column(Float)
     summary_n: Mapped[int | None] = mapped_column(Integer)

@@ -3,8 +3,9 @@ where to resume it, how far it has got, and the known constants B of its model."
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import UTC, datetime
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, selectinload
@@ -57,6 +58,47 @@ def instrument_for(
     return instrument
 
 
+@dataclass(frozen=True)
+class CampaignHeader:
+    """What a new campaign row holds besides its trials: the instrument (model, serial, known
+    constants lP and H1), the site (latitude, Earth rate U, gravity g), the plan text and who
+    ran it with which software."""
+
+    model: str
+    serial: str
+    lp_gcm2s2: float
+    h1_gcm2s: float
+    latitude_deg: float
+    earth_rate_rad_s: float
+    gravity_cm_s2: float
+    plan_toml: str
+    operator: str
+    n_obs: int
+    software_version: str
+
+
+def new_campaign(session: Session, header: CampaignHeader, *, status: str, source: str) -> Campaign:
+    """A campaign row (added to `session`) for a stand run or an import, on the stored instrument
+    with the same model, serial and constants when there is one."""
+    constants = {"lp_gcm2s2": header.lp_gcm2s2, "h1_gcm2s": header.h1_gcm2s}
+    campaign = Campaign(
+        instrument=instrument_for(session, header.model, header.serial, constants),
+        plan_toml=header.plan_toml,
+        plan_hash=hashlib.sha256(header.plan_toml.encode()).hexdigest(),
+        operator=header.operator,
+        latitude_deg=header.latitude_deg,
+        earth_rate_rad_s=header.earth_rate_rad_s,
+        gravity_cm_s2=header.gravity_cm_s2,
+        n_obs=header.n_obs,
+        status=status,
+        source=source,
+        started_at=datetime.now(UTC) if source == "stand" else None,
+        software_version=header.software_version,
+    )
+    session.add(campaign)
+    return campaign
+
+
 def campaign_constants(campaign: Campaign) -> dict[str, float]:
     """The known parameters B of seed 000 eq 1.1 for this campaign: lP, H1 (instrument) and
     latitude, Earth rate U, gravity g (site). Keys: lp_gcm2s2, h1_gcm2s, latitude_deg,
@@ -82,50 +124,110 @@ class ResumePoint:
     next_k: int
 
 
-def first_incomplete_series(session: Session, campaign_id: int) -> ResumePoint | None:
-    """The first series (by trial index, then j) that is not completed, in a trial that is
-    neither completed nor failed (failed trials keep their reason and are not retried).
-    A series already holding N observations counts as done even if the process died before
-    marking it completed. None when nothing is left to acquire."""
-    n_obs = session.scalar(select(Campaign.n_obs).where(Campaign.id == campaign_id))
-    if n_obs is None:
-        raise CampaignNotFound(f"no campaign {campaign_id} in the database")
-    last_k = dict(
-        session.execute(
-            select(Series.id, func.max(Observation.k))
-            .join(Observation, Observation.series_id == Series.id)
-            .join(Trial, Trial.id == Series.trial_id)
-            .where(Trial.campaign_id == campaign_id)
-            .group_by(Series.id)
-        ).all()
-    )
-    trials = session.scalars(
-        select(Trial)
-        .where(Trial.campaign_id == campaign_id, Trial.status.not_in(("completed", "failed")))
-        .order_by(Trial.index)
-        .options(selectinload(Trial.series))
-    )
-    for trial in trials:
-        by_j = {series.j: series for series in trial.series}
-        for j in SERIES_J:
-            series = by_j.get(j)
-            if series is None:
-                return ResumePoint(trial.id, trial.index, j, None, 1)
-            done = last_k.get(series.id, 0)
-            if series.status != "completed" and done < n_obs:
-                return ResumePoint(trial.id, trial.index, j, series.id, done + 1)
-    return None
-
-
 @dataclass(frozen=True)
 class TrialProgress:
-    """One trial's state: role, status (and failure reason), observations stored per series j."""
+    """What the database holds for one trial, read by the one resume rule (used by acquisition
+    to resume, by `campaign status` and by the report): a series is done when it is marked
+    completed or holds N observations; a trial is acquired when it is completed or failed
+    (failed trials keep their reason and are not retried) or both its series are done (the
+    process may have died before marking it completed)."""
 
+    trial_id: int
     index: int
     role: str
     status: str
     failure_reason: str | None
-    observations_by_j: dict[int, int]
+    n_obs: int
+    series_ids: dict[int, int]  # j -> series id
+    series_status: dict[int, str]
+    observations_by_j: dict[int, int]  # j -> observations stored
+    last_k: dict[int, int]  # j -> highest k stored
+
+    @property
+    def series_done(self) -> frozenset[int]:
+        return frozenset(
+            j
+            for j in SERIES_J
+            if self.series_status.get(j) == "completed" or self.last_k.get(j, 0) >= self.n_obs
+        )
+
+    @property
+    def acquired(self) -> bool:
+        return self.status in ("completed", "failed") or self.series_done == frozenset(SERIES_J)
+
+    @property
+    def resume(self) -> ResumePoint | None:
+        """The first series of this trial still to acquire (None: the trial is acquired)."""
+        if self.acquired:
+            return None
+        j = next(j for j in SERIES_J if j not in self.series_done)
+        return ResumePoint(
+            self.trial_id, self.index, j, self.series_ids.get(j), self.last_k.get(j, 0) + 1
+        )
+
+
+def trial_progress(session: Session, campaign_id: int) -> tuple[TrialProgress, ...]:
+    """Every trial of the campaign (by index) with its series' observation counts, by SQL
+    aggregates (cheap while a campaign is running in another process)."""
+    n_obs = session.scalar(select(Campaign.n_obs).where(Campaign.id == campaign_id))
+    if n_obs is None:
+        raise CampaignNotFound(f"no campaign {campaign_id} in the database")
+    series: dict[int, list[tuple[int, int, str, int, int]]] = {}
+    for trial_id, series_id, j, status, count, last in session.execute(
+        select(
+            Series.trial_id,
+            Series.id,
+            Series.j,
+            Series.status,
+            func.count(Observation.id),
+            func.coalesce(func.max(Observation.k), 0),
+        )
+        .join(Trial, Trial.id == Series.trial_id)
+        .outerjoin(Observation, Observation.series_id == Series.id)
+        .where(Trial.campaign_id == campaign_id)
+        .group_by(Series.id)
+    ):
+        series.setdefault(trial_id, []).append((series_id, j, status, count, last))
+    trials = session.execute(
+        select(Trial.id, Trial.index, Trial.role, Trial.status, Trial.failure_reason)
+        .where(Trial.campaign_id == campaign_id)
+        .order_by(Trial.index)
+    )
+    return tuple(
+        TrialProgress(
+            trial_id=trial_id,
+            index=index,
+            role=role,
+            status=status,
+            failure_reason=reason,
+            n_obs=n_obs,
+            series_ids={j: sid for sid, j, _, _, _ in series.get(trial_id, [])},
+            series_status={j: st for _, j, st, _, _ in series.get(trial_id, [])},
+            observations_by_j={j: n for _, j, _, n, _ in series.get(trial_id, [])},
+            last_k={j: k for _, j, _, _, k in series.get(trial_id, [])},
+        )
+        for trial_id, index, role, status, reason in trials
+    )
+
+
+def first_incomplete_series(session: Session, campaign_id: int) -> ResumePoint | None:
+    """Where acquisition continues (`TrialProgress.resume` of the first trial not acquired);
+    None when nothing is left to acquire."""
+    return next(
+        (t.resume for t in trial_progress(session, campaign_id) if t.resume is not None), None
+    )
+
+
+def reference_heading(session: Session, trial_id: int) -> float | None:
+    """The trial's first stored observation (series 1 first): the reference a resumed trial
+    takes its headings about."""
+    return session.scalar(
+        select(Observation.value_deg)
+        .join(Series, Series.id == Observation.series_id)
+        .where(Series.trial_id == trial_id)
+        .order_by(Series.j, Observation.k)
+        .limit(1)
+    )
 
 
 @dataclass(frozen=True)
@@ -158,22 +260,11 @@ class CampaignSummary:
 
 
 def campaign_summary(session: Session, campaign_id: int) -> CampaignSummary:
-    """Counts by SQL aggregates (cheap while a campaign is running in another process)."""
+    """Where a campaign stands, by SQL aggregates."""
     campaign = session.get(Campaign, campaign_id)
     if campaign is None:
         raise CampaignNotFound(f"no campaign {campaign_id} in the database")
-    counts: dict[int, dict[int, int]] = {}
-    for trial_id, j, n in session.execute(
-        select(Series.trial_id, Series.j, func.count(Observation.id))
-        .join(Trial, Trial.id == Series.trial_id)
-        .outerjoin(Observation, Observation.series_id == Series.id)
-        .where(Trial.campaign_id == campaign_id)
-        .group_by(Series.trial_id, Series.j)
-    ):
-        counts.setdefault(trial_id, {})[j] = n
-    trials = session.scalars(
-        select(Trial).where(Trial.campaign_id == campaign_id).order_by(Trial.index)
-    )
+    trials = trial_progress(session, campaign_id)
     events = dict.fromkeys(EVENT_SEVERITIES, 0)
     events.update(
         session.execute(
@@ -191,10 +282,7 @@ def campaign_summary(session: Session, campaign_id: int) -> CampaignSummary:
         n_obs=campaign.n_obs,
         started_at=campaign.started_at,
         finished_at=campaign.finished_at,
-        trials=tuple(
-            TrialProgress(t.index, t.role, t.status, t.failure_reason, counts.get(t.id, {}))
-            for t in trials
-        ),
+        trials=trials,
         events_by_severity=events,
-        resume=first_incomplete_series(session, campaign_id),
+        resume=next((t.resume for t in trials if t.resume is not None), None),
     )

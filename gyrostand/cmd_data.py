@@ -140,8 +140,8 @@ def register(app: typer.Typer) -> None:
         db: DbOption = DEFAULT_DB,
     ) -> None:
         """Export a campaign's observations and series/trial summaries (CSV, Parquet, Excel)."""
-        from gyrostand.db.io import export_campaign, export_paths
         from gyrostand.db.queries import CampaignNotFound
+        from gyrostand.report.export import export_campaign, export_paths
 
         fmt = format.value
         out = out or Path("runs/export") / f"campaign-{campaign}.{fmt}"

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gyrostand.analysis.settle import SettleOutcome
+
 
 @dataclass(frozen=True)
 class Identification:
@@ -108,21 +110,6 @@ class ObservationRecord:
     value_deg: float
     window_start_ms: int | None
     window_end_ms: int | None
-
-
-@dataclass(frozen=True)
-class SettleOutcome:
-    """How a series settled, as acquisition recorded it: by the plan's band criterion (it
-    waited) or by the settle point estimated from the transient (seed 003, early settle). For
-    an early settle: the estimate's standard error, when the band criterion held on the readings
-    (``band_measured``) or is predicted to hold on the fitted transient (stand seconds from the
-    settle start; None: not within the plan's max_wait_s), and the stand seconds saved."""
-
-    criterion: str  # "band" or "estimate"
-    standard_error_deg: float | None
-    band_s: float | None
-    band_measured: bool
-    saved_s: float | None
 
 
 @dataclass(frozen=True)

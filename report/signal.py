@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from scipy.integrate import quad
 
+from gyrostand.analysis.angles import about
 from gyrostand.analysis.campaign import json_safe
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.excursions import (
@@ -56,7 +57,7 @@ def uniform_record(t_ms: np.ndarray, heading_deg: np.ndarray, source: str) -> Re
         raise AnalysisError(f"{source}: {t.size} heading frames, too few for a reading record")
     step_ms = float(np.median(np.diff(t)))
     n = int(round((t[-1] - t[0]) / step_ms)) + 1
-    h = h[0] + (h - h[0] + 180.0) % 360.0 - 180.0
+    h = about(h[0], h)
     grid = t[0] + step_ms * np.arange(n)
     return ReadingRecord(
         source=source,

@@ -27,10 +27,11 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from gyrostand import SOFTWARE_VERSION
-from gyrostand.acquisition.early_settle import parse_outcome
+from gyrostand.analysis.angles import about
 from gyrostand.analysis.campaign import CampaignAnalysis, analyze_campaign, json_safe
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.gyro_model import KnownConstants
+from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.trials import SeriesSummary, TrialInput
 from gyrostand.db.models import AnalysisRun, Campaign, Trial
 from gyrostand.db.queries import campaign_constants, load_campaign
@@ -51,7 +52,6 @@ from gyrostand.report.model import (
     ReadingRecord,
     ReportInputs,
     SeriesRecord,
-    SettleOutcome,
     Signatures,
     TrialAcquisition,
     TrialRecord,
@@ -82,6 +82,16 @@ class StoredInputs:
         return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
 
 
+def applied_conditions(trial: Trial) -> dict[str, object]:
+    """A trial's role and its applied K, A, tau (stand-measured, else commanded)."""
+    return {
+        "role": trial.role,
+        "direction_deg": trial.direction_deg,
+        "amplitude_cm": trial.amplitude_cm,
+        "period_s": trial.period_s,
+    }
+
+
 def trial_input(trial: Trial) -> TrialInput | str:
     """The analysis input of one stored trial, or why it cannot be analysed. K, A and tau are
     the applied values (stand-measured, else commanded)."""
@@ -89,13 +99,7 @@ def trial_input(trial: Trial) -> TrialInput | str:
         return f"trial {trial.status}" + (
             f": {trial.failure_reason}" if trial.failure_reason else ""
         )
-    common = {
-        "index": trial.index,
-        "role": trial.role,
-        "direction_deg": trial.direction_deg,
-        "amplitude_cm": trial.amplitude_cm,
-        "period_s": trial.period_s,
-    }
+    common = {"index": trial.index} | applied_conditions(trial)
     series = {s.j: s for s in trial.series}
     values = {j: tuple(o.value_deg for o in s.observations) for j, s in series.items()}
     if all(len(values.get(j, ())) >= 2 for j in (1, 2)):
@@ -320,32 +324,7 @@ def _events(campaign: Campaign) -> tuple[EventRecord, ...]:
     )
 
 
-def settle_outcomes(campaign: Campaign, plan: Plan | None) -> dict[int, SettleOutcome]:
-    """How each settled series settled, by series id: from its "early settle" event when the
-    plan settles by the estimate (the last one, after a resume), by the band criterion when the
-    plan waits for it (nothing saved); none for imports (no plan)."""
-    if plan is None:
-        return {}
-    outcomes = {}
-    if plan.settle.method == "band":
-        for s in (s for t in campaign.trials for s in t.series):
-            if s.settle_started_ms is not None and s.settle_done_ms is not None:
-                waited = (s.settle_done_ms - s.settle_started_ms) / 1000
-                outcomes[s.id] = SettleOutcome("band", None, waited, True, 0.0)
-    for e in campaign.events:
-        found = parse_outcome(e.message) if e.kind == "early settle" else None
-        if found is not None and e.series_id is not None:
-            outcomes[e.series_id] = SettleOutcome(
-                "estimate",
-                found.standard_error_deg,
-                found.band_s,
-                found.band_measured,
-                found.saved_s,
-            )
-    return outcomes
-
-
-def _series_records(trial: Trial, outcomes: dict[int, SettleOutcome]) -> tuple[SeriesRecord, ...]:
+def _series_records(trial: Trial) -> tuple[SeriesRecord, ...]:
     return tuple(
         SeriesRecord(
             j=s.j,
@@ -356,7 +335,7 @@ def _series_records(trial: Trial, outcomes: dict[int, SettleOutcome]) -> tuple[S
                 ObservationRecord(o.k, o.value_deg, o.window_start_ms, o.window_end_ms)
                 for o in s.observations
             ),
-            settle=outcomes.get(s.id),
+            settle=None if s.settle_outcome is None else SettleOutcome.from_dict(s.settle_outcome),
         )
         for s in trial.series
     )
@@ -392,7 +371,7 @@ class _Binner:
             return
         if self.ref is None:
             self.ref = float(h[0])
-        h = self.ref + (h - self.ref + 180.0) % 360.0 - 180.0
+        h = about(self.ref, h)
         n = self.count.size
         b = np.clip(np.searchsorted(self.edges, t, side="right") - 1, 0, n - 1)
         self.sum_t += np.bincount(b, t, n)
@@ -435,8 +414,7 @@ def _records(
 ) -> tuple[tuple[TrialRecord, ...], str]:
     """Per trial its series and (from the raw log) its heading trace; and how the plots were
     made."""
-    outcomes = settle_outcomes(campaign, plan)
-    series = {t.index: _series_records(t, outcomes) for t in campaign.trials}
+    series = {t.index: _series_records(t) for t in campaign.trials}
     has_observations = any(s.observations for rows in series.values() for s in rows)
     event_times: dict[int, list[int]] = {t.index: [] for t in campaign.trials}
     by_id = {t.id: t.index for t in campaign.trials}
@@ -511,10 +489,7 @@ def campaign_signal(session: Session, campaign_id: int) -> SignalSection:
     campaign = load_campaign(session, campaign_id)
     check, log = _raw_log_check(campaign)
     plan = _plan(campaign)
-    outcomes = settle_outcomes(campaign, plan)
-    records = tuple(
-        TrialRecord(t.index, _series_records(t, outcomes), None) for t in campaign.trials
-    )
+    records = tuple(TrialRecord(t.index, _series_records(t), None) for t in campaign.trials)
     reading, note, acceptance = _reading(plan, log, check, records)
     return signal_section(reading, note, records, acceptance)
 

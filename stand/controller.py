@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import can
 
+from gyrostand.analysis.angles import wrap180
 from gyrostand.stand.protocol import AckFrame, Codec, StandStatusFrame
 
 
@@ -164,7 +165,7 @@ class StandController(can.Listener):
         if status is None or not status.rocking:
             raise StandError("no status of a rocking stand received yet")
         return TrackingError(
-            direction_error_deg=(status.direction_deg - direction_deg + 180.0) % 360.0 - 180.0,
+            direction_error_deg=wrap180(status.direction_deg - direction_deg),
             amplitude_rel_error=(status.amplitude_cm - amplitude_cm) / amplitude_cm,
             period_rel_error=(status.period_s - period_s) / period_s,
             stand_time_ms=status.stand_time_ms,

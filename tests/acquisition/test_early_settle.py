@@ -26,11 +26,11 @@ from gyrostand.acquisition.early_settle import (
     EarlySettle,
     band_settled,
     hold_blocks,
-    parse_outcome,
     predict_band_settle_s,
 )
 from gyrostand.acquisition.engine import Engine
 from gyrostand.acquisition.store import CampaignStore
+from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.db.models import Event, Series, Trial
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.frames.batch import BatchDecoder, RawFrames
@@ -193,18 +193,20 @@ def test_early_series_start_earlier_and_stay_within_the_tolerance(band, early) -
     assert rms["early"] <= rms["band"]  # the band criterion settles on the overshoot
 
 
-def test_the_event_records_estimate_and_time_saved(band, early) -> None:
+def test_the_outcome_records_estimate_and_time_saved(band, early) -> None:
     sink = early[0]
     events = {(a[3], a[4]): a for a in sink.of("event") if a[0] == "early settle"}
     settled = {(a[0], a[1]): a for a in sink.of("series_settled")}
     waited, early_s = settle_s(band[0]), settle_s(sink)
     c = scaled_config().compass
     truth = {1: c.heading_deg, 2: None}
+    assert all(a[3].criterion == "band" for a in band[0].of("series_settled"))
     for key, event in events.items():
-        outcome = parse_outcome(event[2])
-        assert outcome is not None and event[5] == settled[key][2]  # stand time of the decision
+        outcome = settled[key][3]
+        assert event[5] == settled[key][2]  # the event tells the decision at its stand time
+        assert f"settle point {outcome.estimate_deg:.5f} deg" in event[2]
+        assert outcome.criterion == "estimate"
         assert outcome.settle_s == early_s[key]
-        assert outcome.estimate_deg == pytest.approx(settled[key][3], abs=5e-6)  # 5 decimals
         assert outcome.standard_error_deg <= 0.015
         assert outcome.stable_since_s <= outcome.settle_s
         if key[1] == 1:
@@ -222,8 +224,8 @@ def test_rocking_harmonics_are_averaged_out_by_whole_period_blocks(early) -> Non
     neither when the series start nor, beyond quantisation, what they estimate."""
     loud, _, _ = run(EARLY_SETTLE, scaled_config(harmonic_deg_per_g=10.0))
     assert settle_s(loud) == settle_s(early[0])
-    quiet_est = {(a[0], a[1]): a[3] for a in early[0].of("series_settled")}
-    loud_est = {(a[0], a[1]): a[3] for a in loud.of("series_settled")}
+    quiet_est = {(a[0], a[1]): a[3].estimate_deg for a in early[0].of("series_settled")}
+    loud_est = {(a[0], a[1]): a[3].estimate_deg for a in loud.of("series_settled")}
     assert all(abs(loud_est[k] - quiet_est[k]) < 2e-3 for k in quiet_est)
 
 
@@ -241,11 +243,12 @@ def test_stored_and_reported(tmp_path: Path) -> None:
             select(Trial.index, Series).join(Series).where(Trial.campaign_id == store.campaign_id)
         ).all()
         events = session.scalars(select(Event).where(Event.kind == "early settle")).all()
-        by_series = {e.series_id: parse_outcome(e.message) for e in events}
+        assert {e.series_id for e in events} == {s.id for _, s in series}
         stored = {}
         for index, s in series:
-            outcome = by_series[s.id]
-            assert s.settle_estimate_deg == pytest.approx(outcome.estimate_deg, abs=5e-6)
+            outcome = SettleOutcome.from_dict(s.settle_outcome)
+            assert outcome.criterion == "estimate" and outcome.standard_error_deg <= 0.015
+            assert s.settle_estimate_deg == outcome.estimate_deg
             assert (s.settle_done_ms - s.settle_started_ms) / 1000 == outcome.settle_s
             assert outcome.saved_s > 0
             stored[(index, s.j)] = (s.settle_estimate_deg, outcome.saved_s)

@@ -61,6 +61,22 @@ def test_vectorised_core_matches_per_trial() -> None:
     assert np.all(d.dof == 12)
 
 
+def test_headings_across_north_differ_by_their_small_angle() -> None:
+    """Readings 359.9 deg before and 0.1 deg under rocking differ by +0.2 deg, not -359.8 deg,
+    in every input form; a series that itself crosses north has the mean of its readings."""
+    before = SeriesSummary(359.9, 1e-4, 5)
+    under = SeriesSummary(0.1, 1e-4, 5)
+    assert trial_statistics(trial(before=before, under=under)).delta_deg == pytest.approx(0.2)
+    raw = trial_statistics(
+        trial(before_deg=(359.98, 0.02, 359.99, 0.01), under_deg=(0.21, 0.19, 0.2, 0.2))
+    )
+    assert raw.delta_deg == pytest.approx(0.2)
+    assert raw.before.mean_deg % 360.0 == pytest.approx(0.0, abs=1e-12)
+    assert raw.before.var_deg2 == pytest.approx(np.var([-0.02, 0.02, -0.01, 0.01], ddof=1))
+    d = difference_statistics(np.array([[359.9, 359.9]]), np.array([[0.1, 0.1]]))
+    assert d.delta_deg == pytest.approx([0.2])
+
+
 def test_bad_trials_name_the_trial() -> None:
     with pytest.raises(TooFewObservationsError, match="trial 7, before_deg: N = 1"):
         trial(before_deg=(0.5,), under_deg=UNDER)

@@ -12,20 +12,20 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from gyrostand.analysis.trials import trial_statistics
 from gyrostand.db.io import (
     SEED_000_METADATA,
     ImportedFile,
     ImportedTrial,
     ImportFileError,
     MetadataError,
-    campaign_frames,
-    export_campaign,
-    export_paths,
     import_file,
     read_import_file,
 )
 from gyrostand.db.models import Campaign, Event, Instrument
 from gyrostand.db.queries import load_campaign
+from gyrostand.report.export import campaign_frames, export_campaign, export_paths
+from gyrostand.report.stored import stored_inputs
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -188,6 +188,25 @@ def test_series_form_import(sessions: sessionmaker[Session], tmp_path: Path) -> 
         trials = campaign_frames(session, import_file(sessions, path, SEED_000_METADATA)).trials
     assert trials.delta_mean_deg.tolist() == [pytest.approx(-0.117, abs=1e-12)]
     assert trials.delta_var_deg2.tolist() == [pytest.approx(0.8e-4)]
+
+
+def test_export_and_analysis_agree_across_north(
+    sessions: sessionmaker[Session], tmp_path: Path
+) -> None:
+    """An imported series pair at 359.9 / 0.1 deg: the export and the analysis both give
+    <delta> = +0.20 deg (one statistics path)."""
+    path = tmp_path / "north.csv"
+    path.write_text(
+        "trial,role,direction_deg,amplitude_cm,period_s,j,mean_deg,variance_deg2,n_obs\n"
+        "1,fit,332,24,8,1,359.9,0.00004,5\n"
+        "1,fit,332,24,8,2,0.1,0.00004,5\n"
+    )
+    campaign_id = import_file(sessions, path, SEED_000_METADATA)
+    with sessions() as session:
+        exported = campaign_frames(session, campaign_id).trials.delta_mean_deg.tolist()
+        analysed = trial_statistics(stored_inputs(load_campaign(session, campaign_id)).trials[0])
+    assert exported == [pytest.approx(0.2)]
+    assert analysed.delta_deg == pytest.approx(0.2)
 
 
 def test_excel_and_parquet_errors_name_sheet_rows_and_records(tmp_path: Path) -> None:

@@ -1,25 +1,29 @@
 """Opening databases: pragmas, schema creation, version refusal and upgrade via Alembic."""
 
+import json
 import shutil
 import sqlite3
 from pathlib import Path
 
 import pytest
+from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import create_engine, text
 from sqlalchemy.orm import Session, sessionmaker
 
-from gyrostand.db.models import Base
+from gyrostand.db.models import Base, Event
 from gyrostand.db.session import (
     MIGRATIONS_DIR,
     DatabaseVersionError,
     _configure_sqlite,
+    alembic_config,
     database_url,
     migrate,
     open_database,
     sqlite_url,
 )
+from tests.db.conftest import make_campaign
 
 
 def version_of(path: Path) -> list[str]:
@@ -39,7 +43,7 @@ def test_pragmas_are_set_on_every_connection(sessions: sessionmaker[Session]) ->
 def test_empty_file_is_created_at_head(db_path: Path) -> None:
     assert not db_path.parent.exists()
     open_database(sqlite_url(db_path))
-    assert version_of(db_path) == ["0001"]
+    assert version_of(db_path) == ["0002"]
     with sqlite3.connect(db_path) as conn:
         tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
     assert {"instrument", "campaign", "trial", "series", "observation", "event"} <= tables
@@ -57,7 +61,7 @@ def test_without_upgrade_a_missing_or_empty_database_is_refused(tmp_path: Path) 
         open_database(sqlite_url(tmp_path / "none.sqlite"), upgrade=False)
     assert not (tmp_path / "none.sqlite").exists()
     sqlite3.connect(tmp_path / "empty.sqlite").close()
-    with pytest.raises(DatabaseVersionError, match="is empty; schema 0001 is needed"):
+    with pytest.raises(DatabaseVersionError, match="is empty; schema 0002 is needed"):
         open_database(sqlite_url(tmp_path / "empty.sqlite"), upgrade=False)
 
 
@@ -84,8 +88,8 @@ SECOND_REVISION = '''"""Test-only revision: adds a table."""
 import sqlalchemy as sa
 from alembic import op
 
-revision = "0002"
-down_revision = "0001"
+revision = "0003"
+down_revision = "0002"
 branch_labels = None
 depends_on = None
 
@@ -104,23 +108,23 @@ def newer_migrations(tmp_path: Path) -> Path:
     """A copy of the shipped migrations plus a second revision, as a future release would have."""
     location = tmp_path / "migrations"
     shutil.copytree(MIGRATIONS_DIR, location, ignore=shutil.ignore_patterns("__pycache__"))
-    (location / "versions" / "0002_probe.py").write_text(SECOND_REVISION)
+    (location / "versions" / "0003_probe.py").write_text(SECOND_REVISION)
     return location
 
 
 def test_older_database_is_upgraded_on_open(db_path: Path, newer_migrations: Path) -> None:
-    open_database(sqlite_url(db_path))  # written by "this" release, at 0001
+    open_database(sqlite_url(db_path))  # written by "this" release, at 0002
     engine = create_engine(sqlite_url(db_path))
-    with pytest.raises(DatabaseVersionError, match="has old schema 0001; schema 0002 is needed"):
+    with pytest.raises(DatabaseVersionError, match="has old schema 0002; schema 0003 is needed"):
         migrate(engine, upgrade=False, script_location=newer_migrations)
-    assert version_of(db_path) == ["0001"]
+    assert version_of(db_path) == ["0002"]
     migrate(engine, upgrade=True, script_location=newer_migrations)
     engine.dispose()
-    assert version_of(db_path) == ["0002"]
+    assert version_of(db_path) == ["0003"]
     with sqlite3.connect(db_path) as conn:
         assert conn.execute("SELECT count(*) FROM probe").fetchone() == (0,)
-    # and the released code (which only knows 0001) now refuses the upgraded file
-    with pytest.raises(DatabaseVersionError, match="0002, newer than this gyrostand"):
+    # and the released code (which only knows up to 0002) now refuses the upgraded file
+    with pytest.raises(DatabaseVersionError, match="0003, newer than this gyrostand"):
         open_database(sqlite_url(db_path))
 
 
@@ -133,13 +137,13 @@ def test_failed_migration_leaves_the_database_unchanged(
         'op.create_table("probe", sa.Column("id", sa.Integer(), primary_key=True))\n'
         '    op.execute("SELECT no_such_function()")',
     )
-    (newer_migrations / "versions" / "0002_probe.py").write_text(broken)
+    (newer_migrations / "versions" / "0003_probe.py").write_text(broken)
     engine = create_engine(sqlite_url(db_path))
     _configure_sqlite(engine)
     with pytest.raises(Exception, match="no_such_function"):
         migrate(engine, upgrade=True, script_location=newer_migrations)
     engine.dispose()
-    assert version_of(db_path) == ["0001"]
+    assert version_of(db_path) == ["0002"]
     with sqlite3.connect(db_path) as conn:
         tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
     assert "probe" not in tables
@@ -148,3 +152,44 @@ def test_failed_migration_leaves_the_database_unchanged(
 def test_database_url_accepts_paths_and_urls(tmp_path: Path) -> None:
     assert database_url("postgresql+psycopg://lab/gyro") == "postgresql+psycopg://lab/gyro"
     assert database_url(str(tmp_path / "a.sqlite")) == f"sqlite:///{tmp_path / 'a.sqlite'}"
+
+
+def test_0002_fills_settle_outcomes_from_0001_event_text(db_path: Path) -> None:
+    """A 0.1.0 database (schema 0001) told an early settle only in event text: the upgrade to
+    0002 turns that text into the series' structured outcome, and band settles into theirs."""
+    sessions = open_database(sqlite_url(db_path))
+    with sessions.begin() as session:
+        campaign = make_campaign(session, n_trials=1)
+        early, band = campaign.trials[0].series
+        for s, done in ((early, 61_000), (band, 1_801_000)):
+            s.settle_started_ms, s.settle_done_ms, s.settle_estimate_deg = 1_000, done, 120.5
+        message = (
+            "settled by the estimate after 60.0 s: settle point 120.50000 deg (SE 0.00310 deg, "
+            "stable since 45.0 s at 120.49000 deg, last estimates within 0.00100 deg, predicted "
+            "transient over the observations 0.00200 deg; tolerance 0.00500 deg); band criterion "
+            "predicted after 900.0 s: 840.0 s saved"
+        )
+        session.add(Event(campaign=campaign, series_id=early.id, kind="early settle",
+                          severity="info", message=message))  # fmt: skip
+        ids = early.id, band.id
+    engine = create_engine(sqlite_url(db_path))
+    config = alembic_config()
+    with engine.begin() as connection:
+        config.attributes["connection"] = connection
+        command.downgrade(config, "0001")
+        assert connection.execute(text("SELECT count(*) FROM series")).scalar() == 2
+    engine.dispose()
+    assert version_of(db_path) == ["0001"]
+    open_database(sqlite_url(db_path))  # upgrades to head
+    with sqlite3.connect(db_path) as conn:
+        rows = dict(conn.execute("SELECT id, settle_outcome FROM series"))
+    assert json.loads(rows[ids[0]]) == {
+        "criterion": "estimate", "settle_s": 60.0, "estimate_deg": 120.5,
+        "standard_error_deg": 0.0031, "stable_since_s": 45.0, "stable_estimate_deg": 120.49,
+        "band_s": 900.0, "band_measured": False,
+    }  # fmt: skip
+    assert json.loads(rows[ids[1]]) == {
+        "criterion": "band", "settle_s": 1800.0, "estimate_deg": 120.5,
+        "standard_error_deg": None, "stable_since_s": None, "stable_estimate_deg": None,
+        "band_s": 1800.0, "band_measured": True,
+    }  # fmt: skip

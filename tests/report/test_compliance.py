@@ -24,9 +24,7 @@ from gyrostand.report.settings import SEED_000_SETTINGS
 
 from .conftest import PAPER_CSV
 
-PROFILE = (
-    Path(__file__).resolve().parents[2] / "report/profiles/imo-a424.toml"
-).read_text()
+PROFILE = (Path(__file__).resolve().parents[2] / "report/profiles/imo-a424.toml").read_text()
 
 
 def item(report_or_items: object, evidence: str) -> object:

@@ -1,0 +1,71 @@
+"""The one resume rule: a process killed after a trial's last observation was committed but
+before the trial was marked completed (waiting for the stand's stop acknowledgement)."""
+
+from pathlib import Path
+
+from sqlalchemy import select
+
+from gyrostand.acquisition.engine import Engine, ObservationResult
+from gyrostand.acquisition.runner import resume_store
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.db.models import Event, Trial
+from gyrostand.db.queries import ResumePoint, campaign_summary, first_incomplete_series
+from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.plan.model import parse_plan
+from tests.acquisition.harness import plan_text
+
+THREE = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "fit"), (30.0, 20.0, 6.0, "control")]
+
+
+def killed_after_trial_2(tmp_path: Path) -> CampaignStore:
+    """Trial 1 completed, trial 2 with both series holding N = 3 observations but "running"."""
+    sessions = open_database(sqlite_url(tmp_path / "db.sqlite"))
+    store = CampaignStore.create(sessions, parse_plan(plan_text(THREE)))
+    for trial in (1, 2):
+        store.trial_started(trial)
+        for j in (1, 2):
+            for k in (1, 2, 3):
+                value = 100.0 + 0.1 * (j - 1)
+                store.observation(ObservationResult(trial, j, k, value, 0, 1, 10, 0, ""))
+            if trial == 1:
+                store.series_completed(trial, j)
+    store.trial_completed(1, None)
+    return store
+
+
+class Sent:
+    def __init__(self) -> None:
+        self.commands: list = []
+
+    def issue(self, command, now_ms: int) -> None:  # noqa: ANN001
+        self.commands.append(command)
+
+
+def test_status_resume_point_and_engine_agree(tmp_path: Path) -> None:
+    store = killed_after_trial_2(tmp_path)
+    with store.sessions() as session:
+        resume = first_incomplete_series(session, store.campaign_id)
+        summary = campaign_summary(session, store.campaign_id)
+    third = summary.trials[2]
+    assert resume == ResumePoint(third.trial_id, 3, 1, None, 1)  # "next: trial 3"
+    assert summary.resume == resume and summary.observations_stored == 12
+    progress = store.progress()
+    assert progress[2].completed and progress[2].series_done == {1, 2}
+    assert not progress[3].completed
+    sent = Sent()
+    engine = Engine(parse_plan(plan_text(THREE)), store, sent, progress)
+    assert engine.todo == []  # trial 3 is the only one taken up: trial 2 is not rocked again
+    assert [c.kind for c in sent.commands] == ["stop"]  # trial 3 starts from still, series 1
+
+
+def test_resume_completes_the_acquired_trial_with_an_event(tmp_path: Path) -> None:
+    store = killed_after_trial_2(tmp_path)
+    _, resumed = resume_store(store.sessions, store.campaign_id)
+    with store.sessions() as session:
+        statuses = session.scalars(select(Trial.status).order_by(Trial.index)).all()
+        events = session.scalars(select(Event).where(Event.kind == "resume")).all()
+    assert statuses == ["completed", "completed", "pending"]
+    assert len(events) == 1 and "trial 2 completed on resume" in events[0].message
+    resume_store(store.sessions, store.campaign_id)  # idempotent: nothing more to complete
+    with store.sessions() as session:
+        assert len(session.scalars(select(Event).where(Event.kind == "resume")).all()) == 1
