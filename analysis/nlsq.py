@@ -25,9 +25,14 @@ Entry point::
 Gauss-Newton diverges (non-finite values, residual sum of squares rising three iterations in a
 row), stalls (singular linearisation, ``max_iter`` reached) or leaves ``bounds``: then, with
 ``robust=True``, the trust-region path refits from the start values and ``FitResult.path`` /
-``FitResult.fallback_reason`` say so. A solution where the Jacobian is (nearly) rank-deficient is
-flagged ``converged=False`` ("degenerate"): typically a local minimum on a flat direction, as
-NIST BoxBOD from its first start vector.
+``FitResult.fallback_reason`` say so. The trust-region solver's own stop is not trusted: its
+point counts as converged only once verified stationary. A Gauss-Newton polish with step halving
+(at most ``max_iter`` steps) runs from it until the stopping rule (1.8) holds at a point whose
+relative offset (Bates & Watts 1981; scale-invariant first-order optimality) is at most
+``OFFSET_TOL``; parameters the descent direction pushes against a bound stay there. Otherwise
+``converged=False`` and ``FitResult.reason`` says why. A solution where the Jacobian is (nearly)
+rank-deficient is flagged ``converged=False`` ("degenerate"): typically a local minimum on a
+flat direction, as NIST BoxBOD from its first start vector.
 """
 
 from collections.abc import Callable, Mapping
@@ -46,8 +51,13 @@ Model = Callable[..., np.ndarray]
 # Condition number of the column-equilibrated Jacobian above which X^T X counts as singular:
 # its inverse (1.10) would then carry fewer than ~4 correct digits.
 COND_LIMIT = 1e10
+# Largest relative offset (Bates & Watts 1981) of a verified stationary point, R's nls default:
+# the Gauss-Newton step still to go is then ~1e-5 sqrt(p) standard errors (covariance metric).
+OFFSET_TOL = 1e-5
 _DIVERGING_RISES = 3
 _FD_STEP = np.finfo(float).eps ** (1 / 3)  # optimal relative step of a central difference
+_MIN_STEP_FACTOR = 1 / 1024  # step halving gives up below this factor (R's nls minFactor)
+_SQRT_EPS = np.sqrt(np.finfo(float).eps)
 _TINY = np.finfo(float).tiny
 
 
@@ -70,9 +80,11 @@ class FitResult:
     ``residuals`` are observed minus fitted (y - f). ``xtx_inv`` is the unscaled covariance
     (X^T X)^-1 of the linearisation at the solution, ``covariance`` = ``xtx_inv`` x S^2 (1.10).
     ``path`` is "gauss-newton" or "trust-region"; ``fallback_reason`` says why Gauss-Newton was
-    abandoned (None when it was not). ``log`` holds the Gauss-Newton iterations (including those
-    of an abandoned attempt); ``iterations`` counts them, or the trust-region solver's function
-    evaluations on that path."""
+    abandoned (None when it was not). ``converged`` means the stopping rule (1.8) was met, on the
+    trust-region path at a point verified stationary by the Gauss-Newton polish; ``reason`` says
+    how, or why not. ``log`` holds the Gauss-Newton iterations (including those of an abandoned
+    attempt); ``iterations`` counts them, or the trust-region solver's function evaluations on
+    that path (the polish's steps are given in ``reason``)."""
 
     names: tuple[str, ...]
     estimates: dict[str, float]
@@ -130,6 +142,24 @@ class _Problem:
         jacobian: Callable[..., np.ndarray] | None,
     ) -> None:
         self.model, self.x, self.y, self.names, self.analytic = model, x, y, names, jacobian
+        self.dof = y.size - len(names)
+
+    def restricted(self, free: np.ndarray, theta: np.ndarray) -> "_Problem":
+        """The problem in the ``free`` parameters alone, the others held at their ``theta``."""
+        if free.all():
+            return self
+        held = {n: float(v) for n, v, f in zip(self.names, theta, free, strict=True) if not f}
+        names = tuple(n for n, f in zip(self.names, free, strict=True) if f)
+
+        def full(free_theta: dict[str, float]) -> np.ndarray:
+            return np.array([free_theta[n] if n in free_theta else held[n] for n in self.names])
+
+        jacobian = None
+        if self.analytic is not None:
+            jacobian = lambda x, **th: self.jacobian(full(th))[:, free]  # noqa: E731
+        return _Problem(
+            lambda x, **th: self.model(x, **th, **held), self.x, self.y, names, jacobian
+        )
 
     def kwargs(self, theta: np.ndarray) -> dict[str, float]:
         return {name: float(v) for name, v in zip(self.names, theta, strict=True)}
@@ -139,6 +169,12 @@ class _Problem:
         with np.errstate(all="ignore"):
             values = self.model(self.x, **self.kwargs(theta))
         return np.asarray(values, dtype=float).reshape(-1)
+
+    def rss(self, theta: np.ndarray) -> float:
+        """Residual sum of squares at theta (NaN when the model is not finite there)."""
+        with np.errstate(all="ignore"):
+            residuals = self.y - self.values(theta)
+            return float(residuals @ residuals)
 
     def jacobian(self, theta: np.ndarray) -> np.ndarray:
         if self.analytic is not None:
@@ -159,7 +195,8 @@ class _Problem:
 
 @dataclass(frozen=True)
 class _Linearisation:
-    """QR solution of the linearised problem (1.5-1.6) at one theta."""
+    """QR solution of the linearised problem (1.5-1.6) at one theta, with its relative offset:
+    zero exactly at a stationary point, whatever the scales of the parameters and the data."""
 
     values: np.ndarray
     jac: np.ndarray
@@ -167,6 +204,7 @@ class _Linearisation:
     step: np.ndarray
     xtx_inv: np.ndarray
     cond: float
+    offset: float
 
     @property
     def rss(self) -> float:
@@ -188,14 +226,35 @@ def _linearise(problem: _Problem, theta: np.ndarray) -> _Linearisation | str:
     if not cond < COND_LIMIT:
         return f"singular linearisation: condition number {cond:.3g} of X"
     residuals = problem.y - values  # Y of eq 1.4: observed minus computed
-    step = linalg.solve_triangular(r, q.T @ residuals) / scale  # eq 1.6
+    tangent = q.T @ residuals  # the residuals' coordinates in the tangent plane
+    step = linalg.solve_triangular(r, tangent) / scale  # eq 1.6
+    # Relative offset (Bates & Watts 1981): tangential over orthogonal residual, each per degree
+    # of freedom. An exact fit would make it 0/0, so the orthogonal spread is floored at
+    # sqrt(eps) x rms(y): a 1e-5 offset then still asks the tangential part for ~1e-13 rms(y).
+    spread = max(
+        float(np.linalg.norm(residuals - q @ tangent)) / np.sqrt(problem.dof),
+        _SQRT_EPS * float(np.sqrt(np.mean(problem.y**2))),
+        _TINY,
+    )
+    offset = float(np.linalg.norm(tangent)) / np.sqrt(len(scale)) / spread
     # LAPACK's triangular inverse: a BLAS-3 solve against the identity costs ~1000x more on tiny
     # matrices when a multi-threaded BLAS contends for cores
     r_inv, info = linalg.lapack.dtrtri(r)
     if info != 0:
         return f"singular linearisation: R[{info - 1}, {info - 1}] = 0"
     xtx_inv = (r_inv @ r_inv.T) / np.outer(scale, scale)
-    return _Linearisation(values, jac, residuals, step, xtx_inv, cond)
+    return _Linearisation(values, jac, residuals, step, xtx_inv, cond, offset)
+
+
+def _thresholds(
+    lin: _Linearisation, theta: np.ndarray, eps: np.ndarray | None, eps_se: float, dof: int
+) -> np.ndarray:
+    """epsilon_i of the stopping rule (1.8): as given, or eps_se x SE_i at theta (1.9-1.10)
+    floored at 1e-13 |theta_i|."""
+    if eps is not None:
+        return eps
+    se = np.sqrt(lin.rss / dof * np.diag(lin.xtx_inv))
+    return np.maximum(eps_se * se, 1e-13 * np.abs(theta) + _TINY)
 
 
 def _gauss_newton(
@@ -208,12 +267,11 @@ def _gauss_newton(
 ) -> tuple[np.ndarray, list[IterationRecord], str | None]:
     """Iterate 1.3-1.8; returns the final theta, the log, and a failure reason (None if met)."""
     theta, log, rises = theta0.astype(float), [], 0
-    dof = problem.y.size - theta0.size
     for d in range(1, max_iter + 1):
         lin = _linearise(problem, theta)
         if isinstance(lin, str):
             return theta, log, f"{lin} at iteration {d}"
-        s2 = lin.rss / dof
+        s2 = lin.rss / problem.dof
         log.append(IterationRecord(d, problem.kwargs(theta), problem.kwargs(lin.step), lin.rss, s2))
         rises = rises + 1 if len(log) > 1 and lin.rss > log[-2].rss else 0
         if rises >= _DIVERGING_RISES:
@@ -228,11 +286,7 @@ def _gauss_newton(
                 f"left the bounds at iteration {d}: {problem.names[i]} = {new[i]:.6g} outside "
                 f"[{bounds[0][i]:.6g}, {bounds[1][i]:.6g}]",
             )
-        if eps is None:
-            se = np.sqrt(s2 * np.diag(lin.xtx_inv))
-            threshold = np.maximum(eps_se * se, 1e-13 * np.abs(theta) + _TINY)
-        else:
-            threshold = eps
+        threshold = _thresholds(lin, theta, eps, eps_se, problem.dof)
         theta = new
         if np.all(np.abs(lin.step) < threshold):  # eq 1.8
             return theta, log, None
@@ -244,8 +298,9 @@ def _trust_region(
     theta0: np.ndarray,
     bounds: tuple[np.ndarray, np.ndarray],
     x_scale: np.ndarray | str,
-) -> tuple[np.ndarray, int, bool, str]:
-    """Bounded trust-region reflective fit from theta0 (clipped into the bounds)."""
+) -> tuple[np.ndarray, int, str]:
+    """Bounded trust-region reflective fit from theta0 (clipped into the bounds): the point where
+    the solver stopped, its function evaluations and its stopping message (not yet verified)."""
     lo, hi = bounds
     start = np.clip(theta0.astype(float), lo, hi)  # trf moves it strictly inside itself
     jac = "3-point" if problem.analytic is None else (lambda th: -problem.jacobian(th))
@@ -261,8 +316,157 @@ def _trust_region(
             xtol=1e-15,
             gtol=1e-15,
             max_nfev=2000 * theta0.size,
+            # Relative steps as _Problem.jacobian: scipy's default step is at least ~6e-6 in
+            # absolute terms, which swamps parameters of 1e-6 (NIST Hahn1's b4..b7).
+            diff_step=_FD_STEP,
         )
-    return sol.x, int(sol.nfev), sol.status > 0, f"trust region: {sol.message}"
+    return sol.x, int(sol.nfev), f"trust region: {sol.message.rstrip('.')}"
+
+
+def _held_at(
+    problem: _Problem,
+    theta: np.ndarray,
+    lin: _Linearisation,
+    eps: np.ndarray | None,
+    eps_se: float,
+    bounds: tuple[np.ndarray, np.ndarray],
+) -> np.ndarray:
+    """The bound each parameter is held at, NaN where it is free. A parameter within its epsilon
+    (1.8) of a bound that the descent direction pushes against stays there: an active
+    constraint whose multiplier has the right sign (KKT: Nocedal & Wright 2006, Theorem 12.1)."""
+    lo, hi = bounds
+    near = _thresholds(lin, theta, eps, eps_se, problem.dof)
+    descent = lin.jac.T @ lin.residuals  # minus half the gradient of the RSS
+    at_lo = (theta - lo <= near) & (descent < 0)
+    at_hi = (hi - theta <= near) & (descent > 0)
+    return np.where(at_lo, lo, np.where(at_hi, hi, np.nan))
+
+
+@dataclass(frozen=True)
+class _Polish:
+    """Outcome of the Gauss-Newton polish: its last point, the steps taken, the relative offsets
+    where it started and ended, and why it failed (None when the point is verified)."""
+
+    theta: np.ndarray
+    steps: int
+    start_offset: float
+    offset: float
+    failure: str | None
+
+
+def _polish(
+    problem: _Problem,
+    theta: np.ndarray,
+    eps: np.ndarray | None,
+    eps_se: float,
+    bounds: tuple[np.ndarray, np.ndarray],
+    max_steps: int,
+) -> _Polish:
+    """Gauss-Newton (1.6-1.7) with step halving from theta until (1.8) holds at a point whose
+    relative offset is at most OFFSET_TOL; that point is returned as is (verified)."""
+    lo, hi = bounds
+    start_offset = offset = float("nan")
+    for steps in range(max_steps + 1):
+        lin = _linearise(problem, theta)
+        if isinstance(lin, str):
+            return _Polish(theta, steps, start_offset, offset, f"{lin} after {steps} steps")
+        offset = lin.offset
+        start_offset = offset if steps == 0 else start_offset
+        met = np.all(np.abs(lin.step) < _thresholds(lin, theta, eps, eps_se, problem.dof))
+        if offset <= OFFSET_TOL and met:  # stationary, and eq 1.8
+            return _Polish(theta, steps, start_offset, offset, None)
+        if steps == max_steps:
+            break
+        # Step halving: stay inside the bounds and, until stationary, decrease the RSS. Within
+        # OFFSET_TOL the predicted decrease (offset^2 p / dof of the RSS) soon sinks to rounding
+        # level, where comparing RSS values is noise: full steps.
+        factor = 1.0
+        while True:
+            new = theta + factor * lin.step  # eq 1.7 with a step factor
+            inside = np.all((new >= lo) & (new <= hi))
+            if inside and (offset <= OFFSET_TOL or problem.rss(new) <= lin.rss):
+                break
+            factor /= 2
+            if factor < _MIN_STEP_FACTOR:
+                return _Polish(
+                    theta,
+                    steps,
+                    start_offset,
+                    offset,
+                    f"no decrease of the residual sum of squares along the Gauss-Newton step "
+                    f"(step factor below 1/{round(1 / _MIN_STEP_FACTOR)}) after {steps} steps",
+                )
+        theta = new
+    return _Polish(
+        theta,
+        max_steps,
+        start_offset,
+        offset,
+        f"(1.8) and the offset tolerance not both met in {max_steps} steps (relative offset "
+        f"{offset:.3g})",
+    )
+
+
+def _degenerate(failure: str, reason: str) -> str:
+    """The reason given for a solution whose linearisation is singular."""
+    return (
+        f"degenerate solution ({failure}): a local minimum on a flat direction or "
+        f"unidentifiable parameters; {reason}"
+    )
+
+
+def _verify(
+    problem: _Problem,
+    theta: np.ndarray,
+    eps: np.ndarray | None,
+    eps_se: float,
+    bounds: tuple[np.ndarray, np.ndarray],
+    max_steps: int,
+    solver: str,
+) -> tuple[np.ndarray, bool, str]:
+    """Polish the trust-region point and accept it only as a verified stationary point (within
+    the bounds' active constraints): the point, converged, and the reason."""
+    lin = _linearise(problem, theta)
+    if isinstance(lin, str):
+        return theta, False, _degenerate(lin, solver)
+    lo, hi = bounds
+    held_at = _held_at(problem, theta, lin, eps, eps_se, bounds)
+    free = np.isnan(held_at)
+    theta = np.where(free, theta, held_at)
+    held = [n for n, f in zip(problem.names, free, strict=True) if not f]
+    at_bounds = f"; {', '.join(held)} held at the bounds" if held else ""
+    if not free.any():
+        return theta, True, f"{solver}{at_bounds}"
+    polish = _polish(
+        problem.restricted(free, theta),
+        theta[free],
+        None if eps is None else eps[free],
+        eps_se,
+        (lo[free], hi[free]),
+        max_steps,
+    )
+    theta[free] = polish.theta
+    if polish.failure is not None:
+        return (
+            theta,
+            False,
+            f"not a verified stationary point: {solver}, but the relative offset there is "
+            f"{polish.start_offset:.3g} (stationary: <= {OFFSET_TOL:g}) and the Gauss-Newton "
+            f"polish from there failed: {polish.failure}{at_bounds}",
+        )
+    if held:  # the held set must still satisfy KKT at the polished point
+        final = _linearise(problem, theta)
+        if isinstance(final, str):
+            return theta, False, _degenerate(final, solver)
+        if not np.array_equal(held_at, _held_at(problem, theta, final, eps, eps_se, bounds), True):
+            return theta, False, f"not verified: the active bounds changed in the polish; {solver}"
+    return (
+        theta,
+        True,
+        f"{solver}; verified stationary: relative offset {polish.offset:.2g} <= "
+        f"{OFFSET_TOL:g} and stopping rule (1.8) met after {polish.steps} Gauss-Newton polish "
+        f"steps{at_bounds}",
+    )
 
 
 def _vector(
@@ -323,8 +527,11 @@ def fit_nonlinear(
     reason = "stopping rule (1.8) met" if failure is None else failure
     if failure is not None and robust:
         path, fallback = "trust-region", failure
-        theta, iterations, converged, reason = _trust_region(
+        theta, iterations, solver = _trust_region(
             problem, start, (lo, hi), "jac" if scale_vec is None else scale_vec
+        )
+        theta, converged, reason = _verify(
+            problem, theta, eps_vec, eps_se, (lo, hi), max_iter, solver
         )
     return _result(problem, theta, log, iterations, converged, reason, path, fallback)
 
@@ -341,7 +548,7 @@ def _result(
 ) -> FitResult:
     """Statistics at the solution (1.9-1.10), flagging a degenerate (rank-deficient) one."""
     m = len(problem.names)
-    dof = problem.y.size - m
+    dof = problem.dof
     lin = _linearise(problem, theta)
     if isinstance(lin, str):
         values = problem.values(theta)
@@ -350,10 +557,7 @@ def _result(
             rss = float(residuals @ residuals)
         nan = np.full((m, m), np.nan)
         if converged:
-            reason = (
-                f"degenerate solution ({lin}): a local minimum on a flat direction or "
-                f"unidentifiable parameters; {reason}"
-            )
+            reason = _degenerate(lin, reason)
         return FitResult(
             names=problem.names,
             estimates=problem.kwargs(theta),
