@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import tomllib
 from dataclasses import dataclass, replace
 from datetime import datetime
 from pathlib import Path
@@ -35,10 +34,9 @@ from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.trials import SeriesSummary, TrialInput
 from gyrostand.db.models import AnalysisRun, Campaign, Trial
 from gyrostand.db.queries import campaign_constants, load_campaign
-from gyrostand.frames.batch import BatchDecoder
-from gyrostand.frames.logfile import read_raw_frames, sha256_of
+from gyrostand.frames.logfile import sha256_of
 from gyrostand.plan.codec import codec_for
-from gyrostand.plan.model import Plan, PlanError, parse_plan
+from gyrostand.plan.model import Plan, PlanError, parse_any_plan
 from gyrostand.report.build import Report, build_report
 from gyrostand.report.compliance import Profile
 from gyrostand.report.model import (
@@ -56,9 +54,9 @@ from gyrostand.report.model import (
     TrialAcquisition,
     TrialRecord,
 )
-from gyrostand.report.settings import SEED_000_SETTINGS, AnalysisSettings, settings_from_plan
+from gyrostand.report.settings import AnalysisSettings, fallback_notes, settings_from_plan
 from gyrostand.report.signal import SignalSection, signal_section
-from gyrostand.report.signal_record import acceptance_of, still_series_record
+from gyrostand.report.signal_record import acceptance_of, headings_in, still_series_record
 
 TRACE_BINS = 600  # per trial: enough for a page-wide plot, small enough for inline SVG
 
@@ -121,22 +119,15 @@ def trial_input(trial: Trial) -> TrialInput | str:
 
 
 def stored_settings(campaign: Campaign) -> tuple[AnalysisSettings, tuple[str, ...]]:
-    """Settings from the stored plan; the known constants B from the campaign's own columns.
-    A plan without [analysis] or [forecast] (an import without a plan) takes those from the
-    seed-000 example, and a note says so."""
-    settings = settings_from_plan(campaign.plan_toml, fallback=SEED_000_SETTINGS)
-    plan = tomllib.loads(campaign.plan_toml)
-    notes = []
-    if "analysis" not in plan:
-        notes.append(
-            "The stored plan has no [analysis] table: q, the start values and the admissible "
-            "region of the seed-000 example (Potemkin 1982) were used."
-        )
-    if "forecast" not in plan:
-        notes.append(
-            "The stored plan has no [forecast] table: the seed-000 example's ship conditions "
-            "were forecast."
-        )
+    """Settings from the stored plan (a whole plan, or the partial form an import stores); the
+    known constants B from the campaign's own columns. A partial plan without [analysis] or
+    [forecast] takes those from the example of Potemkin (1982), and a note says so."""
+    try:
+        plan = parse_any_plan(campaign.plan_toml)
+    except PlanError as exc:
+        raise AnalysisError(
+            f"campaign {campaign.id}: its stored plan is invalid: " + "; ".join(exc.problems)
+        ) from None
     b = campaign_constants(campaign)
     constants = KnownConstants(
         lP_gcm2s2=b["lp_gcm2s2"],
@@ -145,7 +136,7 @@ def stored_settings(campaign: Campaign) -> tuple[AnalysisSettings, tuple[str, ..
         gravity_cm_s2=b["gravity_cm_s2"],
         latitude_deg=b["latitude_deg"],
     )
-    return replace(settings, constants=constants), tuple(notes)
+    return replace(settings_from_plan(plan), constants=constants), fallback_notes(plan)
 
 
 def stored_inputs(campaign: Campaign) -> StoredInputs:
@@ -351,62 +342,41 @@ def _stand_span_ms(series: tuple[SeriesRecord, ...], events: list[int]) -> tuple
     return (min(times), max(times)) if times else None
 
 
-class _Binner:
-    """Bins one trial's heading frames as they stream past: per bin the sums for the mean, and
-    min and max. Headings are taken relative to the trial's first one, wrapped to +-180 deg,
-    so a record crossing 0/360 deg stays continuous (as the engine does)."""
-
-    def __init__(self, span_ms: tuple[int, int], bins: int) -> None:
-        self.t0, self.t1 = span_ms
-        self.edges = np.linspace(self.t0, max(self.t1, self.t0 + 1), bins + 1)
-        self.sum_t, self.sum_h = np.zeros(bins), np.zeros(bins)
-        self.count = np.zeros(bins, dtype=np.int64)
-        self.low, self.high = np.full(bins, np.inf), np.full(bins, -np.inf)
-        self.ref: float | None = None
-
-    def add(self, t_ms: np.ndarray, heading_deg: np.ndarray) -> None:
-        inside = (t_ms >= self.t0) & (t_ms <= self.t1)
-        t, h = t_ms[inside].astype(float), heading_deg[inside]
-        if not t.size:
-            return
-        if self.ref is None:
-            self.ref = float(h[0])
-        h = about(self.ref, h)
-        n = self.count.size
-        b = np.clip(np.searchsorted(self.edges, t, side="right") - 1, 0, n - 1)
-        self.sum_t += np.bincount(b, t, n)
-        self.sum_h += np.bincount(b, h, n)
-        self.count += np.bincount(b, minlength=n)
-        np.minimum.at(self.low, b, h)
-        np.maximum.at(self.high, b, h)
-
-    def trace(self) -> HeadingTrace | None:
-        keep = self.count > 0
-        if not keep.any():
-            return None
-        n = self.count[keep]
-        return HeadingTrace(
-            t_ms=self.sum_t[keep] / n,
-            mean_deg=self.sum_h[keep] / n,
-            min_deg=self.low[keep],
-            max_deg=self.high[keep],
-            frames=int(n.sum()),
-        )
+def _binned(
+    span_ms: tuple[int, int], t_ms: np.ndarray, heading_deg: np.ndarray, bins: int
+) -> HeadingTrace | None:
+    """One trial's heading frames in `bins` bins of its span: per bin the mean, min and max.
+    Headings are taken about the trial's first one (`about`), so a record crossing 0/360 deg
+    stays continuous (as the engine does)."""
+    if not t_ms.size:
+        return None
+    t, h = t_ms.astype(float), about(float(heading_deg[0]), heading_deg)
+    t0, t1 = span_ms
+    edges = np.linspace(t0, max(t1, t0 + 1), bins + 1)
+    b = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, bins - 1)
+    count = np.bincount(b, minlength=bins)
+    low, high = np.full(bins, np.inf), np.full(bins, -np.inf)
+    np.minimum.at(low, b, h)
+    np.maximum.at(high, b, h)
+    keep = count > 0
+    n = count[keep]
+    return HeadingTrace(
+        t_ms=np.bincount(b, t, bins)[keep] / n,
+        mean_deg=np.bincount(b, h, bins)[keep] / n,
+        min_deg=low[keep],
+        max_deg=high[keep],
+        frames=int(n.sum()),
+    )
 
 
 def heading_traces(
     log: Path, plan: Plan, spans: dict[int, tuple[int, int]], bins: int = TRACE_BINS
 ) -> dict[int, HeadingTrace | None]:
-    """Binned valid heading frames of each trial's stand-time span, from the raw log."""
-    decoder = BatchDecoder(codec_for(plan))
-    binners = {index: _Binner(span, bins) for index, span in spans.items()}
-    for raw in read_raw_frames(log):
-        headings = decoder.decode(raw).headings
-        valid = headings.valid
-        t, h = headings.t_ms[valid], headings.heading_deg[valid]
-        for binner in binners.values():
-            binner.add(t, h)
-    return {index: binner.trace() for index, binner in binners.items()}
+    """Binned valid heading frames of each trial's stand-time span [start, end], from the raw
+    log (`headings_in`)."""
+    closed = {index: (t0, np.nextafter(t1, np.inf)) for index, (t0, t1) in spans.items()}
+    found = headings_in(log, codec_for(plan), closed)
+    return {index: _binned(spans[index], *found[index], bins) for index in spans}
 
 
 def _records(
@@ -460,10 +430,12 @@ def _records(
 
 
 def _plan(campaign: Campaign) -> Plan | None:
+    """The stored plan when it is a whole one (an import may store the partial form)."""
     try:
-        return parse_plan(campaign.plan_toml)
-    except PlanError:  # e.g. the instrument/site metadata stored with an import
+        plan = parse_any_plan(campaign.plan_toml)
+    except PlanError:
         return None
+    return plan if isinstance(plan, Plan) else None
 
 
 def _reading(
