@@ -16,8 +16,16 @@ from dataclasses import dataclass, fields
 import can
 import numpy as np
 
-from gyrostand.frames.vectordecode import SignalLayout, VectorDecoder
-from gyrostand.stand.protocol import ClockFrame, Codec, Frame, ProtocolError, StandStatusFrame
+from gyrostand.frames.vectordecode import VectorDecoder
+from gyrostand.stand.protocol import (
+    ClockFrame,
+    Codec,
+    Frame,
+    ProtocolError,
+    SignalLayout,
+    StandStatusFrame,
+    crc8_sae_j1850_rows,
+)
 from gyrostand.stand.virtual_time import check_free, clock_message
 
 _STATUS_FIELDS = ("time", "rocking", "direction", "amplitude", "period")
@@ -132,34 +140,6 @@ class FrameBatch:
     end: int  # stream position after the last frame
 
 
-def _crc8_table(poly: int = 0x1D) -> np.ndarray:
-    """Lookup table of the MSB-first CRC-8 with the given polynomial (SAE J1850: 0x1D)."""
-    table = np.zeros(256, np.uint8)
-    for byte in range(256):
-        crc = byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ poly) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-        table[byte] = crc
-    return table
-
-
-_CRC8_SAE_J1850 = _crc8_table()
-
-
-def crc8_sae_j1850(data: np.ndarray) -> np.ndarray:
-    """CRC-8/SAE-J1850 (init 0xFF, xorout 0xFF) of each row of an (n, k) uint8 array."""
-    crc = np.full(len(data), 0xFF, np.uint8)
-    for column in range(data.shape[1]):
-        crc = _CRC8_SAE_J1850[crc ^ data[:, column]]
-    return crc ^ np.uint8(0xFF)
-
-
-def _mask_bytes(layout: SignalLayout) -> np.ndarray:
-    """The 8 payload bytes with exactly this signal's bits set."""
-    word = ((1 << layout.length) - 1) << layout.shift
-    return np.frombuffer(word.to_bytes(8, "big" if layout.big_endian else "little"), np.uint8)
-
-
 class BatchDecoder:
     """Decodes `RawFrames` into a `FrameBatch` with the codec's DBC and signal map.
 
@@ -180,7 +160,7 @@ class BatchDecoder:
         self._crc: tuple[SignalLayout, np.ndarray] | None = None
         if smap.heading_crc is not None:
             layout = SignalLayout.of(heading_msg.get_signal_by_name(smap.heading_crc.signal))
-            self._crc = (layout, ~_mask_bytes(layout))
+            self._crc = (layout, ~np.frombuffer(layout.payload(layout.mask), np.uint8))
 
         # status: each field in some message; the message carrying the time completes a status
         self._status_fields: dict[int, dict[str, str]] = {}
@@ -248,10 +228,10 @@ class BatchDecoder:
     ) -> Headings:
         rows, values = self._fast_rows(raw, candidate, ok, self._heading)
         if self._crc is not None and len(rows):
-            layout, keep = self._crc
+            layout, keep = self._crc  # as Codec: CRC of the payload, CRC bits zeroed, cut
             data = raw.data[rows]
-            crc_raw = layout.raw(*VectorDecoder.words(data))
-            good = crc8_sae_j1850(data & keep) == (crc_raw & ((1 << layout.length) - 1))
+            crc = crc8_sae_j1850_rows(data & keep).astype(np.int64) & layout.mask
+            good = layout.raw(*VectorDecoder.words(data)) == crc
             rows, values = rows[good], {k: v[good] for k, v in values.items()}
         slow[rows] = False
         k = self._heading_keys

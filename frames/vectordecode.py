@@ -1,86 +1,19 @@
 """Decode many CAN payloads of one DBC message at once with numpy.
 
 cantools decodes one frame per Python call (tens of microseconds); acquisition and replay see
-10^5-10^7 frames, so the signal layout cantools parses from the DBC (start bit, length, byte
-order, sign, scale, offset) is applied here to whole arrays of payloads instead. A property test
-checks that the result equals `cantools` bit for bit on every signal.
+10^5-10^7 frames, so each signal's `SignalLayout` (the protocol's reading of the DBC: start bit,
+length, byte order, sign, scale, offset, range) is applied here to whole arrays of payloads. A
+property test checks that the result equals `cantools` bit for bit on every signal.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
-from cantools.database.can import Message, Signal
+from cantools.database.can import Message
 
-
-@dataclass(frozen=True)
-class SignalLayout:
-    """Where one signal sits in the payload read as a 64-bit integer, and how it scales."""
-
-    name: str
-    big_endian: bool
-    shift: int  # bit position of the signal's least significant bit in that integer
-    length: int
-    signed: bool
-    is_float: bool
-    scale: float
-    offset: float
-    minimum: float | None
-    maximum: float | None
-
-    @classmethod
-    def of(cls, signal: Signal) -> SignalLayout:
-        """The layout of a cantools signal (payloads of at most 8 bytes)."""
-        if signal.byte_order == "big_endian":
-            # DBC "sawtooth" numbering: start bit is the MSB; byte 0 is the top byte of the
-            # big-endian integer, bit b of byte k sits at (7 - k) * 8 + b.
-            msb = (7 - signal.start // 8) * 8 + signal.start % 8
-            shift = msb - signal.length + 1
-        else:
-            shift = signal.start
-        if shift < 0 or shift + signal.length > 64:
-            raise ValueError(f"signal {signal.name} does not fit in 8 bytes")
-        return cls(
-            name=signal.name,
-            big_endian=signal.byte_order == "big_endian",
-            shift=shift,
-            length=signal.length,
-            signed=signal.is_signed,
-            is_float=signal.is_float,
-            scale=signal.scale,
-            offset=signal.offset,
-            minimum=signal.minimum,
-            maximum=signal.maximum,
-        )
-
-    def raw(self, little: np.ndarray, big: np.ndarray) -> np.ndarray:
-        """Raw values (int64, uint64 for unsigned 64-bit, float for IEEE signals)."""
-        word = big if self.big_endian else little
-        mask = np.uint64((1 << self.length) - 1)
-        bits = (word >> np.uint64(self.shift)) & mask
-        if self.is_float:
-            if self.length == 32:
-                return bits.astype(np.uint32).view(np.float32).astype(np.float64)
-            return bits.view(np.float64)
-        if self.length == 64:
-            return bits.view(np.int64) if self.signed else bits
-        raw = bits.astype(np.int64)
-        if self.signed:
-            raw -= (raw >> (self.length - 1)) << self.length
-        return raw
-
-    def scaled(self, raw: np.ndarray) -> np.ndarray:
-        """Physical values, computed as cantools does: raw * scale + offset.
-
-        Integer scale and offset keep integers exact (as cantools does); past 52 bits that
-        needs Python integers."""
-        if isinstance(self.scale, int) and isinstance(self.offset, int) and not self.is_float:
-            if self.length <= 52:
-                return raw.astype(np.int64) * self.scale + self.offset
-            return np.array([r * self.scale + self.offset for r in raw.tolist()], dtype=object)
-        return raw.astype(np.float64) * self.scale + self.offset
+from gyrostand.stand.protocol import SignalLayout
 
 
 class VectorDecoder:
@@ -117,13 +50,10 @@ class VectorDecoder:
         return {layout.name: layout.scaled(layout.raw(little, big)) for layout in self.layouts}
 
     def out_of_range(self, values: dict[str, np.ndarray]) -> np.ndarray:
-        """Rows where a signal is outside its DBC minimum/maximum."""
+        """Rows where a signal is outside its DBC range (`signal_bounds`, as the codec)."""
         n = len(next(iter(values.values()))) if values else 0
         bad = np.zeros(n, dtype=bool)
         for layout in self.layouts:
             v = values[layout.name]
-            if layout.minimum is not None:
-                bad |= v < layout.minimum
-            if layout.maximum is not None:
-                bad |= v > layout.maximum
+            bad |= (v < layout.low) | (v > layout.high)
         return bad

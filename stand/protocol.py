@@ -16,6 +16,7 @@ from pathlib import Path
 
 import can
 import cantools
+import numpy as np
 from cantools.database.can import Message as DbcMessage
 from cantools.database.can import Signal
 
@@ -25,6 +26,7 @@ COMMANDS = ("set", "start", "stop")
 
 
 def _crc8_table(poly: int) -> tuple[int, ...]:
+    """Lookup table of the MSB-first CRC-8 with the given polynomial."""
     table = []
     for byte in range(256):
         crc = byte
@@ -34,7 +36,8 @@ def _crc8_table(poly: int) -> tuple[int, ...]:
     return tuple(table)
 
 
-CRC8_J1850_TABLE = _crc8_table(0x1D)
+_CRC8_J1850 = _crc8_table(0x1D)  # SAE J1850 polynomial x^8 + x^4 + x^3 + x^2 + 1
+_CRC8_J1850_ARRAY = np.array(_CRC8_J1850, dtype=np.uint8)
 
 
 def crc8_sae_j1850(data: bytes) -> int:
@@ -44,12 +47,118 @@ def crc8_sae_j1850(data: bytes) -> int:
     sends 10 000 heading frames a second at 1000x (tests check it against crccheck)."""
     crc = 0xFF
     for byte in data:
-        crc = CRC8_J1850_TABLE[crc ^ byte]
+        crc = _CRC8_J1850[crc ^ byte]
     return crc ^ 0xFF
+
+
+def crc8_sae_j1850_rows(data: np.ndarray) -> np.ndarray:
+    """`crc8_sae_j1850` of each row of an (n, k) uint8 array, as uint8."""
+    crc = np.full(len(data), 0xFF, np.uint8)
+    for column in range(data.shape[1]):
+        crc = _CRC8_J1850_ARRAY[crc ^ data[:, column]]
+    return crc ^ np.uint8(0xFF)
+
+
+def signal_bounds(signal: Signal) -> tuple[float, float]:
+    """A signal's physical [minimum, maximum] widened by a rounding tolerance (inf if unset)."""
+    # cantools' range rule (Message._assert_signal_values_valid): limits +- abs(scale) * 1e-6
+    tolerance = abs(signal.scale) * 1e-6
+    low = signal.minimum - tolerance if signal.minimum is not None else -math.inf
+    high = signal.maximum + tolerance if signal.maximum is not None else math.inf
+    return low, high
 
 
 class ProtocolError(ValueError):
     """A value that cannot be encoded, or a DBC / signal map that does not fit the protocol."""
+
+
+@dataclass(frozen=True)
+class SignalLayout:
+    """Where one signal sits in a payload of at most 8 bytes read as a 64-bit integer
+    (little-endian for Intel signals, big-endian for Motorola ones), how it scales and its range
+    (`signal_bounds`). The one reading of a cantools signal's bit layout: the numpy decoder and
+    encoder and the codec's CRC all use it."""
+
+    name: str
+    big_endian: bool
+    shift: int  # bit position of the signal's least significant bit in that integer
+    length: int
+    signed: bool
+    is_float: bool
+    scale: float
+    offset: float
+    low: float
+    high: float
+
+    @classmethod
+    def of(cls, signal: Signal) -> SignalLayout:
+        """The layout of a cantools signal; ProtocolError if it does not fit in 8 bytes."""
+        big_endian = signal.byte_order == "big_endian"
+        if big_endian:
+            # DBC "sawtooth" numbering: start bit is the MSB; byte 0 is the top byte of the
+            # big-endian integer, bit b of byte k sits at (7 - k) * 8 + b.
+            shift = (7 - signal.start // 8) * 8 + signal.start % 8 - signal.length + 1
+        else:
+            shift = signal.start
+        if shift < 0 or shift + signal.length > 64:
+            raise ProtocolError(f"signal {signal.name} does not fit in 8 bytes")
+        low, high = signal_bounds(signal)
+        return cls(
+            name=signal.name,
+            big_endian=big_endian,
+            shift=shift,
+            length=signal.length,
+            signed=signal.is_signed,
+            is_float=signal.is_float,
+            scale=signal.scale,
+            offset=signal.offset,
+            low=low,
+            high=high,
+        )
+
+    @property
+    def mask(self) -> int:
+        """The raw value's bits: 2**length - 1."""
+        return (1 << self.length) - 1
+
+    def payload(self, raw: int) -> bytes:
+        """The 8 payload bytes with this signal at raw value `raw` and every other bit zero."""
+        word = (raw & self.mask) << self.shift
+        return word.to_bytes(8, "big" if self.big_endian else "little")
+
+    def raw(self, little: np.ndarray, big: np.ndarray) -> np.ndarray:
+        """Raw values (int64, uint64 for unsigned 64-bit, float for IEEE signals) from the
+        payloads as little- and big-endian uint64 words."""
+        word = big if self.big_endian else little
+        bits = (word >> np.uint64(self.shift)) & np.uint64(self.mask)
+        if self.is_float:
+            if self.length == 32:
+                return bits.astype(np.uint32).view(np.float32).astype(np.float64)
+            return bits.view(np.float64)
+        if self.length == 64:
+            return bits.view(np.int64) if self.signed else bits
+        raw = bits.astype(np.int64)
+        if self.signed:
+            raw -= (raw >> (self.length - 1)) << self.length
+        return raw
+
+    def scaled(self, raw: np.ndarray) -> np.ndarray:
+        """Physical values, computed as cantools does: raw * scale + offset.
+
+        Integer scale and offset keep integers exact (as cantools does); past 52 bits that
+        needs Python integers."""
+        if isinstance(self.scale, int) and isinstance(self.offset, int) and not self.is_float:
+            if self.length <= 52:
+                return raw.astype(np.int64) * self.scale + self.offset
+            return np.array([r * self.scale + self.offset for r in raw.tolist()], dtype=object)
+        return raw.astype(np.float64) * self.scale + self.offset
+
+    def place(self, values: np.ndarray) -> np.ndarray:
+        """Physical values as raw values (rounded as cantools rounds, two's complement) at
+        their bit position in the uint64 word."""
+        raw = np.round((np.asarray(values, dtype=np.float64) - self.offset) / self.scale)
+        bits = raw.astype(np.int64).view(np.uint64) & np.uint64(self.mask)
+        return bits << np.uint64(self.shift)
 
 
 class Reason(StrEnum):
@@ -248,8 +357,8 @@ class SignalMap:
 
 @dataclass(frozen=True)
 class _Bound:
-    """A resolved signal map entry with its DBC range (physical, widened by a rounding
-    tolerance, for decoding; raw, for encoding)."""
+    """A resolved signal map entry with its DBC range (physical, `signal_bounds`, for decoding;
+    raw, for encoding)."""
 
     key: str
     ref: SignalRef
@@ -262,9 +371,7 @@ class _Bound:
 
     @classmethod
     def of(cls, key: str, ref: SignalRef, message: DbcMessage, signal: Signal) -> _Bound:
-        tolerance = abs(signal.scale) * 1e-6
-        low = signal.minimum - tolerance if signal.minimum is not None else -math.inf
-        high = signal.maximum + tolerance if signal.maximum is not None else math.inf
+        low, high = signal_bounds(signal)
         raw_low, raw_high = sorted(
             ((low - signal.offset) / signal.scale, (high - signal.offset) / signal.scale)
         )
@@ -311,12 +418,13 @@ class Codec:
             raise ProtocolError("signals: the heading message cannot also carry stand status")
         self._status_trigger = self._bound["status_time"].message.frame_id
         self._status_cache: dict[str, float] = {}
+        self._crc: SignalLayout | None = None
+        self._crc_keep = 0  # the payload bits outside the CRC signal
         crc = self._bound.get("heading_crc")
-        self._crc_keep: int | None = None  # the payload bits outside the CRC signal
         if crc is not None:
-            self._crc_keep = ~int.from_bytes(_crc_mask(crc), "little")
-            self._crc_cut = 2**crc.signal.length - 1
-        self._crc_bits_memo: dict[int, bytes] = {}
+            self._crc = SignalLayout.of(crc.signal)
+            ones = self._crc.payload(self._crc.mask)[: crc.message.length]
+            self._crc_keep = ~int.from_bytes(ones, "little")
         # physical value of raw 0 for every signal: the filler for signals a frame does not set
         self._zero = {m.name: {s.name: s.offset for s in m.signals} for m in self._db.messages}
         self._decoders = {
@@ -431,27 +539,16 @@ class Codec:
             "heading_crc": 0,
         }
         (msg,) = self._encode(values, strict=strict)
-        if self._crc_keep is not None:  # the CRC bits are still zero: OR the CRC into them
-            crc_bits = self._crc_bits(self._crc(bytes(msg.data)))
+        if self._crc is not None:  # the CRC bits are still zero: OR the CRC into them
+            crc_bits = self._crc.payload(self._crc_of(bytes(msg.data)))[: len(msg.data)]
             msg.data = bytearray(a | b for a, b in zip(msg.data, crc_bits, strict=True))
         return msg
 
-    def _crc_bits(self, crc: int) -> bytes:
-        """The payload bytes of a frame whose only non-zero signal is the CRC (memoised)."""
-        bits = self._crc_bits_memo.get(crc)
-        if bits is None:
-            bound = self._bound["heading_crc"]
-            data = {s.name: 0 for s in bound.message.signals} | {bound.signal.name: crc}
-            bits = self._crc_bits_memo[crc] = bound.message.encode(
-                data, scaling=False, strict=False
-            )
-        return bits
-
-    def _crc(self, data: bytes) -> int:
+    def _crc_of(self, data: bytes) -> int:
         """CRC of the payload with the CRC bits zeroed, cut to the CRC signal length."""
-        assert self._crc_keep is not None
+        assert self._crc is not None
         masked = (int.from_bytes(data, "little") & self._crc_keep).to_bytes(len(data), "little")
-        return crc8_sae_j1850(masked) & self._crc_cut
+        return crc8_sae_j1850(masked) & self._crc.mask
 
     def encode_status(
         self,
@@ -581,7 +678,7 @@ class Codec:
 
     def _decode_heading(self, frame_id: int, raw: bytes) -> HeadingFrame:
         v = self._values(frame_id, raw, HEADING_KEYS)
-        if self._crc_keep is not None and v["heading_crc"] != self._crc(raw):
+        if self._crc is not None and v["heading_crc"] != self._crc_of(raw):
             raise _Invalid("CRC mismatch: corrupt payload")
         return HeadingFrame(
             stand_time_ms=int(v["heading_time"]),
@@ -641,13 +738,6 @@ class Codec:
 
 class _Invalid(Exception):
     """Internal: the frame is invalid for the given reason."""
-
-
-def _crc_mask(bound: _Bound) -> bytes:
-    """Payload bytes with exactly the CRC signal's bits set."""
-    zero = {s.name: 0 for s in bound.message.signals}
-    ones = zero | {bound.signal.name: 2**bound.signal.length - 1}
-    return bound.message.encode(ones, scaling=False, strict=False)
 
 
 def _choice_code(bound: _Bound, name: str) -> int:

@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gyrostand.frames.vectordecode import VectorDecoder
+from gyrostand.stand.protocol import SignalLayout
 
 
 @st.composite
@@ -76,6 +77,20 @@ def test_vector_decoder_equals_cantools(message: Message, payloads: list[bytes])
             assert same(got, value), (name, payload.hex(), got, value)
 
 
+@settings(max_examples=150, deadline=None)
+@given(messages(), st.data())
+def test_layout_payload_equals_cantools(message: Message, data: st.DataObject) -> None:
+    for signal in message.signals:
+        if signal.is_float:
+            continue
+        raw = data.draw(st.integers(0, 2**signal.length - 1))
+        alone = {s.name: 0 for s in message.signals} | {signal.name: raw}
+        if signal.is_signed and raw >= 2 ** (signal.length - 1):
+            alone[signal.name] = raw - 2**signal.length  # cantools takes the signed value
+        expected = message.encode(alone, scaling=False, strict=False)
+        assert SignalLayout.of(signal).payload(raw) == expected, (signal.name, raw)
+
+
 def test_out_of_range_uses_dbc_limits() -> None:
     scale = BaseConversion.factory(scale=0.001)
     sig = Signal("heading", 0, 20, minimum=0, maximum=360, conversion=scale)
@@ -84,3 +99,15 @@ def test_out_of_range_uses_dbc_limits() -> None:
     values = decoder.decode(raw)
     assert values["heading"].tolist() == [0.0, 360.0, 360_001 * 0.001, (2**20 - 1) * 0.001]
     assert decoder.out_of_range(values).tolist() == [False, False, True, True]
+
+
+def test_out_of_range_allows_the_rounding_tolerance() -> None:
+    """raw 3599 at scale 0.1 is 359.90000000000003: inside [0, 359.9] as cantools and the codec
+    judge it (limits widened by abs(scale) * 1e-6)."""
+    scale = BaseConversion.factory(scale=0.1)
+    sig = Signal("heading", 0, 20, minimum=0, maximum=359.9, conversion=scale)
+    decoder = VectorDecoder(Message(0x10, "h", 8, [sig]))
+    raw = np.array([3599, 3600], dtype="<u8").view(np.uint8).reshape(2, 8)
+    values = decoder.decode(raw)
+    assert values["heading"][0] > 359.9
+    assert decoder.out_of_range(values).tolist() == [False, True]

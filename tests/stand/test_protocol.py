@@ -6,6 +6,8 @@ from pathlib import Path
 import can
 import cantools
 import pytest
+from cantools.database.can import Message, Signal
+from cantools.database.conversion import BaseConversion
 from crccheck.crc import Crc8SaeJ1850
 from hypothesis import given
 from hypothesis import strategies as st
@@ -25,6 +27,7 @@ from gyrostand.stand.protocol import (
     SignalRef,
     StandStatusFrame,
     crc8_sae_j1850,
+    signal_bounds,
 )
 
 CODEC = Codec()
@@ -167,6 +170,30 @@ def test_crc_matches_the_reference_implementation(data: bytes) -> None:
 
 def test_crc_check_value() -> None:
     assert crc8_sae_j1850(b"123456789") == 0x4B  # catalogue check value of CRC-8/SAE-J1850
+
+
+@given(
+    st.sampled_from([1, 0.1, 0.001, 2.5, -0.5]),
+    st.sampled_from([(0, 359.9), (-50, 150), (0.25, 0.75)]),
+    st.floats(-3, 3),
+)
+def test_range_rule_is_cantools(scale: float, limits: tuple[float, float], k: float) -> None:
+    """A value k rounding tolerances past either limit is in `signal_bounds` exactly when
+    cantools' strict encoding accepts it."""
+    minimum, maximum = limits
+    conversion = BaseConversion.factory(scale=scale)
+    signal = Signal(
+        "x", 0, 32, is_signed=True, minimum=minimum, maximum=maximum, conversion=conversion
+    )
+    message = Message(0x10, "m", 8, [signal])
+    low, high = signal_bounds(signal)
+    for value in (minimum - k * abs(scale) * 1e-6, maximum + k * abs(scale) * 1e-6):
+        try:
+            message.encode({"x": value}, strict=True)
+            accepted = True
+        except cantools.database.EncodeError:
+            accepted = False
+        assert (low <= value <= high) == accepted, value
 
 
 @pytest.mark.parametrize(
