@@ -91,3 +91,19 @@ def test_every_layer_is_installed_under_the_namespace() -> None:
         f"gyrostand.{layer}": layer for layer in LAYERS
     }
     assert all(p == "gyrostand" or p.startswith("gyrostand.") for p in project["packages"])
+
+
+def test_analysis_is_pure_computation() -> None:
+    """analysis/ renders nothing: no template, plotting or PDF library is imported there."""
+    rendering = {"jinja2", "matplotlib", "weasyprint"}
+    found = {
+        f"{path.relative_to(ROOT)} imports {alias.name.split('.')[0]}"
+        for path in sorted((ROOT / "analysis").rglob("*.py"))
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.Import | ast.ImportFrom)
+        for alias in (
+            node.names if isinstance(node, ast.Import) else [ast.alias(node.module or "")]
+        )
+        if alias.name.split(".")[0] in rendering
+    }
+    assert found == set()
