@@ -9,7 +9,7 @@ with its stored plan's settings and records the run (`report.stored.analyze_stor
 10: noise, hidden harmonics, sampling interval, settle points, acceptance by excursions); they
 read the database and the raw log only.
 The pieces are separate functions so other sources (a campaign in the database) can reuse them:
-`settings_from_plan` -> `AnalysisSettings`, `run_analysis`, `emit`.
+`plan_settings` -> `AnalysisSettings`, `run_analysis`, `emit`.
 """
 
 from __future__ import annotations
@@ -39,18 +39,19 @@ PAPER_NOTE = (
 SIGNAL_SCHEMA = "gyrostand.signal/1"  # the report JSON's "signal" object, with this key added
 
 
-def settings_from_plan(path: Path) -> AnalysisSettings:
-    """Read [instrument], [site], [analysis] and the optional [forecast] of a campaign plan."""
-    from gyrostand.report.settings import settings_from_plan as plan_settings
+def plan_settings(path: Path) -> AnalysisSettings:
+    """The analysis settings of a plan file, whole or partial (`report.settings`); a note on
+    stderr for each table taken from the example of Potemkin (1982)."""
+    from gyrostand.plan.model import PlanError, load_any_plan
+    from gyrostand.report.settings import fallback_notes, settings_from_plan
 
     try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        fail(f"plan {path}: cannot read it ({exc})")
-    try:
-        return plan_settings(text)
-    except AnalysisError as exc:
-        fail(f"plan {path}: {exc}")
+        plan = load_any_plan(path)
+    except PlanError as exc:
+        fail(f"plan {path}: " + "; ".join(exc.problems))
+    for note in fallback_notes(plan, source=f"note: plan {path}"):
+        typer.echo(note, err=True)
+    return settings_from_plan(plan)
 
 
 def run_analysis(trials: list[TrialInput], settings: AnalysisSettings) -> CampaignAnalysis:
@@ -145,7 +146,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(PAPER_NOTE, err=True)
             settings = SEED_000_SETTINGS
         else:
-            settings = settings_from_plan(plan)
+            settings = plan_settings(plan)
         try:
             trials = read_trials_csv(csv)
         except AnalysisError as exc:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -12,17 +11,19 @@ from rich.table import Table
 
 from gyrostand.cmd_data import DEFAULT_DB, open_db
 from gyrostand.errors import EXIT_FAILED, fail
-from gyrostand.plan.model import Plan, PlanError, load_plan
 from gyrostand.stand.simconfig import TIMINGS
 
 if TYPE_CHECKING:
     from gyrostand.acquisition.runner import RunResult
     from gyrostand.acquisition.store import CampaignStore
+    from gyrostand.plan.model import Plan
 
 _out = Console(highlight=False, soft_wrap=True)
 
 
 def _load(plan_path: Path) -> Plan:
+    from gyrostand.plan.model import PlanError, load_plan
+
     try:
         return load_plan(plan_path)
     except PlanError as exc:
@@ -39,9 +40,12 @@ def checked_plan(
     seed: int | None,
     timing: str | None = None,
 ) -> Plan:
+    """The plan with the command line's bus and database options, validated as the plan file
+    and prepared as the run will use it (one-line errors)."""
     from gyrostand.acquisition.runner import prepare
+    from gyrostand.plan.model import PlanError, revised
 
-    bus = plan.bus
+    bus: dict[str, object] = {}
     if timing is not None and timing not in TIMINGS:
         fail(f"--timing must be one of {', '.join(TIMINGS)}, not {timing!r}")
     if timing == "virtual" and speedup is not None:
@@ -49,27 +53,26 @@ def checked_plan(
     if interface is not None or channel is not None:
         if speedup is not None or seed is not None:
             fail("--speedup and --seed apply to the simulated stand, not to --interface/--channel")
-        bus = dataclasses.replace(
-            bus,
-            simulated=False,
-            interface=interface,
-            channel=channel,
-            speedup=1.0,
-            timing=timing or "realtime",  # type: ignore[arg-type]
-        )
+        bus = {
+            "simulated": False,
+            "interface": interface,
+            "channel": channel,
+            "speedup": 1.0,
+            "timing": timing or "realtime",
+        }
     else:
         if timing is not None:
-            bus = dataclasses.replace(bus, timing=timing)  # type: ignore[arg-type]
-        if (speedup is not None or seed is not None) and not bus.simulated:
+            bus["timing"] = timing
+        if (speedup is not None or seed is not None) and not plan.bus.simulated:
             fail("--speedup and --seed apply only when the plan's bus is simulated")
         if speedup is not None:
             if not speedup > 0:
                 fail("--speedup must be > 0")
-            bus = dataclasses.replace(bus, timing="realtime", speedup=speedup)
+            bus.update(timing="realtime", speedup=speedup)
         if seed is not None:
-            bus = dataclasses.replace(bus, seed=seed)
-    plan = dataclasses.replace(plan, bus=bus, database=db or plan.database)
+            bus["seed"] = seed
     try:
+        plan = revised(plan, bus=bus, campaign={"database": db or plan.database})
         prepare(plan)
     except PlanError as exc:
         fail("invalid plan: " + "; ".join(exc.problems))
@@ -173,6 +176,7 @@ def register(app: typer.Typer) -> None:
         """Continue a campaign from its first incomplete series (re-settling first)."""
         from gyrostand.acquisition.runner import resume_store
         from gyrostand.db.queries import first_incomplete_series
+        from gyrostand.plan.model import PlanError
 
         sessions = open_db(db, must_exist=True)
         try:

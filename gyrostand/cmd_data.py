@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import tomllib
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -16,10 +15,6 @@ if TYPE_CHECKING:
     from sqlalchemy.orm import Session, sessionmaker
 
 DEFAULT_DB = "runs/gyrostand.sqlite"
-PLAN_KEYS = {
-    "instrument": ("model", "serial", "lp_gcm2s2", "h1_gcm2s"),
-    "site": ("latitude_deg", "earth_rate_rad_s", "gravity_cm_s2"),
-}
 
 DbOption = Annotated[
     str, typer.Option("--db", help="Database: a SQLite file path or any SQLAlchemy URL.")
@@ -44,30 +39,23 @@ def open_db(db: str, *, must_exist: bool = False) -> sessionmaker[Session]:
         fail(str(error))
 
 
-def plan_metadata(plan: Path) -> dict[str, Any]:
-    """Instrument, site and operator from a campaign plan's [instrument], [site], [campaign]."""
+def plan_metadata(path: Path) -> dict[str, Any]:
+    """Instrument, site and operator of a plan file, whole or partial (`plan.model`), and its
+    text (stored with the import)."""
+    from gyrostand.plan.model import PlanError, parse_any_plan, read_text
+
     try:
-        text = plan.read_text(encoding="utf-8")
-        document = tomllib.loads(text)
-    except OSError as error:
-        fail(f"cannot read plan {plan}: {error.strerror}")
-    except tomllib.TOMLDecodeError as error:
-        fail(f"{plan}: not valid TOML: {error}")
-    metadata: dict[str, Any] = {"plan_toml": text}
-    missing = []
-    for table, keys in PLAN_KEYS.items():
-        section = document.get(table)
-        section = section if isinstance(section, dict) else {}
-        for key in keys:
-            if key in section:
-                metadata[key] = section[key]
-            else:
-                missing.append(f"{table}.{key}")
-    if missing:
-        fail(f"{plan}: missing {', '.join(missing)}")
-    campaign = document.get("campaign")
-    if isinstance(campaign, dict) and "operator" in campaign:
-        metadata["operator"] = campaign["operator"]
+        text = read_text(path)
+        plan = parse_any_plan(text)
+    except PlanError as error:
+        fail(f"{path}: invalid plan: " + "; ".join(error.problems))
+    metadata: dict[str, Any] = {
+        "plan_toml": text,
+        **plan.instrument.model_dump(),
+        **plan.site.model_dump(),
+    }
+    if plan.campaign is not None:
+        metadata["operator"] = plan.campaign.operator
     return metadata
 
 
@@ -80,7 +68,8 @@ def register(app: typer.Typer) -> None:
         plan: Annotated[
             Path | None,
             typer.Option(
-                help="Campaign plan (TOML) whose instrument and site tables describe the data."
+                help="Campaign plan (TOML), whole or partial: its \\[instrument] and \\[site] "
+                "describe the data, its \\[analysis] and \\[forecast] the analysis."
             ),
         ] = None,
         operator: Annotated[str | None, typer.Option(help="Who made the measurements.")] = None,

@@ -10,7 +10,6 @@ from gyrostand.cmd_campaign import checked_plan, print_outcome, run_campaign
 from gyrostand.cmd_data import open_db
 from gyrostand.cmd_report import DEFAULT_OUT, write_campaign_report
 from gyrostand.errors import fail
-from gyrostand.plan.model import PlanError, parse_plan
 
 DEMO_PLAN = files("gyrostand") / "plans" / "paper.toml"  # also examples/paper.toml
 
@@ -24,6 +23,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Run the paper's campaign on the simulated stand, analyse it, write its report."""
         from gyrostand.acquisition.store import CampaignStore
+        from gyrostand.plan.model import PlanError, parse_plan
 
         try:
             plan = parse_plan(DEMO_PLAN.read_text())
@@ -31,8 +31,8 @@ def register(app: typer.Typer) -> None:
             fail("embedded demo plan invalid: " + "; ".join(exc.problems))
         plan = checked_plan(plan, interface=None, channel=None, db=None, speedup=None, seed=None)
         typer.echo(
-            f"1/2 campaign: {len(plan.trials)} trials of the seed-000 example on the simulated "
-            f"stand (virtual CAN bus, {plan.bus.timing} time) into {plan.database}"
+            f"1/2 campaign: {len(plan.trials)} trials of the example of Potemkin (1982) on the "
+            f"simulated stand (virtual CAN bus, {plan.bus.timing} time) into {plan.database}"
         )
         store = CampaignStore.create(open_db(plan.database, must_exist=False), plan)
         print_outcome(run_campaign(plan, store, quiet), plan.database)

@@ -1,23 +1,56 @@
-"""The campaign plan: a TOML file read with tomllib and validated in full before anything runs.
+"""The campaign plan: one typed model of the plan file (pydantic), parsed once, used by every layer.
 
-Every problem is reported with its field path (``trials[3].period_s: must be > 0``) in one
-`PlanError`, so an operator fixes the whole file at once and the bus and database stay untouched.
+The models mirror the TOML: one class per table, unknown keys refused, field constraints and
+cross-field rules in the models, the field docs doubling as the JSON Schema's descriptions
+(`gyrostand plan schema`). `parse_plan` reports every problem at once in one `PlanError`, each
+with its path in the plan's terms (``[settle] hold_s: must be >= 0``, ``[[trials]] 3 period_s:
+must be > 0``), so an operator fixes the whole file before the bus or the database is touched.
+
+A plan without ``[[trials]]`` is the *partial form* (`PartialPlan`): the instrument, site and
+analysis tables alone. `gyrostand import --plan` and `gyrostand analyze --plan` accept it, and an
+import without a plan file stores it (``db.io.metadata_toml`` writes [instrument] and [site]);
+`parse_any_plan` reads either form.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import math
 import tomllib
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal, TypeVar, get_args, get_origin
 
-from gyrostand.stand.simconfig import TIMINGS
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    PrivateAttr,
+    StringConstraints,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import ErrorDetails
+
+from gyrostand.stand.protocol import SignalMap
+
+EARTH_RATE_RAD_S = 7.292115e-5  # the sidereal rotation rate of the Earth (IERS)
+GRAVITY_CM_S2 = 981.0
 
 Role = Literal["fit", "control"]
+Timing = Literal["virtual", "realtime"]
+ESTIMATE_KEYS = (
+    "undamped_period_s",
+    "damping_ratio",
+    "expected_se_deg",
+    "tolerance_fraction",
+    "stable_estimates",
+)
 
 
 class PlanError(ValueError):
@@ -28,41 +61,169 @@ class PlanError(ValueError):
         super().__init__("invalid plan: " + "; ".join(problems))
 
 
-@dataclass(frozen=True)
-class InstrumentPlan:
-    """The compass under test and its known constants B (seed 000 eq 1.1)."""
+class _Problems(ValueError):
+    """What a cross-field rule found in one table, as (key, message) pairs."""
 
-    model: str
-    serial: str
-    lp_gcm2s2: float
-    h1_gcm2s: float
+    def __init__(self, problems: list[tuple[str, str]]) -> None:
+        self.problems = problems
+        super().__init__("; ".join(f"{key}: {message}" for key, message in problems))
 
 
-@dataclass(frozen=True)
-class SitePlan:
-    latitude_deg: float
-    earth_rate_rad_s: float
-    gravity_cm_s2: float
+def _check(problems: list[tuple[str, str]]) -> None:
+    if problems:
+        raise _Problems(problems)
 
 
-@dataclass(frozen=True)
-class TrialPlan:
-    """One row of the design: rocking direction K, amplitude A, period tau, fit or control."""
-
-    index: int  # 1-based
-    direction_deg: float
-    amplitude_cm: float
-    period_s: float
-    role: Role
+def _no_default(schema: dict[str, Any]) -> None:
+    """Drop a default the JSON Schema cannot state (infinity, or one that depends on the table)."""
+    schema.pop("default", None)
 
 
-@dataclass(frozen=True)
-class ObservationPlan:
-    """Observation windows in stand time: seconds when still, whole rocking periods when rocking."""
+def _interval(value: Any) -> tuple[float, float]:
+    numbers = isinstance(value, list | tuple) and len(value) == 2
+    numbers = numbers and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value
+    )
+    if not numbers or not 0 < value[0] < value[1]:
+        raise ValueError("must be [low, high] with 0 < low < high")
+    return float(value[0]), float(value[1])
 
-    still_window_s: float
-    rocking_window_periods: int
-    spacing_s: float
+
+def _channel(value: Any) -> str:
+    if isinstance(value, bool) or not isinstance(value, str | int):
+        raise ValueError("must be a string or an integer")
+    return str(value)
+
+
+_SIGNALS = tuple(f.name for f in fields(SignalMap))
+
+
+def _known_signals(table: dict[str, str]) -> dict[str, str]:
+    _check([(key, "unknown key") for key in table if key not in _SIGNALS])
+    return table
+
+
+Text = Annotated[str, StringConstraints(pattern=r"\S")]
+Interval = Annotated[tuple[float, float], BeforeValidator(_interval)]
+Channel = Annotated[str, PlainValidator(_channel, json_schema_input_type=str | int)]
+Signals = Annotated[dict[str, str], AfterValidator(_known_signals)]
+
+
+class _Table(BaseModel):
+    """A plan table: frozen; strict types (no "1.5" for 1.5, no true for 1); finite numbers."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        frozen=True,
+        strict=True,
+        allow_inf_nan=False,
+        use_attribute_docstrings=True,
+    )
+
+
+class CampaignPlan(_Table):
+    """[campaign]: who runs it, how many observations per series, where everything goes."""
+
+    operator: Text
+    """Who runs the campaign (stored with it, signs the report)."""
+    n_obs: int = Field(ge=2)
+    """N, observations per series (Potemkin 1982, eq 2.1)."""
+    database: Text
+    """A file path (SQLite) or any SQLAlchemy URL."""
+    raw_log_format: Literal["blf", "asc"] = "blf"
+    """Format of the python-can log that receives every frame."""
+    raw_log_dir: Text = "runs/raw"
+    """Folder of the raw CAN logs."""
+    on_trial_failure: Literal["continue", "pause"] = "continue"
+    """What a failed trial does to the campaign."""
+
+
+class InstrumentPlan(_Table):
+    """[instrument]: the compass under test and its known constants B (Potemkin 1982, eq 1.1)."""
+
+    model: Text
+    """Instrument model."""
+    serial: Text
+    """Serial number."""
+    lp_gcm2s2: float = Field(gt=0)
+    """Maximum pendulous moment lP, g*cm^2*s^-2."""
+    h1_gcm2s: float = Field(gt=0)
+    """Angular momentum H1 of the gyrosphere along N-S, g*cm^2*s^-1."""
+
+
+class SitePlan(_Table):
+    """[site]: where the stand is."""
+
+    latitude_deg: float = Field(gt=-90, lt=90)
+    """Latitude phi of the stand, deg."""
+    earth_rate_rad_s: float = Field(EARTH_RATE_RAD_S, gt=0)
+    """Earth rotation rate U, rad/s (default: the sidereal rate 7.292115e-5)."""
+    gravity_cm_s2: float = Field(GRAVITY_CM_S2, gt=0)
+    """Gravity g, cm/s^2."""
+
+
+class AnalysisPlan(_Table):
+    """[analysis]: the regression of Potemkin (1982): level q, start values, prior region."""
+
+    q: float = Field(0.05, gt=0, lt=1)
+    """Significance level of the tests."""
+    start_c: float = Field(gt=0)
+    """Start value of the reduced elastic compliance C, g*cm^2*s^-2."""
+    start_t_s: float = Field(gt=0)
+    """Start value of the time constant T, s."""
+    admissible_c: Interval | None = None
+    """Admissible range [low, high] of C (checked and reported, not imposed)."""
+    admissible_t_s: Interval | None = None
+    """Admissible range [low, high] of T, s (checked and reported, not imposed)."""
+
+
+class ForecastPlan(_Table):
+    """[forecast]: the ship's rocking for which the error at sea is predicted."""
+
+    roll_deg: float = Field(gt=0, lt=90)
+    """Roll (or pitch) amplitude theta0, deg."""
+    arm_cm: float = Field(gt=0)
+    """Height h of the compass above the rocking axis, cm."""
+    period_s: float = Field(gt=0)
+    """Rocking period tau, s."""
+    course_deg: float = Field(ge=0, lt=360)
+    """Ship's course, deg in [0, 360)."""
+    latitude_deg: float = Field(gt=-90, lt=90)
+    """Latitude phi of the voyage, deg."""
+    motion: Literal["roll", "pitch"] = "roll"
+    """Rolling (K = course + 90 deg) or pitching (K = course)."""
+    amplitude_cm: float | None = Field(None, gt=0)
+    """Acceleration amplitude A, cm, instead of theta0 x h (Potemkin 1982 rounds 65.45 to 65)."""
+
+
+class TrialPlan(_Table):
+    """[[trials]]: one row of the design: rocking direction K, amplitude A, period tau, role."""
+
+    direction_deg: float = Field(ge=0, lt=360)
+    """Rocking direction K, deg in [0, 360)."""
+    amplitude_cm: float = Field(gt=0)
+    """Rocking amplitude A, cm."""
+    period_s: float = Field(gt=0)
+    """Rocking period tau, s."""
+    role: Role = "fit"
+    """"fit": estimates C and T; "control": checks the fitted model."""
+    _index: int = PrivateAttr(0)
+
+    @property
+    def index(self) -> int:
+        """The trial's number in the plan, from 1."""
+        return self._index
+
+
+class ObservationPlan(_Table):
+    """[observation]: windows in stand time: seconds when still, whole periods when rocking."""
+
+    still_window_s: float = Field(60.0, gt=0)
+    """Stand seconds per observation with the stand still."""
+    rocking_window_periods: int = Field(10, ge=1)
+    """Whole rocking periods per observation while rocking."""
+    spacing_s: float = Field(0.0, ge=0)
+    """Stand seconds between consecutive windows."""
 
     def window_ms(self, rocking_period_s: float | None) -> int:
         """Window length in stand milliseconds for a still (None) or rocking series."""
@@ -72,27 +233,11 @@ class ObservationPlan:
 
 
 @dataclass(frozen=True)
-class SettlePlan:
-    """Settled (method "band") when the window means over the last `hold_s` stand seconds all
-    lie within +-`band_deg` of their mean and their least-squares trend moves the reading by at
-    most `drift_deg` over that time (a damped transient that is not over yet, seed 003). Method
-    "estimate" settles by `estimate` instead; the band criterion then only measures the time
-    saved. `max_wait_s` bounds both."""
-
-    band_deg: float
-    drift_deg: float
-    hold_s: float
-    max_wait_s: float
-    method: Literal["band", "estimate"] = "band"
-    estimate: EstimatePlan | None = None  # set when method = "estimate"
-
-
-@dataclass(frozen=True)
 class EstimatePlan:
-    """Early settle (seed 003): observe once the settle point estimated from the transient is
-    stable. The transient's undamped period 2 pi / omega0 and damping ratio xi / omega0 are
-    instrument data; the tolerance is `tolerance_fraction` x the expected S{<delta>}_e of
-    seed 000 eq 2.6."""
+    """Early settle (Bezvesilna & Gura): observe once the settle point estimated from the transient
+    is stable. The transient's undamped period 2 pi / omega0 and damping ratio xi / omega0 are
+    instrument data; the tolerance is `tolerance_fraction` x the expected S{<delta>}_e
+    (Potemkin 1982, eq 2.6). Derived from [settle] (`SettlePlan.estimate`)."""
 
     undamped_period_s: float
     damping_ratio: float
@@ -106,438 +251,424 @@ class EstimatePlan:
 
     @property
     def omega_rad_s(self) -> float:
-        """Damped angular frequency omega = sqrt(omega0^2 - xi^2) (seed 003 eq 2)."""
+        """Damped angular frequency omega = sqrt(omega0^2 - xi^2)."""
         return 2.0 * math.pi / self.undamped_period_s * math.sqrt(1.0 - self.damping_ratio**2)
 
     @property
     def damping_per_s(self) -> float:
-        """xi of seed 003 eq 1."""
+        """xi, the decay rate of the transient."""
         return 2.0 * math.pi / self.undamped_period_s * self.damping_ratio
 
 
-@dataclass(frozen=True)
-class TrackingPlan:
-    """How closely the stand's measured rocking must follow the command, and for how long."""
+class SettlePlan(_Table):
+    """[settle]: when a series may start observing. Method "band": the window means over the
+    last `hold_s` stand seconds all lie within +-`band_deg` of their mean and their trend moves
+    the reading by at most `drift_deg` over that time. Method "estimate": once the settle point
+    estimated from the damped transient is stable; the band criterion then only measures the
+    time saved. `max_wait_s` bounds both."""
 
-    amplitude_rel: float
-    period_rel: float
-    direction_deg: float
-    confirm_s: float  # stand seconds allowed for the stand to reach the commanded motion
+    band_deg: float = Field(0.02, gt=0)
+    """Half-width of the band, deg."""
+    drift_deg: float = Field(math.inf, gt=0, json_schema_extra=_no_default)
+    """Largest trend over hold_s, deg (default: no trend condition)."""
+    hold_s: float = Field(600.0, ge=0)
+    """Stand seconds the window means must stay in the band."""
+    max_wait_s: float = Field(4 * 3600.0, gt=0)
+    """Stand seconds after which an unsettled series fails (>= hold_s)."""
+    method: Literal["band", "estimate"] = "band"
+    """"band" or "estimate" (early settle; needs the keys below)."""
+    undamped_period_s: float | None = Field(None, gt=0)
+    """Estimate: the compass's undamped precession period 2 pi / omega0, s (instrument data)."""
+    damping_ratio: float | None = Field(None, ge=0, lt=1)
+    """Estimate: the damping ratio xi / omega0 of the precession (instrument data)."""
+    expected_se_deg: float | None = Field(None, gt=0)
+    """Estimate: the expected S{<delta>}_e, deg (Potemkin 1982, eq 2.6)."""
+    tolerance_fraction: float = Field(0.5, gt=0, le=1)
+    """Estimate: tolerance = tolerance_fraction x expected_se_deg."""
+    stable_estimates: int = Field(3, ge=2)
+    """Estimate: consecutive estimates that must agree within the tolerance."""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> SettlePlan:
+        problems = []
+        if self.max_wait_s < self.hold_s:
+            problems.append(("max_wait_s", "must be >= hold_s"))
+        if self.method == "band":
+            given = [key for key in ESTIMATE_KEYS if key in self.model_fields_set]
+            problems += [(key, "only applies when method = 'estimate'") for key in given]
+        else:
+            required = ESTIMATE_KEYS[:3]
+            problems += [(key, "missing") for key in required if getattr(self, key) is None]
+        _check(problems)
+        return self
+
+    @property
+    def estimate(self) -> EstimatePlan | None:
+        """The early-settle parameters (method "estimate"), else None."""
+        if self.method != "estimate":
+            return None
+        return EstimatePlan(*(getattr(self, key) for key in ESTIMATE_KEYS))
 
 
-@dataclass(frozen=True)
-class ChecksPlan:
-    max_error_frames: int  # per series; more fails the trial
+class TrackingPlan(_Table):
+    """[tracking]: how closely the stand's measured rocking must follow the command."""
+
+    amplitude_rel: float = Field(0.05, gt=0)
+    """Largest relative amplitude error."""
+    period_rel: float = Field(0.05, gt=0)
+    """Largest relative period error."""
+    direction_deg: float = Field(2.0, gt=0)
+    """Largest direction error, deg."""
+    confirm_s: float = Field(120.0, gt=0)
+    """Stand seconds allowed for the stand to reach the commanded motion."""
 
 
-@dataclass(frozen=True)
-class TimeoutsPlan:
-    ack_s: float  # wall seconds for a command acknowledgement
-    bus_silence_s: float  # stand seconds without a heading frame
+class TimeoutsPlan(_Table):
+    """[timeouts]"""
+
+    ack_s: float = Field(2.0, gt=0)
+    """Wall seconds for a command acknowledgement."""
+    bus_silence_s: float = Field(5.0, gt=0)
+    """Stand seconds without a heading frame."""
 
 
-@dataclass(frozen=True)
-class AcceptancePlan:
-    """Optional acceptance by excursions (seed 004 eqs 8.79-8.88): the reading must stay within
-    +-`tolerance_deg` of its mean for `duration_s` stand seconds, with probability of at least
-    one excursion at most `max_risk`."""
+class ChecksPlan(_Table):
+    """[checks]"""
 
-    tolerance_deg: float
-    duration_s: float
-    max_risk: float
+    max_error_frames: int = Field(10, ge=0)
+    """Error frames allowed per series; more fail the trial."""
 
 
-@dataclass(frozen=True)
-class BusPlan:
-    """Where the frames come from: the in-process simulated stand, or a python-can bus."""
+class BusPlan(_Table):
+    """[bus]: where the frames come from: the in-process simulated stand, or a python-can bus
+    (interface and channel, or python-can's own configuration when both are left out)."""
 
-    simulated: bool
-    interface: str | None = None
-    channel: str | None = None
-    bitrate: int | None = None
-    timing: Literal["virtual", "realtime"] = "realtime"  # virtual: stand.virtual_time
-    speedup: float = 1.0
-    seed: int = 0
-    simulator: Mapping[str, Any] = field(default_factory=dict)
-    queue_size: int = 200_000
+    simulated: bool = True
+    """The simulated compass and stand on an in-process virtual bus."""
+    interface: Text | None = None
+    """python-can interface, e.g. "socketcan" (not with simulated = true)."""
+    channel: Channel | None = None
+    """python-can channel, e.g. "can0"."""
+    bitrate: int | None = Field(None, ge=1)
+    """Bit rate, bit/s."""
+    timing: Timing = Field("realtime", json_schema_extra=_no_default)
+    """"virtual": stand time follows the acquisition (repeatable, full speed); "realtime": the
+    wall clock. Default: virtual when simulated, realtime otherwise."""
+    speedup: float = Field(1.0, gt=0)
+    """Stand seconds per wall second: the simulated stand with timing = "realtime" only."""
+    seed: int = Field(0, ge=0)
+    """Random seed of the simulated stand."""
+    simulator: dict[str, Any] = Field(default_factory=dict)
+    """Overrides of the simulated stand's parameters (tables compass, noise, faults, stand)."""
+    queue_size: int = Field(200_000, ge=1)
+    """Frames the receive queue holds."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_timing(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "timing" not in data:
+            simulated = data.get("simulated", True) is True
+            return {**data, "timing": "virtual" if simulated else "realtime"}
+        return data
+
+    @model_validator(mode="after")
+    def _consistent(self) -> BusPlan:
+        problems = []
+        if self.simulated and self.interface is not None:
+            problems.append(("interface", "must be absent when simulated = true"))
+        if not self.simulated and self.speedup != 1.0:
+            problems.append(("speedup", "only applies when simulated = true"))
+        elif self.timing == "virtual" and self.speedup != 1.0:
+            virtual = 'only applies with timing = "realtime" (virtual time runs at full speed)'
+            problems.append(("speedup", virtual))
+        _check(problems)
+        return self
 
 
-@dataclass(frozen=True)
-class Plan:
-    """A validated campaign plan; `text` is the TOML as submitted (stored on the campaign)."""
+class ProtocolPlan(_Table):
+    """[protocol]"""
 
-    text: str
-    operator: str
-    n_obs: int
-    database: str
-    raw_log_format: Literal["blf", "asc"]
-    raw_log_dir: str
-    on_trial_failure: Literal["continue", "pause"]
+    dbc_path: Text | None = None
+    """The lab's DBC file (default: the shipped stand/gyrostand.dbc)."""
+
+
+class AcceptancePlan(_Table):
+    """[acceptance]: optional acceptance by excursions (Sveshnikov, section 8.3): the reading
+    must stay within +-`tolerance_deg` of its mean for `duration_s` stand seconds, with a
+    probability of at least one excursion of at most `max_risk`."""
+
+    tolerance_deg: float = Field(gt=0)
+    """Half-width of the tolerance band, deg."""
+    duration_s: float = Field(gt=0)
+    """Stand seconds the reading must stay within it."""
+    max_risk: float = Field(gt=0, lt=1)
+    """Largest acceptable probability of an excursion."""
+
+
+_SIGNALS_SCHEMA = {
+    "properties": {name: {"type": "string"} for name in _SIGNALS},
+    "additionalProperties": False,
+}
+
+
+class Plan(_Table):
+    """A campaign plan (gyrostand): instrument, site, analysis, the trials of the design and how
+    to acquire them. `text` is the TOML as submitted (stored with the campaign)."""
+
+    model_config = ConfigDict(title="gyrostand campaign plan")
+
+    campaign: CampaignPlan
     instrument: InstrumentPlan
     site: SitePlan
-    analysis: Mapping[str, Any]
-    forecast: Mapping[str, Any]
-    trials: tuple[TrialPlan, ...]
-    observation: ObservationPlan
-    settle: SettlePlan
-    tracking: TrackingPlan
-    timeouts: TimeoutsPlan
-    checks: ChecksPlan
-    bus: BusPlan
-    dbc_path: str | None
-    signals: Mapping[str, Any]
+    analysis: AnalysisPlan
+    forecast: ForecastPlan
+    trials: tuple[TrialPlan, ...] = Field(strict=False, json_schema_extra={"minItems": 1})
+    """The design, in order; at least one trial has role "fit"."""
+    observation: ObservationPlan = Field(default_factory=ObservationPlan)
+    settle: SettlePlan = Field(default_factory=SettlePlan)
+    tracking: TrackingPlan = Field(default_factory=TrackingPlan)
+    timeouts: TimeoutsPlan = Field(default_factory=TimeoutsPlan)
+    checks: ChecksPlan = Field(default_factory=ChecksPlan)
+    bus: BusPlan = Field(default_factory=BusPlan)
+    protocol: ProtocolPlan = Field(default_factory=ProtocolPlan)
+    signals: Signals = Field(default_factory=dict, json_schema_extra=_SIGNALS_SCHEMA)
+    """The lab's DBC signals, "MESSAGE.SIGNAL" per quantity (docs/protocol.md)."""
     acceptance: AcceptancePlan | None = None
+    _text: str = PrivateAttr("")
+
+    @field_validator("trials")
+    @classmethod
+    def _design(cls, trials: tuple[TrialPlan, ...]) -> tuple[TrialPlan, ...]:
+        if not trials:
+            raise ValueError("must list at least one trial")
+        if not any(t.role == "fit" for t in trials):
+            raise ValueError("at least one trial must have role 'fit'")
+        return trials
+
+    @model_validator(mode="after")
+    def _number_trials(self) -> Plan:
+        for number, trial in enumerate(self.trials, start=1):
+            trial._index = number
+        return self
+
+    @property
+    def text(self) -> str:
+        return self._text
 
     @property
     def sha256(self) -> str:
         return hashlib.sha256(self.text.encode()).hexdigest()
 
+    @property
+    def operator(self) -> str:
+        return self.campaign.operator
 
-class _Fields:
-    """Reads one TOML table, recording every problem with its path instead of stopping."""
+    @property
+    def n_obs(self) -> int:
+        return self.campaign.n_obs
 
-    def __init__(self, problems: list[str], table: Any, path: str) -> None:
-        self.problems = problems
-        self.path = path
-        self.seen: set[str] = set()
-        if not isinstance(table, Mapping):
-            problems.append(f"{path}: must be a table")
-            table = {}
-        self.table = table
+    @property
+    def database(self) -> str:
+        return self.campaign.database
 
-    def _where(self, key: str) -> str:
-        return f"{self.path}.{key}" if self.path else key
+    @property
+    def raw_log_format(self) -> Literal["blf", "asc"]:
+        return self.campaign.raw_log_format
 
-    def bad(self, key: str, message: str) -> None:
-        self.problems.append(f"{self._where(key)}: {message}")
+    @property
+    def raw_log_dir(self) -> str:
+        return self.campaign.raw_log_dir
 
-    def _get(self, key: str, default: Any) -> Any:
-        self.seen.add(key)
-        if key not in self.table:
-            if default is _REQUIRED:
-                self.bad(key, "missing")
-            return default
-        return self.table[key]
+    @property
+    def on_trial_failure(self) -> Literal["continue", "pause"]:
+        return self.campaign.on_trial_failure
 
-    def number(
-        self,
-        key: str,
-        default: Any = None,
-        *,
-        gt: float | None = None,
-        ge: float | None = None,
-        le: float | None = None,
-        lt: float | None = None,
-    ) -> float:
-        value = self._get(key, default)
-        if value is _REQUIRED or value is None:
-            return math.nan
-        numeric = isinstance(value, int | float) and not isinstance(value, bool)
-        if not numeric or not math.isfinite(value):
-            self.bad(key, "must be a finite number")
-            return math.nan
-        for bound, ok, text in (
-            (gt, lambda b: value > b, "> "),
-            (ge, lambda b: value >= b, ">= "),
-            (le, lambda b: value <= b, "<= "),
-            (lt, lambda b: value < b, "< "),
-        ):
-            if bound is not None and not ok(bound):
-                self.bad(key, f"must be {text}{bound:g}")
-        return float(value)
-
-    def integer(self, key: str, default: Any = None, *, ge: int | None = None) -> int:
-        value = self._get(key, default)
-        if value is _REQUIRED or value is None:
-            return 0
-        if isinstance(value, bool) or not isinstance(value, int):
-            self.bad(key, "must be an integer")
-            return 0
-        if ge is not None and value < ge:
-            self.bad(key, f"must be >= {ge}")
-        return value
-
-    def text(self, key: str, default: Any = None, *, choices: tuple[str, ...] = ()) -> Any:
-        value = self._get(key, default)
-        if value is None:
-            return None
-        if value is _REQUIRED:
-            return ""
-        if not isinstance(value, str) or not value.strip():
-            self.bad(key, "must be a non-empty string")
-            return ""
-        if choices and value not in choices:
-            self.bad(key, f"must be one of {', '.join(repr(c) for c in choices)}, not {value!r}")
-        return value
-
-    def flag(self, key: str, default: bool) -> bool:
-        value = self._get(key, default)
-        if not isinstance(value, bool):
-            self.bad(key, "must be true or false")
-            return default
-        return value
-
-    def table_of(self, key: str) -> Mapping[str, Any]:
-        value = self._get(key, {})
-        if not isinstance(value, Mapping):
-            self.bad(key, "must be a table")
-            return {}
-        return value
-
-    def interval(self, key: str) -> None:
-        value = self._get(key, None)
-        if value is None:
-            return
-        ok = (
-            isinstance(value, list)
-            and len(value) == 2
-            and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
-        )
-        if not ok or not 0 < value[0] < value[1]:
-            self.bad(key, "must be [low, high] with 0 < low < high")
-
-    def done(self) -> None:
-        """Report keys nobody asked for (usually typos)."""
-        for key in sorted(set(self.table) - self.seen):
-            self.bad(key, "unknown key")
+    @property
+    def dbc_path(self) -> str | None:
+        return self.protocol.dbc_path
 
 
-_REQUIRED: Any = object()
+class OperatorPlan(_Table):
+    """[campaign] of the partial form: who made the measurements."""
+
+    operator: Text
+    """Who made the measurements."""
+
+
+class PartialPlan(_Table):
+    """The partial form of a plan: no campaign to run, only what describes the data and their
+    analysis. Without [analysis] or [forecast] the analysis takes the example values of
+    Potemkin (1982) and says so."""
+
+    model_config = ConfigDict(title="gyrostand plan, partial form")
+
+    campaign: OperatorPlan | None = None
+    instrument: InstrumentPlan
+    site: SitePlan
+    analysis: AnalysisPlan | None = None
+    forecast: ForecastPlan | None = None
+
+
+# ------------------------------------------------------------------------------ reading
 
 
 def parse_plan(text: str) -> Plan:
     """Validate a plan given as TOML text; raise `PlanError` listing every problem."""
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise PlanError([f"TOML syntax: {exc}"]) from None
-    problems: list[str] = []
-    top = _Fields(problems, doc, "")
-    for name in ("campaign", "instrument", "site", "analysis", "forecast", "trials"):
-        if name not in doc:
-            problems.append(f"{name}: missing")
-
-    c = _Fields(problems, top.table_of("campaign"), "campaign")
-    operator = c.text("operator", _REQUIRED)
-    n_obs = c.integer("n_obs", _REQUIRED, ge=2)
-    database = c.text("database", _REQUIRED)
-    raw_log_format = c.text("raw_log_format", "blf", choices=("blf", "asc"))
-    raw_log_dir = c.text("raw_log_dir", "runs/raw")
-    on_failure = c.text("on_trial_failure", "continue", choices=("continue", "pause"))
-    c.done()
-
-    i = _Fields(problems, top.table_of("instrument"), "instrument")
-    instrument = InstrumentPlan(
-        model=i.text("model", _REQUIRED),
-        serial=i.text("serial", _REQUIRED),
-        lp_gcm2s2=i.number("lp_gcm2s2", _REQUIRED, gt=0),
-        h1_gcm2s=i.number("h1_gcm2s", _REQUIRED, gt=0),
-    )
-    i.done()
-
-    s = _Fields(problems, top.table_of("site"), "site")
-    site = SitePlan(
-        latitude_deg=s.number("latitude_deg", _REQUIRED, gt=-90, lt=90),
-        earth_rate_rad_s=s.number("earth_rate_rad_s", 7.292115e-5, gt=0),
-        gravity_cm_s2=s.number("gravity_cm_s2", 981.0, gt=0),
-    )
-    s.done()
-
-    a = _Fields(problems, top.table_of("analysis"), "analysis")
-    a.number("q", 0.05, gt=0, lt=1)
-    a.number("start_c", _REQUIRED, gt=0)
-    a.number("start_t_s", _REQUIRED, gt=0)
-    a.interval("admissible_c")
-    a.interval("admissible_t_s")
-    a.done()
-
-    f = _Fields(problems, top.table_of("forecast"), "forecast")
-    f.number("roll_deg", _REQUIRED, gt=0, lt=90)
-    f.number("arm_cm", _REQUIRED, gt=0)
-    f.number("period_s", _REQUIRED, gt=0)
-    f.number("course_deg", _REQUIRED, ge=0, lt=360)
-    f.number("latitude_deg", _REQUIRED, gt=-90, lt=90)
-    f.text("motion", "roll", choices=("roll", "pitch"))
-    f.done()
-
-    trials = _trials(problems, top._get("trials", []))
-
-    o = _Fields(problems, top.table_of("observation"), "observation")
-    observation = ObservationPlan(
-        still_window_s=o.number("still_window_s", 60.0, gt=0),
-        rocking_window_periods=o.integer("rocking_window_periods", 10, ge=1),
-        spacing_s=o.number("spacing_s", 0.0, ge=0),
-    )
-    o.done()
-
-    st = _Fields(problems, top.table_of("settle"), "settle")
-    settle = SettlePlan(
-        band_deg=st.number("band_deg", 0.02, gt=0),
-        drift_deg=st.number("drift_deg", None, gt=0),
-        hold_s=st.number("hold_s", 600.0, ge=0),
-        max_wait_s=st.number("max_wait_s", 4 * 3600.0, gt=0),
-        method=st.text("method", "band", choices=("band", "estimate")),
-    )
-    settle = dataclasses.replace(settle, estimate=_estimate(st, settle.method))
-    st.done()
-    if math.isnan(settle.drift_deg):  # not given: no trend condition
-        settle = dataclasses.replace(settle, drift_deg=math.inf)
-    if settle.max_wait_s < settle.hold_s:
-        problems.append("settle.max_wait_s: must be >= settle.hold_s")
-
-    tr = _Fields(problems, top.table_of("tracking"), "tracking")
-    tracking = TrackingPlan(
-        amplitude_rel=tr.number("amplitude_rel", 0.05, gt=0),
-        period_rel=tr.number("period_rel", 0.05, gt=0),
-        direction_deg=tr.number("direction_deg", 2.0, gt=0),
-        confirm_s=tr.number("confirm_s", 120.0, gt=0),
-    )
-    tr.done()
-
-    t = _Fields(problems, top.table_of("timeouts"), "timeouts")
-    timeouts = TimeoutsPlan(
-        ack_s=t.number("ack_s", 2.0, gt=0),
-        bus_silence_s=t.number("bus_silence_s", 5.0, gt=0),
-    )
-    t.done()
-
-    ch = _Fields(problems, top.table_of("checks"), "checks")
-    checks = ChecksPlan(max_error_frames=ch.integer("max_error_frames", 10, ge=0))
-    ch.done()
-
-    bus = _bus(problems, top.table_of("bus"))
-
-    p = _Fields(problems, top.table_of("protocol"), "protocol")
-    dbc_path = p.text("dbc_path", None)
-    p.done()
-    signals = top.table_of("signals")
-    acceptance = _acceptance(problems, top.table_of("acceptance")) if "acceptance" in doc else None
-    top.done()
-
-    if problems:
-        raise PlanError(problems)
-    return Plan(
-        text=text,
-        operator=operator,
-        n_obs=n_obs,
-        database=database,
-        raw_log_format=raw_log_format,
-        raw_log_dir=raw_log_dir,
-        on_trial_failure=on_failure,
-        instrument=instrument,
-        site=site,
-        analysis=dict(doc["analysis"]),
-        forecast=dict(doc["forecast"]),
-        trials=trials,
-        observation=observation,
-        settle=settle,
-        tracking=tracking,
-        timeouts=timeouts,
-        checks=checks,
-        bus=bus,
-        dbc_path=dbc_path,
-        signals=dict(signals),
-        acceptance=acceptance,
-    )
-
-
-def _trials(problems: list[str], raw: Any) -> tuple[TrialPlan, ...]:
-    if not isinstance(raw, list) or not raw:
-        problems.append("trials: must be a non-empty array of tables ([[trials]])")
-        return ()
-    trials = []
-    for n, row in enumerate(raw, start=1):
-        r = _Fields(problems, row, f"trials[{n}]")
-        trials.append(
-            TrialPlan(
-                index=n,
-                direction_deg=r.number("direction_deg", _REQUIRED, ge=0, lt=360),
-                amplitude_cm=r.number("amplitude_cm", _REQUIRED, gt=0),
-                period_s=r.number("period_s", _REQUIRED, gt=0),
-                role=r.text("role", "fit", choices=("fit", "control")),
-            )
-        )
-        r.done()
-    if trials and not any(t.role == "fit" for t in trials):
-        problems.append("trials: at least one trial must have role 'fit'")
-    return tuple(trials)
-
-
-def _acceptance(problems: list[str], raw: Mapping[str, Any]) -> AcceptancePlan:
-    a = _Fields(problems, raw, "acceptance")
-    acceptance = AcceptancePlan(
-        tolerance_deg=a.number("tolerance_deg", _REQUIRED, gt=0),
-        duration_s=a.number("duration_s", _REQUIRED, gt=0),
-        max_risk=a.number("max_risk", _REQUIRED, gt=0, lt=1),
-    )
-    a.done()
-    return acceptance
-
-
-_ESTIMATE_KEYS = (
-    "undamped_period_s",
-    "damping_ratio",
-    "expected_se_deg",
-    "tolerance_fraction",
-    "stable_estimates",
-)
-
-
-def _estimate(st: _Fields, method: str) -> EstimatePlan | None:
-    """The early-settle keys of [settle]: required with method = "estimate", refused with
-    "band" (and left alone when the method itself is invalid: that is the one problem)."""
-    if method != "estimate":
-        for key in [k for k in _ESTIMATE_KEYS if k in st.table]:
-            st.seen.add(key)
-            if method == "band":
-                st.bad(key, "only applies when settle.method = 'estimate'")
-        return None
-    return EstimatePlan(
-        undamped_period_s=st.number("undamped_period_s", _REQUIRED, gt=0),
-        damping_ratio=st.number("damping_ratio", _REQUIRED, ge=0, lt=1),
-        expected_se_deg=st.number("expected_se_deg", _REQUIRED, gt=0),
-        tolerance_fraction=st.number("tolerance_fraction", 0.5, gt=0, le=1),
-        stable_estimates=st.integer("stable_estimates", 3, ge=2),
-    )
-
-
-def _bus(problems: list[str], raw: Mapping[str, Any]) -> BusPlan:
-    b = _Fields(problems, raw, "bus")
-    simulated = b.flag("simulated", True)
-    interface = b.text("interface", None)
-    channel = b._get("channel", None)
-    if channel is not None and not isinstance(channel, str | int):
-        b.bad("channel", "must be a string or an integer")
-    bitrate = b.integer("bitrate", None, ge=1) or None
-    timing = b.text("timing", "virtual" if simulated else "realtime", choices=TIMINGS)
-    speedup = b.number("speedup", 1.0, gt=0)
-    seed = b.integer("seed", 0, ge=0)
-    simulator = b.table_of("simulator")
-    queue_size = b.integer("queue_size", 200_000, ge=1)
-    b.done()
-    if simulated and interface is not None:
-        b.bad("interface", "must be absent when bus.simulated = true")
-    if not simulated and speedup != 1.0:
-        b.bad("speedup", "only applies when bus.simulated = true")
-    elif timing == "virtual" and speedup != 1.0:
-        b.bad("speedup", 'only applies with timing = "realtime" (virtual time runs at full speed)')
-    return BusPlan(
-        simulated=simulated,
-        interface=interface,
-        channel=None if channel is None else str(channel),
-        bitrate=bitrate,
-        timing=timing,  # type: ignore[arg-type]
-        speedup=speedup,
-        seed=seed,
-        simulator=dict(simulator),
-        queue_size=queue_size,
-    )
+    return _validate(Plan, _document(text), text)
 
 
 def load_plan(path: Path) -> Plan:
     """Read and validate a plan file; unreadable files raise `PlanError` too."""
+    return parse_plan(read_text(path))
+
+
+def parse_any_plan(text: str) -> Plan | PartialPlan:
+    """A whole plan, or the partial form when it has no [[trials]] (PlanError as `parse_plan`)."""
+    document = _document(text)
+    if "trials" in document:
+        return _validate(Plan, document, text)
+    return _validate(PartialPlan, document, text)
+
+
+def load_any_plan(path: Path) -> Plan | PartialPlan:
+    """`parse_any_plan` of a file."""
+    return parse_any_plan(read_text(path))
+
+
+def read_text(path: Path) -> str:
+    """A plan file's text (PlanError when it cannot be read)."""
     try:
-        text = path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise PlanError([f"{path}: cannot read ({exc})"]) from None
-    return parse_plan(text)
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise PlanError([f"cannot read the file ({reason})"]) from None
+
+
+def revised(plan: Plan, **tables: Mapping[str, Any]) -> Plan:
+    """The plan with some keys changed, per table (``revised(plan, bus={"seed": 2})``), and
+    validated as the file is; `text` stays the file's."""
+    document = plan.model_dump(exclude_unset=True)
+    for table, changes in tables.items():
+        document[table] = {**document.get(table, {}), **changes}
+    return _validate(Plan, document, plan.text)
+
+
+def schema() -> dict[str, Any]:
+    """The JSON Schema of a plan file (TOML read as JSON), with every field's description."""
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", **Plan.model_json_schema()}
+
+
+def _document(text: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise PlanError([f"TOML syntax: {exc}"]) from None
+
+
+_M = TypeVar("_M", Plan, PartialPlan)
+
+
+def _validate(model: type[_M], document: dict[str, Any], text: str) -> _M:
+    try:
+        plan = model.model_validate(document)
+    except ValidationError as exc:
+        raise PlanError(problems(model, exc.errors(include_url=False))) from None
+    if isinstance(plan, Plan):
+        plan._text = text
+    return plan
+
+
+# ---------------------------------------------------------- pydantic errors in plan terms
+
+_BOUNDS = {
+    "greater_than": ">",
+    "greater_than_equal": ">=",
+    "less_than": "<",
+    "less_than_equal": "<=",
+}
+_MESSAGES = {
+    "missing": "missing",
+    "extra_forbidden": "unknown key",
+    "float_type": "must be a finite number",
+    "finite_number": "must be a finite number",
+    "int_type": "must be an integer",
+    "string_type": "must be a non-empty string",
+    "string_pattern_mismatch": "must be a non-empty string",
+    "bool_type": "must be true or false",
+    "model_type": "must be a table",
+    "dict_type": "must be a table",
+    "tuple_type": "must be an array",
+}
+
+
+def problems(model: type[BaseModel], errors: Iterable[ErrorDetails]) -> list[str]:
+    """pydantic's errors of validating `model` as ``path: message`` lines in the document's
+    own terms: ``[table.subtable] key``, ``[[trials]] 3 key``; each problem once."""
+    found: list[str] = []
+    for error in errors:
+        loc, ctx = error["loc"], error.get("ctx", {})
+        cause = ctx.get("error")
+        if isinstance(cause, _Problems):
+            lines = [(loc + (key,), message) for key, message in cause.problems]
+        elif error["type"] == "value_error" and cause is not None:
+            lines = [(loc, str(cause))]
+        else:
+            lines = [(loc, _message(error))]
+        for where, message in lines:
+            line = f"{_path(model, where)}: {message}"
+            if line not in found:
+                found.append(line)
+    return found
+
+
+def _message(error: ErrorDetails) -> str:
+    kind, ctx = error["type"], error.get("ctx", {})
+    if kind in _BOUNDS:
+        return f"must be {_BOUNDS[kind]} {next(iter(ctx.values())):g}"
+    if kind == "literal_error":
+        expected = str(ctx["expected"]).replace(" or ", ", ")
+        return f"must be one of {expected}, not {error['input']!r}"
+    return _MESSAGES.get(kind, error["msg"])
+
+
+def _path(model: type[BaseModel], loc: tuple[int | str, ...]) -> str:
+    """``[bus.simulator] seed``, ``[[trials]] 3 role``, ``[analysis]``, or a top-level key."""
+    tables: list[str] = []
+    row: int | None = None
+    key: str | None = None
+    current: type[BaseModel] | None = model
+    for part in loc:
+        if key is not None:
+            break
+        if isinstance(part, int):
+            row = part + 1
+            continue
+        table = _table(current, part)
+        if table is None:
+            key = part
+        else:
+            tables.append(part)
+            current = table if isinstance(table, type) and issubclass(table, BaseModel) else None
+    if tables == ["trials"]:
+        where = "[[trials]]" + ("" if row is None else f" {row}")
+    else:
+        where = f"[{'.'.join(tables)}]" if tables else ""
+    return " ".join(p for p in (where, key) if p)
+
+
+def _table(model: type[BaseModel] | None, name: str) -> type | None:
+    """The model of table `name` of `model` (``dict`` for a free-form table), None for a key."""
+    field = None if model is None else model.model_fields.get(name)
+    return None if field is None else _model_in(field.annotation)
+
+
+def _model_in(annotation: Any) -> type | None:
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    if get_origin(annotation) is dict:
+        return dict
+    for arg in get_args(annotation):
+        found = _model_in(arg)
+        if found is not None:
+            return found
+    return None

@@ -1,11 +1,12 @@
 """Plan validation: the shipped paper plan is valid and matches the seed's table; every defect of
 a bad plan is reported at once with its field path."""
 
+import math
 from pathlib import Path
 
 import pytest
 
-from gyrostand.plan.model import PlanError, load_plan, parse_plan
+from gyrostand.plan.model import PlanError, load_plan, parse_plan, revised
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "examples" / "paper.toml"
@@ -47,20 +48,20 @@ def test_every_problem_is_reported_with_its_path() -> None:
     text = text.replace("latitude_deg = 46.5", 'latitude_deg = "north"')
     problems = _broken(text)
     assert problems == [
-        "campaign.n_obs: must be >= 2",
-        "campaign.raw_log_format: must be one of 'blf', 'asc', not 'mf4'",
-        "site.latitude_deg: must be a finite number",
-        "trials[4].period_s: must be > 0",
-        "trials[5].role: must be one of 'fit', 'control', not 'spare'",
-        "settle.bnad: unknown key",
+        "[campaign] n_obs: must be >= 2",
+        "[campaign] raw_log_format: must be one of 'blf', 'asc', not 'mf4'",
+        "[site] latitude_deg: must be a finite number",
+        "[[trials]] 4 period_s: must be > 0",
+        "[[trials]] 5 role: must be one of 'fit', 'control', not 'spare'",
+        "[settle] bnad: unknown key",
     ]
 
 
 def test_missing_tables_and_keys() -> None:
     problems = _broken('[campaign]\noperator = "x"\n')
-    assert "campaign.n_obs: missing" in problems
-    assert "campaign.database: missing" in problems
-    for table in ("instrument", "site", "analysis", "forecast", "trials"):
+    assert "[campaign] n_obs: missing" in problems
+    assert "[campaign] database: missing" in problems
+    for table in ("[instrument]", "[site]", "[analysis]", "[forecast]", "[[trials]]"):
         assert f"{table}: missing" in problems
 
 
@@ -70,16 +71,16 @@ def test_syntax_error_is_one_problem() -> None:
 
 def test_bus_consistency() -> None:
     text = PAPER.read_text().replace("simulated = true", 'simulated = true\ninterface = "pcan"')
-    assert _broken(text) == ["bus.interface: must be absent when bus.simulated = true"]
+    assert _broken(text) == ["[bus] interface: must be absent when simulated = true"]
     text = PAPER.read_text().replace("simulated = true", "simulated = false\nspeedup = 5.0")
     text = text.replace('timing = "virtual"', 'timing = "realtime"')
-    assert _broken(text) == ["bus.speedup: only applies when bus.simulated = true"]
+    assert _broken(text) == ["[bus] speedup: only applies when simulated = true"]
     text = PAPER.read_text().replace("simulated = true", "simulated = true\nspeedup = 5.0")
     assert _broken(text) == [
-        'bus.speedup: only applies with timing = "realtime" (virtual time runs at full speed)'
+        '[bus] speedup: only applies with timing = "realtime" (virtual time runs at full speed)'
     ]
     text = PAPER.read_text().replace('timing = "virtual"', 'timing = "fast"')
-    assert _broken(text) == ["bus.timing: must be one of 'virtual', 'realtime', not 'fast'"]
+    assert _broken(text) == ["[bus] timing: must be one of 'virtual', 'realtime', not 'fast'"]
 
 
 def test_timing_defaults_to_virtual_for_the_simulated_stand_only() -> None:
@@ -91,4 +92,91 @@ def test_timing_defaults_to_virtual_for_the_simulated_stand_only() -> None:
 
 def test_control_only_design_is_refused() -> None:
     text = PAPER.read_text().replace('role = "fit"', 'role = "control"')
-    assert _broken(text) == ["trials: at least one trial must have role 'fit'"]
+    assert _broken(text) == ["[[trials]]: at least one trial must have role 'fit'"]
+
+
+MINIMAL = """
+[campaign]
+operator = "o"
+n_obs = 2
+database = "db.sqlite"
+[instrument]
+model = "m"
+serial = "s"
+lp_gcm2s2 = 6.57e6
+h1_gcm2s = 1.55e8
+[site]
+latitude_deg = 46.5
+[analysis]
+start_c = 7e7
+start_t_s = 0.55
+[forecast]
+roll_deg = 5.0
+arm_cm = 750.0
+period_s = 7.0
+course_deg = 45.0
+latitude_deg = 57.0
+[[trials]]
+direction_deg = 0.0
+amplitude_cm = 10.0
+period_s = 5.0
+"""
+
+
+def test_defaults_of_a_minimal_plan() -> None:
+    plan = parse_plan(MINIMAL)
+    assert (plan.raw_log_format, plan.raw_log_dir, plan.on_trial_failure, plan.dbc_path) == (
+        "blf",
+        "runs/raw",
+        "continue",
+        None,
+    )
+    assert (plan.site.earth_rate_rad_s, plan.site.gravity_cm_s2) == (7.292115e-5, 981.0)
+    assert (plan.analysis.q, plan.analysis.admissible_c, plan.forecast.motion) == (
+        0.05,
+        None,
+        "roll",
+    )
+    assert (plan.forecast.amplitude_cm, plan.acceptance, plan.signals) == (None, None, {})
+    assert [(t.index, t.role) for t in plan.trials] == [(1, "fit")]
+    o, st, tr = plan.observation, plan.settle, plan.tracking
+    assert (o.still_window_s, o.rocking_window_periods, o.spacing_s) == (60.0, 10, 0.0)
+    assert (st.band_deg, st.drift_deg, st.hold_s, st.max_wait_s) == (0.02, math.inf, 600.0, 14400.0)
+    assert (st.method, st.estimate) == ("band", None)
+    assert (tr.amplitude_rel, tr.period_rel, tr.direction_deg, tr.confirm_s) == (0.05, 0.05, 2, 120)
+    assert (plan.timeouts.ack_s, plan.timeouts.bus_silence_s, plan.checks.max_error_frames) == (
+        2.0,
+        5.0,
+        10,
+    )
+    bus = plan.bus
+    assert (bus.simulated, bus.timing, bus.speedup, bus.seed, bus.queue_size) == (
+        True,
+        "virtual",
+        1.0,
+        0,
+        200_000,
+    )
+    assert plan.text == MINIMAL and len(plan.sha256) == 64
+
+
+def test_cross_field_rules_of_settle() -> None:
+    text = MINIMAL + "[settle]\nhold_s = 900.0\nmax_wait_s = 600.0\n"
+    assert _broken(text) == ["[settle] max_wait_s: must be >= hold_s"]
+    text = MINIMAL + '[settle]\nmethod = "estimate"\n'
+    assert _broken(text) == [
+        f"[settle] {key}: missing"
+        for key in ("undamped_period_s", "damping_ratio", "expected_se_deg")
+    ]
+
+
+def test_revised_plan_is_validated_and_keeps_the_text() -> None:
+    plan = parse_plan(MINIMAL)
+    changed = revised(plan, bus={"timing": "realtime", "speedup": 4.0}, campaign={"database": "x"})
+    assert (changed.bus.speedup, changed.database, changed.text) == (4.0, "x", MINIMAL)
+    assert changed.trials == plan.trials and changed.trials[0].index == 1
+    with pytest.raises(PlanError) as caught:
+        revised(plan, bus={"speedup": 4.0})
+    assert caught.value.problems == [
+        '[bus] speedup: only applies with timing = "realtime" (virtual time runs at full speed)'
+    ]
