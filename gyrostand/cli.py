@@ -14,6 +14,7 @@ from gyrostand import (
     cmd_campaign,
     cmd_data,
     cmd_demo,
+    cmd_plan,
     cmd_report,
     cmd_simulate,
 )
@@ -41,5 +42,5 @@ def main(
     """Rolling-stand tests of marine gyrocompasses."""
 
 
-for module in (cmd_simulate, cmd_campaign, cmd_analyze, cmd_report, cmd_data, cmd_demo):
+for module in (cmd_plan, cmd_simulate, cmd_campaign, cmd_analyze, cmd_report, cmd_data, cmd_demo):
     module.register(app)

@@ -1,0 +1,80 @@
+"""CLI: plan check|schema -- validate a campaign plan file; the plan's JSON Schema for editors.
+
+`gyrostand plan check PLAN` prints one summary line, or every problem one per line with its
+path in the plan (exit code 1). `gyrostand plan schema [--out FILE]` prints the JSON Schema of a
+plan file, generated from the plan model (docs/plan.md).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from gyrostand.errors import EXIT_FAILED, fail
+
+if TYPE_CHECKING:
+    from gyrostand.plan.model import Plan
+
+
+def summary(plan: Plan) -> str:
+    """The plan in one line: design, N, settle, bus, database."""
+    fit = sum(t.role == "fit" for t in plan.trials)
+    design = f"{len(plan.trials)} trials ({fit} fit, {len(plan.trials) - fit} control)"
+    bus = plan.bus
+    if bus.simulated:
+        where = f"simulated stand in {bus.timing} time"
+    else:
+        where = f"python-can {bus.interface or '(configured)'} {bus.channel or ''}".rstrip()
+    acceptance = ", acceptance by excursions" if plan.acceptance is not None else ""
+    return (
+        f"{design}, N = {plan.n_obs}, settle by {plan.settle.method}{acceptance}, {where}, "
+        f"database {plan.database}"
+    )
+
+
+def register(app: typer.Typer) -> None:
+    """Add the plan check and plan schema commands to the CLI."""
+
+    plan_app = typer.Typer(
+        help="Check campaign plans; the plan's JSON Schema.", no_args_is_help=True
+    )
+    app.add_typer(plan_app, name="plan")
+
+    @plan_app.command("check")
+    def check(plan: Annotated[Path, typer.Argument(help="Campaign plan (TOML).")]) -> None:
+        """Validate a plan as `campaign run` does before it touches the bus or the database:
+        one summary line, or every problem one per line (exit code 1)."""
+        from gyrostand.acquisition.runner import prepare
+        from gyrostand.plan.model import PlanError, load_plan
+
+        try:
+            checked = load_plan(plan)
+            prepare(checked)
+        except PlanError as exc:
+            for problem in exc.problems:
+                typer.echo(f"{plan}: {problem}")
+            raise typer.Exit(EXIT_FAILED) from None
+        typer.echo(f"{plan}: ok — {summary(checked)}")
+
+    @plan_app.command("schema")
+    def schema(
+        out: Annotated[
+            Path | None, typer.Option("--out", help="Write it to this file (default: stdout).")
+        ] = None,
+    ) -> None:
+        """Print the JSON Schema of a plan file (for editors that validate TOML, e.g. with a
+        `#:schema FILE` first line)."""
+        from gyrostand.plan.model import schema as plan_schema
+
+        text = json.dumps(plan_schema(), indent=2) + "\n"
+        if out is None:
+            typer.echo(text, nl=False)
+            return
+        try:
+            out.write_text(text, encoding="utf-8")
+        except OSError as exc:
+            fail(f"cannot write {out}: {exc.strerror or exc}")
+        typer.echo(f"wrote {out}")

@@ -1,0 +1,231 @@
+"""`gyrostand plan check` and `gyrostand plan schema`: the shipped plans pass and match the
+schema; a bad plan gets every problem with its path; unknown keys are refused in every table."""
+
+import json
+import re
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import pytest
+from typer.testing import CliRunner
+
+from gyrostand.cli import app
+from gyrostand.plan.model import PlanError, parse_any_plan, parse_plan
+
+ROOT = Path(__file__).resolve().parents[2]
+PAPER = ROOT / "examples" / "paper.toml"
+SHIPPED = sorted(ROOT.glob("examples/*.toml")) + [ROOT / "gyrostand" / "plans" / "paper.toml"]
+runner = CliRunner()
+
+
+def gyrostand(*args: str | Path) -> tuple[int, str]:
+    result = runner.invoke(app, [str(a) for a in args])
+    assert result.exception is None or isinstance(result.exception, SystemExit), result.exception
+    return result.exit_code, result.output
+
+
+@pytest.mark.parametrize("plan", SHIPPED, ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_shipped_plan_passes(plan: Path) -> None:
+    code, out = gyrostand("plan", "check", plan)
+    assert code == 0, out
+    assert re.fullmatch(
+        rf"{re.escape(str(plan))}: ok — 6 trials \(4 fit, 2 control\), N = 5, .*\n", out
+    )
+
+
+def test_bad_plan_lists_every_problem_with_its_path(tmp_path: Path) -> None:
+    text = PAPER.read_text().replace("n_obs = 5", "n_obs = 1")
+    text = text.replace("period_s = 3.5", "period_s = 0", 1).replace(
+        "hold_s = 1800.0", "hold_s = -1"
+    )
+    text = text.replace("[tracking]", "[tracking]\nconfirm = 1")
+    plan = tmp_path / "plan.toml"
+    plan.write_text(text)
+    code, out = gyrostand("plan", "check", plan)
+    assert code == 1 and "Traceback" not in out
+    assert out.splitlines() == [
+        f"{plan}: [campaign] n_obs: must be >= 2",
+        f"{plan}: [[trials]] 4 period_s: must be > 0",
+        f"{plan}: [settle] hold_s: must be >= 0",
+        f"{plan}: [tracking] confirm: unknown key",
+    ]
+
+
+def test_unreadable_file_and_syntax_error_are_one_line(tmp_path: Path) -> None:
+    missing = tmp_path / "missing.toml"
+    code, out = gyrostand("plan", "check", missing)
+    assert (code, out) == (1, f"{missing}: cannot read the file (No such file or directory)\n")
+    broken = tmp_path / "broken.toml"
+    broken.write_text("[campaign\n")
+    code, out = gyrostand("plan", "check", broken)
+    assert code == 1 and out.count("\n") == 1 and out.startswith(f"{broken}: TOML syntax: ")
+
+
+def test_check_also_prepares_the_run(tmp_path: Path) -> None:
+    """What `campaign run` checks beyond the file (here the DBC signals) is checked too."""
+    plan = tmp_path / "plan.toml"
+    plan.write_text(PAPER.read_text() + '\n[signals]\nheading = "NOPE.HEADING"\n')
+    code, out = gyrostand("plan", "check", plan)
+    assert code == 1 and "NOPE" in out and out.count("\n") == 1
+
+
+# ---------------------------------------------------------------------- unknown keys
+
+
+TABLES = [
+    "campaign",
+    "instrument",
+    "site",
+    "analysis",
+    "forecast",
+    "observation",
+    "settle",
+    "tracking",
+    "timeouts",
+    "bus",
+]
+
+
+@pytest.mark.parametrize("table", TABLES)
+def test_unknown_key_is_refused_in_every_table(table: str) -> None:
+    text = PAPER.read_text().replace(f"[{table}]", f"[{table}]\nbogus = 1", 1)
+    with pytest.raises(PlanError) as caught:
+        parse_plan(text)
+    assert caught.value.problems == [f"[{table}] bogus: unknown key"]
+
+
+@pytest.mark.parametrize(
+    ("extra", "problem"),
+    [
+        ("bogus = 1\n", "[[trials]] 6 bogus: unknown key"),  # after the last [[trials]]
+        ("[checks]\nbogus = 1\n", "[checks] bogus: unknown key"),
+        ("[protocol]\nbogus = 1\n", "[protocol] bogus: unknown key"),
+        ('[signals]\nbogus = "A.B"\n', "[signals] bogus: unknown key"),
+        (
+            "[acceptance]\ntolerance_deg = 0.1\nduration_s = 60.0\nmax_risk = 0.1\nbogus = 1\n",
+            "[acceptance] bogus: unknown key",
+        ),
+        ("[bogus]\nx = 1\n", "bogus: unknown key"),
+    ],
+)
+def test_unknown_key_is_refused_in_the_optional_tables(extra: str, problem: str) -> None:
+    with pytest.raises(PlanError) as caught:
+        parse_plan(PAPER.read_text() + "\n" + extra)
+    assert caught.value.problems == [problem]
+
+
+def test_partial_form_refuses_unknown_keys_too() -> None:
+    text = tomllib.loads(PAPER.read_text())
+    partial = "".join(
+        f"[{name}]\n" + "".join(f"{k} = {json.dumps(v)}\n" for k, v in text[name].items())
+        for name in ("instrument", "site", "analysis", "forecast")
+    )
+    assert parse_any_plan(partial).analysis is not None
+    with pytest.raises(PlanError) as caught:
+        parse_any_plan(partial + '[campaign]\noperator = "x"\nn_obs = 5\n[observation]\n')
+    assert caught.value.problems == ["[campaign] n_obs: unknown key", "observation: unknown key"]
+
+
+# ---------------------------------------------------------------------------- schema
+
+
+def schema_errors(
+    schema: dict[str, Any], value: Any, root: dict[str, Any], at: str = ""
+) -> list[str]:
+    """The subset of JSON Schema (2020-12) that pydantic emits for the plan, checked by hand
+    (the jsonschema package is not a dependency)."""
+    if "$ref" in schema:
+        return schema_errors(root["$defs"][schema["$ref"].split("/")[-1]], value, root, at)
+    if "anyOf" in schema:
+        options = [schema_errors(s, value, root, at) for s in schema["anyOf"]]
+        return [] if any(not o for o in options) else [f"{at}: matches no option"]
+    types = {
+        "object": dict,
+        "array": list,
+        "string": str,
+        "boolean": bool,
+        "null": type(None),
+        "integer": int,
+        "number": (int, float),
+    }
+    kind = schema.get("type")
+    if kind and (
+        not isinstance(value, types[kind])
+        or (kind in ("integer", "number") and isinstance(value, bool))
+    ):
+        return [f"{at}: not {kind}"]
+    errors = []
+    if (
+        "enum" in schema
+        and value not in schema["enum"]
+        or "const" in schema
+        and value != schema["const"]
+    ):
+        errors.append(f"{at}: {value!r} not allowed")
+    for key, ok in (
+        ("minimum", lambda b: value >= b),
+        ("maximum", lambda b: value <= b),
+        ("exclusiveMinimum", lambda b: value > b),
+        ("exclusiveMaximum", lambda b: value < b),
+        ("minItems", lambda b: len(value) >= b),
+        ("maxItems", lambda b: len(value) <= b),
+        ("pattern", lambda b: re.search(b, value)),
+    ):
+        if key in schema and not ok(schema[key]):
+            errors.append(f"{at}: violates {key}")
+    if kind == "object":
+        properties = schema.get("properties", {})
+        errors += [f"{at}.{k}: required" for k in schema.get("required", []) if k not in value]
+        for k, v in value.items():
+            if k in properties:
+                errors += schema_errors(properties[k], v, root, f"{at}.{k}")
+            elif schema.get("additionalProperties") is False:
+                errors.append(f"{at}.{k}: not allowed")
+            elif isinstance(schema.get("additionalProperties"), dict):
+                errors += schema_errors(schema["additionalProperties"], v, root, f"{at}.{k}")
+    if kind == "array":
+        prefix = schema.get("prefixItems", [])
+        for i, item in enumerate(value):
+            sub = prefix[i] if i < len(prefix) else schema.get("items", {})
+            errors += schema_errors(sub, item, root, f"{at}[{i}]")
+    return errors
+
+
+@pytest.fixture(scope="module")
+def schema(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    out = tmp_path_factory.mktemp("schema") / "plan.schema.json"
+    code, printed = gyrostand("plan", "schema", "--out", out)
+    assert (code, printed) == (0, f"wrote {out}\n")
+    code, stdout = gyrostand("plan", "schema")
+    assert code == 0 and json.loads(stdout) == json.loads(out.read_text())
+    return json.loads(out.read_text())
+
+
+@pytest.mark.parametrize("plan", SHIPPED, ids=lambda p: str(p.relative_to(ROOT)))
+def test_schema_validates_the_shipped_plans(schema: dict[str, Any], plan: Path) -> None:
+    assert schema_errors(schema, tomllib.loads(plan.read_text()), schema) == []
+
+
+def test_schema_refuses_what_the_model_refuses(schema: dict[str, Any]) -> None:
+    document = tomllib.loads(PAPER.read_text())
+    document["settle"]["bnad"] = 1
+    document["trials"][3]["period_s"] = -3.5
+    document["bus"]["timing"] = "fast"
+    del document["campaign"]["n_obs"]
+    assert sorted(schema_errors(schema, document, schema)) == [
+        ".bus.timing: 'fast' not allowed",
+        ".campaign.n_obs: required",
+        ".settle.bnad: not allowed",
+        ".trials[3].period_s: violates exclusiveMinimum",
+    ]
+
+
+def test_schema_describes_every_field(schema: dict[str, Any]) -> None:
+    assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
+    site = schema["$defs"]["SitePlan"]["properties"]
+    assert site["earth_rate_rad_s"]["default"] == 7.292115e-5
+    assert "Earth rotation rate" in site["earth_rate_rad_s"]["description"]
+    for name, table in schema["$defs"].items():
+        for key, field in table.get("properties", {}).items():
+            assert field.get("description"), f"{name}.{key} has no description"
