@@ -6,13 +6,11 @@ queue or a listener error is counted and reported as an event, never dropped sil
 
 from __future__ import annotations
 
-import dataclasses
 import queue
 import threading
 import time
 import uuid
 from collections import deque
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -22,43 +20,17 @@ from can.interfaces.virtual import VirtualBus
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import BatchBLFWriter, raw_log_writer
 from gyrostand.plan.codec import codec_for
-from gyrostand.plan.model import BusPlan, Plan, PlanError
+from gyrostand.plan.model import BusPlan, Plan
 from gyrostand.stand.controller import StandController
 from gyrostand.stand.protocol import Codec
+from gyrostand.stand.simconfig import simulator_config
 from gyrostand.stand.simulator import SimConfig, Simulator
 
 
 def sim_config(bus: BusPlan) -> SimConfig:
-    """The simulated stand for a plan: `[bus.simulator]` overrides (nested tables compass,
-    noise, faults, stand) on the defaults, plus the plan's speedup and seed."""
-    overrides: dict[str, Any] = dict(bus.simulator)
-    problems: list[str] = []
-    base = SimConfig()
-    values: dict[str, Any] = {"speedup": bus.speedup, "seed": bus.seed, "timing": bus.timing}
-    for f in dataclasses.fields(SimConfig):
-        if f.name not in overrides:
-            continue
-        given = overrides.pop(f.name)
-        current = getattr(base, f.name)
-        if dataclasses.is_dataclass(current):
-            if not isinstance(given, Mapping):
-                problems.append(f"bus.simulator.{f.name}: must be a table")
-                continue
-            known = {g.name for g in dataclasses.fields(current)}
-            for key in sorted(set(given) - known):
-                problems.append(f"bus.simulator.{f.name}.{key}: unknown key")
-            values[f.name] = dataclasses.replace(
-                current, **{k: v for k, v in given.items() if k in known}
-            )
-        else:
-            values[f.name] = given
-    problems += [f"bus.simulator.{key}: unknown key" for key in sorted(overrides)]
-    if problems:
-        raise PlanError(problems)
-    try:
-        return dataclasses.replace(base, **values)
-    except (TypeError, ValueError) as exc:
-        raise PlanError([f"bus.simulator: {exc}"]) from None
+    """The simulated stand for a plan: its `[bus.simulator]` overrides (validated with the plan)
+    on the defaults, with the plan's speedup, seed and timing."""
+    return simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
 
 
 class SimulatorBus(VirtualBus):

@@ -17,10 +17,10 @@ from __future__ import annotations
 import hashlib
 import math
 import tomllib
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Annotated, Any, Literal, TypeVar, get_args, get_origin
+from typing import Annotated, Any, Literal, TypeVar
 
 from pydantic import (
     AfterValidator,
@@ -35,9 +35,10 @@ from pydantic import (
     field_validator,
     model_validator,
 )
-from pydantic_core import ErrorDetails
 
 from gyrostand.stand.protocol import SignalMap
+from gyrostand.stand.simconfig import SimConfigError, simulator_config, simulator_tables
+from gyrostand.stand.tables import TABLE_CONFIG, check, problems
 
 EARTH_RATE_RAD_S = 7.292115e-5  # the sidereal rotation rate of the Earth (IERS)
 GRAVITY_CM_S2 = 981.0
@@ -59,19 +60,6 @@ class PlanError(ValueError):
     def __init__(self, problems: list[str]) -> None:
         self.problems = problems
         super().__init__("invalid plan: " + "; ".join(problems))
-
-
-class _Problems(ValueError):
-    """What a cross-field rule found in one table, as (key, message) pairs."""
-
-    def __init__(self, problems: list[tuple[str, str]]) -> None:
-        self.problems = problems
-        super().__init__("; ".join(f"{key}: {message}" for key, message in problems))
-
-
-def _check(problems: list[tuple[str, str]]) -> None:
-    if problems:
-        raise _Problems(problems)
 
 
 def _no_default(schema: dict[str, Any]) -> None:
@@ -99,10 +87,11 @@ _SIGNALS = tuple(f.name for f in fields(SignalMap))
 
 
 def _known_signals(table: dict[str, str]) -> dict[str, str]:
-    _check([(key, "unknown key") for key in table if key not in _SIGNALS])
+    check([(key, "unknown key") for key in table if key not in _SIGNALS])
     return table
 
 
+SimulatorTables = simulator_tables()
 Text = Annotated[str, StringConstraints(pattern=r"\S")]
 Interval = Annotated[tuple[float, float], BeforeValidator(_interval)]
 Channel = Annotated[str, PlainValidator(_channel, json_schema_input_type=str | int)]
@@ -110,15 +99,9 @@ Signals = Annotated[dict[str, str], AfterValidator(_known_signals)]
 
 
 class _Table(BaseModel):
-    """A plan table: frozen; strict types (no "1.5" for 1.5, no true for 1); finite numbers."""
+    """A plan table (`stand.tables.TABLE_CONFIG`)."""
 
-    model_config = ConfigDict(
-        extra="forbid",
-        frozen=True,
-        strict=True,
-        allow_inf_nan=False,
-        use_attribute_docstrings=True,
-    )
+    model_config = TABLE_CONFIG
 
 
 class CampaignPlan(_Table):
@@ -299,7 +282,7 @@ class SettlePlan(_Table):
         else:
             required = ESTIMATE_KEYS[:3]
             problems += [(key, "missing") for key in required if getattr(self, key) is None]
-        _check(problems)
+        check(problems)
         return self
 
     @property
@@ -358,7 +341,7 @@ class BusPlan(_Table):
     """Stand seconds per wall second: the simulated stand with timing = "realtime" only."""
     seed: int = Field(0, ge=0)
     """Random seed of the simulated stand."""
-    simulator: dict[str, Any] = Field(default_factory=dict)
+    simulator: SimulatorTables = Field(default_factory=SimulatorTables)  # type: ignore[valid-type]
     """Overrides of the simulated stand's parameters (tables compass, noise, faults, stand)."""
     queue_size: int = Field(200_000, ge=1)
     """Frames the receive queue holds."""
@@ -381,7 +364,14 @@ class BusPlan(_Table):
         elif self.timing == "virtual" and self.speedup != 1.0:
             virtual = 'only applies with timing = "realtime" (virtual time runs at full speed)'
             problems.append(("speedup", virtual))
-        _check(problems)
+        if self.simulated and not problems:
+            try:
+                simulator_config(
+                    self.simulator, speedup=self.speedup, seed=self.seed, timing=self.timing
+                )
+            except SimConfigError as exc:
+                problems += [(f"simulator.{key}", message) for key, message in exc.problems]
+        check(problems)
         return self
 
 
@@ -576,99 +566,3 @@ def _validate(model: type[_M], document: dict[str, Any], text: str) -> _M:
     if isinstance(plan, Plan):
         plan._text = text
     return plan
-
-
-# ---------------------------------------------------------- pydantic errors in plan terms
-
-_BOUNDS = {
-    "greater_than": ">",
-    "greater_than_equal": ">=",
-    "less_than": "<",
-    "less_than_equal": "<=",
-}
-_MESSAGES = {
-    "missing": "missing",
-    "extra_forbidden": "unknown key",
-    "float_type": "must be a finite number",
-    "finite_number": "must be a finite number",
-    "int_type": "must be an integer",
-    "string_type": "must be a non-empty string",
-    "string_pattern_mismatch": "must be a non-empty string",
-    "bool_type": "must be true or false",
-    "model_type": "must be a table",
-    "dict_type": "must be a table",
-    "tuple_type": "must be an array",
-}
-
-
-def problems(model: type[BaseModel], errors: Iterable[ErrorDetails]) -> list[str]:
-    """pydantic's errors of validating `model` as ``path: message`` lines in the document's
-    own terms: ``[table.subtable] key``, ``[[trials]] 3 key``; each problem once."""
-    found: list[str] = []
-    for error in errors:
-        loc, ctx = error["loc"], error.get("ctx", {})
-        cause = ctx.get("error")
-        if isinstance(cause, _Problems):
-            lines = [(loc + (key,), message) for key, message in cause.problems]
-        elif error["type"] == "value_error" and cause is not None:
-            lines = [(loc, str(cause))]
-        else:
-            lines = [(loc, _message(error))]
-        for where, message in lines:
-            line = f"{_path(model, where)}: {message}"
-            if line not in found:
-                found.append(line)
-    return found
-
-
-def _message(error: ErrorDetails) -> str:
-    kind, ctx = error["type"], error.get("ctx", {})
-    if kind in _BOUNDS:
-        return f"must be {_BOUNDS[kind]} {next(iter(ctx.values())):g}"
-    if kind == "literal_error":
-        expected = str(ctx["expected"]).replace(" or ", ", ")
-        return f"must be one of {expected}, not {error['input']!r}"
-    return _MESSAGES.get(kind, error["msg"])
-
-
-def _path(model: type[BaseModel], loc: tuple[int | str, ...]) -> str:
-    """``[bus.simulator] seed``, ``[[trials]] 3 role``, ``[analysis]``, or a top-level key."""
-    tables: list[str] = []
-    row: int | None = None
-    key: str | None = None
-    current: type[BaseModel] | None = model
-    for part in loc:
-        if key is not None:
-            break
-        if isinstance(part, int):
-            row = part + 1
-            continue
-        table = _table(current, part)
-        if table is None:
-            key = part
-        else:
-            tables.append(part)
-            current = table if isinstance(table, type) and issubclass(table, BaseModel) else None
-    if tables == ["trials"]:
-        where = "[[trials]]" + ("" if row is None else f" {row}")
-    else:
-        where = f"[{'.'.join(tables)}]" if tables else ""
-    return " ".join(p for p in (where, key) if p)
-
-
-def _table(model: type[BaseModel] | None, name: str) -> type | None:
-    """The model of table `name` of `model` (``dict`` for a free-form table), None for a key."""
-    field = None if model is None else model.model_fields.get(name)
-    return None if field is None else _model_in(field.annotation)
-
-
-def _model_in(annotation: Any) -> type | None:
-    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
-        return annotation
-    if get_origin(annotation) is dict:
-        return dict
-    for arg in get_args(annotation):
-        found = _model_in(arg)
-        if found is not None:
-            return found
-    return None

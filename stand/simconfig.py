@@ -3,11 +3,16 @@ which `gyrostand simulate --help` shows, so the options and their documentation 
 
 from __future__ import annotations
 
+import functools
 import math
+import typing
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gyrostand.stand.physics import rolling_error_rad
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
 
 TIMINGS = ("virtual", "realtime")
 
@@ -144,26 +149,85 @@ class SimConfig:
     stand: StandParams = field(default_factory=StandParams)
 
     def __post_init__(self) -> None:
+        problems = self.problems()
+        if problems:
+            raise SimConfigError(problems)
+
+    def problems(self) -> list[tuple[str, str]]:
+        """Every inconsistent value, as (dotted field path, message)."""
         positive = {
             "speedup": self.speedup,
             "heading_rate_hz": self.heading_rate_hz,
             "status_rate_hz": self.status_rate_hz,
-            "undamped_period_s": self.compass.undamped_period_s,
-            "C_gcm2s2": self.compass.C_gcm2s2,
-            "corr_mu_per_s": self.noise.corr_mu_per_s,
-            "spurious_period_s": self.noise.spurious_period_s,
+            "compass.undamped_period_s": self.compass.undamped_period_s,
+            "compass.C_gcm2s2": self.compass.C_gcm2s2,
+            "noise.corr_mu_per_s": self.noise.corr_mu_per_s,
+            "noise.spurious_period_s": self.noise.spurious_period_s,
         }
-        for name, value in positive.items():
-            if not (value > 0 and math.isfinite(value)):
-                raise ValueError(f"{name} must be a positive number, got {value}")
+        found = [
+            (name, f"must be a positive number, got {value}")
+            for name, value in positive.items()
+            if not (value > 0 and math.isfinite(value))
+        ]
         if self.timing not in TIMINGS:
-            raise ValueError(f"timing must be one of {', '.join(TIMINGS)}, got {self.timing!r}")
-        if self.timing == "virtual" and self.speedup != 1.0:
-            raise ValueError("speedup applies only with timing realtime")
+            found.append(("timing", f"must be one of {', '.join(TIMINGS)}, got {self.timing!r}"))
+        elif self.timing == "virtual" and self.speedup != 1.0:
+            found.append(("speedup", "applies only with timing realtime"))
         if not self.compass.damping_ratio >= 0.0:
-            raise ValueError("damping_ratio must be >= 0")
-        if self.compass.undamped_period_s * self.heading_rate_hz < 20:
-            raise ValueError("undamped_period_s must span at least 20 heading intervals")
+            found.append(("compass.damping_ratio", "must be >= 0"))
+        if not self.compass.undamped_period_s * self.heading_rate_hz >= 20:
+            found.append(("compass.undamped_period_s", "must span at least 20 heading intervals"))
         for f in fields(FaultParams):
             if f.name.endswith("_rate") and not 0.0 <= getattr(self.faults, f.name) <= 1.0:
-                raise ValueError(f"{f.name} must be a probability in [0, 1]")
+                found.append((f"faults.{f.name}", "must be a probability in [0, 1]"))
+        return found
+
+
+class SimConfigError(ValueError):
+    """An inconsistent SimConfig; `problems` as (dotted field path, message), the text names
+    each field as the command-line option does."""
+
+    def __init__(self, problems: list[tuple[str, str]]) -> None:
+        self.problems = problems
+        super().__init__("; ".join(f"{path.split('.')[-1]} {text}" for path, text in problems))
+
+
+_TABLES = {
+    "compass": CompassParams,
+    "noise": NoiseParams,
+    "faults": FaultParams,
+    "stand": StandParams,
+}
+
+
+@functools.cache
+def simulator_tables() -> type[BaseModel]:
+    """The pydantic model of a plan's `[bus.simulator]` overrides (tables compass, noise,
+    faults, stand and the scalar fields of SimConfig), generated from the dataclasses: their
+    defaults, and their help texts as descriptions; unknown keys refused."""
+    from pydantic import Field, create_model
+
+    from gyrostand.stand.tables import TABLE_CONFIG
+
+    def model(cls: type, name: str, doc: str, **nested: Any) -> type[BaseModel]:
+        hints = typing.get_type_hints(cls)
+        scalars: dict[str, Any] = {
+            f.name: (hints[f.name], Field(f.default, description=f.metadata["help"]))
+            for f in fields(cls)
+            if f.name not in nested
+        }
+        return create_model(name, __config__=TABLE_CONFIG, __doc__=doc, **scalars, **nested)
+
+    nested: dict[str, Any] = {}
+    for name, cls in _TABLES.items():
+        table = model(cls, f"Simulator{name.title()}", cls.__doc__ or name)
+        nested[name] = (table, Field(default_factory=table))
+    return model(SimConfig, "SimulatorTables", "[bus.simulator]: the simulated stand.", **nested)
+
+
+def simulator_config(tables: BaseModel, **base: Any) -> SimConfig:
+    """The SimConfig of validated `simulator_tables()` over the defaults and `base` (the plan's
+    [bus] speedup, seed, timing; keys set in the tables win). SimConfigError: inconsistent."""
+    given = tables.model_dump(exclude_unset=True)
+    parts = {name: cls(**given.pop(name, {})) for name, cls in _TABLES.items()}
+    return SimConfig(**{**base, **given, **parts})

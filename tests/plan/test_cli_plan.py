@@ -228,4 +228,5 @@ def test_schema_describes_every_field(schema: dict[str, Any]) -> None:
     assert "Earth rotation rate" in site["earth_rate_rad_s"]["description"]
     for name, table in schema["$defs"].items():
         for key, field in table.get("properties", {}).items():
-            assert field.get("description"), f"{name}.{key} has no description"
+            if "$ref" not in field:  # a subtable: its own definition is described
+                assert field.get("description"), f"{name}.{key} has no description"
