@@ -5,7 +5,8 @@ The frames are a real campaign stream of the simulated stand (examples/paper.tom
 consumer they are first queued on a python-can `virtual` bus (untimed), then the consumer's
 `can.Notifier` drains that backlog and the clock runs until the consumer has the last frame.
 The process is pinned to one CPU. Targets: >= 87 000 frames/s (ten times a saturated 1 Mbit/s
-bus), zero loss, at least twice `can.Logger`.
+bus), zero loss, at least twice `can.Logger`. Last, the raw BLF writers alone (ours, python-can's)
+on the same frames, without a bus.
 """
 
 from __future__ import annotations
@@ -27,7 +28,10 @@ from gyrostand.acquisition.runner import _NoCommands
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.frames.logfile import BatchBLFWriter
 from gyrostand.stand.protocol import Codec
+
+DRAIN = 50_000  # frames drained (and logged) at a time
 
 
 def loaded_bus(frames: list[can.Message]) -> tuple[can.BusABC, can.BusABC]:
@@ -54,7 +58,7 @@ def ours(frames: list[can.Message], tmp: Path, raw_log: bool) -> tuple[float, in
     notifier = can.Notifier(rx, [recorder], timeout=0.05)
     position = 0
     while position < len(frames):
-        msgs = recorder.drain(50_000, 0.5)
+        msgs = recorder.drain(DRAIN, 0.5)
         if not msgs:
             break
         raw = RawFrames.from_messages(position, msgs)
@@ -85,6 +89,24 @@ def python_can_logger(frames: list[can.Message], path: Path) -> tuple[float, int
     return seconds, stored, len(frames) - stored
 
 
+def writers_alone(frames: list[can.Message], tmp: Path) -> tuple[float, float]:
+    """Frames/s of the raw BLF writers alone, no bus: ours on drain-sized batches (what the raw
+    log adds to `ours`), python-can's BLFWriter frame by frame."""
+    batches = [
+        RawFrames.from_messages(i, frames[i : i + DRAIN]) for i in range(0, len(frames), DRAIN)
+    ]
+    t0 = time.perf_counter()
+    with BatchBLFWriter(tmp / "alone-ours.blf") as ours_writer:
+        for raw in batches:
+            ours_writer.write_frames(raw)
+    t1 = time.perf_counter()
+    with can.BLFWriter(tmp / "alone-python-can.blf") as theirs:
+        for msg in frames:
+            theirs.on_message_received(msg)
+    t2 = time.perf_counter()
+    return len(frames) / (t1 - t0), len(frames) / (t2 - t1)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=300_000)
@@ -102,9 +124,14 @@ def main() -> None:
             "can.Logger -> .db (SqliteWriter)": python_can_logger(frames, tmp / "logger.db"),
             "can.Logger -> .blf (BLFWriter)": python_can_logger(frames, tmp / "logger.blf"),
         }
+        ours_alone, theirs_alone = writers_alone(frames, tmp)
     width = max(map(len, rows))
     for name, (seconds, done, lost) in rows.items():
         print(f"{name:<{width}}  {done / seconds:>10,.0f} frames/s  {lost:>8,} lost")
+    print(
+        f"raw BLF writer alone: BatchBLFWriter {ours_alone:,.0f} frames/s "
+        f"(batches of {DRAIN:,}), can.BLFWriter {theirs_alone:,.0f} frames/s"
+    )
     ours_rate = rows["gyrostand (decode, check, aggregate, SQLite + raw BLF)"]
     rate = ours_rate[1] / ours_rate[0]
     best_logger = max(done / s for s, done, _ in list(rows.values())[2:])

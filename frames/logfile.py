@@ -1,15 +1,14 @@
 """Raw CAN log files: writing them during acquisition, reading them back for replay.
 
 ASC and other formats go through python-can's writers and readers. BLF, the default, is written
-by `BatchBLFWriter` (python-can's BLFWriter plus a method that packs a whole batch of frames with
-numpy: python-can packs one frame per call, ~6 us, more than the rest of the ingest path together)
-and read by `read_blf`, a numpy parser of its CAN_MESSAGE objects (python-can's BLFReader builds
-one `can.Message` per frame, ~10^5 frames/s: a 10^7-frame replay would take minutes).
+by `BatchBLFWriter` and read by `read_blf`, both ours (see `BatchBLFWriter` for why).
 """
 
 from __future__ import annotations
 
+import datetime
 import hashlib
+import io
 import itertools
 import struct
 import zlib
@@ -18,6 +17,7 @@ from pathlib import Path
 
 import can
 import numpy as np
+from can.io.generic import BinaryIOMessageWriter, MessageWriter
 
 from gyrostand.frames.batch import RawFrames
 
@@ -30,13 +30,29 @@ def sha256_of(path: Path) -> str:
         return hashlib.file_digest(f, "sha256").hexdigest()
 
 
-# BLF layout (the same constants python-can's can/io/blf.py uses)
+# BLF (Vector's Binary Logging Format), the part we write and read. python-can's can/io/blf.py is
+# the reference implementation: for the same frames our files are byte for byte those of its
+# BLFWriter (4.6), pinned by tests/acquisition/data/reference*.blf.
+# "LOGG", header size, application id/major/minor/build, BLF major/minor/build/patch, file size,
+# uncompressed size, object count, objects read, start and stop time (SYSTEMTIME, UTC)
 _FILE_HEADER = struct.Struct("<4sLBBBBBBBBQQLL8H8H")
-_OBJ_HEADER_BASE = struct.Struct("<4sHHLL")
-_LOG_CONTAINER = struct.Struct("<H6xL4x")
-_LOG_CONTAINER_TYPE = 10
-_CAN_MESSAGE = 1
-_ZLIB_DEFLATE = 2
+_FILE_HEADER_SIZE = 144  # the file header, zero-padded to this size
+_APPLICATION_ID = 5  # application id in the file header (python-can's)
+_BLF_VERSION = (2, 6, 8, 1)  # BLF major, minor, build, patch in the file header (python-can's)
+_SYSTEMTIME_EPOCH = 631152000  # 1990-01-01: earlier start/stop times are stored as zeros
+_OBJ_HEADER_BASE = struct.Struct("<4sHHLL")  # object: "LOBJ", header size, version, size, type
+_LOG_CONTAINER = struct.Struct("<H6xL4x")  # LOG_CONTAINER: compression method, uncompressed size
+_LOG_CONTAINER_TYPE = 10  # object type of a LOG_CONTAINER (a block of other objects)
+_CONTAINER_SIZE = 128 * 1024  # uncompressed bytes per LOG_CONTAINER (python-can's default)
+_NO_COMPRESSION = 0  # LOG_CONTAINER method: stored as is
+_ZLIB_DEFLATE = 2  # LOG_CONTAINER method: zlib
+_CAN_MESSAGE = 1  # object type of a classic CAN frame (CAN_MESSAGE)
+_CAN_ERROR_EXT = 73  # object type of an error frame (CAN_ERROR_EXT)
+_CHANNEL = 1  # BLF channel of every frame we write (BLF counts channels from 1)
+_CAN_MSG_EXT = 0x80000000  # identifier bit: 29-bit identifier
+_REMOTE_FLAG = 0x80  # CAN_MESSAGE flags bit: remote frame
+_TIME_TEN_MICS = 0x1  # object header v1 flags: timestamp in 10 us units
+_TIME_ONE_NANS = 0x2  # object header v1 flags: timestamp in ns units (what we write)
 # one CAN_MESSAGE object: base header (16), header v1 (16: flags, client, version, timestamp),
 # channel u16, flags u8, dlc u8, id u32, data 8
 _CAN_MESSAGE_DTYPE = np.dtype(
@@ -57,10 +73,11 @@ _CAN_MESSAGE_DTYPE = np.dtype(
         ("data", "u1", (8,)),
     ]
 )
-_CAN_MSG_EXT = 0x80000000
-_REMOTE_FLAG = 0x80
-_TIME_TEN_MICS = 0x1
-_TIME_ONE_NANS = 0x2
+_OBJ_HEADER_V1 = struct.Struct("<LHHQ")  # object header v1: flags, client, version, timestamp
+_OBJ_HEADER_SIZE = _OBJ_HEADER_BASE.size + _OBJ_HEADER_V1.size  # of every object we write
+# CAN_ERROR_EXT body: channel, length, flags, ecc, position, dlc, frame length, id, extended
+# flags, data 8
+_CAN_ERROR_EXT_BODY = struct.Struct("<HHLBBBxLLH2x8s")
 
 
 def read_raw_frames(path: Path, chunk: int = CHUNK_FRAMES) -> Iterator[RawFrames]:
@@ -81,9 +98,10 @@ def read_raw_frames(path: Path, chunk: int = CHUNK_FRAMES) -> Iterator[RawFrames
 
 def read_blf(path: Path, chunk: int = CHUNK_FRAMES) -> Iterator[RawFrames]:
     """BLF frames as arrays. Runs of CAN_MESSAGE objects are viewed with one numpy dtype; any
-    other object (error frames, CAN FD, markers) goes through python-can's own object parser,
-    so identifiers, flags and payloads are those `can.BLFReader` gives (timestamps are relative
-    to the file start: replay times by the stand time inside the frames)."""
+    other objects (error frames, CAN FD, markers) go through python-can's public `can.BLFReader`,
+    so identifiers, flags and payloads are those it gives (timestamps are relative to the file
+    start: replay times by the stand time inside the frames). A file whose writer was killed is
+    read up to its last complete container."""
     start = 0
     pending: list[RawFrames] = []
     pending_n = 0
@@ -127,9 +145,9 @@ def _containers(path: Path) -> Iterator[bytes]:
                 return  # a truncated tail (e.g. the writer was killed)
             body = f.read(obj_size - _OBJ_HEADER_BASE.size)
             f.seek(obj_size % 4, 1)
-            if obj_type != _LOG_CONTAINER_TYPE or len(body) < obj_size - _OBJ_HEADER_BASE.size:
-                if len(body) < obj_size - _OBJ_HEADER_BASE.size:
-                    return
+            if len(body) < obj_size - _OBJ_HEADER_BASE.size:
+                return
+            if obj_type != _LOG_CONTAINER_TYPE:
                 continue
             method, _ = _LOG_CONTAINER.unpack_from(body)
             data = body[_LOG_CONTAINER.size :]
@@ -155,6 +173,16 @@ def _blf_parts(path: Path) -> Iterator[RawFrames]:
             if frames:
                 yield RawFrames.from_messages(0, frames)
         tail = data[pos:]
+
+
+def _is_can_message(signature: bytes, version: int, obj_size: int, obj_type: int) -> bool:
+    """An object header of the CAN_MESSAGE layout `_CAN_MESSAGE_DTYPE` views."""
+    return (
+        signature == b"LOBJ"
+        and obj_type == _CAN_MESSAGE
+        and obj_size == _CAN_MESSAGE_DTYPE.itemsize
+        and version == 1
+    )
 
 
 def _can_message_run(data: bytes, pos: int) -> int:
@@ -190,66 +218,190 @@ def _frames_of(objs: np.ndarray) -> RawFrames:
 
 
 def _other_objects(data: bytes, pos: int) -> tuple[int, list[can.Message]]:
-    """Parse the one object at pos with python-can (whatever its type); bytes consumed (0 when
-    it is incomplete) and the frames it holds."""
-    signature, _, _, obj_size, _ = _OBJ_HEADER_BASE.unpack_from(data, pos)
-    if signature != b"LOBJ":
-        nxt = data.find(b"LOBJ", pos + 1)
-        return (nxt - pos if nxt > 0 else 0), []
-    end = pos + obj_size
-    if end > len(data):
+    """The complete objects from pos up to the next CAN_MESSAGE: bytes consumed (0 when the
+    first is incomplete) and the frames python-can's public BLFReader finds in them (read from
+    an in-memory BLF file of one uncompressed container). Bytes that are not an object are
+    skipped up to the next "LOBJ"."""
+    end = pos
+    while end + _OBJ_HEADER_BASE.size <= len(data):
+        signature, _, version, obj_size, obj_type = _OBJ_HEADER_BASE.unpack_from(data, end)
+        if end > pos and _is_can_message(signature, version, obj_size, obj_type):
+            break
+        if signature != b"LOBJ" or obj_size < _OBJ_HEADER_BASE.size:
+            if end > pos:
+                break
+            nxt = data.find(b"LOBJ", pos + 1)
+            return (nxt - pos if nxt > 0 else 0), []
+        if end + obj_size > len(data):
+            break  # it continues in the next container
+        end += obj_size + obj_size % 4
+    if end == pos:
         return 0, []
-    # python-can's per-object parser, without opening the file again: it needs only these two
-    # attributes of a reader
-    reader = can.BLFReader.__new__(can.BLFReader)
-    reader._pos, reader.start_timestamp = 0, 0.0  # type: ignore[attr-defined]
-    frames = list(reader._parse_data(data[pos:end]))  # type: ignore[attr-defined]
-    return obj_size + (obj_size % 4), frames
+    container = _container_object(_NO_COMPRESSION, data[pos:end], end - pos)
+    size = _FILE_HEADER_SIZE + len(container)
+    blf = _file_header(size, size, 0, None, None) + container
+    return end - pos, list(can.BLFReader(io.BytesIO(blf)))
 
 
-class BatchBLFWriter(can.BLFWriter):
-    """python-can's BLFWriter (same file header, containers, compression and closing) with
-    `write_frames`, which adds a whole `RawFrames` batch at once."""
+def _systemtime(t: float | None) -> tuple[int, ...]:
+    """A Unix time as the file header's SYSTEMTIME (UTC, ms); zeros for none or not a date."""
+    if t is None or t < _SYSTEMTIME_EPOCH:
+        return (0,) * 8
+    d = datetime.datetime.fromtimestamp(round(t, 3), tz=datetime.UTC)
+    return (
+        d.year,
+        d.month,
+        d.isoweekday() % 7,
+        d.day,
+        d.hour,
+        d.minute,
+        d.second,
+        d.microsecond // 1000,
+    )
+
+
+def _file_header(
+    file_size: int, uncompressed: int, objects: int, start: float | None, stop: float | None
+) -> bytes:
+    """The file header, padded to its 144 bytes (uncompressed: size with containers inflated)."""
+    header = _FILE_HEADER.pack(
+        b"LOGG",
+        _FILE_HEADER_SIZE,
+        _APPLICATION_ID,
+        0,
+        0,
+        0,
+        *_BLF_VERSION,
+        file_size,
+        uncompressed,
+        objects,
+        0,
+        *_systemtime(start),
+        *_systemtime(stop),
+    )
+    return header.ljust(_FILE_HEADER_SIZE, b"\0")
+
+
+def _container_object(method: int, payload: bytes, uncompressed: int) -> bytes:
+    """A LOG_CONTAINER object holding `payload` (`uncompressed` bytes once inflated), padded."""
+    obj_size = _OBJ_HEADER_BASE.size + _LOG_CONTAINER.size + len(payload)
+    return b"".join(
+        (
+            _OBJ_HEADER_BASE.pack(b"LOBJ", _OBJ_HEADER_BASE.size, 1, obj_size, _LOG_CONTAINER_TYPE),
+            _LOG_CONTAINER.pack(method, uncompressed),
+            payload,
+            bytes(obj_size % 4),
+        )
+    )
+
+
+def _error_object(timestamp_ns: int, can_id: int, payload: bytes) -> bytes:
+    """A CAN_ERROR_EXT object (an error frame) on our channel, dlc the payload length."""
+    body = _CAN_ERROR_EXT_BODY.pack(_CHANNEL, 0, 0, 0, 0, len(payload), 0, can_id, 0, payload)
+    size = _OBJ_HEADER_SIZE + len(body)
+    return (
+        _OBJ_HEADER_BASE.pack(b"LOBJ", _OBJ_HEADER_SIZE, 1, size, _CAN_ERROR_EXT)
+        + _OBJ_HEADER_V1.pack(_TIME_ONE_NANS, 0, 0, timestamp_ns)
+        + body
+    )
+
+
+class BatchBLFWriter(BinaryIOMessageWriter):
+    """A BLF log written a whole `RawFrames` batch at a time: classic CAN frames and error
+    frames, all on channel 1, as received frames (what `can.BLFWriter` writes for such frames).
+
+    Why ours rather than `can.BLFWriter`: it packs one frame per call, ~6 us a frame, more than
+    the rest of the ingest path together; here a batch is one numpy array. Its reader,
+    `can.BLFReader`, builds one `can.Message` per frame (~10^5 frames/s: a 10^7-frame replay
+    would take minutes), hence `read_blf`. Extending python-can's classes meant using their
+    private buffer and parser, which any python-can release may change (we pin no upper bound):
+    this module owns the format and uses python-can only through its public API.
+
+    Every container a batch fills reaches the operating system before `write_frames` returns:
+    a killed process leaves a file readable up to its last complete container. `stop` writes the
+    last container and the final file header (size, object count, start and stop times)."""
+
+    def __init__(self, file: Path, *, max_container_size: int = _CONTAINER_SIZE) -> None:
+        super().__init__(file, mode="wb")
+        self.max_container_size = max_container_size
+        self.object_count = 0
+        self.uncompressed_size = _FILE_HEADER_SIZE
+        self.start_timestamp: float | None = None
+        self.stop_timestamp: float | None = None
+        self._pending = bytearray()  # objects not yet in a container
+        self.file.write(_file_header(_FILE_HEADER_SIZE, _FILE_HEADER_SIZE, 0, None, None))
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """One frame (as a batch: at most 8 data bytes)."""
+        self.write_frames(RawFrames.from_messages(0, [msg]))
 
     def write_frames(self, raw: RawFrames) -> None:
-        """Append every frame of the batch, in order (error frames through python-can)."""
-        errors = np.flatnonzero(raw.is_error).tolist()
-        start = 0
-        for row in [*errors, len(raw)]:
-            if row > start:
-                self._add_can_messages(raw, start, row)
-            if row < len(raw):
-                self.on_message_received(raw.message(row))
-            start = row + 1
-
-    def _add_can_messages(self, raw: RawFrames, lo: int, hi: int) -> None:
-        ts = raw.timestamp[lo:hi]
-        if self.start_timestamp is None:  # as BLFWriter._add_object: ms precision
+        """Append every frame of the batch, in order; write the containers it fills."""
+        n = len(raw)
+        if n == 0:
+            return
+        ts = raw.timestamp
+        if self.start_timestamp is None:  # ms precision, as the header keeps it
             self.start_timestamp = int(float(ts[0]) * 1000) / 1000
         self.stop_timestamp = float(ts[-1])
-        objs = np.zeros(hi - lo, _CAN_MESSAGE_DTYPE)
+        ns = np.maximum(((ts - self.start_timestamp) * 1e9).astype(np.int64), 0)
+        can_id = raw.arbitration_id | np.where(
+            raw.is_extended, np.uint32(_CAN_MSG_EXT), np.uint32(0)
+        )
+        objs = np.zeros(n, _CAN_MESSAGE_DTYPE)
         objs["signature"] = b"LOBJ"
-        objs["header_size"] = 32
+        objs["header_size"] = _OBJ_HEADER_SIZE
         objs["header_version"] = 1
         objs["obj_size"] = _CAN_MESSAGE_DTYPE.itemsize
         objs["obj_type"] = _CAN_MESSAGE
         objs["flags"] = _TIME_ONE_NANS
-        objs["timestamp"] = np.maximum(((ts - self.start_timestamp) * 1e9).astype(np.int64), 0)
-        objs["channel"] = self.channel
-        objs["msg_flags"] = np.where(raw.is_remote[lo:hi], _REMOTE_FLAG, 0)
-        objs["dlc"] = raw.dlc[lo:hi]
-        ext = np.where(raw.is_extended[lo:hi], np.uint32(_CAN_MSG_EXT), np.uint32(0))
-        objs["can_id"] = raw.arbitration_id[lo:hi] | ext
-        objs["data"] = raw.data[lo:hi]
-        data = objs.tobytes()
-        self._buffer.append(data)
-        self._buffer_size += len(data)
-        self.object_count += hi - lo
-        while self._buffer_size >= self.max_container_size:
-            self._flush()
+        objs["timestamp"] = ns
+        objs["channel"] = _CHANNEL
+        objs["msg_flags"] = np.where(raw.is_remote, _REMOTE_FLAG, 0)
+        objs["dlc"] = raw.dlc
+        objs["can_id"] = can_id
+        objs["data"] = raw.data
+        lo = 0
+        for row in np.flatnonzero(raw.is_error).tolist():  # rare: one struct each
+            payload = raw.data[row, : int(raw.dlc[row])].tobytes()
+            self._pending += objs[lo:row].tobytes()
+            self._pending += _error_object(int(ns[row]), int(can_id[row]), payload)
+            lo = row + 1
+        self._pending += objs[lo:].tobytes()
+        self.object_count += n
+        if len(self._pending) >= self.max_container_size:
+            while len(self._pending) >= self.max_container_size:
+                self._write_container(self.max_container_size)
+            self.file.flush()
+
+    def _write_container(self, size: int) -> None:
+        """The first `size` pending bytes as one zlib LOG_CONTAINER (objects may span two)."""
+        chunk = bytes(self._pending[:size])
+        del self._pending[:size]
+        self.file.write(_container_object(_ZLIB_DEFLATE, zlib.compress(chunk), len(chunk)))
+        self.uncompressed_size += _OBJ_HEADER_BASE.size + _LOG_CONTAINER.size + len(chunk)
+
+    def stop(self) -> None:
+        """Write the last container and the final file header; close the file."""
+        if self.file.closed:
+            return
+        if self._pending:
+            self._write_container(len(self._pending))
+        file_size = self.file.tell()
+        self.file.seek(0)
+        self.file.write(
+            _file_header(
+                file_size,
+                self.uncompressed_size,
+                self.object_count,
+                self.start_timestamp,
+                self.stop_timestamp,
+            )
+        )
+        super().stop()
 
 
-def raw_log_writer(path: Path) -> can.io.generic.MessageWriter:
+def raw_log_writer(path: Path) -> MessageWriter:
     """The writer for a raw log: BatchBLFWriter for .blf, python-can's choice otherwise."""
     if path.suffix.lower() == ".blf":
         return BatchBLFWriter(path)
