@@ -7,17 +7,22 @@ scripted commands and the stand's acks are recorded too, as a bus capture would 
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 import can
 
 from gyrostand.stand.engine import StandEngine
 from gyrostand.stand.protocol import AckFrame, Codec
 from gyrostand.stand.simconfig import SimConfig
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
 
 LOG_SUFFIXES = (".blf", ".asc")
 _CHUNK_S = 60.0  # stand seconds generated per batch
@@ -60,25 +65,45 @@ class Step:
 
 def load_schedule(path: Path) -> list[Step]:
     """Steps from a TOML file: `[[step]]` tables with action, duration_s and, for rock,
-    direction_deg, amplitude_cm, period_s."""
+    direction_deg, amplitude_cm, period_s. ScheduleError lists every problem with its path
+    (``[[step]] 2 duration_s: must be >= 0``)."""
+    from pydantic import ValidationError
+
+    from gyrostand.stand.tables import problems
+
     try:
         document = tomllib.loads(path.read_text())
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise ScheduleError(f"cannot read schedule {path}: {exc}") from None
-    steps = document.get("step")
-    if not isinstance(steps, list) or not steps:
-        raise ScheduleError(f"{path}: no [[step]] tables")
-    known = {"action", "duration_s", "direction_deg", "amplitude_cm", "period_s"}
-    out = []
-    for number, table in enumerate(steps, start=1):
-        unknown = set(table) - known
-        if unknown:
-            raise ScheduleError(f"{path}: step {number}: unknown keys {sorted(unknown)}")
-        try:
-            out.append(Step(**table))
-        except TypeError:
-            raise ScheduleError(f"{path}: step {number}: needs action and duration_s") from None
-    return out
+    model = _schedule_model()
+    try:
+        schedule = model.model_validate(document)
+    except ValidationError as exc:
+        found = problems(model, exc.errors(include_url=False))
+        raise ScheduleError(f"{path}: " + "; ".join(found)) from None
+    return [Step(**table.model_dump()) for table in schedule.step]  # type: ignore[attr-defined]
+
+
+@functools.cache
+def _schedule_model() -> type[BaseModel]:
+    """The schedule file's pydantic model (built on first use: `simulate --help` stays quick)."""
+    from pydantic import BaseModel, Field
+
+    from gyrostand.stand.tables import TABLE_CONFIG
+
+    class StepTable(BaseModel):
+        model_config = TABLE_CONFIG
+        action: Literal["still", "rock"]
+        duration_s: float = Field(ge=0)
+        direction_deg: float = 0.0
+        amplitude_cm: float = 0.0
+        period_s: float = 0.0
+
+    class Schedule(BaseModel):
+        model_config = TABLE_CONFIG
+        step: list[StepTable] = Field(min_length=1)
+
+    return Schedule
 
 
 @dataclass(frozen=True)
