@@ -16,6 +16,7 @@ faster: 12.5 us per reading against 21.7 us for filterpy's update (3 states, num
 import math
 
 import numpy as np
+
 from gyrostand.analysis.angles import about
 
 

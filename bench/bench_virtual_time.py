@@ -10,7 +10,6 @@ Run: .venv/bin/python bench/bench_virtual_time.py"""
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import sqlite3
 import subprocess
@@ -27,7 +26,7 @@ from gyrostand.acquisition.runner import run_live
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.frames.logfile import read_raw_frames
-from gyrostand.plan.model import load_plan
+from gyrostand.plan.model import load_plan, revised
 
 ROOT = Path(__file__).resolve().parents[1]
 INGEST_FRAMES = 300_000  # bench_ingest.py's default
@@ -37,7 +36,7 @@ def campaign(folder: Path) -> tuple[float, int, list[tuple]]:
     """Run the paper plan into `folder`: (wall seconds of run_live, frames, observations)."""
     plan = load_plan(ROOT / "examples" / "paper.toml")
     db = folder / "paper.sqlite"
-    plan = dataclasses.replace(plan, database=str(db), raw_log_dir=str(folder / "raw"))
+    plan = revised(plan, campaign={"database": str(db), "raw_log_dir": str(folder / "raw")})
     store = CampaignStore.create(open_database(sqlite_url(db)), plan)
     start = time.perf_counter()
     result = run_live(plan, store, quiet=True)

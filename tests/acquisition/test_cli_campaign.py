@@ -81,11 +81,14 @@ def statuses(db: Path) -> tuple[str, list[tuple]]:
 @pytest.mark.parametrize(
     ("edit", "expected"),
     [
-        (lambda t: t.replace("n_obs = 3", "n_obs = 0"), "campaign.n_obs: must be >= 2"),
-        (lambda t: t.replace("period_s = 5.0", "period_s = 0"), "trials[2].period_s: must be > 0"),
+        (lambda t: t.replace("n_obs = 3", "n_obs = 0"), "[campaign] n_obs: must be >= 2"),
+        (
+            lambda t: t.replace("period_s = 5.0", "period_s = 0"),
+            "[[trials]] 2 period_s: must be > 0",
+        ),
         (lambda t: t + '\n[signals]\nheading = "NOPE.HEADING"\n', "no message 'NOPE'"),
-        (lambda t: t + "\n[bus.simulator.faults]\ndrop = 1\n", "bus.simulator.faults.drop"),
-        (lambda t: t.replace("hold_s = 60.0", "hold_s = -1"), "settle.hold_s: must be >= 0"),
+        (lambda t: t + "\n[bus.simulator.faults]\ndrop = 1\n", "[bus.simulator.faults] drop"),
+        (lambda t: t.replace("hold_s = 60.0", "hold_s = -1"), "[settle] hold_s: must be >= 0"),
     ],
 )
 def test_bad_plan_is_one_clear_error_and_touches_nothing(tmp_path: Path, edit, expected) -> None:

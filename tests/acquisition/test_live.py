@@ -122,7 +122,7 @@ def test_fitted_c_and_t_cover_the_simulators_truth(campaign) -> None:
                 under_deg=series[2],
             )
         )
-    settings = settings_from_plan(plan.text)
+    settings = settings_from_plan(plan)
     analysis = analyze_campaign(trials, settings.constants, q=settings.q, start=settings.start)
     fit = analysis.fit
     t95 = stats.t.ppf(0.975, fit.dof)

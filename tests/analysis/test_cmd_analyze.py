@@ -84,7 +84,9 @@ def test_bad_plan_and_bad_data(tmp_path: Path) -> None:
     plan = tmp_path / "plan.toml"
     plan.write_text(PLAN.replace("h1_gcm2s = 1.55e8", 'h1_gcm2s = "big"'))
     result = runner.invoke(app, ["analyze", "--csv", str(CSV), "--plan", str(plan)])
-    assert result.exit_code == 2 and "[instrument] h1_gcm2s must be a number" in result.stderr
+    assert (
+        result.exit_code == 2 and "[instrument] h1_gcm2s: must be a finite number" in result.stderr
+    )
     data = tmp_path / "trials.csv"
     data.write_text(CSV.read_text().replace("4.64e-4", "0"))
     result = runner.invoke(app, ["analyze", "--csv", str(data)])

@@ -60,19 +60,19 @@ def test_plan_with_missing_keys_is_refused(paper: Path, db_path: Path, tmp_path:
     code, out, err = gyrostand("import", paper, "--plan", plan, "--db", db_path)
     assert code == 2 and out == ""
     assert err == (
-        f"gyrostand: error: {plan}: missing instrument.lp_gcm2s2, site.latitude_deg, "
-        "site.earth_rate_rad_s, site.gravity_cm_s2\n"
+        f"gyrostand: error: {plan}: invalid plan: [instrument] lp_gcm2s2: missing; "
+        "[site] latitude_deg: missing\n"
     )
     plan.write_text("[instrument\n")
     code, _, err = gyrostand("import", paper, "--plan", plan, "--db", db_path)
-    assert code == 2 and err.startswith(f"gyrostand: error: {plan}: not valid TOML")
+    assert code == 2 and err.startswith(f"gyrostand: error: {plan}: invalid plan: TOML syntax")
     plan.write_text(
         (ROOT / "examples" / "paper.toml")
         .read_text()
         .replace("latitude_deg = 46.5", "latitude_deg = -91.0", 1)
     )
     code, _, err = gyrostand("import", paper, "--plan", plan, "--db", db_path)
-    assert code == 2 and "latitude_deg = -91.0 is not a number in (-90, 90)" in err
+    assert code == 2 and "[site] latitude_deg: must be > -90" in err
     assert not db_path.exists()
 
 

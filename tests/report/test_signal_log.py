@@ -170,7 +170,7 @@ def test_cli_span_and_plan(log: Path, tmp_path: Path) -> None:
         (["1", "--signal", "--log", "x.blf"], "not both"),
         (["--signal", "--log", "{log}", "--from", "10", "--to", "5"], "empty stand-time span"),
         (["--signal", "--log", "{log}", "--from", "3850", "--to", "3880"], "too short"),
-        (["--signal", "--log", "{log}", "--plan", "{bad_plan}"], "campaign.n_obs: missing"),
+        (["--signal", "--log", "{log}", "--plan", "{bad_plan}"], "[campaign] n_obs: missing"),
         (["--signal", "--log", "{garbage}"], "0 valid heading frames in the whole log"),
         (["--signal", "--log", "{unknown}"], "cannot read it"),
     ],
