@@ -20,6 +20,7 @@ from gyrostand.db.queries import (
     reference_heading,
     trial_progress,
 )
+from gyrostand.db.session import writer
 from gyrostand.plan.model import Plan
 
 
@@ -27,7 +28,7 @@ class CampaignStore:
     """Writes one campaign's acquisition results (implements `acquisition.engine.Sink`)."""
 
     def __init__(self, sessions: sessionmaker[Session], campaign_id: int) -> None:
-        self.sessions = sessions
+        self.sessions = writer(sessions)
         self.campaign_id = campaign_id
         self._session: Session | None = None
         with sessions() as session:
@@ -62,7 +63,7 @@ class CampaignStore:
             n_obs=plan.n_obs,
             software_version=SOFTWARE_VERSION,
         )
-        with sessions.begin() as session:
+        with writer(sessions).begin() as session:
             campaign = new_campaign(session, header, status="running", source=source)
             for t in plan.trials:
                 session.add(

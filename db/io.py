@@ -32,6 +32,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand.db.models import TRIAL_ROLES, Campaign, Event, Observation, Series, Trial
 from gyrostand.db.queries import CampaignHeader, new_campaign
+from gyrostand.db.session import writer
 
 COMMON_COLUMNS = ("trial", "role", "direction_deg", "amplitude_cm", "period_s")
 FORM_COLUMNS = {
@@ -530,7 +531,7 @@ def import_file(sessions: sessionmaker[Session], path: Path, metadata: Mapping[s
     campaign's id. Raises MetadataError or ImportFileError (the database is then untouched)."""
     check_metadata(metadata)
     data = read_import_file(path)
-    with sessions.begin() as session:
+    with writer(sessions).begin() as session:
         return store_import(session, data, metadata).id
 
 

@@ -19,6 +19,15 @@ from sqlalchemy.orm import Session, sessionmaker
 
 MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
 BUSY_TIMEOUT_MS = 10_000
+IMMEDIATE = "gyrostand_begin_immediate"  # execution option: SQLite write transactions
+
+
+def writer(sessions: sessionmaker[Session]) -> sessionmaker[Session]:
+    """The same database's sessions for transactions that write: on SQLite they BEGIN IMMEDIATE,
+    so processes writing one file at once (two stands, one lab file) queue instead of failing.
+    Readers keep deferred transactions and never hold up a writer (WAL)."""
+    engine = sessions.kw["bind"]
+    return sessionmaker(engine.execution_options(**{IMMEDIATE: True}), expire_on_commit=False)
 
 
 class DatabaseVersionError(Exception):
@@ -87,7 +96,11 @@ def _configure_sqlite(engine: Engine) -> None:
 
     @event.listens_for(engine, "begin")
     def _on_begin(connection: Connection) -> None:
-        connection.exec_driver_sql("BEGIN")
+        # A writer takes the write lock at BEGIN and so waits (busy_timeout) for another writer;
+        # a deferred BEGIN that later writes gets SQLITE_BUSY at once when another process
+        # committed in between (no busy wait for that case: "database is locked").
+        immediate = connection.get_execution_options().get(IMMEDIATE, False)
+        connection.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")
 
 
 def _enable_wal(engine: Engine) -> None:
@@ -105,9 +118,12 @@ def migrate(engine: Engine, *, upgrade: bool, script_location: Path = MIGRATIONS
     config = alembic_config(script_location)
     script = ScriptDirectory.from_config(config)
     heads = set(script.get_heads())
-    with engine.begin() as connection:
+    with engine.begin() as connection:  # the common case, a current schema: read only
+        if set(MigrationContext.configure(connection).get_current_heads()) == heads:
+            return
+    with engine.execution_options(**{IMMEDIATE: True}).begin() as connection:
         current = set(MigrationContext.configure(connection).get_current_heads())
-        if current == heads:
+        if current == heads:  # another process migrated while this one waited for the lock
             return
         where = engine.url.render_as_string(hide_password=True)
         if not current:
