@@ -20,3 +20,13 @@ def test_demo_plan_is_the_paper_campaign() -> None:
         (31.0, 23.5, 6.2, "control"),
         (346.0, 17.8, 5.5, "control"),
     ]
+
+
+def test_examples_are_plain_files_and_the_demo_plan_is_the_example() -> None:
+    """examples/ can be copied anywhere (no symlinks); the packaged demo plan is that file."""
+    from importlib.resources import files
+
+    examples = Path(__file__).resolve().parents[2] / "examples"
+    assert not [p.name for p in examples.iterdir() if p.is_symlink()]
+    packaged = (files("gyrostand") / "plans" / "paper.toml").read_text()
+    assert packaged == (examples / "paper.toml").read_text()
