@@ -6,6 +6,7 @@ Live and replay share everything downstream of the frames: `BatchDecoder` -> `En
 from __future__ import annotations
 
 import itertools
+import os
 import signal
 import threading
 import time
@@ -280,8 +281,10 @@ def replay(plan: Plan, sessions: sessionmaker[Session], log: Path) -> RunResult:
 
 
 def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Plan, CampaignStore]:
-    """The plan stored with a campaign and a store to continue it (trials acquired but not
-    marked completed are completed first: `CampaignStore.complete_acquired`)."""
+    """The plan stored with a campaign and a store to continue it, holding the campaign's lease
+    (CampaignBusy while another process acquires into it). A campaign still marked running was
+    left by a process that is gone: an "interrupted" event says so; the resume is an event; trials
+    acquired but not marked completed are completed (`CampaignStore.complete_acquired`)."""
     from gyrostand.plan.model import parse_plan
 
     with sessions() as session:
@@ -290,5 +293,15 @@ def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Pla
             raise LookupError(f"no campaign {campaign_id} in the database")
         text = campaign.plan_toml
     plan, store = parse_plan(text), CampaignStore(sessions, campaign_id)
+    with store.sessions() as session:  # read under the lease: nobody else is running it now
+        left_running = session.get_one(Campaign, campaign_id).status == "running"
+    if left_running:
+        store.event(
+            "interrupted",
+            "warning",
+            "the previous run ended without closing the campaign (killed or crashed); "
+            "what it committed is kept",
+        )
+    store.event("resume", "info", f"resumed by process {os.getpid()}")
     store.complete_acquired()
     return plan, store

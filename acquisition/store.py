@@ -13,6 +13,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from gyrostand import SOFTWARE_VERSION
 from gyrostand.acquisition.engine import Measured, ObservationResult, TrialState
 from gyrostand.analysis.settle import SettleOutcome
+from gyrostand.db.lease import take_lease
 from gyrostand.db.models import Campaign, Event, Observation, Series, Trial
 from gyrostand.db.queries import (
     CampaignHeader,
@@ -28,6 +29,7 @@ class CampaignStore:
     """Writes one campaign's acquisition results (implements `acquisition.engine.Sink`)."""
 
     def __init__(self, sessions: sessionmaker[Session], campaign_id: int) -> None:
+        self.lease = take_lease(sessions, campaign_id)  # CampaignBusy: another process runs it
         self.sessions = writer(sessions)
         self.campaign_id = campaign_id
         self._session: Session | None = None

@@ -1,20 +1,24 @@
 """The one resume rule: a process killed after a trial's last observation was committed but
 before the trial was marked completed (waiting for the stand's stop acknowledgement)."""
 
+import subprocess
+import sys
 from pathlib import Path
 
+import pytest
 from sqlalchemy import select
 
 from gyrostand.acquisition.engine import Engine, ObservationResult
 from gyrostand.acquisition.runner import resume_store
 from gyrostand.acquisition.store import CampaignStore
+from gyrostand.db.lease import CampaignBusy, held_elsewhere
 from gyrostand.db.models import Event, Trial
 from gyrostand.db.queries import ResumePoint, campaign_summary, first_incomplete_series
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.plan.model import parse_plan
 from tests.acquisition.harness import plan_text
 
-THREE = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "fit"), (30.0, 20.0, 6.0, "control")]
+THREE = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "fit"), (30.0, 20.0, 6.0, "fit")]
 
 
 def killed_after_trial_2(tmp_path: Path) -> CampaignStore:
@@ -65,7 +69,41 @@ def test_resume_completes_the_acquired_trial_with_an_event(tmp_path: Path) -> No
         statuses = session.scalars(select(Trial.status).order_by(Trial.index)).all()
         events = session.scalars(select(Event).where(Event.kind == "resume")).all()
     assert statuses == ["completed", "completed", "pending"]
-    assert len(events) == 1 and "trial 2 completed on resume" in events[0].message
+    completed = [e for e in events if "completed on resume" in e.message]
+    assert len(completed) == 1 and "trial 2 completed on resume" in completed[0].message
     resume_store(store.sessions, store.campaign_id)  # idempotent: nothing more to complete
     with store.sessions() as session:
-        assert len(session.scalars(select(Event).where(Event.kind == "resume")).all()) == 1
+        events = session.scalars(select(Event).where(Event.kind == "resume")).all()
+    assert sum("completed on resume" in e.message for e in events) == 1
+    assert sum(e.message.startswith("resumed by process") for e in events) == 2
+
+
+HOLD = """
+import sys, time
+from gyrostand.db.lease import take_lease
+from gyrostand.db.session import open_database
+take_lease(open_database(sys.argv[1]), 1)
+print("held", flush=True)
+time.sleep(600)
+"""
+
+
+def test_the_lease_stops_a_second_process_and_dies_with_its_holder(tmp_path: Path) -> None:
+    store = killed_after_trial_2(tmp_path)
+    store.set_status("running")
+    url = str(store.sessions.kw["bind"].url)
+    store.lease.release()
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, url], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline() == "held\n"
+        assert held_elsewhere(store.sessions, 1)
+        with pytest.raises(CampaignBusy, match="campaign 1 is being acquired by another process"):
+            resume_store(store.sessions, 1)
+    finally:
+        holder.kill()  # kill -9: the operating system drops the lock
+        holder.wait()
+    assert not held_elsewhere(store.sessions, 1)
+    _, resumed = resume_store(store.sessions, 1)
+    with store.sessions() as session:
+        kinds = session.scalars(select(Event.kind).order_by(Event.id)).all()
+    assert kinds[-3:] == ["interrupted", "resume", "resume"]  # then trial 2 completed on resume

@@ -1,0 +1,95 @@
+"""Campaign leases: one process at a time acquires into a campaign, and a campaign left "running"
+by a process that is gone can be told from a live one. The lease is a lock that the operating
+system or the database server drops when its holder dies, so a kill -9 never leaves it behind:
+on a SQLite file an exclusive flock on `<file>.campaign-<id>.lock` beside it; on PostgreSQL a
+session advisory lock on a connection the lease keeps open."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+from pathlib import Path
+
+from sqlalchemy import Connection, text
+from sqlalchemy.orm import Session, sessionmaker
+
+_ADVISORY_NAMESPACE = 0x6779  # "gy": first key of PostgreSQL's two-key advisory locks
+_HELD: dict[tuple[str, int], Lease] = {}  # the leases this process holds
+
+
+class CampaignBusy(RuntimeError):
+    """Another process holds the campaign's lease (it is acquiring into it now)."""
+
+
+class Lease:
+    """This process's right to acquire into one campaign (see the module doc)."""
+
+    def __init__(self, key: tuple[str, int], fd: int | None, connection: Connection | None):
+        self._key, self._fd, self._connection = key, fd, connection
+
+    def release(self) -> None:
+        _HELD.pop(self._key, None)
+        if self._fd is not None:
+            os.close(self._fd)  # closing the file drops the flock
+            self._fd = None
+        if self._connection is not None:
+            self._connection.close()  # ending the session drops the advisory lock
+            self._connection = None
+
+
+def _try(sessions: sessionmaker[Session], campaign_id: int) -> Lease | None:
+    engine = sessions.kw["bind"]
+    key = (engine.url.render_as_string(hide_password=True), campaign_id)
+    if engine.dialect.name == "postgresql":
+        connection = engine.connect()
+        got = connection.execute(
+            text("SELECT pg_try_advisory_lock(:a, :b)"),
+            {"a": _ADVISORY_NAMESPACE, "b": campaign_id},
+        ).scalar()
+        connection.commit()
+        if not got:
+            connection.close()
+            return None
+        return Lease(key, None, connection)
+    database = engine.url.database
+    if engine.dialect.name != "sqlite" or database in (None, "", ":memory:"):
+        return Lease(key, None, None)  # a private database: nobody else can reach it
+    path = Path(f"{database}.campaign-{campaign_id}.lock")
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    os.ftruncate(fd, 0)
+    os.write(fd, f"{os.getpid()}\n".encode())  # for people: who holds it
+    return Lease(key, fd, None)
+
+
+def take_lease(sessions: sessionmaker[Session], campaign_id: int) -> Lease:
+    """The campaign's lease for this process (the same one when it already holds it);
+    CampaignBusy when another process holds it."""
+    engine = sessions.kw["bind"]
+    key = (engine.url.render_as_string(hide_password=True), campaign_id)
+    if key in _HELD:
+        return _HELD[key]
+    lease = _try(sessions, campaign_id)
+    if lease is None:
+        raise CampaignBusy(
+            f"campaign {campaign_id} is being acquired by another process; "
+            "wait for it to end or stop it first"
+        )
+    _HELD[key] = lease
+    return lease
+
+
+def held_elsewhere(sessions: sessionmaker[Session], campaign_id: int) -> bool:
+    """Whether another process holds the campaign's lease now (a live run)."""
+    engine = sessions.kw["bind"]
+    if (engine.url.render_as_string(hide_password=True), campaign_id) in _HELD:
+        return False
+    lease = _try(sessions, campaign_id)
+    if lease is None:
+        return True
+    lease.release()
+    return False
