@@ -35,6 +35,7 @@ from pydantic import (
     field_validator,
     model_validator,
 )
+from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from gyrostand.stand.protocol import SignalMap
 from gyrostand.stand.simconfig import SimConfigError, simulator_config, simulator_tables
@@ -52,6 +53,12 @@ ESTIMATE_KEYS = (
     "tolerance_fraction",
     "stable_estimates",
 )
+MAX_N_OBS = 2**31 - 1
+"""Largest N: observation k is an Integer column of the database (32-bit signed in PostgreSQL
+and MySQL), and so is the campaign's n_obs."""
+MAX_SERIES_STAND_DAYS = 7
+"""Largest stand time the N observation windows of one series may take, N x (window + spacing)
+(settling not counted): a week of stand time; more is a typing error, not a campaign."""
 
 
 class PlanError(ValueError):
@@ -75,6 +82,19 @@ def _interval(value: Any) -> tuple[float, float]:
     if not numbers or not 0 < value[0] < value[1]:
         raise ValueError("must be [low, high] with 0 < low < high")
     return float(value[0]), float(value[1])
+
+
+def _storable_n(value: int) -> int:
+    if value > MAX_N_OBS:
+        raise ValueError(
+            f"must be <= {MAX_N_OBS} (observation k is a 32-bit integer column of the database)"
+        )
+    return value
+
+
+def _number(value: float) -> str:
+    """A plan value as the operator wrote it: 40 for 40.0, 17.8 for 17.8."""
+    return format(value, ".15g")
 
 
 def _channel(value: Any) -> str:
@@ -109,8 +129,11 @@ class CampaignPlan(_Table):
 
     operator: Text
     """Who runs the campaign (stored with it, signs the report)."""
-    n_obs: int = Field(ge=2)
-    """N, observations per series (Potemkin 1982, eq 2.1)."""
+    n_obs: Annotated[int, AfterValidator(_storable_n)] = Field(
+        ge=2, json_schema_extra={"maximum": MAX_N_OBS}
+    )
+    """N, observations per series (Potemkin 1982, eq 2.1); at most 2147483647, and the N windows
+    of a series may take at most 7 days of stand time."""
     database: Text
     """A file path (SQLite) or any SQLAlchemy URL."""
     raw_log_format: Literal["blf", "asc"] = "blf"
@@ -119,6 +142,9 @@ class CampaignPlan(_Table):
     """Folder of the raw CAN logs."""
     on_trial_failure: Literal["continue", "pause"] = "continue"
     """What a failed trial does to the campaign."""
+    acquisition_only: bool = False
+    """Acquire and store the data without the promise of an analysis (a design with fewer fit
+    trials than the analysis needs)."""
 
 
 class InstrumentPlan(_Table):
@@ -375,6 +401,44 @@ class BusPlan(_Table):
         return self
 
 
+class StandPlan(_Table):
+    """[stand]: the limits of the real stand, outside which it refuses a command. With the
+    simulated stand the simulator's limits ([bus.simulator.stand], default 50 cm, 2 to 20 s)
+    apply as well: a key left out here is the simulator's (`Plan.stand_limits`)."""
+
+    max_amplitude_cm: float | None = Field(None, gt=0)
+    """Largest amplitude A the stand accepts, cm."""
+    min_period_s: float | None = Field(None, gt=0)
+    """Shortest rocking period tau the stand accepts, s."""
+    max_period_s: float | None = Field(None, gt=0)
+    """Longest rocking period tau the stand accepts, s."""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> StandPlan:
+        low, high = self.min_period_s, self.max_period_s
+        if low is not None and high is not None and high < low:
+            check([("max_period_s", "must be >= min_period_s")])
+        return self
+
+
+@dataclass(frozen=True)
+class StandLimit:
+    """One limit of the stand a plan's trials must respect, and where it comes from."""
+
+    value: float
+    source: Literal["stand", "simulator"]
+    """"stand": the plan's [stand]; "simulator": the simulated stand's [bus.simulator.stand]."""
+
+
+@dataclass(frozen=True)
+class StandLimits:
+    """The binding limits of the stand that runs a plan (None: not known, not checked)."""
+
+    max_amplitude_cm: StandLimit | None
+    min_period_s: StandLimit | None
+    max_period_s: StandLimit | None
+
+
 class ProtocolPlan(_Table):
     """[protocol]"""
 
@@ -420,6 +484,7 @@ class Plan(_Table):
     timeouts: TimeoutsPlan = Field(default_factory=TimeoutsPlan)
     checks: ChecksPlan = Field(default_factory=ChecksPlan)
     bus: BusPlan = Field(default_factory=BusPlan)
+    stand: StandPlan = Field(default_factory=StandPlan)
     protocol: ProtocolPlan = Field(default_factory=ProtocolPlan)
     signals: Signals = Field(default_factory=dict, json_schema_extra=_SIGNALS_SCHEMA)
     """The lab's DBC signals, "MESSAGE.SIGNAL" per quantity (docs/protocol.md)."""
@@ -440,6 +505,59 @@ class Plan(_Table):
         for number, trial in enumerate(self.trials, start=1):
             trial._index = number
         return self
+
+    @model_validator(mode="after")
+    def _feasible(self) -> Plan:
+        """The rules across tables, once every table is valid: every series within the stand
+        time allowed. (A ValidationError, which pydantic passes on as it is, to name each
+        problem's table and key.)"""
+        errors = self._too_long()
+        if errors:
+            raise ValidationError.from_exception_data(type(self).__name__, errors)
+        return self
+
+    @property
+    def stand_limits(self) -> StandLimits:
+        """The limits each trial must respect: the tighter of [stand] and, for the simulated
+        stand, the simulator's ([bus.simulator.stand] over its defaults); [stand] on a tie."""
+        simulator = None
+        if self.bus.simulated:
+            bus = self.bus
+            simulator = simulator_config(
+                bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing
+            ).stand
+
+        def limit(key: str, maximum: bool) -> StandLimit | None:
+            given = []
+            if (value := getattr(self.stand, key)) is not None:
+                given.append(StandLimit(value, "stand"))
+            if simulator is not None:
+                given.append(StandLimit(getattr(simulator, key), "simulator"))
+            if not given:
+                return None
+            return (min if maximum else max)(given, key=lambda g: g.value)
+
+        return StandLimits(
+            limit("max_amplitude_cm", True),
+            limit("min_period_s", False),
+            limit("max_period_s", True),
+        )
+
+    def _too_long(self) -> list[InitErrorDetails]:
+        observation = self.observation
+        window_ms = max(
+            observation.window_ms(period) for period in [None, *(t.period_s for t in self.trials)]
+        )
+        spacing_ms = round(observation.spacing_s * 1000)
+        series_ms = self.n_obs * (window_ms + spacing_ms)
+        if series_ms <= MAX_SERIES_STAND_DAYS * 86_400_000:
+            return []
+        message = (
+            f"{self.n_obs} x ({_number(window_ms / 1000)} s window + "
+            f"{_number(spacing_ms / 1000)} s spacing) = {series_ms / 86_400_000:.1f} days of stand "
+            f"time in the longest series; a series may take at most {MAX_SERIES_STAND_DAYS} days"
+        )
+        return [_error("stand_time", ("campaign", "n_obs"), message)]
 
     @property
     def text(self) -> str:
@@ -497,6 +615,13 @@ class PartialPlan(_Table):
     site: SitePlan
     analysis: AnalysisPlan | None = None
     forecast: ForecastPlan | None = None
+
+
+def _error(kind: str, loc: tuple[str | int, ...], message: str) -> InitErrorDetails:
+    """One problem of a cross-table rule, at its place in the plan."""
+    return InitErrorDetails(
+        type=PydanticCustomError(kind, "{message}", {"message": message}), loc=loc, input=None
+    )
 
 
 # ------------------------------------------------------------------------------ reading

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from gyrostand.plan.model import PlanError, load_plan, parse_plan, revised
+from gyrostand.plan.model import PlanError, StandLimit, load_plan, parse_plan, revised
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "examples" / "paper.toml"
@@ -100,6 +100,7 @@ MINIMAL = """
 operator = "o"
 n_obs = 2
 database = "db.sqlite"
+acquisition_only = true
 [instrument]
 model = "m"
 serial = "s"
@@ -138,7 +139,14 @@ def test_defaults_of_a_minimal_plan() -> None:
         "roll",
     )
     assert (plan.forecast.amplitude_cm, plan.acceptance, plan.signals) == (None, None, {})
-    assert [(t.index, t.role) for t in plan.trials] == [(1, "fit")]
+    assert [(t.index, t.role) for t in plan.trials] == [(1, "fit")]  # acquisition only
+    assert plan.stand.model_fields_set == set()
+    limits = plan.stand_limits  # the simulator's defaults
+    assert (limits.max_amplitude_cm, limits.min_period_s, limits.max_period_s) == (
+        StandLimit(50.0, "simulator"),
+        StandLimit(2.0, "simulator"),
+        StandLimit(20.0, "simulator"),
+    )
     o, st, tr = plan.observation, plan.settle, plan.tracking
     assert (o.still_window_s, o.rocking_window_periods, o.spacing_s) == (60.0, 10, 0.0)
     assert (st.band_deg, st.drift_deg, st.hold_s, st.max_wait_s) == (0.02, math.inf, 600.0, 14400.0)

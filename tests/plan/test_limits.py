@@ -1,0 +1,153 @@
+"""What a plan may ask of the stand and the database, refused before a campaign starts (each
+case ran, or was a traceback, before these rules):
+
+2. N = 10**9 ran (weeks of stand time per series) and N = 10**30 was a traceback in the database;
+4. a simulator knob with a string value is a problem line, not a traceback (pinned);
+
+and the tables the rules on the design and the stand read: [stand] (the real stand's limits; with
+the simulated stand, the simulator's as well) and [campaign] acquisition_only.
+"""
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from gyrostand.cli import app
+from gyrostand.plan.model import (
+    MAX_N_OBS,
+    PlanError,
+    StandLimit,
+    StandLimits,
+    parse_plan,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+PAPER = ROOT / "examples" / "paper.toml"
+TEXT = PAPER.read_text()
+runner = CliRunner()
+
+
+def _problems(text: str) -> list[str]:
+    with pytest.raises(PlanError) as info:
+        parse_plan(text)
+    return info.value.problems
+
+
+def _with(text: str, old: str, new: str) -> str:
+    assert text.count(old) == 1, old
+    return text.replace(old, new)
+
+
+def _after_bus(table: str, text: str = TEXT) -> str:
+    """`table` (TOML) right after the plan's [bus] keys."""
+    return _with(text, "seed = 1\n", "seed = 1\n" + table)
+
+
+# ------------------------------------------------------------------ the stand's limits
+
+
+def test_stand_limits_of_a_simulated_and_a_real_stand() -> None:
+    assert parse_plan(TEXT).stand_limits == StandLimits(
+        StandLimit(50.0, "simulator"), StandLimit(2.0, "simulator"), StandLimit(20.0, "simulator")
+    )
+    text = _after_bus("[bus.simulator.stand]\nmax_amplitude_cm = 35.0\n")
+    assert parse_plan(text).stand_limits.max_amplitude_cm == StandLimit(35.0, "simulator")
+    real = _with(TEXT, "simulated = true", "simulated = false")
+    real = _with(real, 'timing = "virtual"', 'timing = "realtime"')
+    assert parse_plan(real).stand_limits == StandLimits(None, None, None)  # unknown
+    real += "\n[stand]\nmax_amplitude_cm = 30.0\nmin_period_s = 3.0\nmax_period_s = 30.0\n"
+    assert parse_plan(real).stand_limits == StandLimits(
+        StandLimit(30.0, "stand"), StandLimit(3.0, "stand"), StandLimit(30.0, "stand")
+    )
+
+
+def test_simulated_plan_with_a_stand_table_takes_the_tighter_limit() -> None:
+    limits = parse_plan(TEXT + "\n[stand]\nmax_amplitude_cm = 60.0\nmin_period_s = 3.0\n")
+    assert limits.stand_limits == StandLimits(
+        StandLimit(50.0, "simulator"), StandLimit(3.0, "stand"), StandLimit(20.0, "simulator")
+    )
+
+
+def test_stand_table_problems() -> None:
+    text = TEXT + "\n[stand]\nmin_period_s = 10.0\nmax_period_s = 5.0\n"
+    assert _problems(text) == ["[stand] max_period_s: must be >= min_period_s"]
+    text = TEXT + "\n[stand]\nmax_amplitude_cm = 0.0\nmax_amplitude = 1.0\n"
+    assert _problems(text) == [
+        "[stand] max_amplitude_cm: must be > 0",
+        "[stand] max_amplitude: unknown key",
+    ]
+
+
+# ------------------------------------------------------------------ 2. the bounds of N
+
+
+def test_n_beyond_the_database_column_is_a_problem_not_a_traceback() -> None:
+    text = _with(TEXT, "n_obs = 5 ", f"n_obs = {10**30} ")
+    assert _problems(text) == [
+        "[campaign] n_obs: must be <= 2147483647 "
+        "(observation k is a 32-bit integer column of the database)"
+    ]
+    assert MAX_N_OBS == 2**31 - 1
+
+
+def test_n_beyond_seven_days_of_stand_time_per_series() -> None:
+    text = _with(TEXT, "n_obs = 5 ", "n_obs = 1000000000 ")
+    assert _problems(text) == [
+        "[campaign] n_obs: 1000000000 x (64 s window + 0 s spacing) = 740740.7 days of stand time "
+        "in the longest series; a series may take at most 7 days"
+    ]
+
+
+def test_seven_days_exactly_is_allowed() -> None:
+    # the longest window of the paper plan: 8 periods of 8 s; 9450 x 64 s = 7 days
+    assert parse_plan(_with(TEXT, "n_obs = 5 ", "n_obs = 9450 ")).n_obs == 9450
+    text = _with(TEXT, "n_obs = 5 ", "n_obs = 9000 ")
+    text = _with(text, "spacing_s = 0.0", "spacing_s = 3.5")
+    assert _problems(text) == [
+        "[campaign] n_obs: 9000 x (64 s window + 3.5 s spacing) = 7.0 days of stand time in the "
+        "longest series; a series may take at most 7 days"
+    ]
+
+
+def test_plan_check_shows_the_bounds_of_n(tmp_path: Path) -> None:
+    plan = tmp_path / "plan.toml"
+    plan.write_text(_with(TEXT, "n_obs = 5 ", f"n_obs = {10**30} "))
+    result = runner.invoke(app, ["plan", "check", str(plan)])
+    assert result.exit_code == 1
+    assert result.output == (
+        f"{plan}: [campaign] n_obs: must be <= 2147483647 "
+        "(observation k is a 32-bit integer column of the database)\n"
+    )
+    plan.write_text(_with(TEXT, "n_obs = 5 ", "n_obs = 1000000000 "))
+    result = runner.invoke(app, ["plan", "check", str(plan)])
+    assert result.exit_code == 1
+    assert result.output == (
+        f"{plan}: [campaign] n_obs: 1000000000 x (64 s window + 0 s spacing) = 740740.7 days of "
+        "stand time in the longest series; a series may take at most 7 days\n"
+    )
+
+
+# ------------------------------------------------------------------ [campaign] acquisition_only
+
+
+def test_acquisition_only_is_a_campaign_key() -> None:
+    assert parse_plan(TEXT).campaign.acquisition_only is False
+    text = _with(TEXT, 'on_trial_failure = "continue"', "acquisition_only = true")
+    assert parse_plan(text).campaign.acquisition_only is True
+    assert _problems(_with(TEXT, 'on_trial_failure = "continue"', "acquisition_only = 1")) == [
+        "[campaign] acquisition_only: must be true or false"
+    ]
+
+
+# ------------------------------------------------------------------ 4. simulator knobs
+
+
+def test_string_simulator_knob_is_a_problem_line() -> None:
+    text = _after_bus('[bus.simulator.noise]\nwhite_sigma_deg = "x"\nwhite_deg = "x"\n')
+    assert _problems(text) == [
+        "[bus.simulator.noise] white_sigma_deg: must be a finite number",
+        "[bus.simulator.noise] white_deg: unknown key",
+    ]
+    text = _after_bus('[bus.simulator.stand]\nmax_amplitude_cm = "35"\n')
+    assert _problems(text) == ["[bus.simulator.stand] max_amplitude_cm: must be a finite number"]
