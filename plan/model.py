@@ -59,6 +59,11 @@ and MySQL), and so is the campaign's n_obs."""
 MAX_SERIES_STAND_DAYS = 7
 """Largest stand time the N observation windows of one series may take, N x (window + spacing)
 (settling not counted): a week of stand time; more is a typing error, not a campaign."""
+FIT_PARAMETERS = 2
+"""m, the parameters the analysis fits: C and T (Potemkin 1982, model 1.1)."""
+MIN_FIT_TRIALS = FIT_PARAMETERS + 1
+"""n >= m + 1 fit trials: the adequacy test (Potemkin 1982, eq 2.8) needs n - m >= 1 degrees of
+freedom."""
 
 
 class PlanError(ValueError):
@@ -143,8 +148,9 @@ class CampaignPlan(_Table):
     on_trial_failure: Literal["continue", "pause"] = "continue"
     """What a failed trial does to the campaign."""
     acquisition_only: bool = False
-    """Acquire and store the data without the promise of an analysis (a design with fewer fit
-    trials than the analysis needs)."""
+    """Acquire and store the data without the promise of an analysis: the design may then have
+    fewer than the 3 fit trials the analysis needs (m + 1 for the m = 2 parameters C and T), and
+    such a campaign cannot be analysed."""
 
 
 class InstrumentPlan(_Table):
@@ -402,9 +408,10 @@ class BusPlan(_Table):
 
 
 class StandPlan(_Table):
-    """[stand]: the limits of the real stand, outside which it refuses a command. With the
-    simulated stand the simulator's limits ([bus.simulator.stand], default 50 cm, 2 to 20 s)
-    apply as well: a key left out here is the simulator's (`Plan.stand_limits`)."""
+    """[stand]: the limits of the real stand, outside which it refuses a command; every trial
+    must lie within them. With the simulated stand the simulator's limits ([bus.simulator.stand],
+    default 50 cm, 2 to 20 s) apply as well: a key left out here is the simulator's
+    (`Plan.stand_limits`)."""
 
     max_amplitude_cm: float | None = Field(None, gt=0)
     """Largest amplitude A the stand accepts, cm."""
@@ -428,6 +435,13 @@ class StandLimit:
     value: float
     source: Literal["stand", "simulator"]
     """"stand": the plan's [stand]; "simulator": the simulated stand's [bus.simulator.stand]."""
+
+
+_STAND_LIMITS = (  # trial key, StandLimits field, whether a maximum, unit
+    ("amplitude_cm", "max_amplitude_cm", True, "cm"),
+    ("period_s", "min_period_s", False, "s"),
+    ("period_s", "max_period_s", True, "s"),
+)
 
 
 @dataclass(frozen=True)
@@ -477,7 +491,8 @@ class Plan(_Table):
     analysis: AnalysisPlan
     forecast: ForecastPlan
     trials: tuple[TrialPlan, ...] = Field(strict=False, json_schema_extra={"minItems": 1})
-    """The design, in order; at least one trial has role "fit"."""
+    """The design, in order; at least 3 trials have role "fit" (at least one when [campaign]
+    acquisition_only = true)."""
     observation: ObservationPlan = Field(default_factory=ObservationPlan)
     settle: SettlePlan = Field(default_factory=SettlePlan)
     tracking: TrackingPlan = Field(default_factory=TrackingPlan)
@@ -508,10 +523,11 @@ class Plan(_Table):
 
     @model_validator(mode="after")
     def _feasible(self) -> Plan:
-        """The rules across tables, once every table is valid: every series within the stand
-        time allowed. (A ValidationError, which pydantic passes on as it is, to name each
-        problem's table and key.)"""
-        errors = self._too_long()
+        """The rules across tables, once every table is valid: a design the analysis can fit
+        (or an acquisition-only campaign), every trial within the stand's limits, every series
+        within the stand time allowed. (A ValidationError, which pydantic passes on as it is,
+        to name each problem's table and key.)"""
+        errors = self._unanalysable() + self._beyond_stand() + self._too_long()
         if errors:
             raise ValidationError.from_exception_data(type(self).__name__, errors)
         return self
@@ -542,6 +558,37 @@ class Plan(_Table):
             limit("min_period_s", False),
             limit("max_period_s", True),
         )
+
+    def _unanalysable(self) -> list[InitErrorDetails]:
+        fit = sum(t.role == "fit" for t in self.trials)
+        if fit >= MIN_FIT_TRIALS or self.campaign.acquisition_only:
+            return []
+        message = (
+            f"{fit} fit trial{'s' if fit > 1 else ''}, but the analysis needs at least "
+            f"{MIN_FIT_TRIALS} (m + 1 for the m = {FIT_PARAMETERS} parameters C and T: the "
+            "adequacy test needs n - m >= 1 degrees of freedom); add fit trials, or set "
+            "[campaign] acquisition_only = true to acquire without analysing"
+        )
+        return [_error("design", ("trials",), message)]
+
+    def _beyond_stand(self) -> list[InitErrorDetails]:
+        limits = self.stand_limits
+        errors = []
+        for row, trial in enumerate(self.trials):
+            for key, limit_key, maximum, unit in _STAND_LIMITS:
+                limit: StandLimit | None = getattr(limits, limit_key)
+                value = getattr(trial, key)
+                if limit is None or (value <= limit.value if maximum else value >= limit.value):
+                    continue
+                # the simulator's limit is "the simulated stand's" when [stand] states another
+                simulated = limit.source == "simulator" and limit_key in self.stand.model_fields_set
+                message = (
+                    f"{_number(value)} {'exceeds' if maximum else 'is below'} "
+                    f"the {'simulated stand' if simulated else 'stand'}'s limit "
+                    f"{_number(limit.value)} {unit}"
+                )
+                errors.append(_error("stand_limit", ("trials", row, key), message))
+        return errors
 
     def _too_long(self) -> list[InitErrorDetails]:
         observation = self.observation

@@ -25,6 +25,7 @@ n_obs = {n_obs}
 database = "{database}"
 on_trial_failure = "{on_failure}"
 raw_log_dir = "{raw_dir}"
+acquisition_only = true
 
 [instrument]
 model = "test compass"

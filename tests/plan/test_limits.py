@@ -1,11 +1,13 @@
-"""What a plan may ask of the stand and the database, refused before a campaign starts (each
-case ran, or was a traceback, before these rules):
+"""What a plan may ask of the stand, the database and the analysis, refused before a campaign
+starts (each case ran, or was a traceback, before these rules):
 
+1. a trial beyond the stand's limits (amplitude above, period below or above) started a campaign
+   whose trial the stand then refused; the limits come from [stand] and, for the simulated stand,
+   from the simulator ([bus.simulator.stand] over its defaults 50 cm, 2 to 20 s);
 2. N = 10**9 ran (weeks of stand time per series) and N = 10**30 was a traceback in the database;
-4. a simulator knob with a string value is a problem line, not a traceback (pinned);
-
-and the tables the rules on the design and the stand read: [stand] (the real stand's limits; with
-the simulated stand, the simulator's as well) and [campaign] acquisition_only.
+3. a design with fewer than 3 fit trials was accepted although the analysis can never fit it
+   (m + 1 fit trials for the m = 2 parameters C and T), unless it is marked acquisition-only;
+4. a simulator knob with a string value is a problem line, not a traceback (pinned).
 """
 
 from pathlib import Path
@@ -44,7 +46,43 @@ def _after_bus(table: str, text: str = TEXT) -> str:
     return _with(text, "seed = 1\n", "seed = 1\n" + table)
 
 
-# ------------------------------------------------------------------ the stand's limits
+# ------------------------------------------------------------------ 1. the stand's limits
+
+
+def test_amplitude_beyond_the_simulated_stands_limit() -> None:
+    text = _after_bus("[bus.simulator.stand]\nmax_amplitude_cm = 35.0\n")
+    text = _with(text, "amplitude_cm = 23.0", "amplitude_cm = 40.0")
+    assert _problems(text) == ["[[trials]] 3 amplitude_cm: 40 exceeds the stand's limit 35 cm"]
+
+
+def test_periods_outside_the_simulators_default_limits() -> None:
+    text = _with(TEXT, "period_s = 3.5", "period_s = 1.5")
+    text = _with(text, "period_s = 6.2", "period_s = 25.0")
+    text = _with(text, "amplitude_cm = 23.0", "amplitude_cm = 60.0")
+    assert _problems(text) == [
+        "[[trials]] 3 amplitude_cm: 60 exceeds the stand's limit 50 cm",
+        "[[trials]] 4 period_s: 1.5 is below the stand's limit 2 s",
+        "[[trials]] 5 period_s: 25 exceeds the stand's limit 20 s",
+    ]
+
+
+def test_limits_are_inclusive() -> None:
+    text = _after_bus("[bus.simulator.stand]\nmax_amplitude_cm = 24.0\nmin_period_s = 3.5\n")
+    assert parse_plan(_with(text, "period_s = 8.0", "period_s = 20.0")).trials[0].period_s == 20
+
+
+def test_real_stand_is_checked_against_its_stand_table() -> None:
+    real = _with(TEXT, "simulated = true", "simulated = false")
+    real = _with(real, 'timing = "virtual"', 'timing = "realtime"')
+    assert parse_plan(real).stand_limits == StandLimits(None, None, None)  # unknown: unchecked
+    text = real + "\n[stand]\nmax_amplitude_cm = 20.0\nmin_period_s = 4.0\nmax_period_s = 30.0\n"
+    assert _problems(text) == [
+        "[[trials]] 1 amplitude_cm: 24 exceeds the stand's limit 20 cm",
+        "[[trials]] 2 amplitude_cm: 24 exceeds the stand's limit 20 cm",
+        "[[trials]] 3 amplitude_cm: 23 exceeds the stand's limit 20 cm",
+        "[[trials]] 4 period_s: 3.5 is below the stand's limit 4 s",
+        "[[trials]] 5 amplitude_cm: 23.5 exceeds the stand's limit 20 cm",
+    ]
 
 
 def test_stand_limits_of_a_simulated_and_a_real_stand() -> None:
@@ -63,6 +101,12 @@ def test_stand_limits_of_a_simulated_and_a_real_stand() -> None:
 
 
 def test_simulated_plan_with_a_stand_table_takes_the_tighter_limit() -> None:
+    looser = TEXT + "\n[stand]\nmax_amplitude_cm = 60.0\nmin_period_s = 4.0\n"
+    looser = _with(looser, "amplitude_cm = 23.0", "amplitude_cm = 55.0")
+    assert _problems(looser) == [
+        "[[trials]] 3 amplitude_cm: 55 exceeds the simulated stand's limit 50 cm",
+        "[[trials]] 4 period_s: 3.5 is below the stand's limit 4 s",
+    ]
     limits = parse_plan(TEXT + "\n[stand]\nmax_amplitude_cm = 60.0\nmin_period_s = 3.0\n")
     assert limits.stand_limits == StandLimits(
         StandLimit(50.0, "simulator"), StandLimit(3.0, "stand"), StandLimit(20.0, "simulator")
@@ -128,7 +172,44 @@ def test_plan_check_shows_the_bounds_of_n(tmp_path: Path) -> None:
     )
 
 
-# ------------------------------------------------------------------ [campaign] acquisition_only
+# ------------------------------------------------------------------ 3. an analysable design
+
+
+def _fit_trials(count: int, text: str = TEXT) -> str:
+    """The paper plan with only its first `count` trials of role fit (the others control)."""
+    head, *trials = text.split("[[trials]]")
+    roles = [
+        t.replace('role = "fit"', 'role = "control"') if i >= count else t
+        for i, t in enumerate(trials)
+    ]
+    return "[[trials]]".join([head, *roles])
+
+
+def test_fewer_than_three_fit_trials_are_refused() -> None:
+    assert _problems(_fit_trials(2)) == [
+        "[[trials]]: 2 fit trials, but the analysis needs at least 3 (m + 1 for the m = 2 "
+        "parameters C and T: the adequacy test needs n - m >= 1 degrees of freedom); add fit "
+        "trials, or set [campaign] acquisition_only = true to acquire without analysing"
+    ]
+    assert _problems(_fit_trials(1))[0].startswith("[[trials]]: 1 fit trial, but the analysis")
+    assert len(parse_plan(_fit_trials(3)).trials) == 6
+    assert parse_plan(TEXT).campaign.acquisition_only is False
+
+
+def test_acquisition_only_plan_may_have_fewer_fit_trials() -> None:
+    text = _with(_fit_trials(1), 'on_trial_failure = "continue"', "acquisition_only = true")
+    plan = parse_plan(text)
+    assert plan.campaign.acquisition_only and sum(t.role == "fit" for t in plan.trials) == 1
+    # still at least one fit trial
+    assert _problems(_fit_trials(0, text)) == [
+        "[[trials]]: at least one trial must have role 'fit'"
+    ]
+
+
+def test_rules_across_tables_wait_for_valid_tables() -> None:
+    """They need every table they read: a plan gets them once its tables are valid."""
+    text = _with(_fit_trials(2), "n_obs = 5 ", "n_obs = 1 ")
+    assert _problems(text) == ["[campaign] n_obs: must be >= 2"]
 
 
 def test_acquisition_only_is_a_campaign_key() -> None:
@@ -151,3 +232,29 @@ def test_string_simulator_knob_is_a_problem_line() -> None:
     ]
     text = _after_bus('[bus.simulator.stand]\nmax_amplitude_cm = "35"\n')
     assert _problems(text) == ["[bus.simulator.stand] max_amplitude_cm: must be a finite number"]
+
+
+# ------------------------------------------------------------------ plan check shows them
+
+
+def test_plan_check_shows_every_problem(tmp_path: Path) -> None:
+    text = _with(_fit_trials(2), "n_obs = 5 ", "n_obs = 1000000000 ")
+    text = _with(text, "amplitude_cm = 23.0", "amplitude_cm = 60.0")
+    plan = tmp_path / "plan.toml"
+    plan.write_text(text)
+    result = runner.invoke(app, ["plan", "check", str(plan)])
+    assert result.exit_code == 1
+    lines = result.output.splitlines()
+    assert lines[0].startswith(f"{plan}: [[trials]]: 2 fit trials, but the analysis needs")
+    assert lines[1:] == [
+        f"{plan}: [[trials]] 3 amplitude_cm: 60 exceeds the stand's limit 50 cm",
+        f"{plan}: [campaign] n_obs: 1000000000 x (64 s window + 0 s spacing) = 740740.7 days of "
+        "stand time in the longest series; a series may take at most 7 days",
+    ]
+    plan.write_text(_with(TEXT, "n_obs = 5 ", f"n_obs = {10**30} "))
+    result = runner.invoke(app, ["plan", "check", str(plan)])
+    assert result.exit_code == 1
+    assert result.output == (
+        f"{plan}: [campaign] n_obs: must be <= 2147483647 "
+        "(observation k is a 32-bit integer column of the database)\n"
+    )
