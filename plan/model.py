@@ -143,8 +143,9 @@ class CampaignPlan(_Table):
     """A file path (SQLite) or any SQLAlchemy URL."""
     raw_log_format: Literal["blf", "asc"] = "blf"
     """Format of the python-can log that receives every frame."""
-    raw_log_dir: Text = "runs/raw"
-    """Folder of the raw CAN logs."""
+    raw_log_dir: Text | None = None
+    """Folder of the raw CAN logs; default: `raw` beside the database file (`runs/raw` for a
+    database given as a server URL)."""
     on_trial_failure: Literal["continue", "pause"] = "continue"
     """What a failed trial does to the campaign."""
     acquisition_only: bool = False
@@ -632,7 +633,12 @@ class Plan(_Table):
 
     @property
     def raw_log_dir(self) -> str:
-        return self.campaign.raw_log_dir
+        """The folder the plan names, else `raw` beside the database file."""
+        if self.campaign.raw_log_dir is not None:
+            return self.campaign.raw_log_dir
+        if "://" in self.database:
+            return "runs/raw"
+        return str(Path(self.database).parent / "raw")
 
     @property
     def on_trial_failure(self) -> Literal["continue", "pause"]:

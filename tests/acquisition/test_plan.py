@@ -128,10 +128,14 @@ def test_defaults_of_a_minimal_plan() -> None:
     plan = parse_plan(MINIMAL)
     assert (plan.raw_log_format, plan.raw_log_dir, plan.on_trial_failure, plan.dbc_path) == (
         "blf",
-        "runs/raw",
+        "raw",  # beside the database db.sqlite
         "continue",
         None,
     )
+    lab = revised(plan, campaign={"database": "/lab/stand-2.sqlite"})
+    assert lab.raw_log_dir == "/lab/raw"  # follows the database (campaign run --db)
+    assert revised(plan, campaign={"database": "postgresql://lab/gyro"}).raw_log_dir == "runs/raw"
+    assert revised(plan, campaign={"raw_log_dir": "logs"}).raw_log_dir == "logs"
     assert (plan.site.earth_rate_rad_s, plan.site.gravity_cm_s2) == (7.292115e-5, 981.0)
     assert (plan.analysis.q, plan.analysis.admissible_c, plan.forecast.motion) == (
         0.05,
