@@ -19,6 +19,14 @@ database store).
 Arithmetic is exact where order could matter: heading deviations from the trial's reference are
 quantised to nano-degrees and summed as integers, so a window mean is bit-identical however the
 frames were batched.
+
+Every wait has a stand-time limit: no VALID heading frame for `timeouts.bus_silence_s` (stand time
+as told by any heading frame, stand status or SIM_CLOCK tick) fails the trial with what the frames
+that came had (CRC mismatch, a value outside its range, VALID cleared; bus silence when none came);
+acks, the stand's confirmation, settling and a command's own echo in the stream have theirs. Gaps
+between heading frames are judged from the stand time (against the expected interval learnt from
+the stream) as well as from the 4-bit counter: 16 or 32 missing frames are counted and told, a
+counter jump with no time gap is a "counter_jump", and a frame received unusable is not lost.
 """
 
 from __future__ import annotations
@@ -46,6 +54,13 @@ from gyrostand.stand.protocol import (
 )
 
 NANO = 1_000_000_000  # deviations are summed as integer nano-degrees
+COUNTER_MODULO = 16  # the heading frame's 4-bit rolling counter
+INTERVAL_SAMPLE = 20  # heading-frame spacings whose median is the expected frame interval
+# Stuck: a run of identical consecutive readings longer than STUCK_MIN_RUN frames and than
+# STUCK_FRACTION of the window's valid frames (a real heading at 0.001 deg under noise changes
+# within ~13 frames: longest run in 800 000 still frames of the simulated 16-bit sensor).
+STUCK_MIN_RUN = 20
+STUCK_FRACTION = 0.1
 CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the error frame's identifier
 COMPASS_FAULTS = ("rotor", "fluid temperature", "angle sensor", "follow-up")  # DBC FAULT_BITS
 
@@ -147,17 +162,46 @@ class _Window:
     low: int | None = None
     high: int | None = None
     anomalies: Counter[str] = field(default_factory=Counter)
+    runs: bool = False  # track runs of identical readings (observation windows)
+    run_value: int | None = None  # the last reading (ndeg) and how many times in a row
+    run_length: int = 0
+    longest_run: int = 0
 
-    def add(self, dev: np.ndarray, lost: int, invalid: int) -> None:
+    def add(self, dev: np.ndarray, lost: int, invalid: int, jumps: int = 0) -> None:
         self.lost += lost
         if invalid:
             self.anomalies["invalid"] += invalid
+        if jumps:
+            self.anomalies["counter_jump"] += jumps
         if len(dev):
             self.total_ndeg += int(dev.sum())
             self.used += len(dev)
             lo, hi = int(dev.min()), int(dev.max())
             self.low = lo if self.low is None else min(self.low, lo)
             self.high = hi if self.high is None else max(self.high, hi)
+            if self.runs:
+                self._add_runs(dev)
+
+    def _add_runs(self, dev: np.ndarray) -> None:
+        """Longest run of identical consecutive readings, carried over the batches."""
+        change = np.flatnonzero(dev[1:] != dev[:-1])  # run i ends at change[i]
+        first = int(change[0]) + 1 if len(change) else len(dev)
+        if int(dev[0]) == self.run_value:
+            first += self.run_length
+        longest = max(self.longest_run, first)
+        if len(change):
+            ends = np.append(change, len(dev) - 1)
+            lengths = np.diff(ends)  # the runs after the first one
+            longest = max(longest, int(lengths.max()))
+            self.run_length = int(lengths[-1])
+        else:
+            self.run_length = first
+        self.longest_run = longest
+        self.run_value = int(dev[-1])
+
+    def stuck_limit(self) -> int:
+        """A run of identical readings longer than this is flagged "stuck"."""
+        return max(STUCK_MIN_RUN, int(self.used * STUCK_FRACTION))
 
     def mean_ndeg(self) -> float:
         return self.total_ndeg / self.used if self.used else math.nan
@@ -199,6 +243,19 @@ def _is_bus_off(frame: InvalidFrame) -> bool:
     return frame.reason == "error frame" and bool(frame.arbitration_id & CAN_ERR_BUSOFF)
 
 
+def _invalid_cause(reason: str) -> str:
+    """Why a received frame was unusable, for the no-valid-heading message (the codec's reasons:
+    "CRC mismatch: ...", "MESSAGE.SIGNAL = value outside [low, high]", others as they are)."""
+    if "CRC" in reason:
+        return "CRC mismatch"
+    if " outside " in reason:
+        return f"{reason.split(' = ')[0]} outside its range"
+    return reason
+
+
+QUIET = "no valid heading"  # event kind: no valid heading frame for the silence timeout
+
+
 class Engine:
     """Drives one campaign plan through the trials still to do, from a stream of frame batches."""
 
@@ -218,8 +275,26 @@ class Engine:
         self.phase = Phase.DONE
         self.now_ms = 0
         self._last_t: int | None = None  # stand time of the last heading frame
-        self._heard_ms: int | None = None  # SIM_CLOCK: silence counts from here without one
         self._last_counter: int | None = None
+        self._last_pos: int | None = None  # its stream position
+        # No valid heading frame for bus_silence_s of stand time fails the trial. Stand time is
+        # known at every heading frame (valid or not), stand status and SIM_CLOCK tick; the
+        # batch's valid heading frames are indexed once (`_quiet_index`).
+        self._valid_ms: int | None = None  # last valid heading (or trial start) before the batch
+        self._quiet_from = 0  # stream position from which unusable frames are counted
+        self._quiet_carry: Counter[str] = Counter()  # ... those counted in earlier batches
+        self._quiet_key: tuple[int, int] | None = None
+        self._resets = 0
+        self._batch_no = 0
+        # gaps: the expected frame interval and the received-but-unusable frames in a gap
+        self._spacings: list[float] = []
+        self._interval: float | None = None
+        self._late_ms = math.inf  # spacing over 1.5 intervals: a frame was due in between
+        self._inv_pos = np.zeros(0, dtype=np.int64)  # this batch's unusable frames (positions)
+        self._inv_cause: list[str] = []
+        self._inv_carry = 0  # unusable frames after the last heading frame, earlier batches
+        self._carry_from: int | None = None  # the last heading frame before this batch
+        self._gap_events: list[tuple[int, str, int]] = []  # (position, message, stand ms)
         self._stopped = False  # the stand acknowledged a stop since the last start
         self._trial: TrialPlan | None = None
         self._ref: float | None = None
@@ -250,6 +325,7 @@ class Engine:
                 self.outcome = "completed"
             return
         self._trial = self.todo.pop(0)
+        self._quiet_reset()
         done = self.progress.get(self._trial.index, _NONE)
         self._ref = done.reference_deg
         self._motion = []
@@ -283,6 +359,7 @@ class Engine:
         if command.kind != "stop":
             self._stopped = False
         self._sent = False
+        self._phase_start_ms = self.now_ms  # (until it shows up in the stream)
         self.sink.event("command", "info", command.describe(), self._tidx, None, self.now_ms)
         try:
             self.commander.issue(command, self.now_ms)
@@ -318,6 +395,10 @@ class Engine:
         self._h, self._s, self._o = batch.headings, batch.statuses, batch.others
         self._hi = self._si = self._oi = 0
         self._end = batch.end
+        if self.phase is Phase.DONE:
+            return
+        self._batch_no += 1
+        self._batch_started()
         while self.phase is not Phase.DONE and (
             self._hi < len(self._h) or self._si < len(self._s) or self._oi < len(self._o)
         ):
@@ -325,6 +406,44 @@ class Engine:
                 self._bulk()
             else:
                 self._step()
+        self._batch_ended()
+
+    def _batch_started(self) -> None:
+        """Index the batch's unusable frames; start the stand-time count at the first frame
+        that carries a stand time when none has been seen yet."""
+        inv_pos, causes = [], []
+        first_clock: tuple[int, int] | None = None
+        for pos, frame in self._o:
+            if isinstance(frame, InvalidFrame) and frame.reason != "error frame":
+                inv_pos.append(pos)
+                causes.append(_invalid_cause(frame.reason))
+            elif first_clock is None and isinstance(frame, ClockFrame):
+                first_clock = (pos, frame.stand_time_ms)
+        self._inv_pos = np.array(inv_pos, dtype=np.int64)
+        self._inv_cause = causes
+        self._carry_from = self._last_pos
+        if self._valid_ms is None:
+            timed = [first_clock] if first_clock is not None else []
+            for a in (self._h, self._s):
+                if len(a):
+                    timed.append((int(a.pos[0]), int(a.t_ms[0])))
+            if timed:  # the first stand time known: nothing waited before it
+                self._valid_ms = min(timed)[1]
+                self.now_ms = max(self.now_ms, self._valid_ms)
+                self._phase_start_ms = max(self._phase_start_ms, self._valid_ms)
+
+    def _batch_ended(self) -> None:
+        """Carry the stand-time count and the unusable frames over to the next batch."""
+        consumed = self.consumed
+        if self._valid_ms is not None:
+            self._valid_ms = self._valid_before(consumed)
+        self._quiet_from, self._quiet_carry = self._quiet_counts(consumed)
+        after = self._inv_pos[: int(np.searchsorted(self._inv_pos, consumed))]
+        if self._last_pos is not None:
+            after = after[after > self._last_pos]
+        kept = self._inv_carry if self._last_pos == self._carry_from else 0
+        self._inv_carry = kept + len(after)
+        self._gap_events = []
 
     @property
     def consumed(self) -> int:
@@ -386,63 +505,164 @@ class Engine:
         if which == 0:
             i = self._hi
             self._hi += 1
-            if not self._heading_clock(int(self._h.t_ms[i]), int(self._h.counter[i])):
+            if not self._heading_clock(i):
                 return
             if self._ref is None and self._h.valid[i]:
                 self._ref = float(self._h.heading_deg[i])
         elif which == 1:
             i = self._si
             self._si += 1
-            self.now_ms = max(self.now_ms, int(self._s.t_ms[i]))
+            t = int(self._s.t_ms[i])
+            self.now_ms = max(self.now_ms, t)
+            if self._is_quiet(int(self._s.pos[i])):
+                self._fail_quiet(int(self._s.pos[i]), t)
+                return
             self._on_status(self._s, i)
         else:
-            frame = self._o[self._oi][1]
+            pos, frame = self._o[self._oi]
             self._oi += 1
-            self._on_other(frame)
+            self._on_other(pos, frame)
         if self.phase in (Phase.COMMANDS, Phase.STILL, Phase.TRACKING):
             self._check_wait_timeout()
 
-    def _heading_clock(self, t: int, counter: int) -> bool:
-        """Advance the stand clock with one heading frame; False when that revealed silence."""
-        silent = self._last_t is not None and t - self._last_t > self._silence_ms
-        gap = self._last_t
-        self._last_t, self._last_counter = t, counter
+    def _heading_clock(self, i: int) -> bool:
+        """Advance the stand clock with heading frame i (waiting phases); False when it failed
+        the trial (no valid heading frame for the silence timeout)."""
+        h = self._h
+        pos, t, counter = int(h.pos[i]), int(h.t_ms[i]), int(h.counter[i])
         self.now_ms = max(self.now_ms, t)
-        if silent:
-            assert gap is not None
-            self.fail(
-                f"bus silence: no heading frame for {(t - gap) / 1000:g} s of stand time",
-                kind="bus silence",
-            )
+        if self._is_quiet(pos):
+            self._note_heading(pos, t, counter)
+            self._fail_quiet(pos, t)
             return False
+        if self._last_t is not None and self._last_pos is not None:
+            dt, prev_c = t - self._last_t, int(self._last_counter or 0)
+            timed = self._interval is not None
+            if not timed:
+                self._learn_interval(np.array([dt]), np.array([counter - prev_c]))
+            if (counter - prev_c) % COUNTER_MODULO != 1 or (timed and self._late(dt)):
+                prev = (self._last_pos, self._last_t, prev_c)
+                self._gap(prev, (pos, t, counter), timed)  # no window to count in: events only
+                self._tell_gaps(pos + 1)
+        self._note_heading(pos, t, counter)
         return True
+
+    def _note_heading(self, pos: int, t: int, counter: int) -> None:
+        self._last_pos, self._last_t, self._last_counter = pos, t, counter
 
     @property
     def _silence_ms(self) -> int:
         return round(self.plan.timeouts.bus_silence_s * 1000)
 
-    def _clock_silence(self, t_ms: int, last_heading_ms: int | None = None) -> str | None:
-        """Virtual time: at a SIM_CLOCK tick t_ms, the bus-silence reason when no heading frame
-        has come for longer than the plan allows (else None)."""
-        last = last_heading_ms if last_heading_ms is not None else self._last_t
-        since = last if last is not None else self._heard_ms
-        if since is None or t_ms - since <= self._silence_ms:
-            return None
-        return f"bus silence: no heading frame for {(t_ms - since) / 1000:g} s of stand time"
+    # ------------------------------------------------------- no valid heading frame (liveness)
+    def _quiet_index(self) -> np.ndarray:
+        """Stream positions of this batch's heading frames and stand statuses at which no valid
+        heading frame has come for longer than the silence timeout (once per batch and trial)."""
+        key = (self._batch_no, self._resets)
+        if self._quiet_key == key:
+            return self._quiet
+        self._quiet_key = key
+        h, s = self._h, self._s
+        valid = h.valid
+        self._vpos = h.pos[valid]
+        self._vrun = np.maximum.accumulate(h.t_ms[valid]) if len(self._vpos) else self._vpos
+        self._flagged = np.concatenate(([0], np.cumsum(~valid)))  # VALID cleared, running
+        if self._valid_ms is None:
+            self._quiet = np.zeros(0, dtype=np.int64)
+            return self._quiet
+        before = np.cumsum(valid) - valid  # valid heading frames before each one
+        quiet = h.t_ms - self._last_valid(before) > self._silence_ms
+        before_s = np.searchsorted(self._vpos, s.pos)
+        quiet_s = s.t_ms - self._last_valid(before_s) > self._silence_ms
+        self._quiet = np.union1d(h.pos[quiet], s.pos[quiet_s])
+        return self._quiet
 
-    def _on_clock(self, t_ms: int, reason: str | None) -> None:
-        """A SIM_CLOCK tick: the clock moves on; after a silence, it counts again from here."""
+    def _last_valid(self, before: np.ndarray) -> np.ndarray:
+        """Stand time of the last valid heading frame, given how many of the batch's come
+        before."""
+        assert self._valid_ms is not None
+        last = np.full(len(before), self._valid_ms, dtype=np.int64)
+        some = before > 0
+        last[some] = np.maximum(self._valid_ms, self._vrun[before[some] - 1])
+        return last
+
+    def _valid_before(self, pos: int) -> int:
+        """Stand time of the last valid heading frame before stream position `pos`."""
+        self._quiet_index()
+        assert self._valid_ms is not None
+        k = int(np.searchsorted(self._vpos, pos))
+        return max(self._valid_ms, int(self._vrun[k - 1])) if k else self._valid_ms
+
+    def _next_quiet(self) -> int:
+        """Position of the next frame revealing the timeout (the batch end when none)."""
+        quiet = self._quiet_index()
+        i = int(np.searchsorted(quiet, self.consumed))
+        return int(quiet[i]) if i < len(quiet) else self._end
+
+    def _is_quiet(self, pos: int) -> bool:
+        quiet = self._quiet_index()
+        i = int(np.searchsorted(quiet, pos))
+        return i < len(quiet) and int(quiet[i]) == pos
+
+    def _quiet_counts(self, stop: int) -> tuple[int, Counter[str]]:
+        """Unusable frames since the last valid heading frame (or the trial start), up to stream
+        position `stop`: (position counted from, count per cause)."""
+        self._quiet_index()
+        k = int(np.searchsorted(self._vpos, stop))
+        if k and int(self._vpos[k - 1]) >= self._quiet_from:
+            start, counts = int(self._vpos[k - 1]) + 1, Counter()
+        else:
+            start, counts = self._quiet_from, Counter(self._quiet_carry)
+        h = self._h
+        a, b = np.searchsorted(h.pos, (start, stop))
+        if self._flagged[b] - self._flagged[a]:
+            counts["VALID flag cleared"] += int(self._flagged[b] - self._flagged[a])
+        a, b = np.searchsorted(self._inv_pos, (start, stop))
+        counts.update(self._inv_cause[a:b])
+        return start, counts
+
+    def _quiet_reset(self) -> None:
+        """A trial starts: it gets the whole timeout from now."""
+        if self._valid_ms is None:
+            return
+        self._valid_ms = self.now_ms
+        self._quiet_from, self._quiet_carry = self.consumed, Counter()
+        self._resets += 1
+
+    def _fail_quiet(self, pos: int, t_ms: int) -> None:
+        """No valid heading frame for longer than the timeout, seen at the frame at `pos` (stand
+        time t_ms): bus silence when nothing came at all, else what the frames that came had."""
+        since = self._valid_before(pos)
+        _, counts = self._quiet_counts(pos + 1)
+        waited = f"{(t_ms - since) / 1000:g} s of stand time"
+        if not counts:
+            self.fail(f"bus silence: no heading frame for {waited}", kind="bus silence")
+            return
+        n = sum(counts.values())
+        causes = sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
+        detail = causes[0][0] if len(causes) == 1 else ", ".join(f"{v} {k}" for k, v in causes)
+        self.fail(
+            f"no valid heading frame for {waited} ({n} of {n} frames invalid: {detail})",
+            kind=QUIET,
+        )
+
+    def _on_clock(self, pos: int, t_ms: int) -> None:
+        """A SIM_CLOCK tick (virtual time): the clock moves on, also while the stand is silent."""
         self.now_ms = max(self.now_ms, t_ms)
-        if self._heard_ms is None:
-            self._heard_ms = t_ms
-        if reason is not None:
-            self._last_t = self._heard_ms = t_ms
-            self.fail(reason, kind="bus silence")
+        if self._valid_ms is not None and t_ms - self._valid_before(pos) > self._silence_ms:
+            self._fail_quiet(pos, t_ms)
 
     def _check_wait_timeout(self) -> None:
         waited_s = (self.now_ms - self._phase_start_ms) / 1000
         if self.phase is Phase.COMMANDS:
-            if not self._sent:
+            if not self._sent:  # the frames before it were on their way: a generous limit
+                limit = self.plan.settle.max_wait_s
+                if waited_s > limit:
+                    self.fail(
+                        f"command '{self._pending[0].kind}' not seen in the stream within "
+                        f"{limit:g} s of stand time",
+                        kind="command not seen",
+                    )
                 return
             limit = self.plan.timeouts.ack_s * self.plan.bus.speedup
             if waited_s > limit:
@@ -459,7 +679,7 @@ class Engine:
                 kind="mis-tracking",
             )
 
-    def _on_other(self, frame: Frame) -> None:
+    def _on_other(self, pos: int, frame: Frame) -> None:
         if isinstance(frame, CommandFrame):
             if self.phase is Phase.COMMANDS and not self._sent and self._awaits(frame):
                 self._sent = True
@@ -469,7 +689,7 @@ class Engine:
         elif isinstance(frame, AckFrame):
             self._on_ack(frame)
         elif isinstance(frame, ClockFrame):
-            self._on_clock(frame.stand_time_ms, self._clock_silence(frame.stand_time_ms))
+            self._on_clock(pos, frame.stand_time_ms)
         elif isinstance(frame, CompassStatusFrame) and _compass_fault(frame):
             self.fail(_compass_fault(frame), kind="compass fault")
         elif isinstance(frame, InvalidFrame) and _is_bus_off(frame):
@@ -569,24 +789,38 @@ class Engine:
         h = self._h
         stop = self._hi + int(np.searchsorted(h.pos[self._hi :], fatal_pos))
         seg = h.take(slice(self._hi, stop))
-        consumed, transition, silence = self._consume(seg)
+        consumed, transition = self._consume(seg)
         self._hi += consumed
-        self._account(int(h.pos[self._hi]) if transition or silence else fatal_pos)
-        if silence:  # the next heading frame comes after a gap: it fails the trial
-            self._hi += 1
-            self._heading_clock(int(h.t_ms[self._hi - 1]), int(h.counter[self._hi - 1]))
-        elif transition:
+        self._account(int(h.pos[self._hi]) if transition else fatal_pos)
+        if transition:
             self._close_window()
+        elif fatal_kind == QUIET:
+            self._quiet_at(fatal_pos)
         elif fatal_reason is not None:
             self._skip_to(fatal_pos + 1)
-            frame = self._o[self._oi - 1][1] if self._oi else None
-            if isinstance(frame, ClockFrame) and fatal_kind == "bus silence":
-                self._on_clock(frame.stand_time_ms, fatal_reason)
-            else:
-                self.fail(fatal_reason, kind=fatal_kind)
+            self.fail(fatal_reason, kind=fatal_kind)
+
+    def _quiet_at(self, pos: int) -> None:
+        """Take in the frame at `pos` (a heading frame, stand status or SIM_CLOCK tick that
+        reveals the timeout) and fail the trial."""
+        h, s = self._h, self._s
+        if self._hi < len(h) and int(h.pos[self._hi]) == pos:
+            i = self._hi
+            t = int(h.t_ms[i])
+            self._note_heading(pos, t, int(h.counter[i]))
+        elif self._si < len(s) and int(s.pos[self._si]) == pos:
+            t = int(s.t_ms[self._si])
+        else:
+            frame = self._o[self._oi][1]
+            assert isinstance(frame, ClockFrame)
+            t = frame.stand_time_ms
+        self._skip_to(pos + 1)
+        self.now_ms = max(self.now_ms, t)
+        self._fail_quiet(pos, t)
 
     def _first_fatal(self) -> tuple[int, str | None, str]:
-        """Position and reason of the first status or frame that ends this series."""
+        """Position and reason of the first status or frame that ends this series (for a
+        missing valid heading frame, kind QUIET: its reason is told by `_fail_quiet`)."""
         best: tuple[int, str | None, str] = (self._end, None, "")
         s = self._s
         key = (id(s), self._tidx, self._j, self.phase is Phase.STILL)
@@ -596,17 +830,17 @@ class Engine:
         if len(bad):
             i = int(bad[0])
             best = (int(s.pos[i]), f"mis-tracking: {self._tracking_problem(s, i)}", "mis-tracking")
+        quiet = self._next_quiet()
+        if quiet < best[0]:
+            best = (quiet, None, QUIET)
         errors = self._series_errors
         for pos, frame in self._o[self._oi :]:
             if pos >= best[0]:
                 break
             if isinstance(frame, ClockFrame):
-                h = self._h
-                before = self._hi + int(np.searchsorted(h.pos[self._hi :], pos)) - 1
-                last = int(h.t_ms[before]) if before >= self._hi else None
-                reason = self._clock_silence(frame.stand_time_ms, last)
-                if reason is not None:
-                    return pos, reason, "bus silence"
+                since = self._valid_before(pos) if self._valid_ms is not None else None
+                if since is not None and frame.stand_time_ms - since > self._silence_ms:
+                    return pos, None, QUIET
             if isinstance(frame, CompassStatusFrame) and _compass_fault(frame):
                 return pos, _compass_fault(frame), "compass fault"
             if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
@@ -625,7 +859,8 @@ class Engine:
             self._oi += 1
 
     def _account(self, limit: int) -> None:
-        """Attribute statuses and other frames before stream position `limit` to the window."""
+        """Attribute statuses and other frames before stream position `limit` to the window;
+        tell the gaps found meanwhile, in stream order."""
         s = self._s
         stop = self._si + int(np.searchsorted(s.pos[self._si :], limit))
         if self._j == 2 and self.phase is Phase.OBSERVE:
@@ -637,12 +872,14 @@ class Engine:
             self.now_ms = max(self.now_ms, int(s.t_ms[stop - 1]))
         self._si = stop
         while self._oi < len(self._o) and self._o[self._oi][0] < limit:
-            frame = self._o[self._oi][1]
+            pos, frame = self._o[self._oi]
             self._oi += 1
+            if self._gap_events:
+                self._tell_gaps(pos)
             if isinstance(frame, CommandFrame):
                 self._foreign_command(frame)
             if isinstance(frame, ClockFrame):
-                self._on_clock(frame.stand_time_ms, None)
+                self.now_ms = max(self.now_ms, frame.stand_time_ms)
             if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
                 self._series_errors += 1
             if isinstance(frame, InvalidFrame) and self._window is not None:
@@ -654,14 +891,16 @@ class Engine:
                     self._window.anomalies["out_of_range"] += 1
                 else:
                     self._window.anomalies["invalid_frame"] += 1
+        if self._gap_events:
+            self._tell_gaps(limit)
 
-    def _consume(self, seg: Headings) -> tuple[int, bool, bool]:
+    def _consume(self, seg: Headings) -> tuple[int, bool]:
         """Accumulate heading frames into the current block/window up to the first one that
-        closes it. Returns (frames consumed, window closed, bus silence at the next frame).
-        Work is bounded by the window, not by the rest of the batch."""
+        closes it. Returns (frames consumed, window closed). Work is bounded by the window, not
+        by the rest of the batch."""
         n = len(seg)
         if n == 0:
-            return 0, False, False
+            return 0, False
         t = seg.t_ms
         if self._window is None:
             start = int(t[0])
@@ -673,27 +912,131 @@ class Engine:
         w = self._window
         guess = int(np.searchsorted(t, w.end_ms))  # exact when the stand clock only advances
         early = np.flatnonzero(t[:guess] >= w.end_ms)
-        close = int(early[0]) if len(early) else guess
-        span = min(close + 1, n)
-        prev_t = t[0] if self._last_t is None else self._last_t
-        silent = np.flatnonzero(np.diff(t[:span], prepend=prev_t) > self._silence_ms)
-        limit = int(silent[0]) if len(silent) else n
-        end = min(close, limit)
+        end = int(early[0]) if len(early) else guess
         if self._ref is None:
             valid_idx = np.flatnonzero(seg.valid[:end])
             if len(valid_idx):
                 self._ref = float(seg.heading_deg[valid_idx[0]])
         if end:
-            prev_c = seg.counter[0] - 1 if self._last_counter is None else self._last_counter
-            lost = (np.diff(seg.counter[:end], prepend=prev_c) - 1) % 16
             inside = t[:end] >= w.start_ms
+            lost, jumps = self._gaps(seg, end, inside)
             valid = seg.valid[:end] & inside
             if self._ref is not None:
                 dev = np.rint(wrap180(seg.heading_deg[:end][valid] - self._ref) * NANO)
-                w.add(dev.astype(np.int64), int(lost[inside].sum()), int((inside & ~valid).sum()))
-            self._last_t, self._last_counter = int(t[end - 1]), int(seg.counter[end - 1])
+                w.add(dev.astype(np.int64), lost, int((inside & ~valid).sum()), jumps)
+            last = end - 1
+            self._note_heading(int(seg.pos[last]), int(t[last]), int(seg.counter[last]))
             self.now_ms = max(self.now_ms, self._last_t)
-        return end, close < limit, limit <= close and limit < n
+        return end, end < n
+
+    # ---------------------------------------------------------------------------------- gaps
+    # A gap between two consecutive heading frames is judged from the stand time AND the 4-bit
+    # counter: the counter alone cannot see 16, 32, ... missing frames, and a counter that skips
+    # values while the stand time runs on has lost nothing. Frames received but unusable in
+    # between (bad CRC, out of range: counted as such in the window) are not missing.
+
+    def _learn_interval(self, dt: np.ndarray, step: np.ndarray) -> int:
+        """The expected heading-frame interval, from the stream (the engine sees frames, not
+        the DBC; on the shipped one GYRO_HEADING's GenMsgCycleTime is 100 ms, as the simulated
+        stand sends): the median stand-time spacing per counter step of the first
+        INTERVAL_SAMPLE pairs of consecutive heading frames with a positive spacing and a
+        counter step of 1 to 15 (per step, so that dropped frames do not stretch it; the median,
+        so that a few counter jumps do not shrink it). Takes pairs from `dt`, `step` in order
+        while learning; returns how many of them come before the interval is known (those are
+        judged by the counter alone)."""
+        if self._interval is not None:
+            return 0
+        need = INTERVAL_SAMPLE - len(self._spacings)
+        step = step % COUNTER_MODULO
+        taken = np.flatnonzero((dt > 0) & (step > 0))[:need]
+        self._spacings.extend(float(x) for x in dt[taken] / step[taken])
+        if len(self._spacings) < INTERVAL_SAMPLE:
+            return len(dt)
+        self._interval = float(np.median(self._spacings))
+        self._late_ms = 1.5 * self._interval  # a frame was due in between
+        return int(taken[-1]) + 1 if len(taken) else 0
+
+    def _late(self, dt: int) -> bool:
+        return self._interval is not None and dt > self._late_ms
+
+    def _gaps(self, seg: Headings, end: int, inside: np.ndarray) -> tuple[int, int]:
+        """Missing frames and counter jumps before each of the first `end` frames of `seg`
+        (those inside the window summed); gaps the counter under-reports are told as events."""
+        t, counter = seg.t_ms[:end], seg.counter[:end]
+        dt = t[1:] - t[:-1]  # before frame i + 1
+        step = counter[1:] - counter[:-1]
+        first = None if self._last_t is None else int(t[0]) - self._last_t  # before frame 0
+        learned = 0  # frames from here on are judged with the interval
+        if self._interval is None:  # (a spacing of 0 is never taken: none before frame 0)
+            step0 = 0 if self._last_counter is None else int(counter[0]) - self._last_counter
+            learned = self._learn_interval(
+                np.concatenate(([first or 0], dt)), np.concatenate(([step0], step))
+            )
+        odd = (step != 1) & (step != 1 - COUNTER_MODULO)
+        if self._interval is not None:
+            late = dt > self._late_ms
+            if learned > 1:
+                late[: learned - 1] = False
+            odd |= late
+        at = (np.flatnonzero(odd) + 1).tolist()
+        if first is not None and self._last_pos is not None and self._last_counter is not None:
+            step0 = (int(counter[0]) - self._last_counter) % COUNTER_MODULO
+            if step0 != 1 or (learned == 0 and self._late(first)):
+                at.insert(0, 0)
+        lost = jumps = 0
+        for i in at:
+            if i:
+                prev = (int(seg.pos[i - 1]), int(t[i - 1]), int(counter[i - 1]))
+            else:
+                assert self._last_pos is not None and self._last_t is not None
+                prev = (self._last_pos, self._last_t, int(self._last_counter or 0))
+            now = (int(seg.pos[i]), int(t[i]), int(counter[i]))
+            missing, jump = self._gap(prev, now, timed=i >= learned)
+            if inside[i]:
+                lost += missing
+                jumps += jump
+        return lost, jumps
+
+    def _gap(
+        self, prev: tuple[int, int, int], now: tuple[int, int, int], timed: bool
+    ) -> tuple[int, int]:
+        """(frames missing, counter jumps) between two consecutive heading frames, each given
+        as (stream position, stand time ms, counter). Missing = max(by the counter, by the
+        stand time); a counter step with no time gap is a counter jump, nothing missing."""
+        (prev_pos, prev_t, prev_c), (pos, t, c) = prev, now
+        dt = t - prev_t
+        if dt > self._silence_ms:  # a silence: the trial failed on it
+            return 0, 0
+        a, b = np.searchsorted(self._inv_pos, (prev_pos, pos))
+        unusable = int(b - a) + (self._inv_carry if prev_pos == self._carry_from else 0)
+        counted = (c - prev_c - 1) % COUNTER_MODULO  # unusable frames included
+        if not timed or self._interval is None:
+            return counted - min(unusable, counted), 0
+        slots = max(round(dt / self._interval) - 1, 0)  # frames due between the two
+        unusable = min(unusable, slots)
+        by_time = slots - unusable
+        by_counter = (counted - unusable) % COUNTER_MODULO
+        if by_time == 0:
+            return 0, int(by_counter != 0)
+        missing = max(by_counter, by_time)
+        if by_time > by_counter:  # the counter cannot tell: never a silent gap
+            self._gap_events.append(
+                (
+                    pos,
+                    f"{missing} heading frames missing before stand time {t / 1000:g} s "
+                    f"({dt / 1000:g} s after the previous one, expected every "
+                    f"{self._interval:g} ms; the 4-bit counter shows {by_counter})",
+                    t,
+                )
+            )
+        return missing, 0
+
+    def _tell_gaps(self, limit: int) -> None:
+        """The gap events of heading frames before stream position `limit`."""
+        j = self._j if self.phase in (Phase.SETTLE, Phase.OBSERVE) else None
+        while self._gap_events and self._gap_events[0][0] < limit:
+            _, message, t = self._gap_events.pop(0)
+            self.sink.event("frame gap", "warning", message, self._tidx, j, t)
 
     def _close_window(self) -> None:
         w = self._window
@@ -729,7 +1072,7 @@ class Engine:
             self._settle_durations.append(w.end_ms - self._settle_start)
             self.sink.series_settled(self._trial.index, self._j, w.end_ms, outcome)
             self._enter(Phase.OBSERVE)
-            self._window = _Window(w.end_ms, w.end_ms + width)
+            self._window = _Window(w.end_ms, w.end_ms + width, runs=True)
             return
         if w.end_ms - self._settle_start > settle.max_wait_s * 1000:
             self.fail(
@@ -777,12 +1120,26 @@ class Engine:
                 kind="stuck sensor",
             )
             return
+        stuck = w.longest_run > w.stuck_limit()
+        if stuck:
+            w.anomalies["stuck"] = w.longest_run
         value = self._ref + w.mean_ndeg() / NANO
         flags = w.flags()
         obs = ObservationResult(
             trial.index, self._j, self._k, value, w.start_ms, w.end_ms, w.used, w.lost, flags
         )
         self.sink.observation(obs)
+        if stuck:
+            self.sink.event(
+                "stuck sensor",
+                "warning",
+                f"observation {self._k}: {w.longest_run} identical heading readings in a row "
+                f"({w.longest_run / w.used:.0%} of its {w.used} frames; flagged above "
+                f"{w.stuck_limit()})",
+                trial.index,
+                self._j,
+                w.end_ms,
+            )
         if flags:
             self.sink.event(
                 "frame anomalies",
@@ -796,7 +1153,7 @@ class Engine:
         self._k += 1
         if self._k <= self.plan.n_obs:
             start = w.end_ms + round(self.plan.observation.spacing_s * 1000)
-            self._window = _Window(start, start + (w.end_ms - w.start_ms))
+            self._window = _Window(start, start + (w.end_ms - w.start_ms), runs=True)
             return
         self.sink.series_completed(trial.index, self._j)
         self._window = None
