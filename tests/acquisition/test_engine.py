@@ -164,7 +164,8 @@ def test_wrong_amplitude_is_mis_tracking() -> None:
 
 def test_refusal_fails_the_trial_with_the_stand_reason() -> None:
     trials = [(45.0, 80.0, 6.0, "fit"), (315.0, 20.0, 5.0, "fit")]  # 80 cm > stand limit
-    sink, _, _ = run({"trials": trials})
+    stand = "[bus.simulator.stand]\nmax_amplitude_cm = 100.0"  # the plan's; lockstep keeps 50
+    sink, _, _ = run({"trials": trials, "bus_extra": stand})
     ((trial, _, reason),) = failure_of(sink)
     assert trial == 1 and reason == "stand refused 'set': amplitude out of stand limits"
     assert sink.of("trial_completed")[0][0] == 2

@@ -42,7 +42,6 @@ def paper_plan_text(tmp: Path, *, seed: int = 3) -> str:
     text = (ROOT / "examples" / "paper.toml").read_text()
     replacements = {
         'database = "runs/gyrostand.sqlite"': f'database = "{tmp / "live.sqlite"}"',
-        'raw_log_dir = "runs/raw"': f'raw_log_dir = "{tmp / "raw"}"',
         "still_window_s = 60.0": "still_window_s = 30.0",
         "rocking_window_periods = 8": "rocking_window_periods = 4",
         "hold_s = 1800.0": "hold_s = 120.0",
