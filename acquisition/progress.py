@@ -1,4 +1,5 @@
-"""Live progress of a campaign on the terminal (rich), silent when stderr is not a terminal."""
+"""Progress of a campaign on stderr: a live rich display on a terminal; plain lines otherwise
+(CI, nohup, a pipe), so that a 15-hour run shows where it is in its log."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ from rich.table import Table
 
 from gyrostand.acquisition.engine import Phase, Snapshot
 
+HEARTBEAT_WALL_S = 60.0  # plain lines: the state again after this long without a line
+
 
 def _duration(seconds: float) -> str:
     seconds = max(0, round(seconds))
@@ -20,12 +23,18 @@ def _duration(seconds: float) -> str:
     return f"{h:d}:{m:02d}:{s:02d}"
 
 
+def _series(j: int) -> str:
+    return f"j={j} ({'before rocking' if j == 1 else 'rocking'})"
+
+
 class ProgressDisplay:
-    """`update(snapshot)` as often as you like; the screen refreshes a few times a second."""
+    """`update(snapshot)` as often as you like. On a terminal the screen refreshes a few times a
+    second; otherwise `PlainProgress` writes a line per step; nothing with `quiet`."""
 
     def __init__(self, *, quiet: bool = False, console: Console | None = None) -> None:
         self.console = console or Console(stderr=True)
         self.enabled = not quiet and self.console.is_terminal
+        self.plain = None if quiet or self.enabled else PlainProgress(self.console)
         self._live: Live | None = None
         self._wall0 = time.monotonic()
         self._stand0: int | None = None
@@ -47,6 +56,8 @@ class ProgressDisplay:
             self._live.__exit__(exc_type, exc, tb)
 
     def update(self, snap: Snapshot) -> None:
+        if self.plain is not None:
+            self.plain.update(snap)
         if self._live is None:
             return
         now = time.monotonic()
@@ -80,3 +91,86 @@ class ProgressDisplay:
         table.add_row("stand time", _duration(snap.now_ms / 1000))
         table.add_row("ETA", f"stand {_duration(eta_stand)}, wall {wall_text}")
         return table
+
+
+class PlainProgress:
+    """Progress as plain lines, for output that is not a terminal. A line when the engine
+    enters a phase of a series, per completed observation and when a trial ends; the state
+    again after `heartbeat_s` of wall time without a line. Every line ends with the stand time
+    and the ETA in stand time: its content depends on the engine's snapshots only, never on the
+    wall clock.
+
+    Snapshots come after each batch of frames; in virtual time one batch may hold several
+    steps. The observations of a series that the engine left for the next one were all taken
+    (it moves on only then) and get their lines; a trial's end is not told apart from a
+    failure here (`campaign status` has the outcome)."""
+
+    def __init__(self, console: Console, heartbeat_s: float = HEARTBEAT_WALL_S) -> None:
+        self.console = console
+        self.heartbeat_s = heartbeat_s
+        self._key: tuple[int, int] | None = None  # (trial, j) of the last snapshot
+        self._phase: Phase | None = None
+        self._done = 0  # observations of that series known to be taken
+        self._base = 0  # ... taken before this run (resume)
+        self._n_obs = 0
+        self._n_trials = 0
+        self._last_line = time.monotonic()
+
+    def update(self, snap: Snapshot) -> None:
+        key = (snap.trial, snap.j)
+        if self._key is not None and key != self._key:
+            self._left(snap)
+        if snap.phase is Phase.DONE or snap.trial == 0:
+            self._key = None
+            return
+        if key != self._key:
+            self._key, self._phase, self._n_obs = key, None, snap.n_obs
+            self._n_trials = snap.n_trials
+            self._base = max(0, snap.k - 1 - len(snap.values_deg))
+            self._done = self._base
+        while self._done < self._base + len(snap.values_deg):
+            self._observed(snap)
+        if snap.phase is not self._phase:
+            self._phase = snap.phase
+            if snap.phase is not Phase.OBSERVE:
+                self._line(f"{self._where()}: {snap.phase.value}", snap)
+        elif time.monotonic() - self._last_line >= self.heartbeat_s:
+            self._line(f"{self._where()}: {self._state(snap)}", snap)
+
+    def _left(self, snap: Snapshot) -> None:
+        """The engine left the series of `_key` (for the next series, or the next trial)."""
+        assert self._key is not None
+        trial, j = self._key
+        if snap.trial == trial and j == 1 and snap.j == 2:
+            while self._done < self._n_obs:
+                self._observed(snap)
+        if snap.trial != trial:
+            self._line(f"trial {trial}/{self._n_trials} ended", snap)
+
+    def _observed(self, snap: Snapshot) -> None:
+        self._done += 1
+        self._line(f"{self._where()}: observation {self._done}/{self._n_obs} done", snap)
+
+    def _where(self) -> str:
+        assert self._key is not None
+        trial, j = self._key
+        return f"trial {trial}/{self._n_trials}, {_series(j)}"
+
+    @staticmethod
+    def _state(snap: Snapshot) -> str:
+        if snap.phase is Phase.SETTLE and snap.settle_spread_deg is not None:
+            return f"settling, window means within +-{snap.settle_spread_deg:.4f} deg"
+        if snap.phase is Phase.OBSERVE:
+            return f"observing {snap.k}/{snap.n_obs}"
+        return snap.phase.value
+
+    def _line(self, text: str, snap: Snapshot) -> None:
+        self._last_line = time.monotonic()
+        self.console.print(
+            f"{text}; stand time {_duration(snap.now_ms / 1000)}, "
+            f"ETA stand {_duration(snap.remaining_ms / 1000)}",
+            markup=False,
+            highlight=False,
+            emoji=False,
+            soft_wrap=True,
+        )

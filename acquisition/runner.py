@@ -5,7 +5,6 @@ Live and replay share everything downstream of the frames: `BatchDecoder` -> `En
 
 from __future__ import annotations
 
-import itertools
 import os
 import signal
 import threading
@@ -27,7 +26,7 @@ from gyrostand.acquisition.store import CampaignStore
 from gyrostand.acquisition.virtual_time import Grants, StreamClock
 from gyrostand.db.models import Campaign, Observation, Series, Trial
 from gyrostand.frames.batch import BatchDecoder, RawFrames
-from gyrostand.frames.logfile import read_raw_frames, sha256_of
+from gyrostand.frames.logfile import LogFileError, read_raw_frames, sha256_of
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import Plan
 from gyrostand.stand.controller import StandController, StandError
@@ -254,19 +253,92 @@ class _NoCommands:
         pass
 
 
-def replay(plan: Plan, sessions: sessionmaker[Session], log: Path) -> RunResult:
-    """Re-derive a campaign offline from a raw log into a new campaign (source "replay")."""
+class ReplayLogError(ValueError):
+    """A raw log that cannot be replayed: unreadable, corrupt, or without a CAN frame. The
+    message starts with the file's name and says what is wrong."""
+
+
+@dataclass(frozen=True)
+class ReplayLog:
+    """A raw log read whole once, before a replay writes anything."""
+
+    path: Path
+    sha256: str
+    frames: int
+    truncated: str | None  # how the log is known to end early (a killed writer, a cut copy)
+
+
+def _blf_truncation(log: Path) -> str | None:
+    """How a BLF file ends early, from its header (python-can's reader): a writer that closes
+    the file writes its final size there; a killed one leaves the initial header."""
+    with can.BLFReader(log) as reader:
+        declared = reader.file_size
+    actual = log.stat().st_size
+    if actual == declared:
+        return None
+    if actual < declared:
+        return f"cut short: {actual} of the {declared} bytes its header declares"
+    return "never closed by its writer (killed?): its last frames were not written"
+
+
+def check_replay_log(log: Path) -> ReplayLog:
+    """Read the whole log (ReplayLogError when it cannot be replayed); a BLF file that ends
+    early but holds frames can be replayed up to its last complete container."""
+    import struct
+    import zlib
+
+    from can.io.blf import BLFParseError
+
+    try:
+        sha = sha256_of(log)
+        frames = sum(len(raw) for raw in read_raw_frames(log))
+        blf = log.suffix.lower() == ".blf"
+        truncated = _blf_truncation(log) if blf else None
+    except (
+        OSError,
+        ValueError,
+        EOFError,
+        struct.error,
+        zlib.error,
+        can.CanError,
+        BLFParseError,
+    ) as exc:
+        what = str(exc) if isinstance(exc, LogFileError) else f"{log}: {exc}"
+        raise ReplayLogError(what) from exc
+    if frames == 0:
+        if blf and truncated is not None:
+            why = f"truncated before its first complete container ({truncated})"
+        elif blf:
+            why = "a BLF file header and nothing else"
+        else:
+            why = f"no line of it is a CAN frame of a {log.suffix.lstrip('.').upper()} log"
+        raise ReplayLogError(f"{log}: no CAN frames in it: {why}")
+    return ReplayLog(log, sha, frames, truncated)
+
+
+def replay(
+    plan: Plan, sessions: sessionmaker[Session], log: Path, checked: ReplayLog | None = None
+) -> RunResult:
+    """Re-derive a campaign offline from a raw log into a new campaign (source "replay"). The
+    log is read whole first (`check_replay_log`, unless `checked` is its result): one that
+    cannot be replayed (ReplayLogError) leaves the database untouched. A log that ends early
+    is replayed up to its end, with a warning event."""
     codec = codec_for(plan)
-    sha = sha256_of(log)
-    batches = read_raw_frames(log)
-    first = next(batches, None)  # an unreadable log fails here, before the database is touched
+    checked = checked or check_replay_log(log)
     store = CampaignStore.create(sessions, plan, source="replay")
-    store.set_raw_log(str(log.resolve()), sha)
     engine = Engine(plan, store, _NoCommands())
     decoder = BatchDecoder(codec)
     try:
         with store.deferred():
-            for raw in itertools.chain([first] if first is not None else [], batches):
+            store.set_raw_log(str(log.resolve()), checked.sha256)
+            if checked.truncated is not None:
+                store.event(
+                    "raw log",
+                    "warning",
+                    f"raw log {log.name} truncated after {checked.frames} frames "
+                    f"({checked.truncated}): replayed up to there",
+                )
+            for raw in read_raw_frames(log):
                 engine.feed(decoder.decode(raw))
                 if engine.phase is Phase.DONE:
                     break
@@ -277,7 +349,7 @@ def replay(plan: Plan, sessions: sessionmaker[Session], log: Path) -> RunResult:
         raise
     outcome = engine.outcome
     store.set_status(outcome)
-    return result(store, outcome, log, sha)
+    return result(store, outcome, log, checked.sha256)
 
 
 def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Plan, CampaignStore]:

@@ -24,6 +24,11 @@ from gyrostand.frames.batch import RawFrames
 CHUNK_FRAMES = 200_000
 
 
+class LogFileError(ValueError):
+    """A raw log that cannot be read: not a log of its format, or corrupt. The message names the
+    file and where it goes wrong."""
+
+
 def sha256_of(path: Path) -> str:
     """The SHA-256 of a file (the raw log's fingerprint stored with the campaign)."""
     with path.open("rb") as f:
@@ -89,7 +94,16 @@ def read_raw_frames(path: Path, chunk: int = CHUNK_FRAMES) -> Iterator[RawFrames
     reader = can.LogReader(path)
     try:
         iterator = iter(reader)
-        while batch := list(itertools.islice(iterator, chunk)):
+        while True:
+            try:
+                batch = list(itertools.islice(iterator, chunk))
+            except ValueError as exc:  # python-can's text readers: a line they cannot parse
+                raise LogFileError(
+                    f"{path}: not a readable {path.suffix.lstrip('.').upper()} log after "
+                    f"{start} frames ({exc})"
+                ) from exc
+            if not batch:
+                return
             yield RawFrames.from_messages(start, batch)
             start += len(batch)
     finally:
@@ -134,9 +148,10 @@ def _containers(path: Path) -> Iterator[bytes]:
     with path.open("rb") as f:
         header = f.read(_FILE_HEADER.size)
         if len(header) < _FILE_HEADER.size or header[:4] != b"LOGG":
-            raise ValueError(f"{path}: not a BLF file")
+            raise LogFileError(f"{path}: not a BLF file (no BLF file header)")
         f.seek(_FILE_HEADER.unpack(header)[1])
         while True:
+            offset = f.tell()
             base = f.read(_OBJ_HEADER_BASE.size)
             if len(base) < _OBJ_HEADER_BASE.size:
                 return
@@ -151,7 +166,14 @@ def _containers(path: Path) -> Iterator[bytes]:
                 continue
             method, _ = _LOG_CONTAINER.unpack_from(body)
             data = body[_LOG_CONTAINER.size :]
-            yield zlib.decompress(data) if method == _ZLIB_DEFLATE else data
+            if method == _ZLIB_DEFLATE:
+                try:
+                    data = zlib.decompress(data)
+                except zlib.error as exc:
+                    raise LogFileError(
+                        f"{path}: corrupt BLF container at byte {offset} ({exc})"
+                    ) from exc
+            yield data
 
 
 def _blf_parts(path: Path) -> Iterator[RawFrames]:

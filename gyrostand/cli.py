@@ -2,11 +2,22 @@
 
 Each command lives in its own `cmd_*` module and registers itself here. The command modules
 import the analysis, database and acquisition layers inside the commands, so `--help` does not
-wait for scipy, matplotlib, pandas and SQLAlchemy (~2 s)."""
+wait for scipy, matplotlib, pandas and SQLAlchemy (~2 s).
 
-from typing import Annotated
+Here too, for every command: how `--help` reads (`HelpCommand`, `HelpGroup`), and the CLI's
+one error boundary (`RootGroup`): a command line that does not parse is one line on stderr
+(exit code 2), an unexpected exception one line and a traceback file (exit code 1)."""
+
+from __future__ import annotations
+
+import re
+import sys
+from collections.abc import Sequence
+from typing import Annotated, Any
 
 import typer
+from typer.core import TyperArgument, TyperCommand, TyperGroup
+from typer.models import DefaultPlaceholder
 
 from gyrostand import (
     SOFTWARE_VERSION,
@@ -18,12 +29,121 @@ from gyrostand import (
     cmd_report,
     cmd_simulate,
 )
+from gyrostand.errors import internal_error, usage_error
+
+_NEXT_SENTENCE = re.compile(r"(?<=[.!?])\s+(?=[A-Z`\[(])")
+
+
+def first_sentence(text: str) -> str:
+    """The first sentence of a help text, on one line (docstrings break lines anywhere)."""
+    paragraph = text.strip().split("\n\n", 1)[0]
+    return _NEXT_SENTENCE.split(" ".join(paragraph.split()), 1)[0]
+
+
+class _HelpLayout:
+    """How a command's `--help` reads: its line in the command list is the first sentence of
+    its help; flags show no value type (they take none); arguments are named in capitals in
+    the usage line, optional ones in brackets (`replay [OPTIONS] LOG`, `analyze [CAMPAIGN]`)."""
+
+    params: list[Any]
+    help: str | None
+    short_help: str | None
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if self.short_help is None and self.help:
+            self.short_help = first_sentence(self.help)
+        for param in self.params:
+            if isinstance(param, TyperArgument) and param.metavar is None:
+                param.metavar = (param.name or "").upper()
+
+    def get_params(self, ctx: Any) -> list[Any]:
+        params = super().get_params(ctx)  # type: ignore[misc]
+        for param in params:  # --help and the completion options are added late
+            if getattr(param, "is_flag", False) and param.metavar is None:
+                param.metavar = ""
+        return params
+
+    def collect_usage_pieces(self, ctx: Any) -> list[str]:
+        pieces = super().collect_usage_pieces(ctx)  # type: ignore[misc]
+        return [re.sub(r"^\{(.+)\}((\.\.\.)?)$", r"\1\2", piece) for piece in pieces]
+
+
+class HelpCommand(_HelpLayout, TyperCommand):
+    """A command with the CLI's help layout."""
+
+
+class HelpGroup(_HelpLayout, TyperGroup):
+    """A command group with the CLI's help layout."""
+
+
+class RootGroup(HelpGroup):
+    """`gyrostand` itself: the one error boundary of every command. A command line that does
+    not parse is one line (exit code 2, as click's own), an unexpected exception one line and a
+    traceback file (exit code 1); a command's own `fail` already is one line."""
+
+    def main(
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        windows_expand_args: bool = True,
+        **extra: Any,
+    ) -> Any:
+        argv = list(sys.argv[1:] if args is None else args)
+        try:
+            try:
+                result = super().main(
+                    argv, prog_name, complete_var, False, windows_expand_args, **extra
+                )
+            except typer.TyperException as exc:  # click's usage errors
+                if not standalone_mode:
+                    raise
+                if type(exc).__name__ == "NoArgsIsHelpError":  # its help is printed already
+                    raise typer.Exit(exc.exit_code) from None
+                ctx = getattr(exc, "ctx", None)
+                hint = None if ctx is None else f"{ctx.command_path} --help"
+                usage_error(exc.format_message(), hint, exc.exit_code)
+            except typer.Abort:
+                if not standalone_mode:
+                    raise
+                typer.echo("gyrostand: aborted", err=True)
+                raise typer.Exit(1) from None
+            except Exception as exc:  # SystemExit and KeyboardInterrupt are not Exceptions
+                internal_error(exc, argv)
+        except typer.Exit as stop:
+            if not standalone_mode:
+                return stop.exit_code
+            sys.exit(stop.exit_code)
+        if standalone_mode:  # super().main returned the exit code of a typer.Exit, or None
+            sys.exit(result if isinstance(result, int) else 0)
+        return result
+
+
+def use_help_layout(typer_app: typer.Typer) -> None:
+    """Give every command and group registered on `typer_app` (and below) the help layout,
+    unless it chose its own class."""
+    for command in typer_app.registered_commands:
+        if command.cls in (None, TyperCommand):
+            command.cls = HelpCommand
+    for group in typer_app.registered_groups:
+        chosen = [
+            cls.value if isinstance(cls, DefaultPlaceholder) else cls
+            for cls in (group.cls, group.typer_instance and group.typer_instance.info.cls)
+        ]
+        if all(cls in (None, TyperGroup) for cls in chosen):
+            group.cls = HelpGroup
+        if group.typer_instance is not None:
+            use_help_layout(group.typer_instance)
+
 
 app = typer.Typer(
     name="gyrostand",
+    cls=RootGroup,
     help="Rolling-stand tests of marine gyrocompasses: simulate, acquire, analyse, report.",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,
 )
 
 
@@ -44,3 +164,4 @@ def main(
 
 for module in (cmd_plan, cmd_simulate, cmd_campaign, cmd_analyze, cmd_report, cmd_data, cmd_demo):
     module.register(app)
+use_help_layout(app)

@@ -24,7 +24,7 @@ import typer
 
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
-from gyrostand.errors import fail
+from gyrostand.errors import fail, printable_lines
 
 if TYPE_CHECKING:
     from gyrostand.analysis.campaign import CampaignAnalysis
@@ -77,8 +77,8 @@ def emit(analysis: CampaignAnalysis, as_json: bool) -> None:
 
     if as_json:
         typer.echo(json.dumps(analysis.to_dict(), indent=2, allow_nan=False))
-    else:
-        typer.echo(render_text(analysis), nl=False)
+    else:  # it may quote stored strings: control characters escaped
+        typer.echo(printable_lines(render_text(analysis)), nl=False)
 
 
 def register(app: typer.Typer) -> None:
@@ -142,15 +142,15 @@ def register(app: typer.Typer) -> None:
         from gyrostand.analysis.csv_input import read_trials_csv
         from gyrostand.report.settings import SEED_000_SETTINGS
 
+        try:  # the table first: a note about the settings would not help a missing file
+            trials = read_trials_csv(csv)
+        except AnalysisError as exc:
+            fail(str(exc))
         if plan is None:
             typer.echo(PAPER_NOTE, err=True)
             settings = SEED_000_SETTINGS
         else:
             settings = plan_settings(plan)
-        try:
-            trials = read_trials_csv(csv)
-        except AnalysisError as exc:
-            fail(str(exc))
         emit(run_analysis(trials, settings), as_json)
 
 
@@ -182,6 +182,7 @@ def signal_of(
     end_s: float | None,
 ) -> SignalSection:
     """The signal analysis the --signal options ask for; one-line CLI errors."""
+    from gyrostand.frames.logfile import LogFileError
     from gyrostand.plan.model import PlanError, load_plan
     from gyrostand.report.signal_record import log_signal
 
@@ -201,6 +202,8 @@ def signal_of(
         fail(f"plan {plan}: {exc}")
     except AnalysisError as exc:
         fail(str(exc))
+    except LogFileError as exc:
+        fail(f"cannot read the raw log {exc}")
     except (OSError, ValueError, EOFError, struct.error, zlib.error) as exc:
         fail(f"raw log {log}: cannot read it ({exc})")
     if section.noise is None:
@@ -211,6 +214,7 @@ def signal_of(
 def campaign_signal_of(db: str, campaign_id: int) -> SignalSection:
     """The signal analysis of a stored campaign (read only); fails when it has no record."""
     from gyrostand.db.queries import CampaignNotFound
+    from gyrostand.frames.logfile import LogFileError
     from gyrostand.report.stored import campaign_signal
 
     sessions = open_db(db, must_exist=True)
@@ -219,6 +223,8 @@ def campaign_signal_of(db: str, campaign_id: int) -> SignalSection:
             section = campaign_signal(session, campaign_id)
     except (AnalysisError, CampaignNotFound) as exc:
         fail(str(exc))
+    except LogFileError as exc:
+        fail(f"campaign {campaign_id}: cannot read its raw log {exc}")
     if section.noise is None:
         fail(f"campaign {campaign_id}: {section.noise_error or section.record_note}")
     return section
@@ -232,4 +238,4 @@ def emit_signal(section: SignalSection, as_json: bool) -> None:
         document = {"schema": SIGNAL_SCHEMA, **section.to_dict()}
         typer.echo(json.dumps(document, indent=2, allow_nan=False))
     else:
-        typer.echo(render_signal_text(section), nl=False)
+        typer.echo(printable_lines(render_signal_text(section)), nl=False)

@@ -8,9 +8,10 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 from gyrostand.cmd_data import DEFAULT_DB, open_db
-from gyrostand.errors import EXIT_FAILED, fail
+from gyrostand.errors import EXIT_FAILED, fail, printable
 from gyrostand.stand.simconfig import TIMINGS
 
 if TYPE_CHECKING:
@@ -18,7 +19,8 @@ if TYPE_CHECKING:
     from gyrostand.acquisition.store import CampaignStore
     from gyrostand.plan.model import Plan
 
-_out = Console(highlight=False, soft_wrap=True)
+_out = Console(highlight=False, soft_wrap=True, markup=False, emoji=False)  # text, never markup
+RECENT_EVENTS = 5  # campaign status: the latest warnings and errors shown
 
 
 def _load(plan_path: Path) -> Plan:
@@ -79,15 +81,22 @@ def checked_plan(
     return plan
 
 
-def print_outcome(result: RunResult, db: str) -> None:
+def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None:
+    """The outcome on stdout; exit code 1 unless the campaign completed (with how to continue
+    it when it can be continued)."""
     _out.print(
         f"campaign {result.campaign_id} {result.outcome}: {result.trials_completed} trials "
-        f"completed, {result.trials_failed} failed, {result.observations} observations in {db}"
+        f"completed, {result.trials_failed} failed, {result.observations} observations in "
+        f"{printable(db)}"
     )
     if result.raw_log is not None:
-        _out.print(f"raw frames: {result.raw_log} (sha256 {result.raw_log_sha256})")
+        _out.print(f"raw frames: {printable(result.raw_log)} (sha256 {result.raw_log_sha256})")
     if result.outcome != "completed":
-        _out.print(f"continue with: gyrostand campaign resume {result.campaign_id} --db {db}")
+        if resumable:
+            _out.print(
+                f"continue with: gyrostand campaign resume {result.campaign_id} "
+                f"--db {printable(db)}"
+            )
         raise typer.Exit(EXIT_FAILED)
 
 
@@ -174,15 +183,29 @@ def register(app: typer.Typer) -> None:
         quiet: Quiet = False,
     ) -> None:
         """Continue a campaign from its first incomplete series (re-settling first)."""
+        from sqlalchemy import select
+
         from gyrostand.acquisition.runner import resume_store
+        from gyrostand.db.lease import CampaignBusy
+        from gyrostand.db.models import Campaign
         from gyrostand.db.queries import first_incomplete_series
-        from gyrostand.plan.model import PlanError
+        from gyrostand.plan.model import PlanError, parse_plan
 
         sessions = open_db(db, must_exist=True)
+        with sessions() as session:  # everything is checked before resume_store writes
+            row = session.execute(
+                select(Campaign.source, Campaign.plan_toml).where(Campaign.id == campaign_id)
+            ).one_or_none()
+        if row is None:
+            fail(f"no campaign {campaign_id} in the database")
+        if row.source != "stand":
+            how = "replayed from a raw log" if row.source == "replay" else "imported from a file"
+            fail(
+                f"campaign {campaign_id} was {how} (source {printable(row.source)!r}): only a "
+                "campaign run on the stand can be resumed"
+            )
         try:
-            stored, store = resume_store(sessions, campaign_id)
-        except LookupError as exc:
-            fail(str(exc))
+            stored = parse_plan(row.plan_toml)
         except PlanError as exc:
             fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
         checked = checked_plan(
@@ -194,6 +217,14 @@ def register(app: typer.Typer) -> None:
             seed=seed,
             timing=timing,
         )
+        try:
+            _, store = resume_store(sessions, campaign_id)
+        except LookupError as exc:
+            fail(str(exc))
+        except CampaignBusy as exc:
+            fail(str(exc), code=EXIT_FAILED)
+        except PlanError as exc:
+            fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
         with sessions() as session:
             left = first_incomplete_series(session, campaign_id)
         if left is None:
@@ -208,6 +239,9 @@ def register(app: typer.Typer) -> None:
         db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
     ) -> None:
         """Show where a campaign stands."""
+        from sqlalchemy import select
+
+        from gyrostand.db.models import Event
         from gyrostand.db.queries import CampaignNotFound, campaign_summary
 
         sessions = open_db(db, must_exist=True)
@@ -216,24 +250,38 @@ def register(app: typer.Typer) -> None:
                 s = campaign_summary(session, campaign_id)
             except CampaignNotFound as exc:
                 fail(str(exc))
+            recent = session.execute(
+                select(Event.severity, Event.kind, Event.message)
+                .where(Event.campaign_id == campaign_id, Event.severity != "info")
+                .order_by(Event.id.desc())
+                .limit(RECENT_EVENTS)
+            ).all()
+        # every stored string goes through printable() and is printed as text (markup off)
         _out.print(
-            f"campaign {s.campaign_id} ({s.source}): {s.status}, {s.instrument}, "
-            f"operator {s.operator}, N={s.n_obs}"
+            f"campaign {s.campaign_id} ({printable(s.source)}): {printable(s.status)}, "
+            f"{printable(s.instrument)}, operator {printable(s.operator)}, N={s.n_obs}"
         )
         table = Table("trial", "role", "status", "j=1", "j=2", "failure")
         for t in s.trials:
             table.add_row(
-                str(t.index),
-                t.role,
-                t.status,
-                f"{t.observations_by_j.get(1, 0)}/{s.n_obs}",
-                f"{t.observations_by_j.get(2, 0)}/{s.n_obs}",
-                t.failure_reason or "",
+                *(
+                    Text(printable(cell))
+                    for cell in (
+                        t.index,
+                        t.role,
+                        t.status,
+                        f"{t.observations_by_j.get(1, 0)}/{s.n_obs}",
+                        f"{t.observations_by_j.get(2, 0)}/{s.n_obs}",
+                        t.failure_reason or "",
+                    )
+                )
             )
         _out.print(table)
-        events = ", ".join(f"{n} {sev}" for sev, n in s.events_by_severity.items())
+        events = ", ".join(f"{n} {printable(sev)}" for sev, n in s.events_by_severity.items())
         _out.print(f"observations: {s.observations_stored}; events: {events}")
-        if s.resume is not None:
+        for severity, kind, message in reversed(recent):
+            _out.print(f"  {printable(severity)} ({printable(kind)}): {printable(message)}")
+        if s.resume is not None and s.source == "stand":
             _out.print(
                 f"next: trial {s.resume.trial_index}, series j={s.resume.j}, "
                 f"observation {s.resume.next_k}"
@@ -247,19 +295,25 @@ def register(app: typer.Typer) -> None:
             str | None, typer.Option(help="Database (file or URL); default: the plan's.")
         ] = None,
     ) -> None:
-        """Re-derive observations offline from a raw CAN log into a new campaign."""
+        """Re-derive observations offline from a raw CAN log into a new campaign. The log is
+        read whole before the database is opened: a log that cannot be replayed leaves it as
+        it was. A replayed campaign cannot be resumed on the stand."""
         import can
 
-        from gyrostand.acquisition.runner import replay
+        from gyrostand.acquisition.runner import ReplayLogError, check_replay_log, replay
 
         checked = checked_plan(
             _load(plan), interface=None, channel=None, db=db, speedup=None, seed=None
         )
         if not log.is_file():
             fail(f"no log file at {log}")
+        try:
+            readable = check_replay_log(log)
+        except ReplayLogError as exc:
+            fail(f"cannot replay {exc}")
         sessions = open_db(checked.database, must_exist=False)
         try:
-            result = replay(checked, sessions, log)
-        except (ValueError, OSError, can.CanError) as exc:
-            fail(f"cannot read {log}: {exc}")
-        print_outcome(result, checked.database)
+            result = replay(checked, sessions, log, readable)
+        except (ReplayLogError, ValueError, OSError, can.CanError) as exc:  # changed meanwhile
+            fail(f"replay of {log} failed: {exc}", code=EXIT_FAILED)
+        print_outcome(result, checked.database, resumable=False)

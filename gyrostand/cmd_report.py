@@ -13,7 +13,7 @@ from typing import Annotated
 import typer
 
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
-from gyrostand.errors import fail
+from gyrostand.errors import fail, printable
 from gyrostand.report import FORMATS
 from gyrostand.report.compliance import SHIPPED
 
@@ -27,18 +27,35 @@ def write_campaign_report(
     formats: tuple[str, ...] = FORMATS,
     profile: str = SHIPPED,
 ) -> dict[str, Path]:
-    """Analyse and report one campaign; the files written by format (one-line CLI errors)."""
-    from sqlalchemy.exc import OperationalError
-
+    """Analyse and report one campaign; the files written by format (one-line CLI errors,
+    every input checked before the analysis run is recorded). A line on stderr per stage: the
+    analysis and the PDF take seconds."""
     from gyrostand.analysis.errors import AnalysisError
-    from gyrostand.db.queries import CampaignNotFound
+    from gyrostand.db.models import Campaign
     from gyrostand.report.compliance import load_profile
-    from gyrostand.report.stored import campaign_report
-    from gyrostand.report.writer import write_report
 
     sessions = open_db(db, must_exist=True)
     try:
         limits = load_profile(profile)
+    except AnalysisError as error:
+        fail(str(error))
+    with sessions() as session:
+        if session.get(Campaign, campaign_id) is None:
+            fail(f"no campaign {campaign_id} in the database")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        fail(f"cannot write the report in {out}: {error.strerror or error}")
+
+    stage(f"campaign {campaign_id} in {db}: analysing it (the analysis run is recorded)")
+    from sqlalchemy.exc import OperationalError
+
+    from gyrostand.db.queries import CampaignNotFound
+    from gyrostand.frames.logfile import LogFileError
+    from gyrostand.report.stored import campaign_report
+    from gyrostand.report.writer import write_report
+
+    try:
         generated = datetime.now(UTC).isoformat(sep=" ", timespec="seconds")
         with sessions.begin() as session:  # the analysis run is recorded with the report
             report = campaign_report(
@@ -46,15 +63,24 @@ def write_campaign_report(
             )
         if report.analysis is None:
             typer.echo(
-                f"note: campaign {campaign_id} could not be analysed ({report.analysis_error}); "
-                "the report documents its plan and acquisition only",
+                f"note: campaign {campaign_id} could not be analysed "
+                f"({printable(report.analysis_error)}); the report documents its plan and "
+                "acquisition only",
                 err=True,
             )
+        stage(f"writing {', '.join(dict.fromkeys(formats))} to {out}")
         return write_report(report, out, formats)
     except (AnalysisError, CampaignNotFound) as error:
         fail(str(error))
+    except LogFileError as error:
+        fail(f"campaign {campaign_id}: cannot read its raw log {error}")
     except OperationalError as error:
         fail(f"the database refused the analysis run: {error.orig}")
+
+
+def stage(what: str) -> None:
+    """One line on stderr: what the report is doing now."""
+    typer.echo(f"report: {printable(what)}", err=True)
 
 
 def register(app: typer.Typer) -> None:

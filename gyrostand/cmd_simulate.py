@@ -30,7 +30,7 @@ from gyrostand.stand.simconfig import (
 )
 from gyrostand.stand.simulator import Simulator
 
-_out = Console(stderr=True, highlight=False)
+_out = Console(stderr=True, highlight=False, markup=False, emoji=False)  # text
 
 # (SimConfig field or None for its top-level fields, dataclass, help panel)
 _GROUPS: tuple[tuple[str | None, type, str], ...] = (

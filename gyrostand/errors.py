@@ -1,17 +1,67 @@
-"""One-line error reporting for the CLI: a clear message on stderr and a non-zero exit code."""
+"""What the CLI writes about itself: one-line errors on stderr with an exit code, the one way
+stored or user-given strings reach the terminal (`printable`), and the boundary for the
+unexpected (`internal_error`: one line, the traceback in a file)."""
 
+from __future__ import annotations
+
+import datetime
+import os
+import sys
+import tempfile
+import traceback
 from typing import NoReturn
 
 import typer
 from rich.console import Console
 
-_err = Console(stderr=True, highlight=False, soft_wrap=True)
+_err = Console(stderr=True, highlight=False, soft_wrap=True, markup=False, emoji=False)
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
+EXIT_INTERNAL = 1
+
+
+def printable(value: object) -> str:
+    """`value` as text for the terminal: characters that are not printable (control characters
+    such as NUL, ESC and newline, bidirectional overrides) as Python escapes (\\x00, \\x1b,
+    \\n, \\u202e), so a stored string can neither move the cursor, change colours nor break
+    a line. Print the result with markup off (or as a rich `Text`): it is text, not markup."""
+    text = str(value)
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
+
+
+def printable_lines(text: str) -> str:
+    """A multi-line text (a rendered analysis) with `printable` applied to each line."""
+    return "\n".join(printable(line) for line in text.split("\n"))
 
 
 def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
-    """Print `gyrostand: error: <message>` to stderr and exit with `code`."""
-    _err.print(f"gyrostand: error: {message}", markup=False)
+    """Print `gyrostand: error: <message>` (one line) to stderr and exit with `code`."""
+    _err.print(f"gyrostand: error: {printable(message)}")
     raise typer.Exit(code)
+
+
+def usage_error(message: str, help_hint: str | None, code: int = EXIT_BAD_INPUT) -> NoReturn:
+    """A command line that does not parse: one line, with where to find the command's help."""
+    hint = f"; see '{help_hint}'" if help_hint else ""
+    fail(f"{message.strip().rstrip('.')}{hint}", code)
+
+
+def internal_error(exc: BaseException, argv: list[str]) -> NoReturn:
+    """An exception nobody expected: one line naming it and a file with the traceback (in the
+    system's temporary folder), exit code 1."""
+    what = printable(f"{type(exc).__name__}: {exc}")
+    try:
+        fd, path = tempfile.mkstemp(prefix="gyrostand-traceback-", suffix=".txt")
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(f"gyrostand {' '.join(argv)}\n")
+            f.write(f"at {datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds')}")
+            f.write(f" with Python {sys.version.split()[0]}\n\n")
+            f.write("".join(traceback.format_exception(exc)))
+        where = f"traceback written to {printable(path)}"
+    except OSError as write_error:
+        where = f"the traceback could not be written ({printable(write_error)})"
+    _err.print(f"gyrostand: internal error: {what}; {where}")
+    raise typer.Exit(EXIT_INTERNAL)
