@@ -28,8 +28,9 @@ from gyrostand.db.models import Campaign, Observation, Series, Trial
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, sha256_of
 from gyrostand.plan.codec import codec_for
-from gyrostand.plan.model import Plan
+from gyrostand.plan.model import Plan, PlanError
 from gyrostand.stand.controller import StandController, StandError
+from gyrostand.stand.protocol import ProtocolError
 
 BATCH_FRAMES = 50_000
 VIRTUAL_STALL_WALL_S = 60.0  # virtual time: no frame at all for this long = no simulator
@@ -47,8 +48,17 @@ class RunResult:
 
 
 def prepare(plan: Plan) -> None:
-    """Everything that can be checked before the bus or the database is touched (PlanError)."""
-    codec_for(plan)
+    """Everything that can be checked before the bus or the database is touched (PlanError),
+    including that the stand command of every trial can be encoded (its DBC ranges)."""
+    codec = codec_for(plan)
+    problems = []
+    for t in plan.trials:
+        try:
+            codec.encode_command_set(t.direction_deg, t.amplitude_cm, t.period_s)
+        except ProtocolError as exc:
+            problems.append(f"[[trials]] {t.index}: the stand command cannot carry it: {exc}")
+    if problems:
+        raise PlanError(problems)
     if plan.bus.simulated:
         sim_config(plan.bus)
 

@@ -258,3 +258,16 @@ def test_plan_check_shows_every_problem(tmp_path: Path) -> None:
         f"{plan}: [campaign] n_obs: must be <= 2147483647 "
         "(observation k is a 32-bit integer column of the database)\n"
     )
+
+
+def test_a_trial_the_stand_command_cannot_carry_is_a_plan_problem(tmp_path: Path) -> None:
+    """The plan allows directions below 360 deg, the DBC's STAND_COMMAND.DIRECTION up to 359.99:
+    refused before the campaign starts, not a ProtocolError in the middle of it."""
+    plan = tmp_path / "plan.toml"
+    plan.write_text(PAPER.read_text().replace("direction_deg = 332.0", "direction_deg = 359.999"))
+    result = CliRunner().invoke(app, ["plan", "check", str(plan)])
+    assert result.exit_code == 1
+    assert result.output == (
+        f"{plan}: [[trials]] 1: the stand command cannot carry it: STAND_COMMAND.DIRECTION = "
+        "359.999 is outside the allowed range [0, 359.99] deg\n"
+    )
