@@ -241,6 +241,7 @@ def register(app: typer.Typer) -> None:
         """Show where a campaign stands."""
         from sqlalchemy import select
 
+        from gyrostand.db.lease import held_elsewhere
         from gyrostand.db.models import Event
         from gyrostand.db.queries import CampaignNotFound, campaign_summary
 
@@ -256,9 +257,12 @@ def register(app: typer.Typer) -> None:
                 .order_by(Event.id.desc())
                 .limit(RECENT_EVENTS)
             ).all()
+        status = printable(s.status)
+        if s.status == "running" and not held_elsewhere(sessions, campaign_id):
+            status = "interrupted (left running by a process that is gone; resume continues it)"
         # every stored string goes through printable() and is printed as text (markup off)
         _out.print(
-            f"campaign {s.campaign_id} ({printable(s.source)}): {printable(s.status)}, "
+            f"campaign {s.campaign_id} ({printable(s.source)}): {status}, "
             f"{printable(s.instrument)}, operator {printable(s.operator)}, N={s.n_obs}"
         )
         table = Table("trial", "role", "status", "j=1", "j=2", "failure")

@@ -7,10 +7,12 @@ from pathlib import Path
 
 import pytest
 from sqlalchemy import select
+from typer.testing import CliRunner
 
 from gyrostand.acquisition.engine import Engine, ObservationResult
 from gyrostand.acquisition.runner import resume_store
 from gyrostand.acquisition.store import CampaignStore
+from gyrostand.cli import app
 from gyrostand.db.lease import CampaignBusy, held_elsewhere
 from gyrostand.db.models import Event, Trial
 from gyrostand.db.queries import ResumePoint, campaign_summary, first_incomplete_series
@@ -78,6 +80,12 @@ def test_resume_completes_the_acquired_trial_with_an_event(tmp_path: Path) -> No
     assert sum(e.message.startswith("resumed by process") for e in events) == 2
 
 
+def status_line(folder: Path) -> str:
+    result = CliRunner().invoke(app, ["campaign", "status", "1", "--db", str(folder / "db.sqlite")])
+    assert result.exit_code == 0, result.output
+    return result.output.splitlines()[0]
+
+
 HOLD = """
 import sys, time
 from gyrostand.db.lease import take_lease
@@ -97,12 +105,16 @@ def test_the_lease_stops_a_second_process_and_dies_with_its_holder(tmp_path: Pat
     try:
         assert holder.stdout.readline() == "held\n"
         assert held_elsewhere(store.sessions, 1)
+        assert "campaign 1 (stand): running," in status_line(tmp_path)
         with pytest.raises(CampaignBusy, match="campaign 1 is being acquired by another process"):
             resume_store(store.sessions, 1)
     finally:
         holder.kill()  # kill -9: the operating system drops the lock
         holder.wait()
     assert not held_elsewhere(store.sessions, 1)
+    assert "campaign 1 (stand): interrupted (left running by a process that is gone" in (
+        status_line(tmp_path)
+    )
     _, resumed = resume_store(store.sessions, 1)
     with store.sessions() as session:
         kinds = session.scalars(select(Event.kind).order_by(Event.id)).all()
