@@ -73,6 +73,17 @@ simulated = true
 {trials}
 """
 
+# a simulated stand that settles in minutes, heading at 2 Hz: quick CLI and process tests
+FAST_SIM = """
+[bus.simulator]
+heading_rate_hz = 2.0
+status_rate_hz = 0.5
+[bus.simulator.compass]
+undamped_period_s = 240.0
+damping_ratio = 0.8
+"""
+
+
 TRIAL = """
 [[trials]]
 direction_deg = {0}

@@ -16,16 +16,7 @@ from typer.testing import CliRunner
 
 from gyrostand.cli import app
 
-from .harness import plan_text
-
-FAST_SIM = """
-[bus.simulator]
-heading_rate_hz = 2.0
-status_rate_hz = 0.5
-[bus.simulator.compass]
-undamped_period_s = 240.0
-damping_ratio = 0.8
-"""
+from .harness import FAST_SIM, plan_text
 
 
 def write_plan(tmp: Path, name: str = "plan.toml", *, extra: str = FAST_SIM, **kw) -> Path:

@@ -13,16 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.acquisition.harness import plan_text
-
-FAST_SIM = """
-[bus.simulator]
-heading_rate_hz = 2.0
-status_rate_hz = 0.5
-[bus.simulator.compass]
-undamped_period_s = 240.0
-damping_ratio = 0.8
-"""
+from tests.acquisition.harness import FAST_SIM, plan_text
 
 
 def write_plan(folder: Path, name: str = "plan.toml", **kw: object) -> Path:

@@ -7,17 +7,7 @@ from pathlib import Path
 
 from sqlalchemy import create_engine, text
 
-from tests.acquisition.harness import plan_text
-
-FAST_SIM = """
-[bus.simulator]
-heading_rate_hz = 2.0
-status_rate_hz = 0.5
-[bus.simulator.compass]
-undamped_period_s = 240.0
-damping_ratio = 0.8
-"""
-
+from tests.acquisition.harness import FAST_SIM, plan_text
 
 TRIALS = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "fit"), (30.0, 20.0, 6.0, "fit")]
 
