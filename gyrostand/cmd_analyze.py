@@ -24,7 +24,7 @@ import typer
 
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
-from gyrostand.errors import fail, printable_lines
+from gyrostand.errors import fail, printable, printable_lines
 
 if TYPE_CHECKING:
     from gyrostand.analysis.campaign import CampaignAnalysis
@@ -165,11 +165,16 @@ def analyze_stored_campaign(db: str, campaign_id: int) -> CampaignAnalysis:
     sessions = open_db(db, must_exist=True)
     try:
         with sessions.begin() as session:
-            return analyze_stored(session, campaign_id).analysis
+            stored = analyze_stored(session, campaign_id)
     except (AnalysisError, CampaignNotFound) as exc:
         fail(str(exc))
     except OperationalError as exc:
         fail(f"the database refused the analysis run: {exc.orig}")
+    for index, why in sorted(stored.inputs.excluded.items()):
+        typer.echo(printable(f"warning: trial {index} left out of the analysis ({why})"), err=True)
+    for note in stored.inputs.notes:
+        typer.echo(printable(f"note: {note}"), err=True)
+    return stored.analysis
 
 
 def signal_of(

@@ -91,3 +91,24 @@ def test_bad_plan_and_bad_data(tmp_path: Path) -> None:
     data.write_text(CSV.read_text().replace("4.64e-4", "0"))
     result = runner.invoke(app, ["analyze", "--csv", str(data)])
     assert result.exit_code == 2 and "trial 2" in result.stderr and "zero" in result.stderr
+
+
+def test_a_trial_left_out_of_a_stored_analysis_is_named(tmp_path: Path) -> None:
+    """A failed trial is not analysed, and `analyze` says which and why (it fits with fewer
+    degrees of freedom: the user must know)."""
+    import sqlite3
+
+    db = str(tmp_path / "c.sqlite")
+    assert CliRunner().invoke(app, ["import", str(CSV), "--db", db]).exit_code == 0
+    with sqlite3.connect(db) as conn:
+        conn.execute(
+            "UPDATE trial SET status = 'failed', failure_reason = 'stand refused: amplitude'"
+            ' WHERE "index" = 2'
+        )
+    result = CliRunner().invoke(app, ["analyze", "1", "--db", db])
+    assert result.exit_code == 0, result.stderr
+    assert (
+        "warning: trial 2 left out of the analysis (trial failed: stand refused: amplitude)\n"
+        in result.stderr
+    )
+    assert result.stderr.count("left out") == 1
