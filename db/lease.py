@@ -37,9 +37,13 @@ class Lease:
             self._connection = None
 
 
+def _key(sessions: sessionmaker[Session], campaign_id: int) -> tuple[str, int]:
+    return sessions.kw["bind"].url.render_as_string(hide_password=True), campaign_id
+
+
 def _try(sessions: sessionmaker[Session], campaign_id: int) -> Lease | None:
     engine = sessions.kw["bind"]
-    key = (engine.url.render_as_string(hide_password=True), campaign_id)
+    key = _key(sessions, campaign_id)
     if engine.dialect.name == "postgresql":
         connection = engine.connect()
         got = connection.execute(
@@ -69,8 +73,7 @@ def _try(sessions: sessionmaker[Session], campaign_id: int) -> Lease | None:
 def take_lease(sessions: sessionmaker[Session], campaign_id: int) -> Lease:
     """The campaign's lease for this process (the same one when it already holds it);
     CampaignBusy when another process holds it."""
-    engine = sessions.kw["bind"]
-    key = (engine.url.render_as_string(hide_password=True), campaign_id)
+    key = _key(sessions, campaign_id)
     if key in _HELD:
         return _HELD[key]
     lease = _try(sessions, campaign_id)
@@ -85,8 +88,7 @@ def take_lease(sessions: sessionmaker[Session], campaign_id: int) -> Lease:
 
 def held_elsewhere(sessions: sessionmaker[Session], campaign_id: int) -> bool:
     """Whether another process holds the campaign's lease now (a live run)."""
-    engine = sessions.kw["bind"]
-    if (engine.url.render_as_string(hide_password=True), campaign_id) in _HELD:
+    if _key(sessions, campaign_id) in _HELD:
         return False
     lease = _try(sessions, campaign_id)
     if lease is None:

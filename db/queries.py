@@ -92,7 +92,7 @@ def new_campaign(session: Session, header: CampaignHeader, *, status: str, sourc
         n_obs=header.n_obs,
         status=status,
         source=source,
-        started_at=datetime.now(UTC) if source == "stand" else None,
+        started_at=None if source == "import" else datetime.now(UTC),  # stand runs and replays
         software_version=header.software_version,
     )
     session.add(campaign)
