@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from itertools import count
 from pathlib import Path
 
 import can
@@ -106,16 +107,13 @@ def _stop_on_signals(stop: threading.Event) -> Iterator[None]:
             signal.signal(s, h)
 
 
-def raw_log_path(plan: Plan, campaign_id: int) -> Path:
-    """campaign-ID.blf for the first run, campaign-ID-resumeN.blf for each resume."""
+def raw_log_path(plan: Plan, campaign_id: int, earlier: int) -> Path:
+    """campaign-ID.blf for the first run, campaign-ID-resumeN.blf for each resume (`earlier`:
+    the campaign's segments so far), never an existing file."""
     folder = Path(plan.raw_log_dir)
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"campaign-{campaign_id}.{plan.raw_log_format}"
-    n = 1
-    while path.exists():
-        path = folder / f"campaign-{campaign_id}-resume{n}.{plan.raw_log_format}"
-        n += 1
-    return path
+    names = (f"campaign-{campaign_id}" + (f"-resume{n}" if n else "") for n in count(earlier))
+    return next(p for name in names if not (p := folder / f"{name}.{plan.raw_log_format}").exists())
 
 
 def run_live(
@@ -133,16 +131,18 @@ def run_live(
     the earlier segments' ones, so that the segments read in order are one stream."""
     stop = stop or threading.Event()
     codec = codec_for(plan)
+    with store.sessions() as session:
+        segments = raw_log_segments(session, store.campaign_id)
     first_frame = 0
     if start == "continued":
-        first_frame = logged_frames(store)
+        first_frame = sum(s.frames or 0 for s in segments)  # all closed, or found killed
         store.re_run()
         progress = None  # from the campaign's start
     else:
         if start == "restarted":
             store.complete_acquired()
         progress = store.progress()
-    raw_log = raw_log_path(plan, store.campaign_id)
+    raw_log = raw_log_path(plan, store.campaign_id, len(segments))
     segment = store.open_segment(str(raw_log), start, first_frame)
     store.set_status("running")
     live = LiveBus(plan, codec, raw_log)
@@ -213,13 +213,6 @@ def run_live(
         outcome = engine.outcome if engine.outcome != "running" else "stopped"
         store.set_status(outcome)
     return result(store, outcome, raw_log, sha)
-
-
-def logged_frames(store: CampaignStore) -> int:
-    """Frames in the campaign's raw log segments so far (all closed or found killed)."""
-    with store.sessions() as session:
-        segments = raw_log_segments(session, store.campaign_id)
-    return sum(s.frames or 0 for s in segments)
 
 
 def _granted(engine: Engine, send: Callable[..., None], *args: int) -> None:

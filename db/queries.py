@@ -153,8 +153,13 @@ class TrialProgress:
         )
 
     @property
+    def finished(self) -> bool:
+        """Marked completed or failed."""
+        return self.status in ("completed", "failed")
+
+    @property
     def acquired(self) -> bool:
-        return self.status in ("completed", "failed") or self.series_done == frozenset(SERIES_J)
+        return self.finished or self.series_done == frozenset(SERIES_J)
 
     @property
     def resume(self) -> ResumePoint | None:

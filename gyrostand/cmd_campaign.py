@@ -194,7 +194,7 @@ def register(app: typer.Typer) -> None:
         from gyrostand.acquisition.runner import resume_start, resume_store
         from gyrostand.db.lease import CampaignBusy
         from gyrostand.db.models import Campaign
-        from gyrostand.db.queries import first_incomplete_series
+        from gyrostand.db.queries import trial_progress
         from gyrostand.plan.model import PlanError, parse_plan
 
         sessions = open_db(db, must_exist=True)
@@ -231,14 +231,17 @@ def register(app: typer.Typer) -> None:
             fail(str(exc), code=EXIT_FAILED)
         except PlanError as exc:
             fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
+        start = resume_start(store, stored, checked)
         with sessions() as session:
-            left = first_incomplete_series(session, campaign_id)
-        if left is None:
+            trials = trial_progress(session, campaign_id)
+        # a re-run also finishes trials acquired but not marked (with the stand's motion)
+        if all(t.acquired for t in trials) and (
+            start != "continued" or all(t.finished for t in trials)
+        ):
             store.complete_acquired()
             store.set_status("completed")
             _out.print(f"campaign {campaign_id}: nothing left to acquire")
             return
-        start = resume_start(store, stored, checked)
         print_outcome(run_campaign(checked, store, quiet, start), db)
 
     @campaign_app.command("status")

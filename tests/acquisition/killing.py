@@ -1,0 +1,214 @@
+"""kill -9 at random moments of a simulated campaign in virtual time, each resume killed in turn,
+then a last resume; compared with an uninterrupted run of the same plan (used by
+tests/acquisition/test_kill_resume.py and validation/kill_resume.py).
+
+The moments: the campaign's n-th engine write committed (n drawn at random, so that a kill finds
+something new to lose), then a random wait of up to 20 ms (into the next write, a commit, or the
+re-run of what is stored). The runs are forked from this process (imports done once) and killed
+with SIGKILL: no cleanup runs in them."""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import sqlite3
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import gyrostand.acquisition.runner  # noqa: F401  (imported once, before the forks)
+import gyrostand.cmd_campaign  # noqa: F401
+from gyrostand.cli import app
+from gyrostand.frames.logfile import BatchBLFWriter, read_segments
+from tests.acquisition.harness import FAST_SIM, plan_text
+
+BOOKKEEPING = ("interrupted", "resume", "raw log")  # events of the runs, not of the campaign
+TABLES = {  # table: columns compared (no wall-clock column, no id that bookkeeping shifts)
+    "campaign": "id, status, n_obs, engine_writes",
+    "trial": 'id, "index", status, failure_reason, meas_direction_deg, meas_amplitude_cm, '
+    "meas_period_s",
+    "series": "id, trial_id, j, status, settle_started_ms, settle_done_ms, settle_estimate_deg, "
+    "settle_outcome",
+    "observation": "id, series_id, k, value_deg, window_start_ms, window_end_ms, frames_used, "
+    "frames_lost, flags",
+    "event": "trial_id, series_id, stand_time_ms, kind, severity, message",
+}
+
+
+def small_containers(path: Path) -> BatchBLFWriter:
+    """Raw logs in 4 KiB blocks: a killed run's log then holds most of its frames (patch
+    `gyrostand.acquisition.bus.raw_log_writer` with it; the forked runs inherit the patch)."""
+    return BatchBLFWriter(path, max_container_size=4096)
+
+
+def write_plan(folder: Path, seed: int = 0) -> Path:
+    path = folder / "plan.toml"
+    path.write_text(
+        plan_text(database=str(folder / "db.sqlite"), raw_dir=str(folder / "raw"), seed=seed)
+        + FAST_SIM
+    )
+    return path
+
+
+def forked(args: list[str], kill_when: Callable[[], bool] = lambda: False) -> int | None:
+    """Run the CLI in a forked child, SIGKILL it once `kill_when()` (polled) holds; its exit
+    code, or None when it was killed."""
+    pid = os.fork()
+    if pid == 0:  # the child: no output, no cleanup, its own exit code
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+        sys.stdout = sys.stderr = open(os.devnull, "w")  # noqa: SIM115
+        code = 1
+        try:
+            app(args, prog_name="gyrostand")
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else 1
+        finally:
+            os._exit(code)
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return os.waitstatus_to_exitcode(status)
+        if kill_when():
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            return None
+        time.sleep(0.005)
+
+
+class Writes:
+    """The campaign's committed engine writes, read on one connection (-1: no campaign yet)."""
+
+    def __init__(self, db: Path) -> None:
+        self.db = db
+        self._conn: sqlite3.Connection | None = None
+
+    def __call__(self) -> int:
+        try:
+            if self._conn is None:
+                self._conn = sqlite3.connect(f"file:{self.db}?mode=ro", uri=True)
+            row = self._conn.execute("SELECT engine_writes FROM campaign").fetchone()
+        except sqlite3.Error:
+            self.close()
+            return -1
+        return -1 if row is None else row[0]
+
+    def close(self) -> None:
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+
+
+def snapshot(db: Path) -> dict[str, list[tuple]]:
+    """The compared rows of every table (empty before the campaign exists)."""
+    if not db.exists():
+        return {name: [] for name in TABLES}
+    with sqlite3.connect(db) as conn:
+        if not conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'campaign'").fetchall():
+            return {name: [] for name in TABLES}
+        rows = {
+            name: conn.execute(f"SELECT {columns} FROM {name} ORDER BY id").fetchall()
+            for name, columns in TABLES.items()
+        }
+    rows["event"] = [e for e in rows["event"] if e[3] not in BOOKKEEPING]
+    return rows
+
+
+@dataclass(frozen=True)
+class Segment:
+    path: Path
+    start: str
+    first_frame: int
+    frames: int | None
+    ending: str | None
+
+
+def segments(db: Path) -> list[Segment]:
+    with sqlite3.connect(db) as conn:
+        rows = conn.execute(
+            "SELECT path, start, first_frame, frames, ending FROM raw_log_segment ORDER BY seq"
+        ).fetchall()
+    return [Segment(Path(path), *rest) for path, *rest in rows]
+
+
+def frames(paths: list[Path]) -> tuple[np.ndarray, ...]:
+    """Identifier, length and payload of every frame of the logs read in order (BLF timestamps
+    count from each file's start; the stand time is in the frames' payload)."""
+    parts = list(read_segments(paths))
+    return tuple(
+        np.concatenate([getattr(p, name) for p in parts])
+        for name in ("arbitration_id", "is_error", "dlc", "data")
+    )
+
+
+@dataclass(frozen=True)
+class KillRun:
+    kills: int
+    problems: tuple[str, ...]  # every way the killed-and-resumed campaign differs
+    segments: tuple[Segment, ...]
+    seconds: float
+
+
+def kill_and_resume(folder: Path, kills: int, seed: int) -> KillRun:
+    """An uninterrupted run and one killed `kills` times (then resumed to its end) of the same
+    plan (simulator seed `seed`) under `folder`; what differs."""
+    t0 = time.monotonic()
+    reference, killed = folder / "reference", folder / "killed"
+    reference.mkdir()
+    killed.mkdir()
+    problems: list[str] = []
+    if forked(["campaign", "run", str(write_plan(reference, seed)), "--quiet"]) != 0:
+        return KillRun(0, ("the uninterrupted run failed",), (), time.monotonic() - t0)
+    expected = snapshot(reference / "db.sqlite")
+    rng = random.Random(seed)
+    moments = sorted(rng.randrange(-1, expected["campaign"][0][3]) for _ in range(kills))
+    db, plan = killed / "db.sqlite", write_plan(killed, seed)
+    writes_now = Writes(db)
+    before = snapshot(db)
+    done = 0
+    for moment in moments:
+        args = ["campaign", "resume", "1", "--db", str(db)] if before["campaign"] else []
+        args = args or ["campaign", "run", str(plan)]
+        delay = rng.uniform(0.0, 0.02)
+
+        def due(moment: int = moment, delay: float = delay) -> bool:
+            if writes_now() < moment:
+                return False
+            time.sleep(delay)
+            return True
+
+        code = forked([*args, "--quiet"], due)
+        writes_now.close()
+        now = snapshot(db)
+        if now["observation"][: len(before["observation"])] != before["observation"]:
+            problems.append(f"kill {done + 1}: committed observations lost or changed")
+        if now["observation"] != expected["observation"][: len(now["observation"])]:
+            problems.append(f"kill {done + 1}: observations not the uninterrupted run's")
+        before = now
+        if code is not None:
+            if code != 0:
+                problems.append(f"{' '.join(args[:2])} ended with exit code {code}")
+            break  # finished before the kill came
+        done += 1
+    if forked(["campaign", "resume", "1", "--db", str(db), "--quiet"]) != 0:
+        problems.append("the last resume failed")
+    final = snapshot(db)
+    problems += [f"table {name} differs" for name in TABLES if final[name] != expected[name]]
+    logs = segments(db)
+    readable = [s.path for s in logs if s.path.exists()]
+    if [s.start for s in logs] != ["new"] + ["continued"] * (len(logs) - 1):
+        problems.append(f"segment starts {[s.start for s in logs]}")
+    if [s.ending for s in logs] != ["killed"] * (len(logs) - 1) + ["closed"]:
+        problems.append(f"segment endings {[s.ending for s in logs]}")
+    if [s.first_frame for s in logs] != list(np.cumsum([0] + [s.frames for s in logs[:-1]])):
+        problems.append("segments do not continue one another")
+    got, want = frames(readable), frames([s.path for s in segments(reference / "db.sqlite")])
+    if any(a.shape != b.shape or not np.array_equal(a, b) for a, b in zip(got, want, strict=True)):
+        problems.append("the segments read in order differ from the uninterrupted raw log")
+    return KillRun(done, tuple(problems), tuple(logs), time.monotonic() - t0)
