@@ -143,7 +143,7 @@ def run_live(
             store.complete_acquired()
         progress = store.progress()
     raw_log = raw_log_path(plan, store.campaign_id, len(segments))
-    segment = store.open_segment(str(raw_log), start, first_frame)
+    segment = store.open_segment(str(raw_log), start if segments else "new", first_frame)
     store.set_status("running")
     live = LiveBus(plan, codec, raw_log)
     grants = Grants(live.bus) if live.virtual else None
@@ -393,6 +393,8 @@ def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Pla
         campaign = session.get(Campaign, campaign_id)
         if campaign is None:
             raise LookupError(f"no campaign {campaign_id} in the database")
+        if (why := not_resumable(campaign_id, campaign.source)) is not None:
+            raise LookupError(why)
         text = campaign.plan_toml
     plan, store = parse_plan(text), CampaignStore(sessions, campaign_id)
     with store.sessions() as session:  # read under the lease: nobody else is running it now
@@ -407,6 +409,18 @@ def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Pla
     store.run_event("resume", "info", f"resumed by process {os.getpid()}")
     close_killed_segments(store)
     return plan, store
+
+
+def not_resumable(campaign_id: int, source: str) -> str | None:
+    """Why a campaign cannot be continued on the stand (None: it can): only a campaign run on
+    the stand can; an imported or replayed one has no stand behind it."""
+    if source == "stand":
+        return None
+    how = "replayed from a raw log" if source == "replay" else "imported from a file"
+    return (
+        f"campaign {campaign_id} was {how} (source {source!r}): only a campaign run "
+        "on the stand can be resumed"
+    )
 
 
 def close_killed_segments(store: CampaignStore) -> None:

@@ -321,19 +321,6 @@ class CampaignStore:
         if j is not None:
             self._series(session, trial, j).status = "failed"
 
-    @_engine_write
-    def event(
-        self,
-        session: Session,
-        kind: str,
-        severity: str,
-        message: str,
-        trial: int | None = None,
-        j: int | None = None,
-        t_ms: int | None = None,
-    ) -> None:
-        self._add_event(session, kind, severity, message, trial, j, t_ms)
-
     def run_event(self, kind: str, severity: str, message: str) -> None:
         """An event of the run rather than of the acquisition (raw log, queue, resume): not one
         of the engine's writes, so never re-derived by a re-run."""
@@ -361,3 +348,5 @@ class CampaignStore:
                 message=message,
             )
         )
+
+    event = _engine_write(_add_event)  # the engine's events (`Sink.event`)

@@ -191,7 +191,7 @@ def register(app: typer.Typer) -> None:
         skipping what the database holds: it ends as the uninterrupted run would have."""
         from sqlalchemy import select
 
-        from gyrostand.acquisition.runner import resume_start, resume_store
+        from gyrostand.acquisition.runner import not_resumable, resume_start, resume_store
         from gyrostand.db.lease import CampaignBusy
         from gyrostand.db.models import Campaign
         from gyrostand.db.queries import trial_progress
@@ -204,12 +204,8 @@ def register(app: typer.Typer) -> None:
             ).one_or_none()
         if row is None:
             fail(f"no campaign {campaign_id} in the database")
-        if row.source != "stand":
-            how = "replayed from a raw log" if row.source == "replay" else "imported from a file"
-            fail(
-                f"campaign {campaign_id} was {how} (source {printable(row.source)!r}): only a "
-                "campaign run on the stand can be resumed"
-            )
+        if (why := not_resumable(campaign_id, row.source)) is not None:
+            fail(why)
         try:
             stored = parse_plan(row.plan_toml)
         except PlanError as exc:

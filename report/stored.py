@@ -209,9 +209,7 @@ def _raw_log_check(campaign: Campaign) -> tuple[str, list[Path]]:
     """How the recorded raw log segments check out, and those that can be read as one stream
     of the campaign: all of them, up to a resume that restarted the stand (its stand times
     start again)."""
-    segments = [  # a run killed before its log file was created wrote nothing to it
-        s for s in campaign.raw_logs if s.frames or s.ending != "killed" or Path(s.path).is_file()
-    ]
+    segments = [s for s in campaign.raw_logs if s.frames or s.ending != "killed"]  # (nothing)
     if not segments:
         return "no raw log", []
     for s in segments:
