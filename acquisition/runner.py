@@ -25,6 +25,7 @@ from gyrostand.acquisition.progress import ProgressDisplay
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.acquisition.virtual_time import Grants, StreamClock
 from gyrostand.db.models import Campaign, Observation, Series, Trial
+from gyrostand.db.queries import latest_attempt
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, sha256_of
 from gyrostand.plan.codec import codec_for
@@ -237,7 +238,7 @@ def _count_trials(session: Session, campaign_id: int, status: str) -> int:
     return (
         session.scalar(
             select(func.count(Trial.id)).where(
-                Trial.campaign_id == campaign_id, Trial.status == status
+                Trial.campaign_id == campaign_id, Trial.status == status, latest_attempt()
             )
         )
         or 0
@@ -250,7 +251,7 @@ def observation_count(session: Session, campaign_id: int) -> int:
             select(func.count(Observation.id))
             .join(Series, Series.id == Observation.series_id)
             .join(Trial, Trial.id == Series.trial_id)
-            .where(Trial.campaign_id == campaign_id)
+            .where(Trial.campaign_id == campaign_id, latest_attempt())
         )
         or 0
     )

@@ -17,6 +17,7 @@ from gyrostand.db.lease import take_lease
 from gyrostand.db.models import Campaign, Event, Observation, Series, Trial
 from gyrostand.db.queries import (
     CampaignHeader,
+    latest_attempt,
     new_campaign,
     reference_heading,
     trial_progress,
@@ -35,7 +36,9 @@ class CampaignStore:
         self._session: Session | None = None
         with sessions() as session:
             rows = session.execute(
-                select(Trial.index, Trial.id).where(Trial.campaign_id == campaign_id)
+                select(Trial.index, Trial.id).where(
+                    Trial.campaign_id == campaign_id, latest_attempt()
+                )
             ).all()
             self._trial_ids = dict(rows)  # type: ignore[arg-type]
             self._series_ids: dict[tuple[int, int], int] = {
@@ -43,7 +46,7 @@ class CampaignStore:
                 for index, j, sid in session.execute(
                     select(Trial.index, Series.j, Series.id)
                     .join(Series, Series.trial_id == Trial.id)
-                    .where(Trial.campaign_id == campaign_id)
+                    .where(Trial.campaign_id == campaign_id, latest_attempt())
                 )
             }
 
