@@ -1,9 +1,10 @@
-"""CLI: campaign run/resume/status, replay."""
+"""CLI: campaign run/resume/retry/status, replay."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 from rich.console import Console
@@ -112,6 +113,81 @@ def run_campaign(plan: Plan, store: CampaignStore, quiet: bool) -> RunResult:
         fail(f"campaign {store.campaign_id} could not use the bus: {exc}", code=EXIT_FAILED)
 
 
+@dataclass(frozen=True)
+class BusOptions:
+    """The command line's bus options of `campaign resume` and `campaign retry`."""
+
+    interface: str | None
+    channel: str | None
+    speedup: float | None
+    seed: int | None
+    timing: str | None
+
+
+def continue_campaign(
+    campaign_id: int,
+    db: str,
+    bus: BusOptions,
+    quiet: bool,
+    *,
+    retry: tuple[int, ...] | Literal["failed"] | None,
+) -> None:
+    """Resume a stand campaign, first retrying the trials `retry` names ("failed": every
+    failed one): everything is checked before anything is written; then the new attempts are
+    added under the campaign's lease, which the acquisition keeps."""
+    from gyrostand.acquisition.retry import RetryRefused, retry_trials
+    from gyrostand.acquisition.runner import resume_store
+    from gyrostand.db.lease import CampaignBusy
+    from gyrostand.db.queries import (
+        CampaignNotFound,
+        NotOnTheStand,
+        first_incomplete_series,
+        stand_campaign,
+    )
+    from gyrostand.plan.model import PlanError, parse_plan
+
+    sessions = open_db(db, must_exist=True)
+    try:
+        with sessions() as session:  # everything is checked before anything is written
+            text = stand_campaign(session, campaign_id).plan_toml
+        stored = parse_plan(text)
+    except (CampaignNotFound, NotOnTheStand) as exc:
+        fail(str(exc))
+    except PlanError as exc:
+        fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
+    checked = checked_plan(
+        stored,
+        interface=bus.interface,
+        channel=bus.channel,
+        db=db,
+        speedup=bus.speedup,
+        seed=bus.seed,
+        timing=bus.timing,
+    )
+    try:
+        if retry is not None:
+            retried = retry_trials(sessions, campaign_id, None if retry == "failed" else retry)
+            for r in retried:
+                _out.print(
+                    printable(
+                        f"trial {r.index}: attempt {r.attempt} (attempt {r.attempt - 1} "
+                        f"failed: {r.reason})"
+                    )
+                )
+        _, store = resume_store(sessions, campaign_id)
+    except (LookupError, NotOnTheStand, RetryRefused) as exc:
+        fail(str(exc))
+    except CampaignBusy as exc:
+        fail(str(exc), code=EXIT_FAILED)
+    with sessions() as session:
+        left = first_incomplete_series(session, campaign_id)
+    if left is None:
+        store.set_status("completed")
+        _out.print(f"campaign {campaign_id}: nothing left to acquire")
+        return
+    print_outcome(run_campaign(checked, store, quiet), db)
+
+
 Interface = Annotated[
     str | None,
     typer.Option(help="python-can interface (e.g. socketcan); default: the plan's bus."),
@@ -137,9 +213,11 @@ Quiet = Annotated[bool, typer.Option("--quiet", help="No live progress display."
 
 
 def register(app: typer.Typer) -> None:
-    """Add the campaign run/resume/status, replay command(s) to the CLI."""
+    """Add the campaign run/resume/retry/status, replay command(s) to the CLI."""
 
-    campaign_app = typer.Typer(help="Run, resume and inspect campaigns.", no_args_is_help=True)
+    campaign_app = typer.Typer(
+        help="Run, resume, retry and inspect campaigns.", no_args_is_help=True
+    )
     app.add_typer(campaign_app, name="campaign")
 
     @campaign_app.command("run")
@@ -180,58 +258,36 @@ def register(app: typer.Typer) -> None:
         speedup: Speedup = None,
         seed: Seed = None,
         timing: Timing = None,
+        retry_failed: Annotated[
+            bool,
+            typer.Option(
+                "--retry-failed", help="First retry every failed trial (see campaign retry)."
+            ),
+        ] = False,
         quiet: Quiet = False,
     ) -> None:
         """Continue a campaign from its first incomplete series (re-settling first)."""
-        from sqlalchemy import select
+        bus = BusOptions(interface, channel, speedup, seed, timing)
+        continue_campaign(campaign_id, db, bus, quiet, retry="failed" if retry_failed else None)
 
-        from gyrostand.acquisition.runner import resume_store
-        from gyrostand.db.lease import CampaignBusy
-        from gyrostand.db.models import Campaign
-        from gyrostand.db.queries import first_incomplete_series
-        from gyrostand.plan.model import PlanError, parse_plan
-
-        sessions = open_db(db, must_exist=True)
-        with sessions() as session:  # everything is checked before resume_store writes
-            row = session.execute(
-                select(Campaign.source, Campaign.plan_toml).where(Campaign.id == campaign_id)
-            ).one_or_none()
-        if row is None:
-            fail(f"no campaign {campaign_id} in the database")
-        if row.source != "stand":
-            how = "replayed from a raw log" if row.source == "replay" else "imported from a file"
-            fail(
-                f"campaign {campaign_id} was {how} (source {printable(row.source)!r}): only a "
-                "campaign run on the stand can be resumed"
-            )
-        try:
-            stored = parse_plan(row.plan_toml)
-        except PlanError as exc:
-            fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
-        checked = checked_plan(
-            stored,
-            interface=interface,
-            channel=channel,
-            db=db,
-            speedup=speedup,
-            seed=seed,
-            timing=timing,
-        )
-        try:
-            _, store = resume_store(sessions, campaign_id)
-        except LookupError as exc:
-            fail(str(exc))
-        except CampaignBusy as exc:
-            fail(str(exc), code=EXIT_FAILED)
-        except PlanError as exc:
-            fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
-        with sessions() as session:
-            left = first_incomplete_series(session, campaign_id)
-        if left is None:
-            store.set_status("completed")
-            _out.print(f"campaign {campaign_id}: nothing left to acquire")
-            return
-        print_outcome(run_campaign(checked, store, quiet), db)
+    @campaign_app.command("retry")
+    def campaign_retry(
+        campaign_id: int,
+        trial: Annotated[
+            list[int],
+            typer.Option("--trial", help="Index of a failed trial to retry (repeatable)."),
+        ],
+        db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
+        interface: Interface = None,
+        channel: Channel = None,
+        speedup: Speedup = None,
+        seed: Seed = None,
+        timing: Timing = None,
+        quiet: Quiet = False,
+    ) -> None:
+        """Re-run failed trials as new attempts (the failed ones are kept), then resume."""
+        bus = BusOptions(interface, channel, speedup, seed, timing)
+        continue_campaign(campaign_id, db, bus, quiet, retry=tuple(trial))
 
     @campaign_app.command("status")
     def campaign_status(
@@ -281,6 +337,12 @@ def register(app: typer.Typer) -> None:
                 )
             )
         _out.print(table)
+        for t in s.trials:
+            if t.earlier:
+                before = "; ".join(
+                    f"attempt {e.attempt} {e.status}: {e.failure_reason or ''}" for e in t.earlier
+                )
+                _out.print(printable(f"trial {t.index}: attempt {t.attempt} {t.status} ({before})"))
         events = ", ".join(f"{n} {printable(sev)}" for sev, n in s.events_by_severity.items())
         _out.print(f"observations: {s.observations_stored}; events: {events}")
         for severity, kind, message in reversed(recent):
