@@ -151,16 +151,15 @@ def trial_inputs(campaign: Campaign) -> tuple[tuple[TrialInput, ...], tuple[Left
     latest = {t.index: t.attempt for t in current_trials(campaign.trials)}
     inputs, left_out = [], []
     for trial in campaign.trials:
-        label = (trial.index, trial.attempt, trial.role, trial.status)
-        if trial.attempt < latest[trial.index]:
-            why = f"superseded by attempt {latest[trial.index]} (retry); it failed: "
-            left_out.append(
-                LeftOutTrial(*label, why + str(trial.failure_reason), latest[trial.index])
-            )
-            continue
-        found = trial_input(trial)
+        newer = latest[trial.index] if trial.attempt < latest[trial.index] else None
+        if newer is None:
+            found = trial_input(trial)
+        else:
+            found = f"superseded by attempt {newer} (retry); it failed: {trial.failure_reason}"
         if isinstance(found, str):
-            left_out.append(LeftOutTrial(*label, found))
+            left_out.append(
+                LeftOutTrial(trial.index, trial.attempt, trial.role, trial.status, found, newer)
+            )
         else:
             inputs.append(found)
     return tuple(inputs), tuple(left_out)
