@@ -70,6 +70,7 @@ class Recorder(can.Listener):
         self.dropped = 0
         self.errors: list[Exception] = []  # from the bus, through the notifier
         self.log_error: Exception | None = None  # the raw log stopped being written
+        self.logged = 0  # frames written to the raw log
         self._stopped = False
 
     def on_message_received(self, msg: can.Message) -> None:
@@ -105,6 +106,8 @@ class Recorder(can.Listener):
                     self.writer.on_message_received(msg)
         except Exception as exc:  # the frames still reach the campaign
             self.log_error = exc
+        else:
+            self.logged += len(msgs)
 
     def stop(self) -> None:
         """Log what is still queued (frames of the campaign too), then close the log."""

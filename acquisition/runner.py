@@ -9,7 +9,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,9 +25,9 @@ from gyrostand.acquisition.progress import ProgressDisplay
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.acquisition.virtual_time import Grants, StreamClock
 from gyrostand.db.models import Campaign, Observation, Series, Trial
-from gyrostand.db.queries import latest_attempt
+from gyrostand.db.queries import latest_attempt, raw_log_segments
 from gyrostand.frames.batch import BatchDecoder, RawFrames
-from gyrostand.frames.logfile import LogFileError, read_raw_frames, sha256_of
+from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import Plan, PlanError
 from gyrostand.stand.controller import StandController, StandError
@@ -122,24 +122,33 @@ def run_live(
     plan: Plan,
     store: CampaignStore,
     *,
+    start: str = "new",
     quiet: bool = False,
     stop: threading.Event | None = None,
 ) -> RunResult:
-    """Acquire the trials the database does not hold yet, on the plan's bus."""
+    """Acquire the trials the database does not hold yet, on the plan's bus. `start` (a raw log
+    segment's start, `resume_start`): "new" for a new campaign; "restarted" continues at the
+    first incomplete series; "continued" re-runs a simulation in virtual time from its start,
+    skipping what the database holds (`CampaignStore.re_run`), and logs only the frames after
+    the earlier segments' ones, so that the segments read in order are one stream."""
     stop = stop or threading.Event()
     codec = codec_for(plan)
-    first_log, first_sha = store.raw_log()
-    if first_log is not None and first_sha is None and Path(first_log).is_file():
-        # the first run was killed: its log holds what was flushed; fix that content's hash
-        store.set_raw_log(first_log, sha256_of(Path(first_log)))
+    first_frame = 0
+    if start == "continued":
+        first_frame = logged_frames(store)
+        store.re_run()
+        progress = None  # from the campaign's start
+    else:
+        if start == "restarted":
+            store.complete_acquired()
+        progress = store.progress()
     raw_log = raw_log_path(plan, store.campaign_id)
-    if first_log is None:
-        store.set_raw_log(str(raw_log), None)
+    segment = store.open_segment(str(raw_log), start, first_frame)
     store.set_status("running")
     live = LiveBus(plan, codec, raw_log)
     grants = Grants(live.bus) if live.virtual else None
     stream_clock = StreamClock()
-    engine = Engine(plan, store, LiveCommander(live.controller, grants), store.progress())
+    engine = Engine(plan, store, LiveCommander(live.controller, grants), progress)
     decoder = BatchDecoder(codec)
     if grants is None:
         silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
@@ -162,10 +171,10 @@ def run_live(
                 if live.recorder.dropped > dropped:
                     lost = live.recorder.dropped - dropped
                     dropped = live.recorder.dropped
-                    store.event("queue full", "error", f"{lost} frames dropped: queue full")
+                    store.run_event("queue full", "error", f"{lost} frames dropped: queue full")
                 if live.recorder.log_error is not None and not log_failed:
                     log_failed = True
-                    store.event(
+                    store.run_event(
                         "raw log", "error", f"raw log incomplete: {live.recorder.log_error!r}"
                     )
                 while errors < len(live.recorder.errors):
@@ -186,7 +195,8 @@ def run_live(
                         raw, msgs = raw.head(keep), msgs[:keep]
                         restamp(raw, msgs, times_s)
                         _granted(engine, grants.progress, engine.now_ms)
-                    live.recorder.log(raw, msgs)
+                    skip = min(max(first_frame - position, 0), len(msgs))  # in earlier logs
+                    live.recorder.log(raw.tail(skip), msgs[skip:])
                     position += len(msgs)
                 else:
                     if grants is not None:
@@ -198,12 +208,18 @@ def run_live(
     finally:
         live.close()
         sha = sha256_of(raw_log)
-        if first_log is None:
-            store.set_raw_log(str(raw_log), sha)
-        store.event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
+        store.close_segment(segment, live.recorder.logged, sha)
+        store.run_event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
         outcome = engine.outcome if engine.outcome != "running" else "stopped"
         store.set_status(outcome)
     return result(store, outcome, raw_log, sha)
+
+
+def logged_frames(store: CampaignStore) -> int:
+    """Frames in the campaign's raw log segments so far (all closed or found killed)."""
+    with store.sessions() as session:
+        segments = raw_log_segments(session, store.campaign_id)
+    return sum(s.frames or 0 for s in segments)
 
 
 def _granted(engine: Engine, send: Callable[..., None], *args: int) -> None:
@@ -328,28 +344,38 @@ def check_replay_log(log: Path) -> ReplayLog:
 
 
 def replay(
-    plan: Plan, sessions: sessionmaker[Session], log: Path, checked: ReplayLog | None = None
+    plan: Plan,
+    sessions: sessionmaker[Session],
+    logs: Sequence[Path],
+    checked: Sequence[ReplayLog] | None = None,
 ) -> RunResult:
-    """Re-derive a campaign offline from a raw log into a new campaign (source "replay"). The
-    log is read whole first (`check_replay_log`, unless `checked` is its result): one that
-    cannot be replayed (ReplayLogError) leaves the database untouched. A log that ends early
-    is replayed up to its end, with a warning event."""
+    """Re-derive a campaign offline from raw logs read in order as one stream (the segments of
+    a campaign, `RawLogSegment`) into a new campaign (source "replay"). Each log is read whole
+    first (`check_replay_log`, unless `checked` holds their results): one that cannot be
+    replayed (ReplayLogError) leaves the database untouched. A log that ends early is replayed
+    up to its end, with a warning event."""
     codec = codec_for(plan)
-    checked = checked or check_replay_log(log)
+    checked = checked or [check_replay_log(log) for log in logs]
     store = CampaignStore.create(sessions, plan, source="replay")
     engine = Engine(plan, store, _NoCommands())
     decoder = BatchDecoder(codec)
+    position = 0
     try:
         with store.deferred():
-            store.set_raw_log(str(log.resolve()), checked.sha256)
-            if checked.truncated is not None:
-                store.event(
-                    "raw log",
-                    "warning",
-                    f"raw log {log.name} truncated after {checked.frames} frames "
-                    f"({checked.truncated}): replayed up to there",
+            for log in checked:
+                seq = store.open_segment(
+                    str(log.path.resolve()), "continued" if position else "new", position
                 )
-            for raw in read_raw_frames(log):
+                store.close_segment(seq, log.frames, log.sha256)
+                position += log.frames
+                if log.truncated is not None:
+                    store.run_event(
+                        "raw log",
+                        "warning",
+                        f"raw log {log.path.name} truncated after {log.frames} frames "
+                        f"({log.truncated}): replayed up to there",
+                    )
+            for raw in read_segments([log.path for log in checked]):
                 engine.feed(decoder.decode(raw))
                 if engine.phase is Phase.DONE:
                     break
@@ -360,14 +386,14 @@ def replay(
         raise
     outcome = engine.outcome
     store.set_status(outcome)
-    return result(store, outcome, log, checked.sha256)
+    return result(store, outcome, checked[-1].path, checked[-1].sha256)
 
 
 def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Plan, CampaignStore]:
     """The plan stored with a campaign and a store to continue it, holding the campaign's lease
     (CampaignBusy while another process acquires into it). A campaign still marked running was
-    left by a process that is gone: an "interrupted" event says so; the resume is an event; trials
-    acquired but not marked completed are completed (`CampaignStore.complete_acquired`)."""
+    left by a process that is gone: an "interrupted" event says so; the resume is an event; raw
+    logs left open by a killed run are closed in the database (`close_killed_segments`)."""
     from gyrostand.plan.model import parse_plan
 
     with sessions() as session:
@@ -379,12 +405,59 @@ def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Pla
     with store.sessions() as session:  # read under the lease: nobody else is running it now
         left_running = session.get_one(Campaign, campaign_id).status == "running"
     if left_running:
-        store.event(
+        store.run_event(
             "interrupted",
             "warning",
             "the previous run ended without closing the campaign (killed or crashed); "
             "what it committed is kept",
         )
-    store.event("resume", "info", f"resumed by process {os.getpid()}")
-    store.complete_acquired()
+    store.run_event("resume", "info", f"resumed by process {os.getpid()}")
+    close_killed_segments(store)
     return plan, store
+
+
+def close_killed_segments(store: CampaignStore) -> None:
+    """Raw logs a killed run left open: their frames (up to the last complete block) and hash
+    go into the database, ending "killed", with an event."""
+    with store.sessions() as session:
+        left = [
+            (s.seq, Path(s.path))
+            for s in raw_log_segments(session, store.campaign_id)
+            if s.ending is None
+        ]
+    for seq, path in left:
+        frames, sha = _readable_frames(path), sha256_of(path) if path.is_file() else None
+        store.close_segment(seq, frames, sha, ending="killed")
+        store.run_event(
+            "raw log",
+            "warning" if sha else "error",
+            f"raw log {path} left open by the stopped run: {frames} frames readable"
+            + (f" (sha256 {sha})" if sha else "; the file is missing"),
+        )
+
+
+def _readable_frames(path: Path) -> int:
+    """Frames of a log that can be read, up to where it is cut off."""
+    frames = 0
+    try:
+        for raw in read_raw_frames(path):
+            frames += len(raw)
+    except (OSError, ValueError, EOFError, can.CanError):
+        pass
+    return frames
+
+
+def resume_start(store: CampaignStore, stored: Plan, plan: Plan) -> str:
+    """How a resumed run starts (`run_live`): "continued" for a simulation in virtual time on
+    the stored plan's bus whose every earlier run was killed (so the database holds a prefix of
+    what re-running the simulation gives: the resumed campaign equals an uninterrupted one);
+    else "restarted", at the first incomplete series."""
+    with store.sessions() as session:
+        segments = raw_log_segments(session, store.campaign_id)
+    rerun = (
+        plan.bus.simulated
+        and plan.bus.timing == "virtual"
+        and plan.bus == stored.bus
+        and all(s.ending == "killed" and s.start != "restarted" for s in segments)
+    )
+    return "continued" if rerun else "restarted"

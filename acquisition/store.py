@@ -3,9 +3,11 @@ durable the moment it completes and a killed process loses at most the one in pr
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import functools
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
+from typing import Concatenate, ParamSpec
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
@@ -14,16 +16,44 @@ from gyrostand import SOFTWARE_VERSION
 from gyrostand.acquisition.engine import Measured, ObservationResult, TrialState
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.db.lease import take_lease
-from gyrostand.db.models import Campaign, Event, Observation, Series, Trial
+from gyrostand.db.models import Campaign, Event, Observation, RawLogSegment, Series, Trial
 from gyrostand.db.queries import (
     CampaignHeader,
     latest_attempt,
     new_campaign,
+    raw_log_segments,
     reference_heading,
     trial_progress,
 )
 from gyrostand.db.session import writer
 from gyrostand.plan.model import Plan
+
+P = ParamSpec("P")
+
+
+class ReRunMismatch(RuntimeError):
+    """A re-run of a simulated campaign derived another observation than the stored one."""
+
+
+def _engine_write(
+    method: Callable[Concatenate[CampaignStore, Session, P], None],
+) -> Callable[Concatenate[CampaignStore, P], None]:
+    """One of the engine's writes (the `Sink` methods): a transaction of its own that also
+    counts it in campaign.engine_writes; skipped while a re-run re-derives what earlier runs
+    committed (`CampaignStore.re_run`)."""
+
+    @functools.wraps(method)
+    def write(self: CampaignStore, *args: P.args, **kwargs: P.kwargs) -> None:
+        self._writes += 1
+        if self._writes <= self._skip:
+            if method.__name__ == "observation":
+                self._check_re_derived(*args)  # type: ignore[arg-type]
+            return
+        with self._tx() as session:
+            method(self, session, *args, **kwargs)
+            session.get_one(Campaign, self.campaign_id).engine_writes = self._writes
+
+    return write
 
 
 class CampaignStore:
@@ -34,6 +64,9 @@ class CampaignStore:
         self.sessions = writer(sessions)
         self.campaign_id = campaign_id
         self._session: Session | None = None
+        self._writes = 0  # the engine's writes so far (counted from the campaign's start)
+        self._skip = 0  # of which committed by earlier runs (a re-run skips them)
+        self._stored: dict[tuple[int, int, int], tuple[float, int | None, int | None]] = {}
         with sessions() as session:
             rows = session.execute(
                 select(Trial.index, Trial.id).where(
@@ -124,7 +157,9 @@ class CampaignStore:
     def complete_acquired(self) -> None:
         """Mark completed the trials whose two series hold N observations but that were not
         marked (the process stopped between the last observation and the stand's stop
-        acknowledgement), each with an event; their measured motion was not recorded."""
+        acknowledgement), each with an event; their measured motion was not recorded. The
+        engine's writes of this run count on from the stored ones."""
+        self.continue_counting()
         with self.sessions() as session:
             left = [
                 t
@@ -151,17 +186,70 @@ class CampaignStore:
             else:
                 campaign.finished_at = None
 
-    def raw_log(self) -> tuple[str | None, str | None]:
-        with self.sessions() as session:
-            campaign = session.get_one(Campaign, self.campaign_id)
-            return campaign.raw_log_path, campaign.raw_log_sha256
-
-    def set_raw_log(self, path: str, sha256: str | None) -> None:
+    def open_segment(self, path: str, start: str, first_frame: int = 0) -> int:
+        """Reference a raw log file before its first frame is written; its seq."""
         with self._tx() as session:
-            campaign = session.get_one(Campaign, self.campaign_id)
-            campaign.raw_log_path, campaign.raw_log_sha256 = path, sha256
+            seq = len(raw_log_segments(session, self.campaign_id)) + 1
+            session.add(
+                RawLogSegment(
+                    campaign_id=self.campaign_id,
+                    seq=seq,
+                    path=path,
+                    start=start,
+                    first_frame=first_frame,
+                )
+            )
+        return seq
+
+    def close_segment(
+        self, seq: int, frames: int, sha256: str | None, ending: str = "closed"
+    ) -> None:
+        """The file's frame count and hash, once nothing more will be written to it."""
+        with self._tx() as session:
+            segment = session.scalars(
+                select(RawLogSegment).where(
+                    RawLogSegment.campaign_id == self.campaign_id, RawLogSegment.seq == seq
+                )
+            ).one()
+            segment.frames, segment.sha256, segment.ending = frames, sha256, ending
 
     # ---------------------------------------------------------------------------------- Sink
+    def continue_counting(self) -> None:
+        """This run's engine continues where the stored ones stopped (a live resume)."""
+        with self.sessions() as session:
+            self._writes = session.get_one(Campaign, self.campaign_id).engine_writes
+
+    def re_run(self) -> int:
+        """This run's engine starts the campaign again from its beginning (a resumed simulation
+        in virtual time, which reproduces the stored run exactly): the engine's writes that
+        earlier runs committed are skipped, each re-derived observation checked against the
+        stored one (`ReRunMismatch`). The number of writes skipped."""
+        with self.sessions() as session:
+            self._skip = session.get_one(Campaign, self.campaign_id).engine_writes
+            self._stored = {
+                (index, j, k): (value, start, end)
+                for index, j, k, value, start, end in session.execute(
+                    select(
+                        Trial.index,
+                        Series.j,
+                        Observation.k,
+                        Observation.value_deg,
+                        Observation.window_start_ms,
+                        Observation.window_end_ms,
+                    )
+                    .join(Series, Series.trial_id == Trial.id)
+                    .join(Observation, Observation.series_id == Series.id)
+                    .where(Trial.campaign_id == self.campaign_id)
+                )
+            }
+        self._writes = 0
+        return self._skip
+
+    @property
+    def re_running(self) -> bool:
+        """Still re-deriving what earlier runs committed (`re_run`)."""
+        return self._writes < self._skip
+
     def _series(self, session: Session, trial: int, j: int) -> Series:
         sid = self._series_ids.get((trial, j))
         if sid is not None:
@@ -172,60 +260,74 @@ class CampaignStore:
         self._series_ids[(trial, j)] = series.id
         return series
 
-    def trial_started(self, trial: int) -> None:
-        with self._tx() as session:
-            session.get_one(Trial, self._trial_ids[trial]).status = "running"
+    @_engine_write
+    def trial_started(self, session: Session, trial: int) -> None:
+        session.get_one(Trial, self._trial_ids[trial]).status = "running"
 
-    def series_settling(self, trial: int, j: int, t_ms: int) -> None:
-        with self._tx() as session:
-            series = self._series(session, trial, j)
-            series.status, series.settle_started_ms, series.settle_done_ms = "settling", t_ms, None
+    @_engine_write
+    def series_settling(self, session: Session, trial: int, j: int, t_ms: int) -> None:
+        series = self._series(session, trial, j)
+        series.status, series.settle_started_ms, series.settle_done_ms = "settling", t_ms, None
 
-    def series_settled(self, trial: int, j: int, t_ms: int, outcome: SettleOutcome) -> None:
-        with self._tx() as session:
-            series = self._series(session, trial, j)
-            series.status, series.settle_done_ms = "observing", t_ms
-            series.settle_estimate_deg = outcome.estimate_deg
-            series.settle_outcome = outcome.to_dict()
+    @_engine_write
+    def series_settled(
+        self, session: Session, trial: int, j: int, t_ms: int, outcome: SettleOutcome
+    ) -> None:
+        series = self._series(session, trial, j)
+        series.status, series.settle_done_ms = "observing", t_ms
+        series.settle_estimate_deg = outcome.estimate_deg
+        series.settle_outcome = outcome.to_dict()
 
-    def observation(self, obs: ObservationResult) -> None:
-        with self._tx() as session:
-            series = self._series(session, obs.trial, obs.j)
-            session.add(
-                Observation(
-                    series_id=series.id,
-                    k=obs.k,
-                    value_deg=obs.value_deg,
-                    window_start_ms=obs.window_start_ms,
-                    window_end_ms=obs.window_end_ms,
-                    frames_used=obs.frames_used,
-                    frames_lost=obs.frames_lost,
-                    flags=obs.flags,
-                )
+    @_engine_write
+    def observation(self, session: Session, obs: ObservationResult) -> None:
+        series = self._series(session, obs.trial, obs.j)
+        session.add(
+            Observation(
+                series_id=series.id,
+                k=obs.k,
+                value_deg=obs.value_deg,
+                window_start_ms=obs.window_start_ms,
+                window_end_ms=obs.window_end_ms,
+                frames_used=obs.frames_used,
+                frames_lost=obs.frames_lost,
+                flags=obs.flags,
+            )
+        )
+
+    def _check_re_derived(self, obs: ObservationResult) -> None:
+        stored = self._stored.get((obs.trial, obs.j, obs.k))
+        again = (obs.value_deg, obs.window_start_ms, obs.window_end_ms)
+        if stored != again:
+            raise ReRunMismatch(
+                f"the re-run of the simulation gives trial {obs.trial} series {obs.j} "
+                f"observation {obs.k} = {again}, the database holds {stored}: this campaign "
+                "cannot be continued by re-running its simulation"
             )
 
-    def series_completed(self, trial: int, j: int) -> None:
-        with self._tx() as session:
-            self._series(session, trial, j).status = "completed"
+    @_engine_write
+    def series_completed(self, session: Session, trial: int, j: int) -> None:
+        self._series(session, trial, j).status = "completed"
 
-    def trial_completed(self, trial: int, measured: Measured | None) -> None:
-        with self._tx() as session:
-            row = session.get_one(Trial, self._trial_ids[trial])
-            row.status = "completed"
-            if measured is not None:
-                row.meas_direction_deg = measured.direction_deg
-                row.meas_amplitude_cm = measured.amplitude_cm
-                row.meas_period_s = measured.period_s
+    @_engine_write
+    def trial_completed(self, session: Session, trial: int, measured: Measured | None) -> None:
+        row = session.get_one(Trial, self._trial_ids[trial])
+        row.status = "completed"
+        if measured is not None:
+            row.meas_direction_deg = measured.direction_deg
+            row.meas_amplitude_cm = measured.amplitude_cm
+            row.meas_period_s = measured.period_s
 
-    def trial_failed(self, trial: int, j: int | None, reason: str) -> None:
-        with self._tx() as session:
-            row = session.get_one(Trial, self._trial_ids[trial])
-            row.status, row.failure_reason = "failed", reason
-            if j is not None:
-                self._series(session, trial, j).status = "failed"
+    @_engine_write
+    def trial_failed(self, session: Session, trial: int, j: int | None, reason: str) -> None:
+        row = session.get_one(Trial, self._trial_ids[trial])
+        row.status, row.failure_reason = "failed", reason
+        if j is not None:
+            self._series(session, trial, j).status = "failed"
 
+    @_engine_write
     def event(
         self,
+        session: Session,
         kind: str,
         severity: str,
         message: str,
@@ -233,17 +335,32 @@ class CampaignStore:
         j: int | None = None,
         t_ms: int | None = None,
     ) -> None:
+        self._add_event(session, kind, severity, message, trial, j, t_ms)
+
+    def run_event(self, kind: str, severity: str, message: str) -> None:
+        """An event of the run rather than of the acquisition (raw log, queue, resume): not one
+        of the engine's writes, so never re-derived by a re-run."""
         with self._tx() as session:
-            session.add(
-                Event(
-                    campaign_id=self.campaign_id,
-                    trial_id=None if trial is None else self._trial_ids[trial],
-                    series_id=None
-                    if trial is None or j is None
-                    else self._series_ids.get((trial, j)),
-                    stand_time_ms=t_ms,
-                    kind=kind,
-                    severity=severity,
-                    message=message,
-                )
+            self._add_event(session, kind, severity, message)
+
+    def _add_event(
+        self,
+        session: Session,
+        kind: str,
+        severity: str,
+        message: str,
+        trial: int | None = None,
+        j: int | None = None,
+        t_ms: int | None = None,
+    ) -> None:
+        session.add(
+            Event(
+                campaign_id=self.campaign_id,
+                trial_id=None if trial is None else self._trial_ids[trial],
+                series_id=None if trial is None or j is None else self._series_ids.get((trial, j)),
+                stand_time_ms=t_ms,
+                kind=kind,
+                severity=severity,
+                message=message,
             )
+        )

@@ -83,7 +83,7 @@ def main() -> None:
         base = rss_mib()
         with PeakRss() as rss:
             t0 = time.perf_counter()
-            result = replay(plan, sessions, log)
+            result = replay(plan, sessions, [log])
             seconds = time.perf_counter() - t0
         growth = rss.peak - base
 

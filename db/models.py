@@ -33,6 +33,8 @@ TRIAL_STATUSES = ("pending", "running", "completed", "failed")
 SERIES_J = (1, 2)  # seed 000 eq 2.1: j = 1 before rocking, j = 2 while rocking
 SERIES_STATUSES = ("pending", "settling", "observing", "completed", "failed")
 EVENT_SEVERITIES = ("info", "warning", "error")
+SEGMENT_STARTS = ("new", "continued", "restarted")
+SEGMENT_ENDINGS = ("closed", "killed")
 
 NAMING = {
     "ix": "ix_%(column_0_label)s",
@@ -87,9 +89,7 @@ class Campaign(Base):
         CheckConstraint("earth_rate_rad_s > 0", name="earth_rate"),
         CheckConstraint("gravity_cm_s2 > 0", name="gravity"),
         CheckConstraint("length(plan_hash) = 64", name="plan_hash"),
-        CheckConstraint(
-            "raw_log_sha256 IS NULL OR length(raw_log_sha256) = 64", name="raw_log_sha256"
-        ),
+        CheckConstraint("engine_writes >= 0", name="engine_writes"),
         CheckConstraint(
             "finished_at IS NULL OR started_at IS NULL OR finished_at >= started_at",
             name="finished_after_start",
@@ -114,8 +114,9 @@ class Campaign(Base):
     started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     software_version: Mapped[str] = mapped_column(String(64))
-    raw_log_path: Mapped[str | None] = mapped_column(Text)
-    raw_log_sha256: Mapped[str | None] = mapped_column(String(64))
+    engine_writes: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    """How many of the acquisition engine's writes are committed (a resumed simulation in virtual
+    time re-runs from the start and skips these: `acquisition.catchup`)."""
 
     instrument: Mapped[Instrument] = relationship(back_populates="campaigns")
     trials: Mapped[list[Trial]] = relationship(
@@ -133,6 +134,12 @@ class Campaign(Base):
     analysis_runs: Mapped[list[AnalysisRun]] = relationship(
         back_populates="campaign",
         order_by="AnalysisRun.id",
+        cascade="all, delete-orphan",
+        passive_deletes=True,
+    )
+    raw_logs: Mapped[list[RawLogSegment]] = relationship(
+        back_populates="campaign",
+        order_by="RawLogSegment.seq",
         cascade="all, delete-orphan",
         passive_deletes=True,
     )
@@ -303,6 +310,40 @@ class Event(Base):
     message: Mapped[str] = mapped_column(Text)
 
     campaign: Mapped[Campaign] = relationship(back_populates="events")
+
+
+class RawLogSegment(Base):
+    """One raw CAN log file of a campaign: the first run's (seq 1), then one per resume.
+
+    `start`: "new" (the first run, or a replayed log), "continued" (a resumed simulation in
+    virtual time: its frames continue the earlier segments' stream exactly, from stream position
+    `first_frame`), "restarted" (a resume that started the stand again at the first incomplete
+    series). `sha256` and `frames` are set when the run closes the file ("closed") or when a
+    later resume finds it left open by a killed run ("killed")."""
+
+    __tablename__ = "raw_log_segment"
+    __table_args__ = (
+        UniqueConstraint("campaign_id", "seq"),
+        CheckConstraint("seq >= 1", name="seq"),
+        CheckConstraint(one_of("start", SEGMENT_STARTS), name="start"),
+        CheckConstraint("ending IS NULL OR " + one_of("ending", SEGMENT_ENDINGS), name="ending"),
+        CheckConstraint("first_frame >= 0", name="first_frame"),
+        CheckConstraint(nonnegative_or_null("frames"), name="frames"),
+        CheckConstraint("sha256 IS NULL OR length(sha256) = 64", name="sha256"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    seq: Mapped[int] = mapped_column(Integer)
+    path: Mapped[str] = mapped_column(Text)
+    start: Mapped[str] = mapped_column(String(16))
+    first_frame: Mapped[int] = mapped_column(BigInteger, default=0)
+    frames: Mapped[int | None] = mapped_column(BigInteger)
+    sha256: Mapped[str | None] = mapped_column(String(64))
+    ending: Mapped[str | None] = mapped_column(String(16))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
+
+    campaign: Mapped[Campaign] = relationship(back_populates="raw_logs")
 
 
 class AnalysisRun(Base):

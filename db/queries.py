@@ -19,6 +19,7 @@ from gyrostand.db.models import (
     Event,
     Instrument,
     Observation,
+    RawLogSegment,
     Series,
     Trial,
 )
@@ -355,4 +356,15 @@ def campaign_summary(session: Session, campaign_id: int) -> CampaignSummary:
         trials=trials,
         events_by_severity=events,
         resume=next((t.resume for t in trials if t.resume is not None), None),
+    )
+
+
+def raw_log_segments(session: Session, campaign_id: int) -> list[RawLogSegment]:
+    """The campaign's raw log files in the order they were written."""
+    return list(
+        session.scalars(
+            select(RawLogSegment)
+            .where(RawLogSegment.campaign_id == campaign_id)
+            .order_by(RawLogSegment.seq)
+        )
     )

@@ -6,6 +6,8 @@ the SQLite dialect. The schema is owned by the Alembic migrations in `db/migrati
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from alembic import command
@@ -121,7 +123,11 @@ def migrate(engine: Engine, *, upgrade: bool, script_location: Path = MIGRATIONS
     with engine.begin() as connection:  # the common case, a current schema: read only
         if set(MigrationContext.configure(connection).get_current_heads()) == heads:
             return
-    with engine.execution_options(**{IMMEDIATE: True}).begin() as connection:
+    with (
+        engine.execution_options(**{IMMEDIATE: True}).connect() as connection,
+        _no_cascades(connection),
+        connection.begin(),
+    ):
         current = set(MigrationContext.configure(connection).get_current_heads())
         if current == heads:  # another process migrated while this one waited for the lock
             return
@@ -149,3 +155,27 @@ def migrate(engine: Engine, *, upgrade: bool, script_location: Path = MIGRATIONS
             )
         config.attributes["connection"] = connection
         command.upgrade(config, "heads")
+        if engine.dialect.name == "sqlite":
+            broken = connection.exec_driver_sql("PRAGMA foreign_key_check").all()
+            if broken:
+                raise DatabaseVersionError(
+                    f"the migration of {where} would leave {len(broken)} rows without the row "
+                    f"they refer to (first: {tuple(broken[0])}); nothing was changed"
+                )
+
+
+@contextmanager
+def _no_cascades(connection: Connection) -> Iterator[None]:
+    """SQLite: foreign keys off while migrating (outside the transaction, where the pragma
+    applies). A migration that alters a table copies it and drops the original, and with foreign
+    keys on that DROP would delete every row referring to it (ON DELETE CASCADE); `migrate`
+    checks the references itself before it commits."""
+    if connection.dialect.name != "sqlite":
+        yield
+        return
+    raw = connection.connection.driver_connection
+    raw.execute("PRAGMA foreign_keys=OFF")  # type: ignore[union-attr]
+    try:
+        yield
+    finally:
+        raw.execute("PRAGMA foreign_keys=ON")  # type: ignore[union-attr]

@@ -70,6 +70,12 @@ class RawFrames:
         """The first n frames."""
         return RawFrames(self.start, *(getattr(self, f.name)[:n] for f in fields(self)[1:]))
 
+    def tail(self, skip: int) -> RawFrames:
+        """All but the first `skip` frames."""
+        return RawFrames(
+            self.start + skip, *(getattr(self, f.name)[skip:] for f in fields(self)[1:])
+        )
+
     def message(self, row: int) -> can.Message:
         """Row `row` as a python-can message (for the rare frames decoded one by one)."""
         return can.Message(

@@ -12,7 +12,8 @@ import io
 import itertools
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import can
@@ -108,6 +109,19 @@ def read_raw_frames(path: Path, chunk: int = CHUNK_FRAMES) -> Iterator[RawFrames
             start += len(batch)
     finally:
         reader.stop()
+
+
+def read_segments(paths: Sequence[Path]) -> Iterator[RawFrames]:
+    """The frames of several log files read in order as one stream (a campaign's raw log
+    segments): stream positions continue from one file to the next."""
+    offset = 0
+    for path in paths:
+        last = None
+        for raw in read_raw_frames(path):
+            last = replace(raw, start=offset + raw.start)
+            yield last
+        if last is not None:
+            offset = last.start + len(last)
 
 
 def read_blf(path: Path, chunk: int = CHUNK_FRAMES) -> Iterator[RawFrames]:

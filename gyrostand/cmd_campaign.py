@@ -101,13 +101,17 @@ def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None
         raise typer.Exit(EXIT_FAILED)
 
 
-def run_campaign(plan: Plan, store: CampaignStore, quiet: bool) -> RunResult:
+def run_campaign(plan: Plan, store: CampaignStore, quiet: bool, start: str = "new") -> RunResult:
     import can
 
     from gyrostand.acquisition.runner import run_live
+    from gyrostand.acquisition.store import ReRunMismatch
 
     try:
-        return run_live(plan, store, quiet=quiet)
+        return run_live(plan, store, start=start, quiet=quiet)
+    except ReRunMismatch as exc:
+        store.run_event("resume", "error", str(exc))
+        fail(f"campaign {store.campaign_id}: {exc}", code=EXIT_FAILED)
     except (can.CanError, OSError, ValueError) as exc:
         store.set_status("paused")
         fail(f"campaign {store.campaign_id} could not use the bus: {exc}", code=EXIT_FAILED)
@@ -136,7 +140,7 @@ def continue_campaign(
     failed one): everything is checked before anything is written; then the new attempts are
     added under the campaign's lease, which the acquisition keeps."""
     from gyrostand.acquisition.retry import RetryRefused, retry_trials
-    from gyrostand.acquisition.runner import resume_store
+    from gyrostand.acquisition.runner import resume_start, resume_store
     from gyrostand.db.lease import CampaignBusy
     from gyrostand.db.queries import (
         CampaignNotFound,
@@ -182,10 +186,12 @@ def continue_campaign(
     with sessions() as session:
         left = first_incomplete_series(session, campaign_id)
     if left is None:
+        store.complete_acquired()
         store.set_status("completed")
         _out.print(f"campaign {campaign_id}: nothing left to acquire")
         return
-    print_outcome(run_campaign(checked, store, quiet), db)
+    start = resume_start(store, stored, checked)
+    print_outcome(run_campaign(checked, store, quiet, start), db)
 
 
 Interface = Annotated[
@@ -266,7 +272,9 @@ def register(app: typer.Typer) -> None:
         ] = False,
         quiet: Quiet = False,
     ) -> None:
-        """Continue a campaign from its first incomplete series (re-settling first)."""
+        """Continue a campaign from its first incomplete series (re-settling first). A
+        simulated campaign in virtual time that was killed is re-run from its start instead,
+        skipping what the database holds: it ends as the uninterrupted run would have."""
         bus = BusOptions(interface, channel, speedup, seed, timing)
         continue_campaign(campaign_id, db, bus, quiet, retry="failed" if retry_failed else None)
 
@@ -355,13 +363,20 @@ def register(app: typer.Typer) -> None:
 
     @app.command("replay")
     def replay_command(
-        log: Annotated[Path, typer.Argument(help="Raw CAN log of a campaign (.blf or .asc).")],
+        logs: Annotated[
+            list[Path],
+            typer.Argument(
+                help="Raw CAN log of a campaign (.blf or .asc); several: its segments in "
+                "order (a resumed campaign's), read as one stream.",
+                show_default=False,
+            ),
+        ],
         plan: Annotated[Path, typer.Option("--plan", help="The campaign's plan (TOML).")],
         db: Annotated[
             str | None, typer.Option(help="Database (file or URL); default: the plan's.")
         ] = None,
     ) -> None:
-        """Re-derive observations offline from a raw CAN log into a new campaign. The log is
+        """Re-derive observations offline from raw CAN logs into a new campaign. The logs are
         read whole before the database is opened: a log that cannot be replayed leaves it as
         it was. A replayed campaign cannot be resumed on the stand."""
         import can
@@ -371,15 +386,17 @@ def register(app: typer.Typer) -> None:
         checked = checked_plan(
             _load(plan), interface=None, channel=None, db=db, speedup=None, seed=None
         )
-        if not log.is_file():
-            fail(f"no log file at {log}")
-        try:
-            readable = check_replay_log(log)
-        except ReplayLogError as exc:
-            fail(f"cannot replay {exc}")
+        readable = []
+        for log in logs:
+            if not log.is_file():
+                fail(f"no log file at {log}")
+            try:
+                readable.append(check_replay_log(log))
+            except ReplayLogError as exc:
+                fail(f"cannot replay {exc}")
         sessions = open_db(checked.database, must_exist=False)
         try:
-            result = replay(checked, sessions, log, readable)
+            result = replay(checked, sessions, logs, readable)
         except (ReplayLogError, ValueError, OSError, can.CanError) as exc:  # changed meanwhile
-            fail(f"replay of {log} failed: {exc}", code=EXIT_FAILED)
+            fail(f"replay of {printable(logs[-1])} failed: {exc}", code=EXIT_FAILED)
         print_outcome(result, checked.database, resumable=False)

@@ -15,6 +15,17 @@ from gyrostand.analysis.settle import SettleOutcome
 
 
 @dataclass(frozen=True)
+class RawLogFile:
+    """One raw CAN log file of the campaign (a segment: the first run's, or a resume's)."""
+
+    path: str
+    sha256: str | None
+    frames: int | None
+    start: str  # new | continued (one stream with the earlier ones) | restarted
+    ending: str | None  # closed | killed (left open by a killed run) | None (being written)
+
+
+@dataclass(frozen=True)
 class Identification:
     """Section 1: who, what, where, with which software, from which records."""
 
@@ -35,8 +46,7 @@ class Identification:
     inputs_sha256: str | None  # hash of the analysed inputs (None: not analysed)
     database: str
     plan_sha256: str
-    raw_log_path: str | None
-    raw_log_sha256: str | None
+    raw_logs: tuple[RawLogFile, ...]  # the campaign's raw log segments, in order
     raw_log_check: str  # "verified", "MISMATCH (...)", "file not found", "no raw log"
 
 

@@ -1,7 +1,7 @@
 """The stationary reading record of the signal analysis (report section 10) from a raw CAN log:
 valid heading frames by stand time, read with the vectorised log reader and batch decoder.
 
-    still_series_record(log, codec, records) -> (ReadingRecord | None, note)   # a campaign
+    still_series_record(logs, codec, records) -> (ReadingRecord | None, note)   # a campaign
     log_record(log, codec, start_s=None, end_s=None) -> ReadingRecord           # a log alone
     log_signal(log, plan=None, start_s=None, end_s=None) -> SignalSection       # its section 10
 
@@ -14,13 +14,14 @@ realisation. A log without a campaign gives its longest still stretch by the sta
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.frames.batch import BatchDecoder
-from gyrostand.frames.logfile import read_raw_frames
+from gyrostand.frames.logfile import read_segments
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import Plan
 from gyrostand.report.model import ExcursionCriterion, ReadingRecord, TrialRecord
@@ -31,12 +32,13 @@ Span = tuple[float, float]  # stand ms, [start, end)
 
 
 def headings_in(
-    log: Path, codec: Codec, spans: dict[int, Span]
+    logs: Sequence[Path], codec: Codec, spans: dict[int, Span]
 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-    """Valid heading frames (stand ms, deg) of the log inside each span, in stream order."""
+    """Valid heading frames (stand ms, deg) inside each span of the logs read in order as one
+    stream (a campaign's raw log segments), in stream order."""
     decoder = BatchDecoder(codec)
     parts: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {key: [] for key in spans}
-    for raw in read_raw_frames(log):
+    for raw in read_segments(logs):
         headings = decoder.decode(raw).headings
         t, h = headings.t_ms[headings.valid], headings.heading_deg[headings.valid]
         for key, (start, end) in spans.items():
@@ -65,14 +67,14 @@ def _still_spans(records: tuple[TrialRecord, ...]) -> dict[int, Span]:
 
 
 def still_series_record(
-    log: Path, codec: Codec, records: tuple[TrialRecord, ...]
+    logs: Sequence[Path], codec: Codec, records: tuple[TrialRecord, ...]
 ) -> tuple[ReadingRecord | None, str]:
-    """The longest still-series record of a campaign in its raw log (by heading frames), and a
-    note saying what it is, or why there is none."""
+    """The longest still-series record of a campaign in its raw log segments (by heading
+    frames), and a note saying what it is, or why there is none."""
     spans = _still_spans(records)
     if not spans:
         return None, "No still series with timed observation windows: no stationary record."
-    frames = headings_in(log, codec, spans)
+    frames = headings_in(logs, codec, spans)
     index = max(sorted(frames), key=lambda i: frames[i][0].size)  # ties: the first trial
     t, h = frames[index]
     if t.size < 3:
@@ -103,7 +105,7 @@ def still_stretch(log: Path, codec: Codec) -> Span | None:
     [first, last]; None when the log has no status frame at all."""
     decoder = BatchDecoder(codec)
     times, rocking = [], []
-    for raw in read_raw_frames(log):
+    for raw in read_segments([log]):
         statuses = decoder.decode(raw).statuses
         times.append(statuses.t_ms)
         rocking.append(statuses.rocking.astype(bool))
@@ -137,7 +139,7 @@ def log_record(
         span, what = (stretch[0], stretch[1] + 1.0), "the longest still stretch"
     else:
         span, what = (-np.inf, np.inf), "the whole log (no stand status frames)"
-    t, h = headings_in(log, codec, {0: span})[0]
+    t, h = headings_in([log], codec, {0: span})[0]
     if t.size < 3:
         raise AnalysisError(f"{log.name}: {t.size} valid heading frames in {what}")
     source = f"raw log {log.name}, {what}: stand time {t[0] / 1000:.1f}-{t[-1] / 1000:.1f} s"

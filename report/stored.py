@@ -18,8 +18,10 @@ from __future__ import annotations
 import hashlib
 import json
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime
+from itertools import takewhile
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +55,7 @@ from gyrostand.report.model import (
     ObservationRecord,
     PlannedTrial,
     PlanSummary,
+    RawLogFile,
     ReadingRecord,
     ReportInputs,
     SeriesRecord,
@@ -223,17 +226,25 @@ def _when(value: datetime | None) -> str | None:
     return None if value is None else value.isoformat(sep=" ", timespec="seconds")
 
 
-def _raw_log_check(campaign: Campaign) -> tuple[str, Path | None]:
-    """How the recorded raw log checks out, and its path when it can be used."""
-    if not campaign.raw_log_path:
-        return "no raw log", None
-    path = Path(campaign.raw_log_path)
-    if not path.is_file():
-        return "file not found", None
-    actual = sha256_of(path)
-    if actual != campaign.raw_log_sha256:
-        return f"MISMATCH: the file's SHA-256 is {actual}", None
-    return "verified", path
+def _raw_log_check(campaign: Campaign) -> tuple[str, list[Path]]:
+    """How the recorded raw log segments check out, and those that can be read as one stream
+    of the campaign: all of them, up to a resume that restarted the stand (its stand times
+    start again)."""
+    segments = campaign.raw_logs
+    if not segments:
+        return "no raw log", []
+    for s in segments:
+        path = Path(s.path)
+        if not path.is_file():
+            return "file not found" + (f" ({path.name})" if len(segments) > 1 else ""), []
+        actual = sha256_of(path)
+        if s.sha256 is None:
+            return f"unverified: no SHA-256 recorded for {path.name}", []
+        if actual != s.sha256:
+            return f"MISMATCH: the SHA-256 of {path.name} is {actual}", []
+    stream = [Path(segments[0].path)]
+    stream += [Path(s.path) for s in takewhile(lambda s: s.start == "continued", segments[1:])]
+    return "verified", stream
 
 
 def _stand(campaign: Campaign, plan: Plan | None) -> str:
@@ -395,17 +406,17 @@ def _binned(
 
 
 def heading_traces(
-    log: Path, plan: Plan, spans: dict[int, tuple[int, int]], bins: int = TRACE_BINS
+    logs: Sequence[Path], plan: Plan, spans: dict[int, tuple[int, int]], bins: int = TRACE_BINS
 ) -> dict[int, HeadingTrace | None]:
     """Binned valid heading frames of each trial's stand-time span [start, end], from the raw
     log (`headings_in`)."""
     closed = {index: (t0, np.nextafter(t1, np.inf)) for index, (t0, t1) in spans.items()}
-    found = headings_in(log, codec_for(plan), closed)
+    found = headings_in(logs, codec_for(plan), closed)
     return {index: _binned(spans[index], *found[index], bins) for index in spans}
 
 
 def _records(
-    campaign: Campaign, plan: Plan | None, log: Path | None, check: str
+    campaign: Campaign, plan: Plan | None, logs: Sequence[Path], check: str
 ) -> tuple[tuple[TrialRecord, ...], str]:
     """Per trial its series and (from the raw log) its heading trace; and how the plots were
     made."""
@@ -423,8 +434,8 @@ def _records(
         if (span := _stand_span_ms(rows, event_times[index])) is not None
     }
     traces: dict[int, HeadingTrace | None] = {}
-    if log is not None and plan is not None and spans:
-        traces = heading_traces(log, plan, spans)
+    if logs and plan is not None and spans:
+        traces = heading_traces(logs, plan, spans)
         frames = sum(t.frames for t in traces.values() if t is not None)
         note = (
             f"Heading from the raw CAN log ({frames} valid heading frames within the trials), "
@@ -436,14 +447,13 @@ def _records(
         missing = [str(i) for i, trace in traces.items() if trace is None]
         if missing:
             note += (
-                f" Trials {', '.join(missing)} have no heading frames in the campaign's first raw "
-                "log (acquired after a resume, which writes its own log; see the events): their "
-                "plots show the stored observations only."
+                f" Trials {', '.join(missing)} have no heading frames in the raw log read "
+                "(acquired after a resume that restarted the stand, whose stand times start "
+                "again; see the events): their plots show the stored observations only."
             )
     elif has_observations:
         reason = {
             "no raw log": "The campaign has no raw CAN log",
-            "file not found": f"The raw CAN log {campaign.raw_log_path} is not found",
         }.get(check, f"The raw CAN log cannot be used ({check})")
         note = f"{reason}: the plots show the stored observations over their windows."
     else:
@@ -465,7 +475,7 @@ def _plan(campaign: Campaign) -> Plan | None:
 
 
 def _reading(
-    plan: Plan | None, log: Path | None, check: str, records: tuple[TrialRecord, ...]
+    plan: Plan | None, logs: Sequence[Path], check: str, records: tuple[TrialRecord, ...]
 ) -> tuple[ReadingRecord | None, str, ExcursionCriterion | None]:
     """The stationary record of section 10 (from the raw log when it verifies), a note on it,
     and the plan's acceptance by excursions."""
@@ -476,21 +486,21 @@ def _reading(
             "No raw reading: the data were imported (no stand, no raw CAN log).",
             acceptance,
         )
-    if log is None:
+    if not logs:
         return None, f"No usable raw CAN log ({check}): no reading record.", acceptance
-    reading, note = still_series_record(log, codec_for(plan), records)
+    reading, note = still_series_record(logs, codec_for(plan), records)
     return reading, note, acceptance
 
 
 def campaign_signal(session: Session, campaign_id: int) -> SignalSection:
     """Section 10 of a stored campaign's report alone (no analysis run, no heading traces)."""
     campaign = load_campaign(session, campaign_id)
-    check, log = _raw_log_check(campaign)
+    check, logs = _raw_log_check(campaign)
     plan = _plan(campaign)
     records = tuple(
         TrialRecord(t.index, _series_records(t), None) for t in current_trials(campaign.trials)
     )
-    reading, note, acceptance = _reading(plan, log, check, records)
+    reading, note, acceptance = _reading(plan, logs, check, records)
     return signal_section(reading, note, records, acceptance)
 
 
@@ -504,9 +514,9 @@ def report_inputs(
     _, left_out = trial_inputs(campaign)
     unused = {(t.index, t.attempt) for t in left_out}
     plan = _plan(campaign)
-    check, log = _raw_log_check(campaign)
-    records, note = _records(campaign, plan, log, check)
-    reading, reading_note, acceptance = _reading(plan, log, check, records)
+    check, logs = _raw_log_check(campaign)
+    records, note = _records(campaign, plan, logs, check)
+    reading, reading_note, acceptance = _reading(plan, logs, check, records)
     ident = Identification(
         campaign_id=campaign.id,
         instrument_model=campaign.instrument.model,
@@ -525,8 +535,9 @@ def report_inputs(
         inputs_sha256=None if stored is None else stored.inputs.sha256(),
         database=database,
         plan_sha256=campaign.plan_hash,
-        raw_log_path=campaign.raw_log_path,
-        raw_log_sha256=campaign.raw_log_sha256,
+        raw_logs=tuple(
+            RawLogFile(s.path, s.sha256, s.frames, s.start, s.ending) for s in campaign.raw_logs
+        ),
         raw_log_check=check,
     )
     return ReportInputs(

@@ -97,7 +97,10 @@ def test_paper_campaign_completes_with_n_observations_per_series(campaign) -> No
     assert all(lost == 0 and flags == "" for *_, lost, flags in rows)
     with sessions() as session:
         c = session.get_one(Campaign, result.campaign_id)
-        assert c.status == "completed" and c.raw_log_sha256 == result.raw_log_sha256
+        assert c.status == "completed"
+        assert [(s.sha256, s.start, s.ending) for s in c.raw_logs] == [
+            (result.raw_log_sha256, "new", "closed")
+        ]
         trials = session.scalars(select(Trial).where(Trial.campaign_id == c.id)).all()
         for t in trials:  # the stand reported the commanded motion
             assert t.meas_amplitude_cm == pytest.approx(t.cmd_amplitude_cm, rel=1e-3)
@@ -135,7 +138,7 @@ def test_fitted_c_and_t_cover_the_simulators_truth(campaign) -> None:
 def test_replay_of_the_raw_log_gives_the_same_campaign(campaign) -> None:
     plan, sessions, result, _ = campaign
     assert result.raw_log is not None and result.raw_log.suffix == ".blf"
-    replayed = replay(plan, sessions, result.raw_log)
+    replayed = replay(plan, sessions, [result.raw_log])
     assert replayed.outcome == "completed"
     assert observations(sessions, replayed.campaign_id) == observations(
         sessions, result.campaign_id
@@ -163,7 +166,7 @@ def test_replay_of_the_raw_log_gives_the_same_campaign(campaign) -> None:
     assert event_rows(replayed.campaign_id) == event_rows(result.campaign_id)
     with sessions() as session:
         c = session.get_one(Campaign, replayed.campaign_id)
-        assert c.source == "replay" and c.raw_log_sha256 == result.raw_log_sha256
+        assert c.source == "replay" and [s.sha256 for s in c.raw_logs] == [result.raw_log_sha256]
 
 
 def test_settled_shift_matches_model_1_1(campaign) -> None:
@@ -187,7 +190,7 @@ def test_asc_raw_log_replays_to_the_same_campaign(tmp_path: Path) -> None:
     live = run_live(plan, CampaignStore.create(sessions, plan), quiet=True)
     assert live.outcome == "completed" and live.raw_log is not None
     assert live.raw_log.suffix == ".asc"
-    replayed = replay(plan, sessions, live.raw_log)
+    replayed = replay(plan, sessions, [live.raw_log])
     assert observations(sessions, replayed.campaign_id) == observations(sessions, live.campaign_id)
     assert len(observations(sessions, live.campaign_id)) == 2 * 2 * 3
 

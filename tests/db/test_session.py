@@ -9,10 +9,11 @@ import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
+from alembic.script import ScriptDirectory
 from sqlalchemy import create_engine, text
 from sqlalchemy.orm import Session, sessionmaker
 
-from gyrostand.db.models import Base, Event
+from gyrostand.db.models import Base, Event, Observation
 from gyrostand.db.session import (
     MIGRATIONS_DIR,
     DatabaseVersionError,
@@ -24,6 +25,9 @@ from gyrostand.db.session import (
     sqlite_url,
 )
 from tests.db.conftest import make_campaign
+
+HEAD = ScriptDirectory.from_config(alembic_config()).get_current_head()
+NEXT = f"{int(HEAD) + 1:04d}"  # a future release's revision
 
 
 def version_of(path: Path) -> list[str]:
@@ -43,7 +47,7 @@ def test_pragmas_are_set_on_every_connection(sessions: sessionmaker[Session]) ->
 def test_empty_file_is_created_at_head(db_path: Path) -> None:
     assert not db_path.parent.exists()
     open_database(sqlite_url(db_path))
-    assert version_of(db_path) == ["0002"]
+    assert version_of(db_path) == [HEAD]
     with sqlite3.connect(db_path) as conn:
         tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
     assert {"instrument", "campaign", "trial", "series", "observation", "event"} <= tables
@@ -61,7 +65,7 @@ def test_without_upgrade_a_missing_or_empty_database_is_refused(tmp_path: Path) 
         open_database(sqlite_url(tmp_path / "none.sqlite"), upgrade=False)
     assert not (tmp_path / "none.sqlite").exists()
     sqlite3.connect(tmp_path / "empty.sqlite").close()
-    with pytest.raises(DatabaseVersionError, match="is empty; schema 0002 is needed"):
+    with pytest.raises(DatabaseVersionError, match=f"is empty; schema {HEAD} is needed"):
         open_database(sqlite_url(tmp_path / "empty.sqlite"), upgrade=False)
 
 
@@ -84,12 +88,12 @@ def test_database_ahead_of_the_code_is_refused(db_path: Path) -> None:
     assert version_of(db_path) == ["9999"]
 
 
-SECOND_REVISION = '''"""Test-only revision: adds a table."""
+SECOND_REVISION = f'''"""Test-only revision: adds a table."""
 import sqlalchemy as sa
 from alembic import op
 
-revision = "0003"
-down_revision = "0002"
+revision = "{NEXT}"
+down_revision = "{HEAD}"
 branch_labels = None
 depends_on = None
 
@@ -108,23 +112,25 @@ def newer_migrations(tmp_path: Path) -> Path:
     """A copy of the shipped migrations plus a second revision, as a future release would have."""
     location = tmp_path / "migrations"
     shutil.copytree(MIGRATIONS_DIR, location, ignore=shutil.ignore_patterns("__pycache__"))
-    (location / "versions" / "0003_probe.py").write_text(SECOND_REVISION)
+    (location / "versions" / f"{NEXT}_probe.py").write_text(SECOND_REVISION)
     return location
 
 
 def test_older_database_is_upgraded_on_open(db_path: Path, newer_migrations: Path) -> None:
-    open_database(sqlite_url(db_path))  # written by "this" release, at 0002
+    open_database(sqlite_url(db_path))  # written by "this" release, at HEAD
     engine = create_engine(sqlite_url(db_path))
-    with pytest.raises(DatabaseVersionError, match="has old schema 0002; schema 0003 is needed"):
+    with pytest.raises(
+        DatabaseVersionError, match=f"has old schema {HEAD}; schema {NEXT} is needed"
+    ):
         migrate(engine, upgrade=False, script_location=newer_migrations)
-    assert version_of(db_path) == ["0002"]
+    assert version_of(db_path) == [HEAD]
     migrate(engine, upgrade=True, script_location=newer_migrations)
     engine.dispose()
-    assert version_of(db_path) == ["0003"]
+    assert version_of(db_path) == [NEXT]
     with sqlite3.connect(db_path) as conn:
         assert conn.execute("SELECT count(*) FROM probe").fetchone() == (0,)
-    # and the released code (which only knows up to 0002) now refuses the upgraded file
-    with pytest.raises(DatabaseVersionError, match="0003, newer than this gyrostand"):
+    # and the released code (which only knows up to HEAD) now refuses the upgraded file
+    with pytest.raises(DatabaseVersionError, match=f"{NEXT}, newer than this gyrostand"):
         open_database(sqlite_url(db_path))
 
 
@@ -137,13 +143,13 @@ def test_failed_migration_leaves_the_database_unchanged(
         'op.create_table("probe", sa.Column("id", sa.Integer(), primary_key=True))\n'
         '    op.execute("SELECT no_such_function()")',
     )
-    (newer_migrations / "versions" / "0003_probe.py").write_text(broken)
+    (newer_migrations / "versions" / f"{NEXT}_probe.py").write_text(broken)
     engine = create_engine(sqlite_url(db_path))
     _configure_sqlite(engine)
     with pytest.raises(Exception, match="no_such_function"):
         migrate(engine, upgrade=True, script_location=newer_migrations)
     engine.dispose()
-    assert version_of(db_path) == ["0002"]
+    assert version_of(db_path) == [HEAD]
     with sqlite3.connect(db_path) as conn:
         tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
     assert "probe" not in tables
@@ -193,3 +199,37 @@ def test_0002_fills_settle_outcomes_from_0001_event_text(db_path: Path) -> None:
         "standard_error_deg": None, "stable_since_s": None, "stable_estimate_deg": None,
         "band_s": 1800.0, "band_measured": True,
     }  # fmt: skip
+
+
+def test_0003_moves_the_raw_log_into_segments_and_keeps_every_row(db_path: Path) -> None:
+    """0003 copies the campaign table (it drops two columns): with SQLite's foreign keys on,
+    dropping the old copy would have deleted every trial, series and observation (cascade)."""
+    sessions = open_database(sqlite_url(db_path))
+    with sessions.begin() as session:
+        campaign = make_campaign(session, n_trials=2)
+        for series in campaign.trials[1].series:
+            series.observations = [Observation(k=k, value_deg=1.0) for k in (1, 2)]
+    engine = create_engine(sqlite_url(db_path))
+    config = alembic_config()
+    with engine.begin() as connection:
+        config.attributes["connection"] = connection
+        command.downgrade(config, "0002")
+        connection.execute(
+            text("UPDATE campaign SET raw_log_path = '/x/campaign-1.blf', raw_log_sha256 = :h"),
+            {"h": "ab" * 32},
+        )
+    engine.dispose()
+    with sqlite3.connect(db_path) as conn:
+        before = {t: conn.execute(f"SELECT count(*) FROM {t}").fetchone()[0]
+                  for t in ("trial", "series", "observation")}  # fmt: skip
+    assert before == {"trial": 2, "series": 4, "observation": 4}
+    open_database(sqlite_url(db_path))  # upgrades to head
+    with sqlite3.connect(db_path) as conn:
+        after = {t: conn.execute(f"SELECT count(*) FROM {t}").fetchone()[0] for t in before}
+        segments = conn.execute(
+            "SELECT campaign_id, seq, path, start, first_frame, sha256, ending FROM raw_log_segment"
+        ).fetchall()
+        engine_writes = conn.execute("SELECT engine_writes FROM campaign").fetchone()
+    assert after == before
+    assert segments == [(1, 1, "/x/campaign-1.blf", "new", 0, "ab" * 32, "closed")]
+    assert engine_writes == (0,)

@@ -120,7 +120,8 @@ def run_simulated(folder: Path, edit: Callable[[str], str] = str) -> Simulated:
     with can.BLFWriter(log) as writer:
         for message in sim.stream:
             writer.on_message_received(message)
-    store.set_raw_log(str(log), hashlib.sha256(log.read_bytes()).hexdigest())
+    seq = store.open_segment(str(log), "new")
+    store.close_segment(seq, len(sim.stream), hashlib.sha256(log.read_bytes()).hexdigest())
     return Simulated(path, sessions, store.campaign_id, log, tuple(sim.stream))
 
 
