@@ -449,15 +449,19 @@ def _readable_frames(path: Path) -> int:
 
 def resume_start(store: CampaignStore, stored: Plan, plan: Plan) -> str:
     """How a resumed run starts (`run_live`): "continued" for a simulation in virtual time on
-    the stored plan's bus whose every earlier run was killed (so the database holds a prefix of
-    what re-running the simulation gives: the resumed campaign equals an uninterrupted one);
-    else "restarted", at the first incomplete series."""
+    the stored plan's bus whose every earlier run was killed and no trial retried (so the
+    database holds a prefix of what re-running the simulation gives: the resumed campaign equals
+    an uninterrupted one); else "restarted", at the first incomplete series."""
     with store.sessions() as session:
         segments = raw_log_segments(session, store.campaign_id)
+        attempts = session.scalar(
+            select(func.max(Trial.attempt)).where(Trial.campaign_id == store.campaign_id)
+        )
     rerun = (
         plan.bus.simulated
         and plan.bus.timing == "virtual"
         and plan.bus == stored.bus
         and all(s.ending == "killed" and s.start != "restarted" for s in segments)
+        and attempts == 1
     )
     return "continued" if rerun else "restarted"
