@@ -113,6 +113,21 @@ def copy(runs: Runs, folder: Path) -> Path:
     return db
 
 
+def attempt_rows(db: Path, index: int, attempt: int) -> list[tuple]:
+    """The observations of one attempt of trial `index`."""
+    where = ' WHERE t."index" = ? AND t.attempt = ? ORDER BY s.j, o.k'
+    return query(db, OBSERVATION + where, index, attempt)
+
+
+def attempt_events(db: Path, index: int, attempt: int) -> list[tuple]:
+    """(kind, message) of the events of one attempt of trial `index`."""
+    sql = (
+        "SELECT e.kind, e.message FROM event e JOIN trial t ON t.id = e.trial_id"
+        ' WHERE t."index" = ? AND t.attempt = ? ORDER BY e.id'
+    )
+    return query(db, sql, index, attempt)
+
+
 def reference_rows(runs: Runs, index: int) -> list[tuple]:
     """The reference run's observations of trial `index` of the campaign (its index - 2)."""
     rows = query(runs.reference, OBSERVATION + ' WHERE t."index" = ? ORDER BY s.j, o.k', index - 2)
@@ -135,14 +150,11 @@ def test_the_fault_knobs_fail_trials_3_and_4(runs: Runs) -> None:
     ]
 
 
-def test_retry_acquires_a_new_attempt_and_keeps_the_failed_one(
-    runs: Runs, tmp_path: Path
-) -> None:
+def test_retry_acquires_a_new_attempt_and_keeps_the_failed_one(runs: Runs, tmp_path: Path) -> None:
     db = copy(runs, tmp_path)
-    first_attempt = query(db, OBSERVATION + ' WHERE t."index" = 3 ORDER BY s.j, o.k')
+    first_attempt = attempt_rows(db, 3, 1)
     assert len(first_attempt) == 1  # the bus fell silent in the second still window
-    events = 'SELECT e.kind, e.message FROM event e JOIN trial t ON t.id = e.trial_id WHERE t."index" = ? AND t.attempt = ? ORDER BY e.id'  # noqa: E501
-    failed_events = query(db, events, 3, 1)
+    failed_events = attempt_events(db, 3, 1)
     assert ("bus silence", SILENCE) in failed_events
 
     code, out, err = invoke("campaign", "retry", "1", "--trial", "3", "--db", str(db), "--quiet")
@@ -159,13 +171,13 @@ def test_retry_acquires_a_new_attempt_and_keeps_the_failed_one(
         (4, 1, "failed", STUCK),  # resume does not retry it: only --trial 4 or --retry-failed
         (3, 2, "completed", None),
     ]
-    assert query(db, OBSERVATION + ' WHERE t."index" = 3 AND t.attempt = 1') == first_attempt
-    assert query(db, events, 3, 1) == failed_events
-    assert query(db, events, 3, 2)[0] == (
+    assert attempt_rows(db, 3, 1) == first_attempt
+    assert attempt_events(db, 3, 1) == failed_events
+    assert attempt_events(db, 3, 2)[0] == (
         "retry",
         f"trial 3: attempt 2 supersedes attempt 1, which failed: {SILENCE}",
     )
-    new = query(db, OBSERVATION + ' WHERE t."index" = 3 AND t.attempt = 2 ORDER BY s.j, o.k')
+    new = attempt_rows(db, 3, 2)
     assert [(r[2], r[3]) for r in new] == [(j, k) for j in (1, 2) for k in (1, 2, 3)]
     assert new == reference_rows(runs, 3)  # as the uninterrupted run of trial 3
 
@@ -233,8 +245,7 @@ def test_resume_retry_failed_retries_every_failed_trial(runs: Runs, tmp_path: Pa
     # the retry run is the uninterrupted run of trials 3 and 4: the same frames, byte for byte
     assert lines[3].endswith(f"(sha256 {runs.reference_sha256})")
     for index in (3, 4):
-        new = query(db, OBSERVATION + ' WHERE t."index" = ? AND t.attempt = 2 ORDER BY s.j, o.k', index)  # noqa: E501
-        assert new == reference_rows(runs, index)
+        assert attempt_rows(db, index, 2) == reference_rows(runs, index)
     assert query(db, "SELECT count(*) FROM trial WHERE attempt = 1 AND status = 'failed'") == [(2,)]
 
     code, out, err = invoke("analyze", "1", "--db", str(db), "--json")
