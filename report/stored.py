@@ -428,10 +428,12 @@ def _records(
     for e in campaign.events:
         if e.trial_id in by_id and e.stand_time_ms is not None:
             event_times[by_id[e.trial_id]].append(e.stand_time_ms)
+    # a retried trial's attempt was acquired by a run that restarted the stand, outside the
+    # stream read (the first run and the runs continuing it): its stand times start again
     spans = {
-        index: span
-        for index, rows in series.items()
-        if (span := _stand_span_ms(rows, event_times[index])) is not None
+        t.index: span
+        for t in current
+        if t.attempt == 1 and (span := _stand_span_ms(series[t.index], event_times[t.index]))
     }
     traces: dict[int, HeadingTrace | None] = {}
     if logs and plan is not None and spans:
@@ -444,7 +446,11 @@ def _records(
             "value as a bar; dashed lines and triangles: where and at what heading each series "
             "settled."
         )
-        missing = [str(i) for i, trace in traces.items() if trace is None]
+        missing = [
+            str(i)
+            for i, rows in series.items()
+            if traces.get(i) is None and any(s.observations for s in rows)
+        ]
         if missing:
             note += (
                 f" Trials {', '.join(missing)} have no heading frames in the raw log read "
