@@ -20,7 +20,12 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from gyrostand.acquisition.retry import RetriedTrial, retry_trials
+from gyrostand.acquisition.runner import resume_start
+from gyrostand.acquisition.store import CampaignStore
 from gyrostand.cli import app
+from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.plan.model import parse_plan
 from tests.acquisition.harness import FAST_SIM, plan_text
 
 from .conftest import checkpointed, db_state
@@ -231,8 +236,9 @@ def test_retry_acquires_a_new_attempt_and_keeps_the_failed_one(runs: Runs, tmp_p
         (3, True),
         (4, False),
     ]
-    assert " Trials 3 have no heading frames in the raw log read" in (
-        document["acquisition"]["raw_log_note"]
+    assert (
+        " Trials 3 have no heading frames in the raw log read"
+        in (document["acquisition"]["raw_log_note"])
     )
     html = (tmp_path / "campaign-1.html").read_text()
     assert "<h3>Trials left out of the analysis</h3>" in html
@@ -343,3 +349,18 @@ def test_retry_while_another_process_holds_the_campaign(runs: Runs, tmp_path: Pa
         "wait for it to end or stop it first\n"
     )
     assert db_state(db) == before
+
+
+def test_a_retried_campaign_is_not_re_run_from_its_start(runs: Runs, tmp_path: Path) -> None:
+    """A killed simulated campaign is resumed by re-running it from its start (the database
+    holds a prefix of that run); a retry departs from it, so the resume restarts instead."""
+    db = copy(runs, tmp_path)
+    with sqlite3.connect(db) as conn:
+        conn.execute("UPDATE raw_log_segment SET ending = 'killed'")  # as a kill -9 leaves it
+    sessions = open_database(sqlite_url(db))
+    plan = parse_plan(query(db, "SELECT plan_toml FROM campaign")[0][0])
+    store = CampaignStore(sessions, 1)
+    assert resume_start(store, plan, plan) == "continued"
+    assert retry_trials(sessions, 1, [3]) == (RetriedTrial(3, 2, SILENCE),)
+    assert resume_start(store, plan, plan) == "restarted"
+    sessions.kw["bind"].dispose()
