@@ -84,7 +84,7 @@ def checked_plan(
 
 def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None:
     """The outcome on stdout; exit code 1 unless the campaign completed (with how to continue
-    it when it can be continued)."""
+    it and to retry its failed trials when it can be continued)."""
     _out.print(
         f"campaign {result.campaign_id} {result.outcome}: {result.trials_completed} trials "
         f"completed, {result.trials_failed} failed, {result.observations} observations in "
@@ -92,6 +92,11 @@ def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None
     )
     if result.raw_log is not None:
         _out.print(f"raw frames: {printable(result.raw_log)} (sha256 {result.raw_log_sha256})")
+    if result.trials_failed and resumable:
+        _out.print(
+            f"retry the failed trials with: gyrostand campaign resume {result.campaign_id} "
+            f"--retry-failed --db {printable(db)}"
+        )
     if result.outcome != "completed":
         if resumable:
             _out.print(

@@ -63,6 +63,7 @@ class Runs:
     (a campaign of their own, as trials 1 and 2) on the same simulated stand without faults."""
 
     failed: Path
+    failed_out: str  # what `campaign run` printed
     reference: Path
     reference_sha256: str
 
@@ -97,6 +98,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Runs:
     assert first.returncode == 0 and second.returncode == 0, first.stderr.read()
     return Runs(
         failed / "db.sqlite",
+        first.stdout.read(),
         reference / "db.sqlite",
         reference_sha256=second.stdout.read().split("(sha256 ")[1].split(")")[0],
     )
@@ -147,6 +149,15 @@ def delta_and_variance(rows: list[tuple]) -> tuple[float, float]:
 
 
 def test_the_fault_knobs_fail_trials_3_and_4(runs: Runs) -> None:
+    lines = runs.failed_out.splitlines()
+    assert (
+        lines[0]
+        == f"campaign 1 completed: 2 trials completed, 2 failed, 17 observations in {runs.failed}"
+    )
+    assert lines[2] == (
+        "retry the failed trials with: gyrostand campaign resume 1 --retry-failed "
+        f"--db {runs.failed}"
+    )
     assert query(runs.failed, 'SELECT "index", attempt, status, failure_reason FROM trial') == [
         (1, 1, "completed", None),
         (2, 1, "completed", None),
@@ -165,9 +176,13 @@ def test_retry_acquires_a_new_attempt_and_keeps_the_failed_one(runs: Runs, tmp_p
     code, out, err = invoke("campaign", "retry", "1", "--trial", "3", "--db", str(db), "--quiet")
 
     assert code == 0, err
-    assert out.splitlines()[:2] == [
+    lines = out.splitlines()
+    assert lines[:2] == [
         f"trial 3: attempt 2 (attempt 1 failed: {SILENCE})",
         f"campaign 1 completed: 3 trials completed, 1 failed, 22 observations in {db}",
+    ]
+    assert lines[3:] == [
+        f"retry the failed trials with: gyrostand campaign resume 1 --retry-failed --db {db}"
     ]
     assert query(db, 'SELECT "index", attempt, status, failure_reason FROM trial') == [
         (1, 1, "completed", None),
@@ -259,6 +274,7 @@ def test_resume_retry_failed_retries_every_failed_trial(runs: Runs, tmp_path: Pa
         f"trial 4: attempt 2 (attempt 1 failed: {STUCK})",
         f"campaign 1 completed: 4 trials completed, 0 failed, 24 observations in {db}",
     ]
+    assert len(lines) == 4  # nothing left to retry
     # the retry run is the uninterrupted run of trials 3 and 4: the same frames, byte for byte
     assert lines[3].endswith(f"(sha256 {runs.reference_sha256})")
     for index in (3, 4):
