@@ -239,7 +239,7 @@ class CampaignStore:
                     )
                     .join(Series, Series.trial_id == Trial.id)
                     .join(Observation, Observation.series_id == Series.id)
-                    .where(Trial.campaign_id == self.campaign_id)
+                    .where(Trial.campaign_id == self.campaign_id, latest_attempt())
                 )
             }
         self._writes = 0
