@@ -26,7 +26,7 @@ from gyrostand.acquisition.progress import ProgressDisplay
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.acquisition.virtual_time import Grants, StreamClock
 from gyrostand.db.models import Campaign, Observation, Series, Trial
-from gyrostand.db.queries import raw_log_segments
+from gyrostand.db.queries import latest_attempt, raw_log_segments, stand_campaign
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.plan.codec import codec_for
@@ -247,7 +247,7 @@ def _count_trials(session: Session, campaign_id: int, status: str) -> int:
     return (
         session.scalar(
             select(func.count(Trial.id)).where(
-                Trial.campaign_id == campaign_id, Trial.status == status
+                Trial.campaign_id == campaign_id, Trial.status == status, latest_attempt()
             )
         )
         or 0
@@ -260,7 +260,7 @@ def observation_count(session: Session, campaign_id: int) -> int:
             select(func.count(Observation.id))
             .join(Series, Series.id == Observation.series_id)
             .join(Trial, Trial.id == Series.trial_id)
-            .where(Trial.campaign_id == campaign_id)
+            .where(Trial.campaign_id == campaign_id, latest_attempt())
         )
         or 0
     )
@@ -383,19 +383,15 @@ def replay(
 
 
 def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Plan, CampaignStore]:
-    """The plan stored with a campaign and a store to continue it, holding the campaign's lease
-    (CampaignBusy while another process acquires into it). A campaign still marked running was
-    left by a process that is gone: an "interrupted" event says so; the resume is an event; raw
-    logs left open by a killed run are closed in the database (`close_killed_segments`)."""
+    """The plan stored with a stand campaign (else CampaignNotFound, NotOnTheStand) and a store
+    to continue it, holding the campaign's lease (CampaignBusy while another process acquires
+    into it). A campaign still marked running was left by a process that is gone: an
+    "interrupted" event says so; the resume is an event; raw logs left open by a killed run are
+    closed in the database (`close_killed_segments`)."""
     from gyrostand.plan.model import parse_plan
 
-    with sessions() as session:
-        campaign = session.get(Campaign, campaign_id)
-        if campaign is None:
-            raise LookupError(f"no campaign {campaign_id} in the database")
-        if (why := not_resumable(campaign_id, campaign.source)) is not None:
-            raise LookupError(why)
-        text = campaign.plan_toml
+    with sessions() as session:  # CampaignNotFound, NotOnTheStand
+        text = stand_campaign(session, campaign_id).plan_toml
     plan, store = parse_plan(text), CampaignStore(sessions, campaign_id)
     with store.sessions() as session:  # read under the lease: nobody else is running it now
         left_running = session.get_one(Campaign, campaign_id).status == "running"
@@ -409,18 +405,6 @@ def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Pla
     store.run_event("resume", "info", f"resumed by process {os.getpid()}")
     close_killed_segments(store)
     return plan, store
-
-
-def not_resumable(campaign_id: int, source: str) -> str | None:
-    """Why a campaign cannot be continued on the stand (None: it can): only a campaign run on
-    the stand can; an imported or replayed one has no stand behind it."""
-    if source == "stand":
-        return None
-    how = "replayed from a raw log" if source == "replay" else "imported from a file"
-    return (
-        f"campaign {campaign_id} was {how} (source {source!r}): only a campaign run "
-        "on the stand can be resumed"
-    )
 
 
 def close_killed_segments(store: CampaignStore) -> None:
@@ -456,15 +440,19 @@ def _readable_frames(path: Path) -> int:
 
 def resume_start(store: CampaignStore, stored: Plan, plan: Plan) -> str:
     """How a resumed run starts (`run_live`): "continued" for a simulation in virtual time on
-    the stored plan's bus whose every earlier run was killed (so the database holds a prefix of
-    what re-running the simulation gives: the resumed campaign equals an uninterrupted one);
-    else "restarted", at the first incomplete series."""
+    the stored plan's bus whose every earlier run was killed and no trial retried (so the
+    database holds a prefix of what re-running the simulation gives: the resumed campaign equals
+    an uninterrupted one); else "restarted", at the first incomplete series."""
     with store.sessions() as session:
         segments = raw_log_segments(session, store.campaign_id)
+        attempts = session.scalar(
+            select(func.max(Trial.attempt)).where(Trial.campaign_id == store.campaign_id)
+        )
     rerun = (
         plan.bus.simulated
         and plan.bus.timing == "virtual"
         and plan.bus == stored.bus
         and all(s.ending == "killed" and s.start != "restarted" for s in segments)
+        and attempts == 1
     )
     return "continued" if rerun else "restarted"

@@ -19,6 +19,7 @@ from gyrostand.db.lease import take_lease
 from gyrostand.db.models import Campaign, Event, Observation, RawLogSegment, Series, Trial
 from gyrostand.db.queries import (
     CampaignHeader,
+    latest_attempt,
     new_campaign,
     raw_log_segments,
     reference_heading,
@@ -68,7 +69,9 @@ class CampaignStore:
         self._stored: dict[tuple[int, int, int], tuple[float, int | None, int | None]] = {}
         with sessions() as session:
             rows = session.execute(
-                select(Trial.index, Trial.id).where(Trial.campaign_id == campaign_id)
+                select(Trial.index, Trial.id).where(
+                    Trial.campaign_id == campaign_id, latest_attempt()
+                )
             ).all()
             self._trial_ids = dict(rows)  # type: ignore[arg-type]
             self._series_ids: dict[tuple[int, int], int] = {
@@ -76,7 +79,7 @@ class CampaignStore:
                 for index, j, sid in session.execute(
                     select(Trial.index, Series.j, Series.id)
                     .join(Series, Series.trial_id == Trial.id)
-                    .where(Trial.campaign_id == campaign_id)
+                    .where(Trial.campaign_id == campaign_id, latest_attempt())
                 )
             }
 
@@ -236,7 +239,7 @@ class CampaignStore:
                     )
                     .join(Series, Series.trial_id == Trial.id)
                     .join(Observation, Observation.series_id == Series.id)
-                    .where(Trial.campaign_id == self.campaign_id)
+                    .where(Trial.campaign_id == self.campaign_id, latest_attempt())
                 )
             }
         self._writes = 0

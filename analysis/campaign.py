@@ -37,7 +37,10 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
 - ``forecasts``: per forecast conditions {roll_deg, arm_cm, period_s, course_deg, latitude_deg,
   motion, amplitude_cm}, direction_deg (K), amplitude_cm (used), alpha_deg, se_deg, se_mean_deg,
   t, half_width_deg, half_width_mean_deg, lower_deg, upper_deg;
-- ``admissible``: {C_gcm2s2: [lo, hi], T_s: [lo, hi]} or null; ``warnings``: list of strings.
+- ``admissible``: {C_gcm2s2: [lo, hi], T_s: [lo, hi]} or null; ``warnings``: list of strings;
+- ``left_out``: the source's trials not in ``trials``, each index, attempt, role, status,
+  reason, superseded_by (a stored campaign's failed trials, attempts superseded by a retry with
+  the attempt that replaced them, trials not acquired; empty for a table of trials).
 """
 
 from collections import Counter
@@ -90,6 +93,18 @@ class AdmissibleRegion:
 
 
 @dataclass(frozen=True)
+class LeftOutTrial:
+    """A trial (one attempt of it) of the source that the analysis did not use, and why."""
+
+    index: int
+    attempt: int
+    role: str
+    status: str
+    reason: str  # failed with its failure reason, superseded by a retry, or not acquired
+    superseded_by: int | None = None  # the attempt that replaced this one
+
+
+@dataclass(frozen=True)
 class CampaignAnalysis:
     """Everything the seed-000 method concludes about one campaign (see module docstring)."""
 
@@ -108,6 +123,7 @@ class CampaignAnalysis:
     forecasts: tuple[Forecast, ...]
     admissible: AdmissibleRegion | None
     warnings: tuple[str, ...]
+    left_out: tuple[LeftOutTrial, ...] = ()  # named by the caller that chose the trials
 
     @property
     def estimates(self) -> dict[str, float]:
@@ -164,6 +180,7 @@ class CampaignAnalysis:
             ],
             "admissible": asdict(self.admissible) if self.admissible else None,
             "warnings": list(self.warnings),
+            "left_out": [asdict(t) for t in self.left_out],
         }
         return json_safe(data)
 

@@ -121,7 +121,7 @@ class Campaign(Base):
     instrument: Mapped[Instrument] = relationship(back_populates="campaigns")
     trials: Mapped[list[Trial]] = relationship(
         back_populates="campaign",
-        order_by="Trial.index",
+        order_by="(Trial.index, Trial.attempt)",
         cascade="all, delete-orphan",
         passive_deletes=True,
     )
@@ -146,7 +146,9 @@ class Campaign(Base):
 
 
 class Trial(Base):
-    """Experiment i of a campaign: one rocking condition K, A, tau (seed 000 eq 1.1).
+    """Experiment i of a campaign: one rocking condition K, A, tau (seed 000 eq 1.1), in one
+    attempt: retrying a failed trial adds a row with the same index and the next attempt; the
+    latest attempt is "trial i" (`db.queries.latest_attempt`), earlier ones keep their data.
 
     `cmd_*` is what was commanded (or, for imports, what the file states); `meas_*` what the
     stand reported doing. `summary_*` hold the per-trial values of the paper's table when they
@@ -154,8 +156,9 @@ class Trial(Base):
 
     __tablename__ = "trial"
     __table_args__ = (
-        UniqueConstraint("campaign_id", "index"),
+        UniqueConstraint("campaign_id", "index", "attempt"),
         CheckConstraint('"index" >= 1', name="index"),
+        CheckConstraint("attempt >= 1", name="attempt"),
         CheckConstraint(one_of("role", TRIAL_ROLES), name="role"),
         CheckConstraint(one_of("status", TRIAL_STATUSES), name="status"),
         CheckConstraint(
@@ -174,6 +177,8 @@ class Trial(Base):
     campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
     index: Mapped[int] = mapped_column("index", Integer)
     """i, 1-based."""
+    attempt: Mapped[int] = mapped_column(Integer, default=1, server_default="1")
+    """1 for the first attempt at trial i, then 2, 3, ... for each retry."""
     role: Mapped[str] = mapped_column(String(16))
     cmd_direction_deg: Mapped[float] = mapped_column(Float)
     cmd_amplitude_cm: Mapped[float] = mapped_column(Float)

@@ -1,14 +1,16 @@
 """Queries shared by the acquisition runner, the CLI and the report: a campaign's ORM graph,
-where to resume it, how far it has got, and the known constants B of its model."""
+which attempt of each trial counts, where to resume it, how far it has got, and the known
+constants B of its model."""
 
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 
-from sqlalchemy import func, select
-from sqlalchemy.orm import Session, selectinload
+from sqlalchemy import ColumnElement, func, select
+from sqlalchemy.orm import Session, aliased, selectinload
 
 from gyrostand.db.models import (
     EVENT_SEVERITIES,
@@ -27,9 +29,36 @@ class CampaignNotFound(LookupError):
     """No campaign with that id in the database."""
 
 
+def latest_attempt() -> ColumnElement[bool]:
+    """SQL condition on `Trial`: the row is the latest attempt of its trial index, the one that
+    stands for "trial i" (acquisition, resume, status, analysis); earlier attempts are failed
+    ones that a retry superseded (`current_trials` is the same rule for loaded rows)."""
+    later = aliased(Trial)
+    return ~(
+        select(later.id)
+        .where(
+            later.campaign_id == Trial.campaign_id,
+            later.index == Trial.index,
+            later.attempt > Trial.attempt,
+        )
+        .exists()
+    )
+
+
+def current_trials(trials: Iterable[Trial]) -> list[Trial]:
+    """The latest attempt of each trial index among loaded rows (e.g. `Campaign.trials`), by
+    index (`latest_attempt` in SQL)."""
+    latest: dict[int, Trial] = {}
+    for trial in trials:
+        if trial.index not in latest or trial.attempt > latest[trial.index].attempt:
+            latest[trial.index] = trial
+    return [latest[index] for index in sorted(latest)]
+
+
 def load_campaign(session: Session, campaign_id: int) -> Campaign:
-    """The campaign with its instrument, trials (by index), series (by j) and observations (by k)
-    loaded in a few SELECTs; events and analysis runs load lazily when touched."""
+    """The campaign with its instrument, trials (every attempt, by index and attempt), series
+    (by j) and observations (by k) loaded in a few SELECTs; events and analysis runs load lazily
+    when touched."""
     campaign = session.scalar(
         select(Campaign)
         .where(Campaign.id == campaign_id)
@@ -42,6 +71,26 @@ def load_campaign(session: Session, campaign_id: int) -> Campaign:
     )
     if campaign is None:
         raise CampaignNotFound(f"no campaign {campaign_id} in the database")
+    return campaign
+
+
+class NotOnTheStand(ValueError):
+    """A campaign imported from a file or replayed from a raw log: nothing more can be acquired
+    into it (no resume, no retry)."""
+
+
+def stand_campaign(session: Session, campaign_id: int) -> Campaign:
+    """The campaign, when it was run on the stand; CampaignNotFound or NotOnTheStand (one line
+    each) otherwise."""
+    campaign = session.get(Campaign, campaign_id)
+    if campaign is None:
+        raise CampaignNotFound(f"no campaign {campaign_id} in the database")
+    if campaign.source != "stand":
+        how = "replayed from a raw log" if campaign.source == "replay" else "imported from a file"
+        raise NotOnTheStand(
+            f"campaign {campaign_id} was {how} (source {campaign.source!r}): only a campaign "
+            "run on the stand can be resumed or retried"
+        )
     return campaign
 
 
@@ -126,12 +175,22 @@ class ResumePoint:
 
 
 @dataclass(frozen=True)
+class EarlierAttempt:
+    """An attempt at a trial that a retry superseded (it failed; its data stay with it)."""
+
+    attempt: int
+    status: str
+    failure_reason: str | None
+
+
+@dataclass(frozen=True)
 class TrialProgress:
-    """What the database holds for one trial, read by the one resume rule (used by acquisition
-    to resume, by `campaign status` and by the report): a series is done when it is marked
-    completed or holds N observations; a trial is acquired when it is completed or failed
-    (failed trials keep their reason and are not retried) or both its series are done (the
-    process may have died before marking it completed)."""
+    """What the database holds for one trial (its latest attempt), read by the one resume rule
+    (used by acquisition to resume, by `campaign status` and by the report): a series is done
+    when it is marked completed or holds N observations; a trial is acquired when it is
+    completed or failed (failed trials keep their reason; resume does not acquire them again,
+    only a retry, which adds a new attempt) or both its series are done (the process may have
+    died before marking it completed). `earlier` lists the attempts it superseded."""
 
     trial_id: int
     index: int
@@ -143,6 +202,8 @@ class TrialProgress:
     series_status: dict[int, str]
     observations_by_j: dict[int, int]  # j -> observations stored
     last_k: dict[int, int]  # j -> highest k stored
+    attempt: int = 1
+    earlier: tuple[EarlierAttempt, ...] = ()
 
     @property
     def series_done(self) -> frozenset[int]:
@@ -173,8 +234,8 @@ class TrialProgress:
 
 
 def trial_progress(session: Session, campaign_id: int) -> tuple[TrialProgress, ...]:
-    """Every trial of the campaign (by index) with its series' observation counts, by SQL
-    aggregates (cheap while a campaign is running in another process)."""
+    """Every trial of the campaign (its latest attempt, by index) with its series' observation
+    counts, by SQL aggregates (cheap while a campaign is running in another process)."""
     n_obs = session.scalar(select(Campaign.n_obs).where(Campaign.id == campaign_id))
     if n_obs is None:
         raise CampaignNotFound(f"no campaign {campaign_id} in the database")
@@ -190,13 +251,20 @@ def trial_progress(session: Session, campaign_id: int) -> tuple[TrialProgress, .
         )
         .join(Trial, Trial.id == Series.trial_id)
         .outerjoin(Observation, Observation.series_id == Series.id)
-        .where(Trial.campaign_id == campaign_id)
+        .where(Trial.campaign_id == campaign_id, latest_attempt())
         .group_by(Series.id)
     ):
         series.setdefault(trial_id, []).append((series_id, j, status, count, last))
+    earlier: dict[int, list[EarlierAttempt]] = {}
+    for index, attempt, status, reason in session.execute(
+        select(Trial.index, Trial.attempt, Trial.status, Trial.failure_reason)
+        .where(Trial.campaign_id == campaign_id, ~latest_attempt())
+        .order_by(Trial.index, Trial.attempt)
+    ):
+        earlier.setdefault(index, []).append(EarlierAttempt(attempt, status, reason))
     trials = session.execute(
-        select(Trial.id, Trial.index, Trial.role, Trial.status, Trial.failure_reason)
-        .where(Trial.campaign_id == campaign_id)
+        select(Trial.id, Trial.index, Trial.attempt, Trial.role, Trial.status, Trial.failure_reason)
+        .where(Trial.campaign_id == campaign_id, latest_attempt())
         .order_by(Trial.index)
     )
     return tuple(
@@ -211,8 +279,10 @@ def trial_progress(session: Session, campaign_id: int) -> tuple[TrialProgress, .
             series_status={j: st for _, j, st, _, _ in series.get(trial_id, [])},
             observations_by_j={j: n for _, j, _, n, _ in series.get(trial_id, [])},
             last_k={j: k for _, j, _, _, k in series.get(trial_id, [])},
+            attempt=attempt,
+            earlier=tuple(earlier.get(index, ())),
         )
-        for trial_id, index, role, status, reason in trials
+        for trial_id, index, attempt, role, status, reason in trials
     )
 
 

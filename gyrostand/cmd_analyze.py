@@ -170,8 +170,10 @@ def analyze_stored_campaign(db: str, campaign_id: int) -> CampaignAnalysis:
         fail(str(exc))
     except OperationalError as exc:
         fail(f"the database refused the analysis run: {exc.orig}")
-    for index, why in sorted(stored.inputs.excluded.items()):
-        typer.echo(printable(f"warning: trial {index} left out of the analysis ({why})"), err=True)
+    for t in stored.inputs.left_out:
+        if t.superseded_by is None:  # (a superseded attempt is replaced, not missing)
+            message = f"warning: trial {t.index} left out of the analysis ({t.reason})"
+            typer.echo(printable(message), err=True)
     for note in stored.inputs.notes:
         typer.echo(printable(f"note: {note}"), err=True)
     return stored.analysis

@@ -1,9 +1,10 @@
-"""CLI: campaign run/resume/status, replay."""
+"""CLI: campaign run/resume/retry/status, replay."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 from rich.console import Console
@@ -83,7 +84,7 @@ def checked_plan(
 
 def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None:
     """The outcome on stdout; exit code 1 unless the campaign completed (with how to continue
-    it when it can be continued)."""
+    it and to retry its failed trials when it can be continued)."""
     _out.print(
         f"campaign {result.campaign_id} {result.outcome}: {result.trials_completed} trials "
         f"completed, {result.trials_failed} failed, {result.observations} observations in "
@@ -91,6 +92,11 @@ def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None
     )
     if result.raw_log is not None:
         _out.print(f"raw frames: {printable(result.raw_log)} (sha256 {result.raw_log_sha256})")
+    if result.trials_failed and resumable:
+        _out.print(
+            f"retry the failed trials with: gyrostand campaign resume {result.campaign_id} "
+            f"--retry-failed --db {printable(db)}"
+        )
     if result.outcome != "completed":
         if resumable:
             _out.print(
@@ -114,6 +120,85 @@ def run_campaign(plan: Plan, store: CampaignStore, quiet: bool, start: str = "ne
     except (can.CanError, OSError, ValueError) as exc:
         store.set_status("paused")
         fail(f"campaign {store.campaign_id} could not use the bus: {exc}", code=EXIT_FAILED)
+
+
+@dataclass(frozen=True)
+class BusOptions:
+    """The command line's bus options of `campaign resume` and `campaign retry`."""
+
+    interface: str | None
+    channel: str | None
+    speedup: float | None
+    seed: int | None
+    timing: str | None
+
+
+def continue_campaign(
+    campaign_id: int,
+    db: str,
+    bus: BusOptions,
+    quiet: bool,
+    *,
+    retry: tuple[int, ...] | Literal["failed"] | None,
+) -> None:
+    """Resume a stand campaign, first retrying the trials `retry` names ("failed": every
+    failed one): everything is checked before anything is written; then the new attempts are
+    added under the campaign's lease, which the acquisition keeps."""
+    from gyrostand.acquisition.retry import RetryRefused, retry_trials
+    from gyrostand.acquisition.runner import resume_start, resume_store
+    from gyrostand.db.lease import CampaignBusy
+    from gyrostand.db.queries import (
+        CampaignNotFound,
+        NotOnTheStand,
+        stand_campaign,
+        trial_progress,
+    )
+    from gyrostand.plan.model import PlanError, parse_plan
+
+    sessions = open_db(db, must_exist=True)
+    try:
+        with sessions() as session:  # everything is checked before anything is written
+            text = stand_campaign(session, campaign_id).plan_toml
+        stored = parse_plan(text)
+    except (CampaignNotFound, NotOnTheStand) as exc:
+        fail(str(exc))
+    except PlanError as exc:
+        fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
+    checked = checked_plan(
+        stored,
+        interface=bus.interface,
+        channel=bus.channel,
+        db=db,
+        speedup=bus.speedup,
+        seed=bus.seed,
+        timing=bus.timing,
+    )
+    try:
+        if retry is not None:
+            retried = retry_trials(sessions, campaign_id, None if retry == "failed" else retry)
+            for r in retried:
+                _out.print(
+                    printable(
+                        f"trial {r.index}: attempt {r.attempt} (attempt {r.attempt - 1} "
+                        f"failed: {r.reason})"
+                    )
+                )
+        _, store = resume_store(sessions, campaign_id)
+    except (CampaignNotFound, NotOnTheStand, RetryRefused) as exc:
+        fail(str(exc))
+    except CampaignBusy as exc:
+        fail(str(exc), code=EXIT_FAILED)
+    start = resume_start(store, stored, checked)
+    with sessions() as session:
+        trials = trial_progress(session, campaign_id)
+    acquired = all(t.acquired for t in trials)  # the one resume rule: nothing left
+    # a re-run also finishes the trials acquired but not marked (with the stand's motion)
+    if acquired and not (start == "continued" and not all(t.finished for t in trials)):
+        store.complete_acquired()
+        store.set_status("completed")
+        _out.print(f"campaign {campaign_id}: nothing left to acquire")
+        return
+    print_outcome(run_campaign(checked, store, quiet, start), db)
 
 
 Interface = Annotated[
@@ -141,9 +226,11 @@ Quiet = Annotated[bool, typer.Option("--quiet", help="No live progress display."
 
 
 def register(app: typer.Typer) -> None:
-    """Add the campaign run/resume/status, replay command(s) to the CLI."""
+    """Add the campaign run/resume/retry/status, replay command(s) to the CLI."""
 
-    campaign_app = typer.Typer(help="Run, resume and inspect campaigns.", no_args_is_help=True)
+    campaign_app = typer.Typer(
+        help="Run, resume, retry and inspect campaigns.", no_args_is_help=True
+    )
     app.add_typer(campaign_app, name="campaign")
 
     @campaign_app.command("run")
@@ -184,61 +271,38 @@ def register(app: typer.Typer) -> None:
         speedup: Speedup = None,
         seed: Seed = None,
         timing: Timing = None,
+        retry_failed: Annotated[
+            bool,
+            typer.Option(
+                "--retry-failed", help="First retry every failed trial (see campaign retry)."
+            ),
+        ] = False,
         quiet: Quiet = False,
     ) -> None:
         """Continue a campaign from its first incomplete series (re-settling first). A
         simulated campaign in virtual time that was killed is re-run from its start instead,
         skipping what the database holds: it ends as the uninterrupted run would have."""
-        from sqlalchemy import select
+        bus = BusOptions(interface, channel, speedup, seed, timing)
+        continue_campaign(campaign_id, db, bus, quiet, retry="failed" if retry_failed else None)
 
-        from gyrostand.acquisition.runner import not_resumable, resume_start, resume_store
-        from gyrostand.db.lease import CampaignBusy
-        from gyrostand.db.models import Campaign
-        from gyrostand.db.queries import trial_progress
-        from gyrostand.plan.model import PlanError, parse_plan
-
-        sessions = open_db(db, must_exist=True)
-        with sessions() as session:  # everything is checked before resume_store writes
-            row = session.execute(
-                select(Campaign.source, Campaign.plan_toml).where(Campaign.id == campaign_id)
-            ).one_or_none()
-        if row is None:
-            fail(f"no campaign {campaign_id} in the database")
-        if (why := not_resumable(campaign_id, row.source)) is not None:
-            fail(why)
-        try:
-            stored = parse_plan(row.plan_toml)
-        except PlanError as exc:
-            fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
-        checked = checked_plan(
-            stored,
-            interface=interface,
-            channel=channel,
-            db=db,
-            speedup=speedup,
-            seed=seed,
-            timing=timing,
-        )
-        try:
-            _, store = resume_store(sessions, campaign_id)
-        except LookupError as exc:
-            fail(str(exc))
-        except CampaignBusy as exc:
-            fail(str(exc), code=EXIT_FAILED)
-        except PlanError as exc:
-            fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
-        start = resume_start(store, stored, checked)
-        with sessions() as session:
-            trials = trial_progress(session, campaign_id)
-        # a re-run also finishes trials acquired but not marked (with the stand's motion)
-        if all(t.acquired for t in trials) and (
-            start != "continued" or all(t.finished for t in trials)
-        ):
-            store.complete_acquired()
-            store.set_status("completed")
-            _out.print(f"campaign {campaign_id}: nothing left to acquire")
-            return
-        print_outcome(run_campaign(checked, store, quiet, start), db)
+    @campaign_app.command("retry")
+    def campaign_retry(
+        campaign_id: int,
+        trial: Annotated[
+            list[int],
+            typer.Option("--trial", help="Index of a failed trial to retry (repeatable)."),
+        ],
+        db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
+        interface: Interface = None,
+        channel: Channel = None,
+        speedup: Speedup = None,
+        seed: Seed = None,
+        timing: Timing = None,
+        quiet: Quiet = False,
+    ) -> None:
+        """Re-run failed trials as new attempts (the failed ones are kept), then resume."""
+        bus = BusOptions(interface, channel, speedup, seed, timing)
+        continue_campaign(campaign_id, db, bus, quiet, retry=tuple(trial))
 
     @campaign_app.command("status")
     def campaign_status(
@@ -288,6 +352,12 @@ def register(app: typer.Typer) -> None:
                 )
             )
         _out.print(table)
+        for t in s.trials:
+            if t.earlier:
+                before = "; ".join(
+                    f"attempt {e.attempt} {e.status}: {e.failure_reason or ''}" for e in t.earlier
+                )
+                _out.print(printable(f"trial {t.index}: attempt {t.attempt} {t.status} ({before})"))
         events = ", ".join(f"{n} {printable(sev)}" for sev, n in s.events_by_severity.items())
         _out.print(f"observations: {s.observations_stored}; events: {events}")
         for severity, kind, message in reversed(recent):

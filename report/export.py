@@ -15,7 +15,7 @@ from sqlalchemy.orm import Session
 from gyrostand.analysis.trials import combine_series, series_moments
 from gyrostand.db.io import FORM_COLUMNS, OBS_FIELDS, OBSERVATION_EXTRAS
 from gyrostand.db.models import Trial
-from gyrostand.db.queries import load_campaign
+from gyrostand.db.queries import current_trials, load_campaign
 from gyrostand.report.stored import applied_conditions
 
 EXPORT_FORMATS = ("csv", "parquet", "xlsx")
@@ -49,10 +49,11 @@ def _series_stats(trial: Trial) -> dict[int, tuple[float, float, int]]:
 
 def campaign_frames(session: Session, campaign_id: int) -> CampaignFrames:
     """Observations as stored; series and trial figures by the analysis's statistics, or as
-    imported for pre-averaged imports. K, A, tau are the applied values."""
+    imported for pre-averaged imports. K, A, tau are the applied values. A retried trial is its
+    latest attempt (the one the analysis uses)."""
     campaign = load_campaign(session, campaign_id)
     observations, series, trials = [], [], []
-    for trial in campaign.trials:
+    for trial in current_trials(campaign.trials):
         common = {"trial": trial.index} | applied_conditions(trial)
         for s in trial.series:
             observations += [

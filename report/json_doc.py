@@ -8,12 +8,14 @@ Schema ``gyrostand.report/2`` (plain JSON types; absent values are null). Versio
 - ``identification``: the fields of `report.model.Identification`;
 - ``plan``: `PlanSummary` (n_obs, trials [index, role, direction_deg, amplitude_cm, period_s],
   windows, settle criterion, notes, plan_toml);
-- ``acquisition``: ``trials`` (`TrialAcquisition` each: commanded and measured K/A/tau, status,
-  observations per series, frames used/lost, flagged observations, analysed), ``events``
-  (`EventRecord` each), ``raw_log_note``, ``records`` (per trial: series with settle start/end
-  ms, settle estimate, observations k/value/window, ``settle``: how it settled {criterion,
-  standard_error_deg, band_s, band_measured, saved_s} or null; ``trace``: {frames, bins, t_first_ms,
-  t_last_ms} or null: the binned heading itself is only plotted);
+- ``acquisition``: ``trials`` (`TrialAcquisition` each, the latest attempt of each trial:
+  commanded and measured K/A/tau, status, observations per series, frames used/lost, flagged
+  observations, analysed, attempt), ``events`` (`EventRecord` each, trial_attempt set when the
+  trial was retried), ``raw_log_note``, ``left_out`` (every trial attempt the analysis does not
+  use: index, attempt, role, status, reason, superseded_by), ``records`` (per trial: series with
+  settle start/end ms, settle estimate, observations k/value/window, ``settle``: how it settled
+  {criterion, standard_error_deg, band_s, band_measured, saved_s} or null; ``trace``: {frames,
+  bins, t_first_ms, t_last_ms} or null: the binned heading itself is only plotted);
 - ``trial_table``: `report.build.TrialRow` each;
 - ``analysis``: `CampaignAnalysis.to_dict()` (schema gyrostand.analysis/1, keys documented in
   `analysis.campaign`), or null with ``analysis_error`` saying why the campaign could not be
@@ -110,6 +112,7 @@ def report_document(report: Report) -> dict[str, Any]:
                 "trials": [asdict(t) for t in inputs.acquisition],
                 "events": [asdict(e) for e in inputs.events],
                 "raw_log_note": inputs.raw_log_note,
+                "left_out": [asdict(t) for t in inputs.left_out],
                 "records": [_record(r) for r in inputs.records],
             },
             "trial_table": [asdict(t) for t in report.trials],

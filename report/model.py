@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gyrostand.analysis.campaign import LeftOutTrial
 from gyrostand.analysis.settle import SettleOutcome
 
 
@@ -97,6 +98,7 @@ class TrialAcquisition:
     frames_lost: int | None
     flagged_observations: int
     analysed: bool  # False: left out of the analysis (failed or incomplete)
+    attempt: int = 1  # the trial's latest attempt (2, 3, ...: retried)
 
 
 @dataclass(frozen=True)
@@ -110,6 +112,7 @@ class EventRecord:
     kind: str
     severity: str
     message: str
+    trial_attempt: int | None = None  # which attempt, when the trial was retried
 
 
 @dataclass(frozen=True)
@@ -209,3 +212,4 @@ class ReportInputs:
     reading: ReadingRecord | None = None  # the stationary record of section 10
     reading_note: str = "No reading record was given."  # where it came from, or why none
     acceptance: ExcursionCriterion | None = None  # None: the plan asks for no acceptance
+    left_out: tuple[LeftOutTrial, ...] = ()  # trial attempts the analysis does not use, and why

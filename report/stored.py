@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime
@@ -29,13 +30,18 @@ from sqlalchemy.orm import Session
 
 from gyrostand import SOFTWARE_VERSION
 from gyrostand.analysis.angles import about
-from gyrostand.analysis.campaign import CampaignAnalysis, analyze_campaign, json_safe
+from gyrostand.analysis.campaign import (
+    CampaignAnalysis,
+    LeftOutTrial,
+    analyze_campaign,
+    json_safe,
+)
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.gyro_model import KnownConstants
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.trials import SeriesSummary, TrialInput
 from gyrostand.db.models import AnalysisRun, Campaign, Trial
-from gyrostand.db.queries import campaign_constants, load_campaign
+from gyrostand.db.queries import campaign_constants, current_trials, load_campaign
 from gyrostand.frames.logfile import sha256_of
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import Plan, PlanError, parse_any_plan
@@ -69,12 +75,12 @@ TRACE_BINS = 600  # per trial: enough for a page-wide plot, small enough for inl
 
 @dataclass(frozen=True)
 class StoredInputs:
-    """What the analysis of a stored campaign runs on. ``excluded`` maps the index of every
-    trial left out to the reason; ``notes`` say where settings did not come from the plan."""
+    """What the analysis of a stored campaign runs on. ``left_out`` names every trial attempt
+    left out and why; ``notes`` say where settings did not come from the plan."""
 
     trials: tuple[TrialInput, ...]
     settings: AnalysisSettings
-    excluded: dict[int, str]
+    left_out: tuple[LeftOutTrial, ...]
     notes: tuple[str, ...]
 
     def sha256(self) -> str:
@@ -96,10 +102,10 @@ def applied_conditions(trial: Trial) -> dict[str, object]:
 def trial_input(trial: Trial) -> TrialInput | str:
     """The analysis input of one stored trial, or why it cannot be analysed. K, A and tau are
     the applied values (stand-measured, else commanded)."""
+    if trial.status == "failed":
+        return f"trial failed: {trial.failure_reason}"
     if trial.status != "completed":
-        return f"trial {trial.status}" + (
-            f": {trial.failure_reason}" if trial.failure_reason else ""
-        )
+        return f"not acquired (trial {trial.status})"
     common = {"index": trial.index} | applied_conditions(trial)
     series = {s.j: s for s in trial.series}
     values = {j: tuple(o.value_deg for o in s.observations) for j, s in series.items()}
@@ -142,17 +148,31 @@ def stored_settings(campaign: Campaign) -> tuple[AnalysisSettings, tuple[str, ..
     return replace(settings_from_plan(plan), constants=constants), fallback_notes(plan)
 
 
+def trial_inputs(campaign: Campaign) -> tuple[tuple[TrialInput, ...], tuple[LeftOutTrial, ...]]:
+    """The analysis inputs of a loaded campaign's trials (their latest attempts), and every
+    attempt left out with why: failed, not acquired, or superseded by a retry."""
+    latest = {t.index: t.attempt for t in current_trials(campaign.trials)}
+    inputs, left_out = [], []
+    for trial in campaign.trials:
+        newer = latest[trial.index] if trial.attempt < latest[trial.index] else None
+        if newer is None:
+            found = trial_input(trial)
+        else:
+            found = f"superseded by attempt {newer} (retry); it failed: {trial.failure_reason}"
+        if isinstance(found, str):
+            left_out.append(
+                LeftOutTrial(trial.index, trial.attempt, trial.role, trial.status, found, newer)
+            )
+        else:
+            inputs.append(found)
+    return tuple(inputs), tuple(left_out)
+
+
 def stored_inputs(campaign: Campaign) -> StoredInputs:
     """The analysis inputs of a loaded campaign (see `db.queries.load_campaign`)."""
-    trials, excluded = [], {}
-    for trial in campaign.trials:
-        found = trial_input(trial)
-        if isinstance(found, str):
-            excluded[trial.index] = found
-        else:
-            trials.append(found)
+    trials, left_out = trial_inputs(campaign)
     settings, notes = stored_settings(campaign)
-    return StoredInputs(tuple(trials), settings, excluded, notes)
+    return StoredInputs(trials, settings, left_out, notes)
 
 
 @dataclass(frozen=True)
@@ -176,6 +196,7 @@ def analyze_stored(session: Session, campaign_id: int) -> StoredAnalysis:
         admissible=s.admissible,
         forecast=s.forecast,
     )
+    analysis = replace(analysis, left_out=inputs.left_out)
     results, digest, version = analysis.to_dict(), inputs.sha256(), SOFTWARE_VERSION
     run = session.scalars(
         select(AnalysisRun)
@@ -267,7 +288,7 @@ def _plan_summary(campaign: Campaign, plan: Plan | None, notes: tuple[str, ...])
     else:
         trials = tuple(
             PlannedTrial(t.index, t.role, t.cmd_direction_deg, t.cmd_amplitude_cm, t.cmd_period_s)
-            for t in campaign.trials
+            for t in current_trials(campaign.trials)
         )
         windows, settle = (None, None, None), (None, None, None)
     return PlanSummary(
@@ -284,7 +305,7 @@ def _plan_summary(campaign: Campaign, plan: Plan | None, notes: tuple[str, ...])
     )
 
 
-def _trial_acquisition(trial: Trial, excluded: dict[int, str]) -> TrialAcquisition:
+def _trial_acquisition(trial: Trial, analysed: bool) -> TrialAcquisition:
     by_j = {s.j: s.observations for s in trial.series}
     observations = [o for s in trial.series for o in s.observations]
     used = [o.frames_used for o in observations if o.frames_used is not None]
@@ -305,18 +326,22 @@ def _trial_acquisition(trial: Trial, excluded: dict[int, str]) -> TrialAcquisiti
         frames_used=sum(used) if used else None,
         frames_lost=sum(lost) if lost else None,
         flagged_observations=sum(bool(o.flags) for o in observations),
-        analysed=trial.index not in excluded,
+        analysed=analysed,
+        attempt=trial.attempt,
     )
 
 
 def _events(campaign: Campaign) -> tuple[EventRecord, ...]:
     trial_index = {t.id: t.index for t in campaign.trials}
+    attempts = Counter(t.index for t in campaign.trials)
+    retried = {t.id: t.attempt for t in campaign.trials if attempts[t.index] > 1}
     series_j = {s.id: s.j for t in campaign.trials for s in t.series}
     return tuple(
         EventRecord(
             stand_time_ms=e.stand_time_ms,
             wall_time=_when(e.wall_time) or "",
             trial_index=None if e.trial_id is None else trial_index.get(e.trial_id),
+            trial_attempt=None if e.trial_id is None else retried.get(e.trial_id),
             series_j=None if e.series_id is None else series_j.get(e.series_id),
             kind=e.kind,
             severity=e.severity,
@@ -395,17 +420,20 @@ def _records(
 ) -> tuple[tuple[TrialRecord, ...], str]:
     """Per trial its series and (from the raw log) its heading trace; and how the plots were
     made."""
-    series = {t.index: _series_records(t) for t in campaign.trials}
+    current = current_trials(campaign.trials)
+    series = {t.index: _series_records(t) for t in current}
     has_observations = any(s.observations for rows in series.values() for s in rows)
-    event_times: dict[int, list[int]] = {t.index: [] for t in campaign.trials}
-    by_id = {t.id: t.index for t in campaign.trials}
+    event_times: dict[int, list[int]] = {t.index: [] for t in current}
+    by_id = {t.id: t.index for t in current}
     for e in campaign.events:
         if e.trial_id in by_id and e.stand_time_ms is not None:
             event_times[by_id[e.trial_id]].append(e.stand_time_ms)
+    # a retried trial's attempt was acquired by a run that restarted the stand, outside the
+    # stream read (the first run and the runs continuing it): its stand times start again
     spans = {
-        index: span
-        for index, rows in series.items()
-        if (span := _stand_span_ms(rows, event_times[index])) is not None
+        t.index: span
+        for t in current
+        if t.attempt == 1 and (span := _stand_span_ms(series[t.index], event_times[t.index]))
     }
     traces: dict[int, HeadingTrace | None] = {}
     if logs and plan is not None and spans:
@@ -418,7 +446,11 @@ def _records(
             "value as a bar; dashed lines and triangles: where and at what heading each series "
             "settled."
         )
-        missing = [str(i) for i, trace in traces.items() if trace is None]
+        missing = [
+            str(i)
+            for i, rows in series.items()
+            if traces.get(i) is None and any(s.observations for s in rows)
+        ]
         if missing:
             note += (
                 f" Trials {', '.join(missing)} have no heading frames in the raw log read "
@@ -471,7 +503,9 @@ def campaign_signal(session: Session, campaign_id: int) -> SignalSection:
     campaign = load_campaign(session, campaign_id)
     check, logs = _raw_log_check(campaign)
     plan = _plan(campaign)
-    records = tuple(TrialRecord(t.index, _series_records(t), None) for t in campaign.trials)
+    records = tuple(
+        TrialRecord(t.index, _series_records(t), None) for t in current_trials(campaign.trials)
+    )
     reading, note, acceptance = _reading(plan, logs, check, records)
     return signal_section(reading, note, records, acceptance)
 
@@ -483,9 +517,8 @@ def report_inputs(
     acquisition summary, every event, the heading records and the stationary reading record
     (from the raw log when it verifies), the plan's acceptance by excursions."""
     campaign = load_campaign(session, campaign_id)
-    excluded = {t.index: "not analysed" for t in campaign.trials}
-    if stored is not None:
-        excluded = stored.inputs.excluded
+    _, left_out = trial_inputs(campaign)
+    unused = {(t.index, t.attempt) for t in left_out}
     plan = _plan(campaign)
     check, logs = _raw_log_check(campaign)
     records, note = _records(campaign, plan, logs, check)
@@ -516,7 +549,11 @@ def report_inputs(
     return ReportInputs(
         identification=ident,
         plan=_plan_summary(campaign, plan, () if stored is None else stored.inputs.notes),
-        acquisition=tuple(_trial_acquisition(t, excluded) for t in campaign.trials),
+        acquisition=tuple(
+            _trial_acquisition(t, stored is not None and (t.index, t.attempt) not in unused)
+            for t in current_trials(campaign.trials)
+        ),
+        left_out=left_out,
         events=_events(campaign),
         records=records,
         raw_log_note=note,

@@ -1,5 +1,5 @@
-"""Plain-text rendering of a `CampaignAnalysis`: trial table, Cochran, fit with its Gauss-Newton
-log, adequacy, control trials, assumption checks, forecasts and warnings."""
+"""Plain-text rendering of a `CampaignAnalysis`: trial table, the trials left out, Cochran, fit
+with its Gauss-Newton log, adequacy, control trials, assumption checks, forecasts and warnings."""
 
 from collections.abc import Sequence
 
@@ -42,6 +42,16 @@ def trials_section(a: CampaignAnalysis) -> list[str]:
         "TRIALS (eqs 2.1-2.4)",
         *_table(headers, rows),
         f"variance basis: {VARIANCE_BASIS}",
+    ]
+
+
+def left_out_section(a: CampaignAnalysis) -> list[str]:
+    return [
+        "TRIALS LEFT OUT OF THE ANALYSIS",
+        *(
+            f"trial {t.index} attempt {t.attempt} ({t.role}, {t.status}): {t.reason}"
+            for t in a.left_out
+        ),
     ]
 
 
@@ -156,6 +166,7 @@ def render_text(analysis: CampaignAnalysis) -> str:
     """The whole analysis as plain text, sections separated by blank lines."""
     sections = [
         trials_section(analysis),
+        *([left_out_section(analysis)] if analysis.left_out else []),
         cochran_section(analysis),
         fit_section(analysis),
         adequacy_section(analysis),

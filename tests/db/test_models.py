@@ -54,6 +54,7 @@ def add_observation(k: int) -> Callable[[Session, Campaign], None]:
         (lambda s, c: setattr(c.trials[0], "status", "done"), "ck_trial_status"),
         (lambda s, c: setattr(c.trials[0], "status", "failed"), "ck_trial_failed_has_reason"),
         (lambda s, c: setattr(c.trials[0], "index", 0), "ck_trial_index"),
+        (lambda s, c: setattr(c.trials[0], "attempt", 0), "ck_trial_attempt"),
         (lambda s, c: setattr(c.trials[0], "cmd_direction_deg", 360.0), "ck_trial_cmd_direction"),
         (lambda s, c: setattr(c.trials[0], "cmd_period_s", 0.0), "ck_trial_cmd_period"),
         (lambda s, c: setattr(c.trials[0].series[0], "j", 3), "ck_series_j"),
@@ -89,8 +90,8 @@ def test_unique_trial_j_and_campaign_index(sessions: sessionmaker[Session]) -> N
             Trial(index=1, role="fit", cmd_direction_deg=0, cmd_amplitude_cm=1, cmd_period_s=1)
         )
 
-    assert (
-        rejected(sessions, same_index) == "UNIQUE constraint failed: trial.campaign_id, trial.index"
+    assert rejected(sessions, same_index) == (
+        "UNIQUE constraint failed: trial.campaign_id, trial.index, trial.attempt"
     )
 
 

@@ -73,7 +73,7 @@ def test_import_without_a_plan_uses_the_example_settings_and_says_so(tmp_path: P
         inputs = stored_inputs(load_campaign(session, stored.campaign_id))
     assert inputs.settings == SEED_000_SETTINGS  # the paper's own metadata, so equal
     assert len(inputs.notes) == 2 and "[analysis]" in inputs.notes[0]
-    assert [t.index for t in inputs.trials] == [1, 2, 3, 4, 5, 6] and inputs.excluded == {}
+    assert [t.index for t in inputs.trials] == [1, 2, 3, 4, 5, 6] and inputs.left_out == ()
 
 
 def runs(stored: Stored) -> int:
