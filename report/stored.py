@@ -21,7 +21,6 @@ from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime
-from itertools import takewhile
 from pathlib import Path
 
 import numpy as np
@@ -226,10 +225,15 @@ def _when(value: datetime | None) -> str | None:
     return None if value is None else value.isoformat(sep=" ", timespec="seconds")
 
 
+RESTARTED = (
+    "verified, not read: a resume restarted the stand, so stand times start again in its raw log"
+)
+
+
 def _raw_log_check(campaign: Campaign) -> tuple[str, list[Path]]:
-    """How the recorded raw log segments check out, and those that can be read as one stream
-    of the campaign: all of them, up to a resume that restarted the stand (its stand times
-    start again)."""
+    """How the recorded raw log segments check out, and the logs to read as one stream of the
+    campaign: all of them, unless a resume restarted the stand, whose stand times then start
+    again in its log (a trial's stand-time span would take frames of another run)."""
     segments = [s for s in campaign.raw_logs if s.frames or s.ending != "killed"]  # (nothing)
     if not segments:
         return "no raw log", []
@@ -242,9 +246,9 @@ def _raw_log_check(campaign: Campaign) -> tuple[str, list[Path]]:
             return f"unverified: no SHA-256 recorded for {path.name}", []
         if actual != s.sha256:
             return f"MISMATCH: the SHA-256 of {path.name} is {actual}", []
-    stream = [Path(segments[0].path)]
-    stream += [Path(s.path) for s in takewhile(lambda s: s.start == "continued", segments[1:])]
-    return "verified", stream
+    if any(s.start == "restarted" for s in segments):
+        return RESTARTED, []
+    return "verified", [Path(s.path) for s in segments]
 
 
 def _stand(campaign: Campaign, plan: Plan | None) -> str:
@@ -428,12 +432,10 @@ def _records(
     for e in campaign.events:
         if e.trial_id in by_id and e.stand_time_ms is not None:
             event_times[by_id[e.trial_id]].append(e.stand_time_ms)
-    # a retried trial's attempt was acquired by a run that restarted the stand, outside the
-    # stream read (the first run and the runs continuing it): its stand times start again
     spans = {
         t.index: span
         for t in current
-        if t.attempt == 1 and (span := _stand_span_ms(series[t.index], event_times[t.index]))
+        if (span := _stand_span_ms(series[t.index], event_times[t.index])) is not None
     }
     traces: dict[int, HeadingTrace | None] = {}
     if logs and plan is not None and spans:
@@ -446,20 +448,11 @@ def _records(
             "value as a bar; dashed lines and triangles: where and at what heading each series "
             "settled."
         )
-        missing = [
-            str(i)
-            for i, rows in series.items()
-            if traces.get(i) is None and any(s.observations for s in rows)
-        ]
-        if missing:
-            note += (
-                f" Trials {', '.join(missing)} have no heading frames in the raw log read "
-                "(acquired after a resume that restarted the stand, whose stand times start "
-                "again; see the events): their plots show the stored observations only."
-            )
     elif has_observations:
         reason = {
             "no raw log": "The campaign has no raw CAN log",
+            RESTARTED: "The raw CAN logs are not read for the plots (a resume restarted the "
+            "stand, whose stand times start again in its log)",
         }.get(check, f"The raw CAN log cannot be used ({check})")
         note = f"{reason}: the plots show the stored observations over their windows."
     else:
