@@ -656,7 +656,9 @@ class Codec:
         except Exception as exc:  # a corrupt frame must never kill the receiving thread
             return InvalidFrame(msg.arbitration_id, f"undecodable payload: {exc}", raw)
 
-    def _values(self, frame_id: int, raw: bytes, keys: Sequence[str]) -> dict[str, float]:
+    def _values(
+        self, frame_id: int, raw: bytes, keys: Sequence[str], *, check_range: bool = True
+    ) -> dict[str, float]:
         """Physical values of the given map entries from one frame, range-checked."""
         message = self._db.get_message_by_frame_id(frame_id)
         if len(raw) != message.length:
@@ -668,7 +670,7 @@ class Codec:
             if bound is None or bound.message is not message:
                 continue
             value = decoded[bound.signal.name]
-            if not bound.low <= value <= bound.high:
+            if check_range and not bound.low <= value <= bound.high:
                 raise _Invalid(
                     f"{bound.ref} = {value} outside [{bound.signal.minimum}, "
                     f"{bound.signal.maximum}]"
@@ -677,9 +679,11 @@ class Codec:
         return out
 
     def _decode_heading(self, frame_id: int, raw: bytes) -> HeadingFrame:
+        if self._crc is not None:  # first: a payload failing its CRC is corrupt, whatever it reads
+            crc = self._values(frame_id, raw, ("heading_crc",), check_range=False)["heading_crc"]
+            if crc != self._crc_of(raw):
+                raise _Invalid("CRC mismatch: corrupt payload")
         v = self._values(frame_id, raw, HEADING_KEYS)
-        if self._crc is not None and v["heading_crc"] != self._crc_of(raw):
-            raise _Invalid("CRC mismatch: corrupt payload")
         return HeadingFrame(
             stand_time_ms=int(v["heading_time"]),
             heading_deg=float(v["heading"]),
