@@ -447,6 +447,9 @@ def check_metadata(metadata: Mapping[str, Any]) -> None:
     for key in ("operator", "software_version", "plan_toml"):
         if key in metadata and not isinstance(metadata[key], str):
             problems.append(f"{key} = {metadata[key]!r} is not text")
+    operator = metadata.get("operator")
+    if isinstance(operator, str) and not operator.strip():  # as a plan's [campaign] operator
+        problems.append(f"operator = {operator!r} is not non-empty text")
     if problems:
         raise MetadataError("campaign metadata: " + "; ".join(problems))
 
