@@ -8,6 +8,7 @@ cannot be decoded become `InvalidFrame`. Times are STAND time in milliseconds.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, fields
@@ -70,6 +71,16 @@ def signal_bounds(signal: Signal) -> tuple[float, float]:
 
 class ProtocolError(ValueError):
     """A value that cannot be encoded, or a DBC / signal map that does not fit the protocol."""
+
+
+@functools.cache
+def shipped_range(ref: str) -> tuple[float, float]:
+    """[minimum, maximum] of a signal "MESSAGE.SIGNAL" of the shipped DBC (what the simulated
+    stand can put in a frame)."""
+    message, signal = ref.split(".")
+    found = cantools.database.load_file(str(DBC_PATH)).get_message_by_name(message)
+    found_signal = found.get_signal_by_name(signal)
+    return float(found_signal.minimum), float(found_signal.maximum)
 
 
 @dataclass(frozen=True)
@@ -400,7 +411,8 @@ class Codec:
     def __init__(self, dbc_path: Path = DBC_PATH, signal_map: SignalMap | None = None) -> None:
         try:
             self._db = cantools.database.load_file(str(dbc_path))
-        except (OSError, cantools.database.UnsupportedDatabaseFormatError) as exc:
+        except (OSError, ValueError, cantools.database.UnsupportedDatabaseFormatError) as exc:
+            # ValueError: a file name cantools cannot tell the format of, a text it cannot decode
             raise ProtocolError(f"cannot load DBC {dbc_path}: {exc}") from None
         self.signal_map = signal_map or SignalMap.default()
         self._bound: dict[str, _Bound] = {}

@@ -15,6 +15,7 @@ if TYPE_CHECKING:
     from pydantic import BaseModel
 
 TIMINGS = ("virtual", "realtime")
+MAX_RATE_HZ = 1000.0  # frame rates: every frame carries its stand time in whole milliseconds
 
 
 def param(default: Any, help: str) -> Any:
@@ -154,21 +155,86 @@ class SimConfig:
             raise SimConfigError(problems)
 
     def problems(self) -> list[tuple[str, str]]:
-        """Every inconsistent value, as (dotted field path, message)."""
+        """Every inconsistent value, as (dotted field path, message): quantities of the model
+        out of their physical domain, and values the simulated stand could not put in its
+        frames (their DBC ranges; stand times in whole milliseconds)."""
+        from gyrostand.stand.protocol import shipped_range
+
+        compass, noise, faults, stand = self.compass, self.noise, self.faults, self.stand
         positive = {
             "speedup": self.speedup,
             "heading_rate_hz": self.heading_rate_hz,
             "status_rate_hz": self.status_rate_hz,
-            "compass.undamped_period_s": self.compass.undamped_period_s,
-            "compass.C_gcm2s2": self.compass.C_gcm2s2,
-            "noise.corr_mu_per_s": self.noise.corr_mu_per_s,
-            "noise.spurious_period_s": self.noise.spurious_period_s,
+            "compass.undamped_period_s": compass.undamped_period_s,
+            "compass.C_gcm2s2": compass.C_gcm2s2,
+            "compass.lP_gcm2s2": compass.lP_gcm2s2,
+            "compass.H1_gcm2s": compass.H1_gcm2s,
+            "compass.U_rad_s": compass.U_rad_s,
+            "compass.g_cm_s2": compass.g_cm_s2,
+            "noise.corr_mu_per_s": noise.corr_mu_per_s,
+            "noise.spurious_period_s": noise.spurious_period_s,
+            "stand.max_amplitude_cm": stand.max_amplitude_cm,
+            "stand.min_period_s": stand.min_period_s,
+            "stand.max_period_s": stand.max_period_s,
         }
         found = [
             (name, f"must be a positive number, got {value}")
             for name, value in positive.items()
             if not (value > 0 and math.isfinite(value))
         ]
+        not_negative = {
+            "compass.T_s": compass.T_s,
+            "noise.corr_sigma_deg": noise.corr_sigma_deg,
+            "noise.white_sigma_deg": noise.white_sigma_deg,
+            "noise.quantum_deg": noise.quantum_deg,
+            "noise.spurious_amplitude_deg": noise.spurious_amplitude_deg,
+            "faults.stuck_at_s": faults.stuck_at_s,
+            "faults.stuck_for_s": faults.stuck_for_s,
+            "faults.silence_at_s": faults.silence_at_s,
+            "faults.silence_for_s": faults.silence_for_s,
+            "faults.amplitude_factor": faults.amplitude_factor,
+        }
+        found += [
+            (name, f"must be a number >= 0, got {value}")
+            for name, value in not_negative.items()
+            if value is not None and not (value >= 0 and math.isfinite(value))
+        ]
+        if not -90.0 < compass.latitude_deg < 90.0:
+            found.append(("compass.latitude_deg", "must be in (-90, 90)"))
+        if not 0.0 <= compass.heading_deg < 360.0:
+            found.append(("compass.heading_deg", "must be in [0, 360)"))
+        for name in ("heading_rate_hz", "status_rate_hz"):
+            if getattr(self, name) > MAX_RATE_HZ:
+                found.append(
+                    (name, f"must be <= {MAX_RATE_HZ:g} (frames carry stand time in whole ms)")
+                )
+        if stand.max_period_s < stand.min_period_s:
+            found.append(("stand.max_period_s", "must be >= min_period_s"))
+        reported = {  # what the stand puts in its frames, the DBC signal carrying it, from what
+            "faults.compass_fault_bits": (
+                faults.compass_fault_bits,
+                "GYRO_STATUS.FAULT_BITS",
+                {"faults.compass_fault_bits"},
+            ),
+            "compass.fluid_temp_c": (
+                compass.fluid_temp_c,
+                "GYRO_STATUS.FLUID_TEMP",
+                {"compass.fluid_temp_c"},
+            ),
+            "faults.amplitude_factor": (
+                faults.amplitude_factor * stand.max_amplitude_cm,
+                "STAND_MOTION.AMPLITUDE",
+                {"faults.amplitude_factor", "stand.max_amplitude_cm"},
+            ),
+        }
+        told = {name for name, _ in found}
+        for name, (value, signal, sources) in reported.items():
+            if sources & told:
+                continue
+            low, high = shipped_range(signal)
+            if not low <= value <= high:
+                outside = f"outside [{low:g}, {high:g}]"
+                found.append((name, f"would put {value:g} in {signal}, {outside}"))
         if self.timing not in TIMINGS:
             found.append(("timing", f"must be one of {', '.join(TIMINGS)}, got {self.timing!r}"))
         elif self.timing == "virtual" and self.speedup != 1.0:
