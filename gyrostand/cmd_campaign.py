@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -10,7 +13,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from gyrostand.cmd_data import DEFAULT_DB, open_db
+from gyrostand.cmd_data import DEFAULT_DB, CampaignId, open_db
 from gyrostand.errors import EXIT_FAILED, fail, printable
 from gyrostand.stand.simconfig import TIMINGS
 
@@ -81,6 +84,51 @@ def checked_plan(
     return plan
 
 
+def preflight(plan: Plan) -> None:
+    """Before anything is written (a campaign row, an event): the raw log folder takes a file
+    and a real bus opens (one-line errors, exit code 1: the environment refuses)."""
+    import can
+
+    from gyrostand.acquisition.bus import check_raw_log_dir, open_bus
+
+    if not plan.bus.simulated:
+        bus = plan.bus
+        try:
+            open_bus(bus).shutdown()
+        except (can.CanError, OSError, ValueError) as exc:
+            fail(
+                f"cannot open the CAN bus (interface {bus.interface!r}, channel {bus.channel!r}):"
+                f" {exc}",
+                code=EXIT_FAILED,
+            )
+    try:
+        check_raw_log_dir(plan)
+    except OSError as exc:
+        fail(
+            f"cannot write raw CAN logs in {plan.raw_log_dir}: {exc.strerror or exc}",
+            code=EXIT_FAILED,
+        )
+
+
+@contextmanager
+def signals_deferred() -> Iterator[threading.Event]:
+    """Ctrl-C (SIGINT) and SIGTERM from here on set the event instead of raising in the middle
+    of opening the database or the bus: the command checks it before it writes the campaign,
+    and the acquisition loop stops on it (the stand told to stop, the campaign "stopped" with
+    an event). The runner's own handlers while it acquires set the same event."""
+    from gyrostand.acquisition.runner import _stop_on_signals
+
+    stop = threading.Event()
+    with _stop_on_signals(stop):
+        yield stop
+
+
+def not_interrupted(stop: threading.Event, before: str) -> None:
+    """Leave before `before` when a signal came: nothing is written yet."""
+    if stop.is_set():
+        fail(f"interrupted before {before}: nothing written", code=EXIT_FAILED)
+
+
 def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None:
     """The outcome on stdout; exit code 1 unless the campaign completed (with how to continue
     it when it can be continued)."""
@@ -100,16 +148,111 @@ def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None
         raise typer.Exit(EXIT_FAILED)
 
 
-def run_campaign(plan: Plan, store: CampaignStore, quiet: bool) -> RunResult:
+def run_campaign(
+    plan: Plan, store: CampaignStore, quiet: bool, stop: threading.Event, db: str
+) -> RunResult:
+    """Acquire into a stored campaign; one outcome whatever happens: the result (completed,
+    paused, stopped), or one line naming the failure with the campaign marked and an event,
+    as far as the database still takes writes."""
     import can
+    from sqlalchemy.exc import OperationalError
 
-    from gyrostand.acquisition.runner import run_live
+    from gyrostand.acquisition.runner import result, run_live
+    from gyrostand.db.session import unusable
+
+    def stopped(kind: str, severity: str, message: str, status: str) -> None:
+        try:
+            store.event(kind, severity, message)
+            store.set_status(status)
+        except OperationalError:  # still refused: the campaign stays "running" (interrupted)
+            pass
 
     try:
-        return run_live(plan, store, quiet=quiet)
+        if stop.is_set():  # a signal while the campaign was being stored: nothing acquired
+            stopped("interrupted", "warning", "stopped by signal before acquiring", "stopped")
+            return result(store, "stopped", None, None)
+        return run_live(plan, store, quiet=quiet, stop=stop)
+    except KeyboardInterrupt:  # raised where no handler of ours was (not the main thread)
+        stopped("interrupted", "warning", "interrupted before acquiring (Ctrl-C)", "stopped")
+        return result(store, "stopped", None, None)
     except (can.CanError, OSError, ValueError) as exc:
-        store.set_status("paused")
+        stopped("bus error", "error", f"could not use the bus: {exc}", "paused")
         fail(f"campaign {store.campaign_id} could not use the bus: {exc}", code=EXIT_FAILED)
+    except OperationalError as exc:
+        problem = unusable(exc, db)
+        stopped("database", "error", f"the database refused a write: {exc.orig}", "stopped")
+        fail(
+            f"campaign {store.campaign_id} stopped: {problem}; what was committed is kept: "
+            f"resume it (gyrostand campaign resume {store.campaign_id} --db {db}) once the "
+            "database takes writes",
+            code=EXIT_FAILED,
+        )
+
+
+def resume(
+    campaign_id: int,
+    db: str,
+    stop: threading.Event,
+    interface: str | None,
+    channel: str | None,
+    speedup: float | None,
+    seed: int | None,
+    timing: str | None,
+) -> tuple[Plan, CampaignStore] | None:
+    """Everything checked (the campaign, its stored plan with the command line's options, the
+    bus and raw log folder) before the campaign is taken over; its plan and store, or None when
+    nothing is left to acquire (then marked completed)."""
+    from sqlalchemy import select
+
+    from gyrostand.acquisition.runner import resume_store
+    from gyrostand.db.lease import CampaignBusy
+    from gyrostand.db.models import Campaign
+    from gyrostand.db.queries import first_incomplete_series
+    from gyrostand.plan.model import PlanError, parse_plan
+
+    sessions = open_db(db, must_exist=True)
+    with sessions() as session:  # everything is checked before resume_store writes
+        row = session.execute(
+            select(Campaign.source, Campaign.plan_toml).where(Campaign.id == campaign_id)
+        ).one_or_none()
+    if row is None:
+        fail(f"no campaign {campaign_id} in the database")
+    if row.source != "stand":
+        how = "replayed from a raw log" if row.source == "replay" else "imported from a file"
+        fail(
+            f"campaign {campaign_id} was {how} (source {printable(row.source)!r}): only a "
+            "campaign run on the stand can be resumed"
+        )
+    try:
+        stored = parse_plan(row.plan_toml)
+    except PlanError as exc:
+        fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
+    checked = checked_plan(
+        stored,
+        interface=interface,
+        channel=channel,
+        db=db,
+        speedup=speedup,
+        seed=seed,
+        timing=timing,
+    )
+    preflight(checked)
+    not_interrupted(stop, f"campaign {campaign_id} was taken over")
+    try:
+        _, store = resume_store(sessions, campaign_id)
+    except LookupError as exc:
+        fail(str(exc))
+    except CampaignBusy as exc:
+        fail(str(exc), code=EXIT_FAILED)
+    except PlanError as exc:
+        fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
+    with sessions() as session:
+        left = first_incomplete_series(session, campaign_id)
+    if left is None:
+        store.set_status("completed")
+        _out.print(f"campaign {campaign_id}: nothing left to acquire")
+        return None
+    return checked, store
 
 
 Interface = Annotated[
@@ -158,22 +301,26 @@ def register(app: typer.Typer) -> None:
         """Run a campaign plan on the stand (the simulated stand when the plan says so)."""
         from gyrostand.acquisition.store import CampaignStore
 
-        checked = checked_plan(
-            _load(plan),
-            interface=interface,
-            channel=channel,
-            db=db,
-            speedup=speedup,
-            seed=seed,
-            timing=timing,
-        )
-        sessions = open_db(checked.database, must_exist=False)
-        store = CampaignStore.create(sessions, checked)
-        print_outcome(run_campaign(checked, store, quiet), checked.database)
+        with signals_deferred() as stop:
+            checked = checked_plan(
+                _load(plan),
+                interface=interface,
+                channel=channel,
+                db=db,
+                speedup=speedup,
+                seed=seed,
+                timing=timing,
+            )
+            preflight(checked)
+            sessions = open_db(checked.database, must_exist=False)
+            not_interrupted(stop, "the campaign was stored")
+            store = CampaignStore.create(sessions, checked)
+            outcome = run_campaign(checked, store, quiet, stop, checked.database)
+        print_outcome(outcome, checked.database)
 
     @campaign_app.command("resume")
     def campaign_resume(
-        campaign_id: int,
+        campaign_id: CampaignId,
         db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
         interface: Interface = None,
         channel: Channel = None,
@@ -183,59 +330,17 @@ def register(app: typer.Typer) -> None:
         quiet: Quiet = False,
     ) -> None:
         """Continue a campaign from its first incomplete series (re-settling first)."""
-        from sqlalchemy import select
-
-        from gyrostand.acquisition.runner import resume_store
-        from gyrostand.db.lease import CampaignBusy
-        from gyrostand.db.models import Campaign
-        from gyrostand.db.queries import first_incomplete_series
-        from gyrostand.plan.model import PlanError, parse_plan
-
-        sessions = open_db(db, must_exist=True)
-        with sessions() as session:  # everything is checked before resume_store writes
-            row = session.execute(
-                select(Campaign.source, Campaign.plan_toml).where(Campaign.id == campaign_id)
-            ).one_or_none()
-        if row is None:
-            fail(f"no campaign {campaign_id} in the database")
-        if row.source != "stand":
-            how = "replayed from a raw log" if row.source == "replay" else "imported from a file"
-            fail(
-                f"campaign {campaign_id} was {how} (source {printable(row.source)!r}): only a "
-                "campaign run on the stand can be resumed"
-            )
-        try:
-            stored = parse_plan(row.plan_toml)
-        except PlanError as exc:
-            fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
-        checked = checked_plan(
-            stored,
-            interface=interface,
-            channel=channel,
-            db=db,
-            speedup=speedup,
-            seed=seed,
-            timing=timing,
-        )
-        try:
-            _, store = resume_store(sessions, campaign_id)
-        except LookupError as exc:
-            fail(str(exc))
-        except CampaignBusy as exc:
-            fail(str(exc), code=EXIT_FAILED)
-        except PlanError as exc:
-            fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
-        with sessions() as session:
-            left = first_incomplete_series(session, campaign_id)
-        if left is None:
-            store.set_status("completed")
-            _out.print(f"campaign {campaign_id}: nothing left to acquire")
-            return
-        print_outcome(run_campaign(checked, store, quiet), db)
+        with signals_deferred() as stop:
+            resumed = resume(campaign_id, db, stop, interface, channel, speedup, seed, timing)
+            if resumed is None:
+                return
+            checked, store = resumed
+            outcome = run_campaign(checked, store, quiet, stop, db)
+        print_outcome(outcome, db)
 
     @campaign_app.command("status")
     def campaign_status(
-        campaign_id: int,
+        campaign_id: CampaignId,
         db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
     ) -> None:
         """Show where a campaign stands."""
