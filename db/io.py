@@ -46,8 +46,8 @@ MAX_REPORTED = 10
 
 # seed 000 example: known constants B of the two-rotor gyrocompass and the site
 SEED_000_METADATA: dict[str, Any] = {
-    "model": "two-rotor gyrocompass (seed 000 example)",
-    "serial": "seed-000",
+    "model": "two-rotor gyrocompass (example of Potemkin 1982)",
+    "serial": "Potemkin-1982",
     "lp_gcm2s2": 6.57e6,
     "h1_gcm2s": 1.55e8,
     "latitude_deg": 46.5,

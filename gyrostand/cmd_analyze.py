@@ -33,8 +33,8 @@ if TYPE_CHECKING:
     from gyrostand.report.signal import SignalSection
 
 PAPER_NOTE = (
-    "note: no --plan given: using the seed-000 example constants, start values and ship "
-    "forecast (Potemkin 1982)"
+    "note: no --plan given: using the example constants, start values and ship forecast of "
+    "Potemkin (1982)"
 )
 SIGNAL_SCHEMA = "gyrostand.signal/1"  # the report JSON's "signal" object, with this key added
 

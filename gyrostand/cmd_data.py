@@ -117,8 +117,9 @@ def register(app: typer.Typer) -> None:
             fail(f"nothing imported, the database refused the write: {error.orig}")
         if plan is None:
             typer.echo(
-                "no --plan: used the seed 000 example instrument and site (lP = 6.57e6 g*cm^2/s^2,"
-                " H1 = 1.55e8 g*cm^2/s, latitude 46.5 deg, U = 7.3e-5 rad/s, g = 981 cm/s^2)",
+                "no --plan: used the example instrument and site of Potemkin (1982) (lP = 6.57e6 "
+                "g*cm^2/s^2, H1 = 1.55e8 g*cm^2/s, latitude 46.5 deg, U = 7.3e-5 rad/s, "
+                "g = 981 cm/s^2)",
                 err=True,
             )
         typer.echo(

@@ -39,20 +39,20 @@ class CompassParams:
     g_cm_s2: float = param(981.0, "gravity g, cm/s^2")
     latitude_deg: float = param(46.5, "latitude phi of the stand, deg")
     rolling_error: bool = param(
-        True, "shift the settled reading by the rolling error of seed 000 eq 1.1 while rocking"
+        True, "shift the settled reading by the rolling error (Potemkin 1982, eq 1.1) while rocking"
     )
     heading_deg: float = param(120.0, "true heading of the stand (settled reading at rest), deg")
     initial_error_deg: float = param(
         0.0, "deviation of the sensitive element from equilibrium at stand time 0, deg"
     )
     transient: bool = param(
-        True, "damped precessional transient to each new equilibrium (seed 003 eqs 1-2)"
+        True, "damped precessional transient to each new equilibrium (Bezvesilna & Gura, eqs 1-2)"
     )
     undamped_period_s: float = param(5064.0, "undamped precession period 2*pi/w0, s (84.4 min)")
     damping_ratio: float = param(
         0.7, "damping xi/w0 of the precession (0.7: within 5% of a step after ~40 min)"
     )
-    nonlinear: bool = param(True, "keep the sin(alpha) term of seed 003 eq 1 (else linear)")
+    nonlinear: bool = param(True, "keep the sin(alpha) term (Bezvesilna & Gura, eq 1; else linear)")
     harmonic_p_deg_per_g: float = param(
         1.0, "reading oscillation at the rocking frequency p, deg per g of stand acceleration A*p^2"
     )
@@ -84,7 +84,7 @@ class CompassParams:
 
 @dataclass(frozen=True)
 class NoiseParams:
-    """Angle-sensor noise (seed 004 §8.3) and optional slow disturbances."""
+    """Angle-sensor noise (Sveshnikov, §8.3) and optional slow disturbances."""
 
     corr_sigma_deg: float = param(
         0.01, "sigma of the exponentially correlated noise sigma^2*exp(-mu*|tau|), deg"
@@ -96,7 +96,7 @@ class NoiseParams:
     )
     drift_deg_per_h: float = param(0.0, "slow linear drift of the reading, deg/h")
     spurious_amplitude_deg: float = param(
-        0.0, "amplitude of a spurious harmonic in the reading (seed 004 §8.3 item 2), deg"
+        0.0, "amplitude of a spurious harmonic in the reading (Sveshnikov, §8.3 item 2), deg"
     )
     spurious_period_s: float = param(60.0, "period of the spurious harmonic, s")
 
