@@ -160,7 +160,8 @@ def run_campaign(
     from gyrostand.acquisition.runner import result, run_live
     from gyrostand.db.session import unusable
 
-    def stopped(kind: str, severity: str, message: str, status: str) -> None:
+    def mark(kind: str, severity: str, message: str, status: str) -> None:
+        """An event saying why, and the campaign's status (as far as the database lets us)."""
         try:
             store.event(kind, severity, message)
             store.set_status(status)
@@ -169,18 +170,18 @@ def run_campaign(
 
     try:
         if stop.is_set():  # a signal while the campaign was being stored: nothing acquired
-            stopped("interrupted", "warning", "stopped by signal before acquiring", "stopped")
+            mark("interrupted", "warning", "stopped by signal before acquiring", "stopped")
             return result(store, "stopped", None, None)
         return run_live(plan, store, quiet=quiet, stop=stop)
-    except KeyboardInterrupt:  # raised where no handler of ours was (not the main thread)
-        stopped("interrupted", "warning", "interrupted before acquiring (Ctrl-C)", "stopped")
+    except KeyboardInterrupt:  # python's own handler (ours cannot be set outside the main thread)
+        mark("interrupted", "warning", "interrupted before acquiring (Ctrl-C)", "stopped")
         return result(store, "stopped", None, None)
     except (can.CanError, OSError, ValueError) as exc:
-        stopped("bus error", "error", f"could not use the bus: {exc}", "paused")
+        mark("bus error", "error", f"could not use the bus: {exc}", "paused")
         fail(f"campaign {store.campaign_id} could not use the bus: {exc}", code=EXIT_FAILED)
     except OperationalError as exc:
         problem = unusable(exc, db)
-        stopped("database", "error", f"the database refused a write: {exc.orig}", "stopped")
+        mark("database", "error", f"the database refused a write: {exc.orig}", "stopped")
         fail(
             f"campaign {store.campaign_id} stopped: {problem}; what was committed is kept: "
             f"resume it (gyrostand campaign resume {store.campaign_id} --db {db}) once the "
