@@ -306,6 +306,11 @@ def test_fault_matrix(row: Row) -> None:
     for o in r.sink.observations:  # every window: as the frames sent say
         expected_frames = accounting(r, o.window_start_ms, o.window_end_ms)
         assert (o.frames_used, o.frames_lost, o.flags) == expected_frames, o
+        # every 10 Hz slot of the window is a frame used, lost, or received unusable
+        counts = dict(f.split("=") for f in o.flags.split(",") if f)
+        unusable = sum(int(counts.get(k, 0)) for k in ("invalid", "corrupt", "out_of_range"))
+        slots = (o.window_end_ms - o.window_start_ms) // INTERVAL_MS
+        assert o.frames_used + o.frames_lost + unusable == slots, o
     assert any(o.flags for o in r.sink.observations) == row.accounted
     warnings = [a for a in r.sink.of("event") if a[0] == "frame anomalies"]
     assert [a[2] for a in warnings] == [
