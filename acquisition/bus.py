@@ -7,6 +7,7 @@ queue or a listener error is counted and reported as an event, never dropped sil
 from __future__ import annotations
 
 import queue
+import tempfile
 import threading
 import time
 import uuid
@@ -31,6 +32,28 @@ def sim_config(bus: BusPlan) -> SimConfig:
     """The simulated stand for a plan: its `[bus.simulator]` overrides (validated with the plan)
     on the defaults, with the plan's speedup, seed and timing."""
     return simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
+
+
+def open_bus(bus: BusPlan) -> can.BusABC:
+    """The plan's python-can bus (a real one: interface, channel, bit rate as given; without
+    them python-can's config file / environment)."""
+    kwargs: dict[str, Any] = {}
+    if bus.interface is not None:
+        kwargs["interface"] = bus.interface
+    if bus.channel is not None:
+        kwargs["channel"] = bus.channel
+    if bus.bitrate is not None:
+        kwargs["bitrate"] = bus.bitrate
+    return can.Bus(**kwargs)
+
+
+def check_raw_log_dir(plan: Plan) -> None:
+    """The plan's raw log folder (made if needed) takes a file: checked before anything is
+    written, as the raw log is opened only once the campaign is stored (OSError)."""
+    folder = Path(plan.raw_log_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryFile(dir=folder):
+        pass
 
 
 class SimulatorBus(VirtualBus):
@@ -173,14 +196,7 @@ class LiveBus:
             # a name not ending in digits: log writers would take those for a channel number
             self._channel = f"gyrostand-{uuid.uuid4().hex}-sim"
             return can.Bus(interface="virtual", channel=self._channel)
-        kwargs: dict[str, Any] = {}
-        if bus.interface is not None:
-            kwargs["interface"] = bus.interface
-        if bus.channel is not None:
-            kwargs["channel"] = bus.channel
-        if bus.bitrate is not None:
-            kwargs["bitrate"] = bus.bitrate
-        return can.Bus(**kwargs)  # without arguments: python-can's config file / environment
+        return open_bus(bus)
 
     def close(self) -> None:
         """Stop the simulated stand, the notifier (which stops the raw log), the buses."""

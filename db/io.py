@@ -46,8 +46,8 @@ MAX_REPORTED = 10
 
 # seed 000 example: known constants B of the two-rotor gyrocompass and the site
 SEED_000_METADATA: dict[str, Any] = {
-    "model": "two-rotor gyrocompass (seed 000 example)",
-    "serial": "seed-000",
+    "model": "two-rotor gyrocompass (example of Potemkin 1982)",
+    "serial": "Potemkin-1982",
     "lp_gcm2s2": 6.57e6,
     "h1_gcm2s": 1.55e8,
     "latitude_deg": 46.5,
@@ -447,6 +447,9 @@ def check_metadata(metadata: Mapping[str, Any]) -> None:
     for key in ("operator", "software_version", "plan_toml"):
         if key in metadata and not isinstance(metadata[key], str):
             problems.append(f"{key} = {metadata[key]!r} is not text")
+    operator = metadata.get("operator")
+    if isinstance(operator, str) and not operator.strip():  # as a plan's [campaign] operator
+        problems.append(f"operator = {operator!r} is not non-empty text")
     if problems:
         raise MetadataError("campaign metadata: " + "; ".join(problems))
 

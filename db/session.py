@@ -17,6 +17,7 @@ from alembic.script import ScriptDirectory
 from alembic.util import CommandError
 from sqlalchemy import Connection, Engine, create_engine, event, inspect
 from sqlalchemy.engine import make_url
+from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
 from sqlalchemy.orm import Session, sessionmaker
 
 MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
@@ -36,6 +37,37 @@ class DatabaseVersionError(Exception):
     """The database's schema is not the one this code uses and cannot (or may not) be upgraded."""
 
 
+class DatabaseUnusable(Exception):
+    """The database cannot be opened or written. `bad_input`: what was given is no database
+    gyrostand can use (a folder, a file that is not SQLite or is damaged, a URL that does not
+    parse or names an unknown dialect); otherwise the environment is at fault (permissions, a
+    read-only or full disk, a missing driver, a server that does not answer)."""
+
+    def __init__(self, message: str, *, bad_input: bool) -> None:
+        super().__init__(message)
+        self.bad_input = bad_input
+
+
+_NOT_A_DATABASE = ("SQLITE_NOTADB", "SQLITE_CORRUPT")  # sqlite3 error names (and extended)
+
+
+def unusable(exc: DBAPIError, where: str | None = None) -> DatabaseUnusable:
+    """What a driver's error says about the database `where` (its file or URL): a file that is
+    not a SQLite database or is damaged is bad input; anything else (a read-only folder, a full
+    disk, a lock held too long, a server that does not answer) the environment."""
+    name = str(getattr(exc.orig, "sqlite_errorname", ""))
+    reason = str(exc.orig).strip() or type(exc.orig).__name__
+    if name.startswith(_NOT_A_DATABASE):
+        what = where or "the database"
+        return DatabaseUnusable(
+            f"{what} is not a SQLite database or is damaged ({reason})", bad_input=True
+        )
+    if name.startswith(("SQLITE_CANTOPEN", "SQLITE_READONLY", "SQLITE_PERM")):
+        reason += " (SQLite writes the file and, beside it, its journal: is the folder writable?)"
+    what = where if where is not None else "the database failed"
+    return DatabaseUnusable(f"{what}: {reason}", bad_input=False)
+
+
 def sqlite_url(path: Path) -> str:
     """The SQLAlchemy URL of a SQLite file (absolute, so it does not depend on the cwd later)."""
     return f"sqlite:///{Path(path).expanduser().resolve()}"
@@ -53,29 +85,59 @@ def alembic_config(script_location: Path = MIGRATIONS_DIR) -> Config:
     return config
 
 
-def open_database(url: str, *, upgrade: bool = True) -> sessionmaker[Session]:
+def open_database(url: str, *, upgrade: bool = True, create: bool = True) -> sessionmaker[Session]:
     """Open (and create or upgrade) the database at `url`; return its session factory.
 
-    A SQLite file's folder is created if needed. With `upgrade=False` a database that is missing,
-    empty or behind the code is refused; a database ahead of the code, or one that has tables but
-    no Alembic version, is always refused (DatabaseVersionError)."""
-    parsed = make_url(url)
+    A SQLite file's folder is created if needed. With `create=False` a SQLite file that does not
+    exist is refused, and with `upgrade=False` also one that is empty or behind the code; a
+    database ahead of the code, or one that has tables but no Alembic version, is always refused
+    (DatabaseVersionError). Anything that is no usable database (a folder, a file that is not
+    SQLite, an unknown dialect, a server that does not answer) is DatabaseUnusable."""
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        raise DatabaseUnusable(
+            f"{url!r} is neither a file path nor a database URL (dialect://...)", bad_input=True
+        ) from None
+    where = parsed.render_as_string(hide_password=True)
     sqlite_file = parsed.get_backend_name() == "sqlite" and parsed.database not in (None, "")
     if sqlite_file and parsed.database != ":memory:" and "mode=memory" not in str(parsed.query):
         path = Path(parsed.database)
-        if not upgrade and not path.exists():
+        where = str(path)
+        if path.is_dir():
+            raise DatabaseUnusable(f"{path} is a folder, not a database file", bad_input=True)
+        if not (upgrade and create) and not path.exists():
             raise DatabaseVersionError(f"no database at {path}")
-        path.parent.mkdir(parents=True, exist_ok=True)
-    engine = create_engine(url)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise DatabaseUnusable(
+                f"{path}: cannot make its folder ({exc.strerror or exc})",
+                bad_input=False,
+            ) from None
+    try:
+        engine = create_engine(url)
+    except NoSuchModuleError:
+        raise DatabaseUnusable(
+            f"{where}: unknown database dialect {parsed.drivername!r}", bad_input=True
+        ) from None
+    except ImportError as exc:
+        raise DatabaseUnusable(
+            f"{where}: the database driver for {parsed.drivername} is not installed ({exc})",
+            bad_input=False,
+        ) from None
     if engine.dialect.name == "sqlite":
         _configure_sqlite(engine)
     try:
         migrate(engine, upgrade=upgrade)
+        if engine.dialect.name == "sqlite":
+            _enable_wal(engine)
+    except DBAPIError as exc:
+        engine.dispose()
+        raise unusable(exc, where) from None
     except BaseException:
         engine.dispose()
         raise
-    if engine.dialect.name == "sqlite":
-        _enable_wal(engine)
     return sessionmaker(engine, expire_on_commit=False)
 
 

@@ -29,7 +29,7 @@ from gyrostand import (
     cmd_report,
     cmd_simulate,
 )
-from gyrostand.errors import internal_error, usage_error
+from gyrostand.errors import unexpected, usage_error
 
 _NEXT_SENTENCE = re.compile(r"(?<=[.!?])\s+(?=[A-Z`\[(])")
 
@@ -111,7 +111,7 @@ class RootGroup(HelpGroup):
                 typer.echo("gyrostand: aborted", err=True)
                 raise typer.Exit(1) from None
             except Exception as exc:  # SystemExit and KeyboardInterrupt are not Exceptions
-                internal_error(exc, argv)
+                unexpected(exc, argv)
         except typer.Exit as stop:
             if not standalone_mode:
                 return stop.exit_code

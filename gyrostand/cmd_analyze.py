@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from gyrostand.analysis.errors import AnalysisError
-from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
+from gyrostand.cmd_data import DEFAULT_DB, MAX_CAMPAIGN_ID, DbOption, open_db
 from gyrostand.errors import fail, printable, printable_lines
 
 if TYPE_CHECKING:
@@ -33,15 +33,16 @@ if TYPE_CHECKING:
     from gyrostand.report.signal import SignalSection
 
 PAPER_NOTE = (
-    "note: no --plan given: using the seed-000 example constants, start values and ship "
-    "forecast (Potemkin 1982)"
+    "note: no --plan given: using the example constants, start values and ship forecast of "
+    "Potemkin (1982)"
 )
 SIGNAL_SCHEMA = "gyrostand.signal/1"  # the report JSON's "signal" object, with this key added
 
 
-def plan_settings(path: Path) -> AnalysisSettings:
-    """The analysis settings of a plan file, whole or partial (`report.settings`); a note on
-    stderr for each table taken from the example of Potemkin (1982)."""
+def plan_settings(path: Path) -> tuple[AnalysisSettings, tuple[str, ...]]:
+    """The analysis settings of a plan file, whole or partial (`report.settings`), and a note
+    for each table taken from the example of Potemkin (1982) (for stderr once the analysis
+    succeeded: a failure is one line)."""
     from gyrostand.plan.model import PlanError, load_any_plan
     from gyrostand.report.settings import fallback_notes, settings_from_plan
 
@@ -49,9 +50,7 @@ def plan_settings(path: Path) -> AnalysisSettings:
         plan = load_any_plan(path)
     except PlanError as exc:
         fail(f"plan {path}: " + "; ".join(exc.problems))
-    for note in fallback_notes(plan, source=f"note: plan {path}"):
-        typer.echo(note, err=True)
-    return settings_from_plan(plan)
+    return settings_from_plan(plan), fallback_notes(plan, source=f"note: plan {path}")
 
 
 def run_analysis(trials: list[TrialInput], settings: AnalysisSettings) -> CampaignAnalysis:
@@ -87,7 +86,8 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def analyze(
         campaign: Annotated[
-            int | None, typer.Argument(help="A stored campaign's id (with --db).")
+            int | None,
+            typer.Argument(help="A stored campaign's id (with --db).", min=1, max=MAX_CAMPAIGN_ID),
         ] = None,
         db: DbOption = DEFAULT_DB,
         csv: Annotated[
@@ -147,11 +147,13 @@ def register(app: typer.Typer) -> None:
         except AnalysisError as exc:
             fail(str(exc))
         if plan is None:
-            typer.echo(PAPER_NOTE, err=True)
-            settings = SEED_000_SETTINGS
+            settings, notes = SEED_000_SETTINGS, (PAPER_NOTE,)
         else:
-            settings = plan_settings(plan)
-        emit(run_analysis(trials, settings), as_json)
+            settings, notes = plan_settings(plan)
+        analysis = run_analysis(trials, settings)
+        for note in notes:
+            typer.echo(note, err=True)
+        emit(analysis, as_json)
 
 
 def analyze_stored_campaign(db: str, campaign_id: int) -> CampaignAnalysis:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
@@ -11,7 +14,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from gyrostand.cmd_data import DEFAULT_DB, open_db
+from gyrostand.cmd_data import DEFAULT_DB, CampaignId, open_db
 from gyrostand.errors import EXIT_FAILED, fail, printable
 from gyrostand.stand.simconfig import TIMINGS
 
@@ -82,6 +85,51 @@ def checked_plan(
     return plan
 
 
+def preflight(plan: Plan) -> None:
+    """Before anything is written (a campaign row, an event): the raw log folder takes a file
+    and a real bus opens (one-line errors, exit code 1: the environment refuses)."""
+    import can
+
+    from gyrostand.acquisition.bus import check_raw_log_dir, open_bus
+
+    if not plan.bus.simulated:
+        bus = plan.bus
+        try:
+            open_bus(bus).shutdown()
+        except (can.CanError, OSError, ValueError) as exc:
+            fail(
+                f"cannot open the CAN bus (interface {bus.interface!r}, channel {bus.channel!r}):"
+                f" {exc}",
+                code=EXIT_FAILED,
+            )
+    try:
+        check_raw_log_dir(plan)
+    except OSError as exc:
+        fail(
+            f"cannot write raw CAN logs in {plan.raw_log_dir}: {exc.strerror or exc}",
+            code=EXIT_FAILED,
+        )
+
+
+@contextmanager
+def signals_deferred() -> Iterator[threading.Event]:
+    """Ctrl-C (SIGINT) and SIGTERM from here on set the event instead of raising in the middle
+    of opening the database or the bus: the command checks it before it writes the campaign,
+    and the acquisition loop stops on it (the stand told to stop, the campaign "stopped" with
+    an event). The runner's own handlers while it acquires set the same event."""
+    from gyrostand.acquisition.runner import _stop_on_signals
+
+    stop = threading.Event()
+    with _stop_on_signals(stop):
+        yield stop
+
+
+def not_interrupted(stop: threading.Event, before: str) -> None:
+    """Leave before `before` when a signal came: nothing is written yet."""
+    if stop.is_set():
+        fail(f"interrupted before {before}: nothing written", code=EXIT_FAILED)
+
+
 def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None:
     """The outcome on stdout; exit code 1 unless the campaign completed (with how to continue
     it and to retry its failed trials when it can be continued)."""
@@ -106,20 +154,55 @@ def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None
         raise typer.Exit(EXIT_FAILED)
 
 
-def run_campaign(plan: Plan, store: CampaignStore, quiet: bool, start: str = "new") -> RunResult:
+def run_campaign(
+    plan: Plan,
+    store: CampaignStore,
+    quiet: bool,
+    stop: threading.Event,
+    db: str,
+    start: str = "new",
+) -> RunResult:
+    """Acquire into a stored campaign (`start`: see `run_live`); one outcome whatever happens:
+    the result (completed, paused, stopped), or one line naming the failure with the campaign
+    marked and an event, as far as the database still takes writes."""
     import can
+    from sqlalchemy.exc import OperationalError
 
-    from gyrostand.acquisition.runner import run_live
+    from gyrostand.acquisition.runner import result, run_live
     from gyrostand.acquisition.store import ReRunMismatch
+    from gyrostand.db.session import unusable
+
+    def mark(kind: str, severity: str, message: str, status: str) -> None:
+        """An event saying why, and the campaign's status (as far as the database lets us)."""
+        try:
+            store.event(kind, severity, message)
+            store.set_status(status)
+        except OperationalError:  # still refused: the campaign stays "running" (interrupted)
+            pass
 
     try:
-        return run_live(plan, store, start=start, quiet=quiet)
+        if stop.is_set():  # a signal while the campaign was being stored: nothing acquired
+            mark("interrupted", "warning", "stopped by signal before acquiring", "stopped")
+            return result(store, "stopped", None, None)
+        return run_live(plan, store, start=start, quiet=quiet, stop=stop)
     except ReRunMismatch as exc:
-        store.run_event("resume", "error", str(exc))
+        mark("resume", "error", str(exc), "stopped")
         fail(f"campaign {store.campaign_id}: {exc}", code=EXIT_FAILED)
+    except KeyboardInterrupt:  # python's own handler (ours cannot be set outside the main thread)
+        mark("interrupted", "warning", "interrupted before acquiring (Ctrl-C)", "stopped")
+        return result(store, "stopped", None, None)
     except (can.CanError, OSError, ValueError) as exc:
-        store.set_status("paused")
+        mark("bus error", "error", f"could not use the bus: {exc}", "paused")
         fail(f"campaign {store.campaign_id} could not use the bus: {exc}", code=EXIT_FAILED)
+    except OperationalError as exc:
+        problem = unusable(exc, db)
+        mark("database", "error", f"the database refused a write: {exc.orig}", "stopped")
+        fail(
+            f"campaign {store.campaign_id} stopped: {problem}; what was committed is kept: "
+            f"resume it (gyrostand campaign resume {store.campaign_id} --db {db}) once the "
+            "database takes writes",
+            code=EXIT_FAILED,
+        )
 
 
 @dataclass(frozen=True)
@@ -155,50 +238,54 @@ def continue_campaign(
     )
     from gyrostand.plan.model import PlanError, parse_plan
 
-    sessions = open_db(db, must_exist=True)
-    try:
-        with sessions() as session:  # everything is checked before anything is written
-            text = stand_campaign(session, campaign_id).plan_toml
-        stored = parse_plan(text)
-    except (CampaignNotFound, NotOnTheStand) as exc:
-        fail(str(exc))
-    except PlanError as exc:
-        fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
-    checked = checked_plan(
-        stored,
-        interface=bus.interface,
-        channel=bus.channel,
-        db=db,
-        speedup=bus.speedup,
-        seed=bus.seed,
-        timing=bus.timing,
-    )
-    try:
-        if retry is not None:
-            retried = retry_trials(sessions, campaign_id, None if retry == "failed" else retry)
-            for r in retried:
-                _out.print(
-                    printable(
-                        f"trial {r.index}: attempt {r.attempt} (attempt {r.attempt - 1} "
-                        f"failed: {r.reason})"
+    with signals_deferred() as stop:
+        sessions = open_db(db, must_exist=True)
+        try:
+            with sessions() as session:  # everything is checked before anything is written
+                text = stand_campaign(session, campaign_id).plan_toml
+            stored = parse_plan(text)
+        except (CampaignNotFound, NotOnTheStand) as exc:
+            fail(str(exc))
+        except PlanError as exc:
+            fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
+        checked = checked_plan(
+            stored,
+            interface=bus.interface,
+            channel=bus.channel,
+            db=db,
+            speedup=bus.speedup,
+            seed=bus.seed,
+            timing=bus.timing,
+        )
+        preflight(checked)
+        not_interrupted(stop, f"campaign {campaign_id} was taken over")
+        try:
+            if retry is not None:
+                retried = retry_trials(sessions, campaign_id, None if retry == "failed" else retry)
+                for r in retried:
+                    _out.print(
+                        printable(
+                            f"trial {r.index}: attempt {r.attempt} (attempt {r.attempt - 1} "
+                            f"failed: {r.reason})"
+                        )
                     )
-                )
-        _, store = resume_store(sessions, campaign_id)
-    except (CampaignNotFound, NotOnTheStand, RetryRefused) as exc:
-        fail(str(exc))
-    except CampaignBusy as exc:
-        fail(str(exc), code=EXIT_FAILED)
-    start = resume_start(store, stored, checked)
-    with sessions() as session:
-        trials = trial_progress(session, campaign_id)
-    acquired = all(t.acquired for t in trials)  # the one resume rule: nothing left
-    # a re-run also finishes the trials acquired but not marked (with the stand's motion)
-    if acquired and not (start == "continued" and not all(t.finished for t in trials)):
-        store.complete_acquired()
-        store.set_status("completed")
-        _out.print(f"campaign {campaign_id}: nothing left to acquire")
-        return
-    print_outcome(run_campaign(checked, store, quiet, start), db)
+            _, store = resume_store(sessions, campaign_id)
+        except (CampaignNotFound, NotOnTheStand, RetryRefused) as exc:
+            fail(str(exc))
+        except CampaignBusy as exc:
+            fail(str(exc), code=EXIT_FAILED)
+        start = resume_start(store, stored, checked)
+        with sessions() as session:
+            trials = trial_progress(session, campaign_id)
+        acquired = all(t.acquired for t in trials)  # the one resume rule: nothing left
+        # a re-run also finishes the trials acquired but not marked (with the stand's motion)
+        if acquired and not (start == "continued" and not all(t.finished for t in trials)):
+            store.complete_acquired()
+            store.set_status("completed")
+            _out.print(f"campaign {campaign_id}: nothing left to acquire")
+            return
+        outcome = run_campaign(checked, store, quiet, stop, db, start)
+    print_outcome(outcome, db)
 
 
 Interface = Annotated[
@@ -249,22 +336,26 @@ def register(app: typer.Typer) -> None:
         """Run a campaign plan on the stand (the simulated stand when the plan says so)."""
         from gyrostand.acquisition.store import CampaignStore
 
-        checked = checked_plan(
-            _load(plan),
-            interface=interface,
-            channel=channel,
-            db=db,
-            speedup=speedup,
-            seed=seed,
-            timing=timing,
-        )
-        sessions = open_db(checked.database, must_exist=False)
-        store = CampaignStore.create(sessions, checked)
-        print_outcome(run_campaign(checked, store, quiet), checked.database)
+        with signals_deferred() as stop:
+            checked = checked_plan(
+                _load(plan),
+                interface=interface,
+                channel=channel,
+                db=db,
+                speedup=speedup,
+                seed=seed,
+                timing=timing,
+            )
+            preflight(checked)
+            sessions = open_db(checked.database, must_exist=False)
+            not_interrupted(stop, "the campaign was stored")
+            store = CampaignStore.create(sessions, checked)
+            outcome = run_campaign(checked, store, quiet, stop, checked.database)
+        print_outcome(outcome, checked.database)
 
     @campaign_app.command("resume")
     def campaign_resume(
-        campaign_id: int,
+        campaign_id: CampaignId,
         db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
         interface: Interface = None,
         channel: Channel = None,
@@ -287,7 +378,7 @@ def register(app: typer.Typer) -> None:
 
     @campaign_app.command("retry")
     def campaign_retry(
-        campaign_id: int,
+        campaign_id: CampaignId,
         trial: Annotated[
             list[int],
             typer.Option("--trial", help="Index of a failed trial to retry (repeatable)."),
@@ -306,7 +397,7 @@ def register(app: typer.Typer) -> None:
 
     @campaign_app.command("status")
     def campaign_status(
-        campaign_id: int,
+        campaign_id: CampaignId,
         db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
     ) -> None:
         """Show where a campaign stands."""

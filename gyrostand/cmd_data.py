@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from gyrostand import SOFTWARE_VERSION
-from gyrostand.errors import fail
+from gyrostand.errors import EXIT_BAD_INPUT, EXIT_FAILED, fail
 
 if TYPE_CHECKING:
     from sqlalchemy.orm import Session, sessionmaker
@@ -19,6 +19,10 @@ DEFAULT_DB = "runs/gyrostand.sqlite"
 DbOption = Annotated[
     str, typer.Option("--db", help="Database: a SQLite file path or any SQLAlchemy URL.")
 ]
+MAX_CAMPAIGN_ID = 2**31 - 1
+"""Largest campaign id: ids are Integer columns of the database (32-bit signed in PostgreSQL
+and MySQL; a larger number is no campaign anywhere)."""
+CampaignId = Annotated[int, typer.Argument(help="Campaign id.", min=1, max=MAX_CAMPAIGN_ID)]
 
 
 class ExportFormat(StrEnum):
@@ -28,15 +32,22 @@ class ExportFormat(StrEnum):
 
 
 def open_db(db: str, *, must_exist: bool = False) -> sessionmaker[Session]:
-    """The database's session factory, or a one-line error (missing file, wrong schema)."""
-    from gyrostand.db.session import DatabaseVersionError, database_url, open_database
+    """The database's session factory, or a one-line error: a missing file (`must_exist`: the
+    command only reads), a wrong schema, a file or URL that is no database (exit code 2), a
+    database the environment does not let us use (exit code 1)."""
+    from gyrostand.db.session import (
+        DatabaseUnusable,
+        DatabaseVersionError,
+        database_url,
+        open_database,
+    )
 
-    if must_exist and "://" not in db and not Path(db).exists():
-        fail(f"no database at {db}")
     try:
-        return open_database(database_url(db))
+        return open_database(database_url(db), create=not must_exist)
     except DatabaseVersionError as error:
         fail(str(error))
+    except DatabaseUnusable as error:
+        fail(str(error), EXIT_BAD_INPUT if error.bad_input else EXIT_FAILED)
 
 
 def plan_metadata(path: Path) -> dict[str, Any]:
@@ -106,8 +117,9 @@ def register(app: typer.Typer) -> None:
             fail(f"nothing imported, the database refused the write: {error.orig}")
         if plan is None:
             typer.echo(
-                "no --plan: used the seed 000 example instrument and site (lP = 6.57e6 g*cm^2/s^2,"
-                " H1 = 1.55e8 g*cm^2/s, latitude 46.5 deg, U = 7.3e-5 rad/s, g = 981 cm/s^2)",
+                "no --plan: used the example instrument and site of Potemkin (1982) (lP = 6.57e6 "
+                "g*cm^2/s^2, H1 = 1.55e8 g*cm^2/s, latitude 46.5 deg, U = 7.3e-5 rad/s, "
+                "g = 981 cm/s^2)",
                 err=True,
             )
         typer.echo(
@@ -117,7 +129,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def export(
-        campaign: Annotated[int, typer.Argument(help="Campaign id.")],
+        campaign: CampaignId,
         format: Annotated[ExportFormat, typer.Option("--format", "-f")] = ExportFormat.csv,
         out: Annotated[
             Path | None,

@@ -12,7 +12,7 @@ from typing import Annotated
 
 import typer
 
-from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
+from gyrostand.cmd_data import DEFAULT_DB, CampaignId, DbOption, open_db
 from gyrostand.errors import fail, printable
 from gyrostand.report import FORMATS
 from gyrostand.report.compliance import SHIPPED
@@ -88,7 +88,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def report(
-        campaign: Annotated[int, typer.Argument(help="Campaign id.")],
+        campaign: CampaignId,
         db: DbOption = DEFAULT_DB,
         out: Annotated[Path, typer.Option(help="Folder for the report files.")] = DEFAULT_OUT,
         format: Annotated[

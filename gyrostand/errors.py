@@ -1,6 +1,7 @@
 """What the CLI writes about itself: one-line errors on stderr with an exit code, the one way
 stored or user-given strings reach the terminal (`printable`), and the boundary for the
-unexpected (`internal_error`: one line, the traceback in a file)."""
+unexpected (`unexpected`: a database failing under a command is one line; anything else an
+`internal_error`: one line, the traceback in a file)."""
 
 from __future__ import annotations
 
@@ -47,6 +48,21 @@ def usage_error(message: str, help_hint: str | None, code: int = EXIT_BAD_INPUT)
     """A command line that does not parse: one line, with where to find the command's help."""
     hint = f"; see '{help_hint}'" if help_hint else ""
     fail(f"{message.strip().rstrip('.')}{hint}", code)
+
+
+def unexpected(exc: Exception, argv: list[str]) -> NoReturn:
+    """An exception that escaped a command: a database that failed under it (a full or
+    read-only disk, a lock held too long, a damaged file met mid-way) is one line (exit code 1,
+    2 for a file that is no database); anything else is an `internal_error`."""
+    if "sqlalchemy" in sys.modules:  # (no database error without it; not imported for it)
+        from sqlalchemy.exc import DatabaseError, OperationalError
+
+        if isinstance(exc, OperationalError) or type(exc) is DatabaseError:
+            from gyrostand.db.session import unusable
+
+            problem = unusable(exc)
+            fail(str(problem), EXIT_BAD_INPUT if problem.bad_input else EXIT_FAILED)
+    internal_error(exc, argv)
 
 
 def internal_error(exc: BaseException, argv: list[str]) -> NoReturn:

@@ -102,6 +102,15 @@ def _number(value: float) -> str:
     return format(value, ".15g")
 
 
+def _interface(value: str) -> str:
+    from can.interfaces import VALID_INTERFACES
+
+    if value not in VALID_INTERFACES:
+        known = ", ".join(sorted(VALID_INTERFACES))
+        raise ValueError(f"unknown python-can interface {value!r} (one of {known})")
+    return value
+
+
 def _channel(value: Any) -> str:
     if isinstance(value, bool) or not isinstance(value, str | int):
         raise ValueError("must be a string or an integer")
@@ -120,6 +129,7 @@ SimulatorTables = simulator_tables()
 Text = Annotated[str, StringConstraints(pattern=r"\S")]
 Interval = Annotated[tuple[float, float], BeforeValidator(_interval)]
 Channel = Annotated[str, PlainValidator(_channel, json_schema_input_type=str | int)]
+Interface = Annotated[Text, AfterValidator(_interface)]
 Signals = Annotated[dict[str, str], AfterValidator(_known_signals)]
 
 
@@ -361,7 +371,7 @@ class BusPlan(_Table):
 
     simulated: bool = True
     """The simulated compass and stand on an in-process virtual bus."""
-    interface: Text | None = None
+    interface: Interface | None = None
     """python-can interface, e.g. "socketcan" (not with simulated = true)."""
     channel: Channel | None = None
     """python-can channel, e.g. "can0"."""

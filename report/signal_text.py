@@ -11,7 +11,7 @@ def _num(value: float | None, spec: str = ".4g") -> str:
 def render_signal_text(section: SignalSection) -> str:
     """The section as text blocks: record, correlation, harmonics, Allan deviation, sampling
     and independence, settle points, acceptance by excursions."""
-    out = ["SIGNAL ANALYSIS OF THE READING (seed 004 §8.3)"]
+    out = ["SIGNAL ANALYSIS OF THE READING (Sveshnikov, §8.3)"]
     r, n = section.record, section.noise
     if r is not None:
         out.append(f"record: {r.source}")

@@ -8,6 +8,7 @@ cannot be decoded become `InvalidFrame`. Times are STAND time in milliseconds.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, fields
@@ -70,6 +71,16 @@ def signal_bounds(signal: Signal) -> tuple[float, float]:
 
 class ProtocolError(ValueError):
     """A value that cannot be encoded, or a DBC / signal map that does not fit the protocol."""
+
+
+@functools.cache
+def shipped_range(ref: str) -> tuple[float, float]:
+    """[minimum, maximum] of a signal "MESSAGE.SIGNAL" of the shipped DBC (what the simulated
+    stand can put in a frame)."""
+    message, signal = ref.split(".")
+    found = cantools.database.load_file(str(DBC_PATH)).get_message_by_name(message)
+    found_signal = found.get_signal_by_name(signal)
+    return float(found_signal.minimum), float(found_signal.maximum)
 
 
 @dataclass(frozen=True)
@@ -400,7 +411,8 @@ class Codec:
     def __init__(self, dbc_path: Path = DBC_PATH, signal_map: SignalMap | None = None) -> None:
         try:
             self._db = cantools.database.load_file(str(dbc_path))
-        except (OSError, cantools.database.UnsupportedDatabaseFormatError) as exc:
+        except (OSError, ValueError, cantools.database.UnsupportedDatabaseFormatError) as exc:
+            # ValueError: a file name cantools cannot tell the format of, a text it cannot decode
             raise ProtocolError(f"cannot load DBC {dbc_path}: {exc}") from None
         self.signal_map = signal_map or SignalMap.default()
         self._bound: dict[str, _Bound] = {}
@@ -656,7 +668,9 @@ class Codec:
         except Exception as exc:  # a corrupt frame must never kill the receiving thread
             return InvalidFrame(msg.arbitration_id, f"undecodable payload: {exc}", raw)
 
-    def _values(self, frame_id: int, raw: bytes, keys: Sequence[str]) -> dict[str, float]:
+    def _values(
+        self, frame_id: int, raw: bytes, keys: Sequence[str], *, check_range: bool = True
+    ) -> dict[str, float]:
         """Physical values of the given map entries from one frame, range-checked."""
         message = self._db.get_message_by_frame_id(frame_id)
         if len(raw) != message.length:
@@ -668,7 +682,7 @@ class Codec:
             if bound is None or bound.message is not message:
                 continue
             value = decoded[bound.signal.name]
-            if not bound.low <= value <= bound.high:
+            if check_range and not bound.low <= value <= bound.high:
                 raise _Invalid(
                     f"{bound.ref} = {value} outside [{bound.signal.minimum}, "
                     f"{bound.signal.maximum}]"
@@ -677,9 +691,11 @@ class Codec:
         return out
 
     def _decode_heading(self, frame_id: int, raw: bytes) -> HeadingFrame:
+        if self._crc is not None:  # first: a payload failing its CRC is corrupt, whatever it reads
+            crc = self._values(frame_id, raw, ("heading_crc",), check_range=False)["heading_crc"]
+            if crc != self._crc_of(raw):
+                raise _Invalid("CRC mismatch: corrupt payload")
         v = self._values(frame_id, raw, HEADING_KEYS)
-        if self._crc is not None and v["heading_crc"] != self._crc_of(raw):
-            raise _Invalid("CRC mismatch: corrupt payload")
         return HeadingFrame(
             stand_time_ms=int(v["heading_time"]),
             heading_deg=float(v["heading"]),

@@ -15,6 +15,7 @@ if TYPE_CHECKING:
     from pydantic import BaseModel
 
 TIMINGS = ("virtual", "realtime")
+MAX_RATE_HZ = 1000.0  # frame rates: every frame carries its stand time in whole milliseconds
 
 
 def param(default: Any, help: str) -> Any:
@@ -38,20 +39,20 @@ class CompassParams:
     g_cm_s2: float = param(981.0, "gravity g, cm/s^2")
     latitude_deg: float = param(46.5, "latitude phi of the stand, deg")
     rolling_error: bool = param(
-        True, "shift the settled reading by the rolling error of seed 000 eq 1.1 while rocking"
+        True, "shift the settled reading by the rolling error (Potemkin 1982, eq 1.1) while rocking"
     )
     heading_deg: float = param(120.0, "true heading of the stand (settled reading at rest), deg")
     initial_error_deg: float = param(
         0.0, "deviation of the sensitive element from equilibrium at stand time 0, deg"
     )
     transient: bool = param(
-        True, "damped precessional transient to each new equilibrium (seed 003 eqs 1-2)"
+        True, "damped precessional transient to each new equilibrium (Bezvesilna & Gura, eqs 1-2)"
     )
     undamped_period_s: float = param(5064.0, "undamped precession period 2*pi/w0, s (84.4 min)")
     damping_ratio: float = param(
         0.7, "damping xi/w0 of the precession (0.7: within 5% of a step after ~40 min)"
     )
-    nonlinear: bool = param(True, "keep the sin(alpha) term of seed 003 eq 1 (else linear)")
+    nonlinear: bool = param(True, "keep the sin(alpha) term (Bezvesilna & Gura, eq 1; else linear)")
     harmonic_p_deg_per_g: float = param(
         1.0, "reading oscillation at the rocking frequency p, deg per g of stand acceleration A*p^2"
     )
@@ -83,7 +84,7 @@ class CompassParams:
 
 @dataclass(frozen=True)
 class NoiseParams:
-    """Angle-sensor noise (seed 004 §8.3) and optional slow disturbances."""
+    """Angle-sensor noise (Sveshnikov, §8.3) and optional slow disturbances."""
 
     corr_sigma_deg: float = param(
         0.01, "sigma of the exponentially correlated noise sigma^2*exp(-mu*|tau|), deg"
@@ -95,7 +96,7 @@ class NoiseParams:
     )
     drift_deg_per_h: float = param(0.0, "slow linear drift of the reading, deg/h")
     spurious_amplitude_deg: float = param(
-        0.0, "amplitude of a spurious harmonic in the reading (seed 004 §8.3 item 2), deg"
+        0.0, "amplitude of a spurious harmonic in the reading (Sveshnikov, §8.3 item 2), deg"
     )
     spurious_period_s: float = param(60.0, "period of the spurious harmonic, s")
 
@@ -154,21 +155,86 @@ class SimConfig:
             raise SimConfigError(problems)
 
     def problems(self) -> list[tuple[str, str]]:
-        """Every inconsistent value, as (dotted field path, message)."""
+        """Every inconsistent value, as (dotted field path, message): quantities of the model
+        out of their physical domain, and values the simulated stand could not put in its
+        frames (their DBC ranges; stand times in whole milliseconds)."""
+        from gyrostand.stand.protocol import shipped_range
+
+        compass, noise, faults, stand = self.compass, self.noise, self.faults, self.stand
         positive = {
             "speedup": self.speedup,
             "heading_rate_hz": self.heading_rate_hz,
             "status_rate_hz": self.status_rate_hz,
-            "compass.undamped_period_s": self.compass.undamped_period_s,
-            "compass.C_gcm2s2": self.compass.C_gcm2s2,
-            "noise.corr_mu_per_s": self.noise.corr_mu_per_s,
-            "noise.spurious_period_s": self.noise.spurious_period_s,
+            "compass.undamped_period_s": compass.undamped_period_s,
+            "compass.C_gcm2s2": compass.C_gcm2s2,
+            "compass.lP_gcm2s2": compass.lP_gcm2s2,
+            "compass.H1_gcm2s": compass.H1_gcm2s,
+            "compass.U_rad_s": compass.U_rad_s,
+            "compass.g_cm_s2": compass.g_cm_s2,
+            "noise.corr_mu_per_s": noise.corr_mu_per_s,
+            "noise.spurious_period_s": noise.spurious_period_s,
+            "stand.max_amplitude_cm": stand.max_amplitude_cm,
+            "stand.min_period_s": stand.min_period_s,
+            "stand.max_period_s": stand.max_period_s,
         }
         found = [
             (name, f"must be a positive number, got {value}")
             for name, value in positive.items()
             if not (value > 0 and math.isfinite(value))
         ]
+        not_negative = {
+            "compass.T_s": compass.T_s,
+            "noise.corr_sigma_deg": noise.corr_sigma_deg,
+            "noise.white_sigma_deg": noise.white_sigma_deg,
+            "noise.quantum_deg": noise.quantum_deg,
+            "noise.spurious_amplitude_deg": noise.spurious_amplitude_deg,
+            "faults.stuck_at_s": faults.stuck_at_s,
+            "faults.stuck_for_s": faults.stuck_for_s,
+            "faults.silence_at_s": faults.silence_at_s,
+            "faults.silence_for_s": faults.silence_for_s,
+            "faults.amplitude_factor": faults.amplitude_factor,
+        }
+        found += [
+            (name, f"must be a number >= 0, got {value}")
+            for name, value in not_negative.items()
+            if value is not None and not (value >= 0 and math.isfinite(value))
+        ]
+        if not -90.0 < compass.latitude_deg < 90.0:
+            found.append(("compass.latitude_deg", "must be in (-90, 90)"))
+        if not 0.0 <= compass.heading_deg < 360.0:
+            found.append(("compass.heading_deg", "must be in [0, 360)"))
+        for name in ("heading_rate_hz", "status_rate_hz"):
+            if getattr(self, name) > MAX_RATE_HZ:
+                found.append(
+                    (name, f"must be <= {MAX_RATE_HZ:g} (frames carry stand time in whole ms)")
+                )
+        if stand.max_period_s < stand.min_period_s:
+            found.append(("stand.max_period_s", "must be >= min_period_s"))
+        reported = {  # what the stand puts in its frames, the DBC signal carrying it, from what
+            "faults.compass_fault_bits": (
+                faults.compass_fault_bits,
+                "GYRO_STATUS.FAULT_BITS",
+                {"faults.compass_fault_bits"},
+            ),
+            "compass.fluid_temp_c": (
+                compass.fluid_temp_c,
+                "GYRO_STATUS.FLUID_TEMP",
+                {"compass.fluid_temp_c"},
+            ),
+            "faults.amplitude_factor": (
+                faults.amplitude_factor * stand.max_amplitude_cm,
+                "STAND_MOTION.AMPLITUDE",
+                {"faults.amplitude_factor", "stand.max_amplitude_cm"},
+            ),
+        }
+        told = {name for name, _ in found}
+        for name, (value, signal, sources) in reported.items():
+            if sources & told:
+                continue
+            low, high = shipped_range(signal)
+            if not low <= value <= high:
+                outside = f"outside [{low:g}, {high:g}]"
+                found.append((name, f"would put {value:g} in {signal}, {outside}"))
         if self.timing not in TIMINGS:
             found.append(("timing", f"must be one of {', '.join(TIMINGS)}, got {self.timing!r}"))
         elif self.timing == "virtual" and self.speedup != 1.0:

@@ -43,9 +43,8 @@ def random_stream(seed: int, n: int) -> list[can.Message]:
         elif kind < 0.92:  # corrupt heading payload: one flipped bit
             msg = codec.encode_heading(t, 10.0, True, i % 16)
             msg.data[rng.randrange(8)] ^= 1 << rng.randrange(8)
-        elif kind < 0.94:  # out-of-range heading
-            msg = codec.encode_heading(t, 359.999, True, i % 16)
-            msg.data[4] = msg.data[5] = 0xFF
+        elif kind < 0.94:  # out-of-range heading, its CRC good (bad CRCs are corrupt first)
+            msg = codec.encode_heading(t, 500.0, True, i % 16, strict=False)
         elif kind < 0.96:  # wrong length
             msg = codec.encode_heading(t, 10.0, True, i % 16)
             msg.data = msg.data[:6]

@@ -40,7 +40,7 @@ runner = CliRunner()
 def test_text_output_without_plan_uses_the_paper() -> None:
     result = runner.invoke(app, ["analyze", "--csv", str(CSV)])
     assert result.exit_code == 0, result.output
-    assert "seed-000 example" in result.stderr
+    assert "example constants, start values and ship forecast of Potemkin (1982)" in result.stderr
     for heading in ("TRIALS", "COCHRAN", "FIT", "ADEQUACY", "CONTROL", "FORECAST"):
         assert heading in result.stdout
     assert "-2.328 +/- 0.534" in result.stdout

@@ -4,10 +4,9 @@ rich markup or raw control characters; unexpected failures are one line and a tr
 
 from __future__ import annotations
 
+import random
 import re
 import tempfile
-from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
@@ -21,14 +20,11 @@ from gyrostand.db.queries import CampaignHeader, new_campaign
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.frames.logfile import BatchBLFWriter, read_raw_frames
 
-from .conftest import Stand, checkpointed, db_state
+from ..acquisition.harness import ROOT
+from .cases import Case, Make, check, folder, ids, invoke, text_file
+from .conftest import Stand, checkpointed, db_state, write_plan
 
 BLF_HEADER = 144  # bytes of a BLF file header
-
-
-def invoke(*args: str) -> tuple[int, str, str]:
-    result = CliRunner().invoke(app, list(args))
-    return result.exit_code, result.stdout, result.stderr
 
 
 def small_container_blf(stand: Stand, path: Path) -> Path:
@@ -69,31 +65,56 @@ def corrupt_blocks(stand: Stand, folder: Path) -> Path:
     return path
 
 
-def text_file(name: str, content: bytes) -> Callable[[Stand, Path], Path]:
-    def make(_stand: Stand, folder: Path) -> Path:
-        path = folder / name
-        path.write_bytes(content)
+def cut_header(stand: Stand, folder: Path) -> Path:
+    path = folder / "random.blf"
+    path.write_bytes(stand.blf.read_bytes()[: BLF_HEADER // 2])
+    return path
+
+
+def plan_file(**kw: object) -> Make:
+    """The stand's kind of plan written in the test's folder, with `plan_text` keywords."""
+
+    def make(_stand: Stand, tmp: Path) -> Path:
+        return write_plan(tmp, "bad.toml", **kw)
+
+    return make
+
+
+def raw_dir_under_a_file(_stand: Stand, tmp: Path) -> Path:
+    """A plan whose raw log folder would sit inside a regular file."""
+    (tmp / "afile").write_text("not a folder\n")
+    return write_plan(tmp, "bad.toml", raw_dir=str(tmp / "afile" / "raw"))
+
+
+def raw_dir_is_a_file(_stand: Stand, tmp: Path) -> Path:
+    (tmp / "afile").write_text("not a folder\n")
+    return write_plan(tmp, "bad.toml", raw_dir=str(tmp / "afile"))
+
+
+def paper_with(*changes: tuple[bytes, bytes]) -> Make:
+    """examples/paper.csv with some substitutions (old, new)."""
+
+    def make(_stand: Stand, tmp: Path) -> Path:
+        data = PAPER_CSV.read_bytes()
+        for old, new in changes:
+            assert old in data
+            data = data.replace(old, new)
+        path = tmp / "paper.csv"
+        path.write_bytes(data)
         return path
 
     return make
 
 
+PAPER_CSV = ROOT / "examples" / "paper.csv"
+PAPER_HEADER = (
+    b"trial,role,direction_deg,amplitude_cm,period_s,delta_mean_deg,delta_var_deg2,n_obs\n"  # noqa: E501
+)
+RANDOM_BYTES = bytes(random.Random(18).randrange(256) for _ in range(4096))
 GARBAGE_ASC = b"hello\nthis is not a CAN log at all\n"
 BINARY_ASC = bytes(range(128, 256)) * 20
 BAD_TRIALS_CSV = b"a,b\n1,2\n"
 BROKEN_TOML = b"x = ["
-
-
-@dataclass(frozen=True)
-class Case:
-    """`args` may name {db} (a copy of the stand's database), {newdb} (no file there), {plan}
-    (the stand's plan), {file} (made by `make` in the test's folder) and {tmp} (that folder)."""
-
-    id: str
-    args: tuple[str, ...]
-    message: str
-    code: int = 2
-    make: Callable[[Stand, Path], Path] | None = field(default=None, compare=False)
 
 
 REPLAY = [
@@ -138,6 +159,16 @@ REPLAY = [
         text_file("notes.txt", b"notes\n"),
     ),
     Case("replay missing log", ("replay", "{tmp}/none.blf"), "no log file", 2),
+    Case("replay folder as log", ("replay", "{file}"), "no log file", 2, folder("log.blf")),
+    Case("replay empty asc", ("replay", "{file}"), "no CAN frames", 2, text_file("e.asc", b"")),
+    Case(
+        "replay random bytes as blf",
+        ("replay", "{file}"),
+        "not a BLF file",
+        2,
+        text_file("random.blf", RANDOM_BYTES),
+    ),
+    Case("replay blf cut in its header", ("replay", "{file}"), "random.blf", 2, cut_header),
 ]
 
 CASES = [
@@ -285,32 +316,234 @@ CASES = [
 ]
 
 
-def _args(case: Case, stand: Stand, tmp: Path, db: Path) -> list[str]:
-    file = case.make(stand, tmp) if case.make is not None else tmp / "unused"
-    values = {"db": db, "newdb": tmp / "new.sqlite", "plan": stand.plan, "file": file, "tmp": tmp}
-    return [arg.format(**{k: str(v) for k, v in values.items()}) for arg in case.args]
+RUN = ("campaign", "run", "{plan}", "--db", "{db}", "--quiet")
+RESUME = ("campaign", "resume", "1", "--db", "{db}", "--quiet")
+BUS = [  # nothing may be written when the bus or the raw log folder cannot be used
+    Case("run unknown interface", (*RUN, "--interface", "nosuchiface"), "'nosuchiface'"),
+    Case("resume unknown interface", (*RESUME, "--interface", "nosuchiface"), "'nosuchiface'"),
+    Case("run empty interface", (*RUN, "--interface", ""), "[bus] interface"),
+    Case(
+        "run missing socketcan channel",
+        (*RUN, "--interface", "socketcan", "--channel", "doesnotexist0"),
+        "'doesnotexist0'",
+        1,
+    ),
+    Case(
+        "resume missing socketcan channel",
+        (*RESUME, "--interface", "socketcan", "--channel", "doesnotexist0"),
+        "'doesnotexist0'",
+        1,
+    ),
+    Case("run negative seed", (*RUN, "--seed", "-1"), "[bus] seed: must be >= 0"),
+    Case("resume negative seed", (*RESUME, "--seed", "-1"), "[bus] seed: must be >= 0"),
+    Case("resume unknown timing", (*RESUME, "--timing", "warp"), "--timing must be one of"),
+    Case("resume zero speedup", (*RESUME, "--speedup", "0"), "--speedup must be > 0"),
+    Case(
+        "run raw log folder inside a file",
+        ("campaign", "run", "{file}", "--db", "{db}", "--quiet"),
+        "cannot write raw CAN logs in",
+        1,
+        raw_dir_under_a_file,
+    ),
+    Case(
+        "run raw log folder is a file",
+        ("campaign", "run", "{file}", "--db", "{db}", "--quiet"),
+        "cannot write raw CAN logs in",
+        1,
+        raw_dir_is_a_file,
+    ),
+    Case(
+        "run raw log folder inside a file, new db",
+        ("campaign", "run", "{file}", "--db", "{newdb}", "--quiet"),
+        "cannot write raw CAN logs in",
+        1,
+        raw_dir_under_a_file,
+    ),
+]
+
+IMPORT = [
+    Case(
+        "import json file",
+        ("import", "{file}", "--db", "{db}"),
+        "unsupported file type '.json'",
+        2,
+        text_file("data.json", b'{"trial": 1}'),
+    ),
+    Case(
+        "import empty csv",
+        ("import", "{file}", "--db", "{db}"),
+        "no header row",
+        2,
+        text_file("empty.csv", b""),
+    ),
+    Case(
+        "import header-only csv",
+        ("import", "{file}", "--db", "{db}"),
+        "no data rows",
+        2,
+        text_file("header.csv", PAPER_HEADER),
+    ),
+    Case(
+        "import garbage xlsx",
+        ("import", "{file}", "--db", "{db}"),
+        "cannot read it",
+        2,
+        text_file("data.xlsx", RANDOM_BYTES),
+    ),
+    Case(
+        "import truncated xlsx",
+        ("import", "{file}", "--db", "{db}"),
+        "cannot read it",
+        2,
+        text_file("data.xlsx", b"PK\x03\x04"),
+    ),
+    Case(
+        "import garbage parquet",
+        ("import", "{file}", "--db", "{db}"),
+        "cannot read it",
+        2,
+        text_file("data.parquet", RANDOM_BYTES),
+    ),
+    Case(
+        "import csv not utf-8",
+        ("import", "{file}", "--db", "{db}"),
+        "cannot read it",
+        2,
+        text_file("latin.csv", "trial,r\u00f4le\n".encode("latin-1")),
+    ),
+    Case(
+        "import folder", ("import", "{file}", "--db", "{db}"), "cannot read it", 2, folder("d.csv")
+    ),
+    Case(
+        "import unknown role",
+        ("import", "{file}", "--db", "{db}"),
+        "role = 'fitt' is not fit or control",
+        2,
+        paper_with((b",fit,", b",fitt,")),
+    ),
+    Case(
+        "import direction out of range",
+        ("import", "{file}", "--db", "{db}"),
+        "direction_deg = 412.0 is not in [0, 360)",
+        2,
+        paper_with((b"1,fit,332,", b"1,fit,412,")),
+    ),
+    Case(
+        "import row with a field too many",
+        ("import", "{file}", "--db", "{db}"),
+        "9 fields, the header has 8",
+        2,
+        paper_with((b"1,fit,332,", b"1,fit,332,0,")),
+    ),
+    Case(
+        "import empty operator",
+        ("import", str(PAPER_CSV), "--db", "{db}", "--operator", " "),
+        "operator = ' ' is not non-empty text",
+    ),
+    Case(
+        "import plan not valid",
+        ("import", str(PAPER_CSV), "--db", "{newdb}", "--plan", "{file}"),
+        "[campaign] n_obs: must be >= 2",
+        2,
+        plan_file(n_obs=1),
+    ),
+    Case(
+        "import plan missing",
+        ("import", str(PAPER_CSV), "--db", "{db}", "--plan", "{tmp}/none.toml"),
+        "cannot read the file",
+    ),
+]
+
+OPTIONS = [
+    *(
+        Case(f"{' '.join(command)} negative id", (*command, "-1", "--db", "{db}"), "No such option")
+        for command in (("campaign", "status"), ("campaign", "resume"), ("analyze",))
+    ),
+    *(
+        Case(f"{command} negative id", (command, "-1", "--db", "{db}"), "No such option")
+        for command in ("export", "report")
+    ),
+    *(
+        Case(
+            f"{' '.join(command)} id beyond any column",
+            (*command, str(10**20), "--db", "{db}"),
+            "Input should be less than or equal to 2147483647",
+        )
+        for command in (
+            ("campaign", "status"),
+            ("campaign", "resume"),
+            ("analyze",),
+            ("export",),
+            ("report",),
+        )
+    ),
+    Case(
+        "status id after -- negative",
+        ("campaign", "status", "--db", "{db}", "--", "-1"),
+        "Input should be greater than or equal to 1",
+    ),
+    Case(
+        "status id zero",
+        ("campaign", "status", "0", "--db", "{db}"),
+        "Input should be greater than or equal to 1",
+    ),
+    Case("status db empty string", ("campaign", "status", "1", "--db", ""), "is a folder"),
+    Case(
+        "status db not a url",
+        ("campaign", "status", "1", "--db", "://"),
+        "neither a file path nor a database URL",
+    ),
+    Case(
+        "status db driver not installed",
+        ("campaign", "status", "1", "--db", "nosuchdriverdb+nosuch://u@localhost/db"),
+        "unknown database dialect",
+    ),
+    Case(
+        "analyze signal empty span",
+        ("analyze", "--signal", "--log", "{blf}", "--from", "100", "--to", "50"),
+        "empty stand-time span",
+    ),
+    Case(
+        "analyze csv of two fit trials",
+        ("analyze", "--csv", "{file}"),
+        "need at least 3",
+        2,
+        paper_with((b"3,fit,", b"3,control,"), (b"4,fit,", b"4,control,")),
+    ),
+    Case(
+        "run virtual timing with speedup",
+        (*RUN, "--timing", "virtual", "--speedup", "2"),
+        "excludes --timing virtual",
+    ),
+    Case(
+        "simulate fault bits beyond the frame",
+        ("simulate", "--step", "still 5", "--log", "{tmp}/x.blf", "--compass-fault-bits", "300"),
+        "compass_fault_bits would put 300 in GYRO_STATUS.FAULT_BITS",
+    ),
+    Case(
+        "simulate heading rate beyond ms",
+        ("simulate", "--step", "still 5", "--log", "{tmp}/x.blf", "--heading-rate-hz", "1e9"),
+        "heading_rate_hz must be <= 1000",
+    ),
+    Case(
+        "export out inside a file",
+        ("export", "1", "--db", "{db}", "--out", "{file}/x.csv"),
+        "cannot write",
+        2,
+        text_file("afile", b"x"),
+    ),
+]
+
+TABLES = CASES + BUS + IMPORT + OPTIONS
 
 
-def check(case: Case, stand: Stand, tmp: Path, db: Path, extra: tuple[str, ...] = ()) -> None:
-    args = _args(case, stand, tmp, db) + list(extra)
-    before = db_state(db)
-    code, _, err = invoke(*args)
-    lines = err.splitlines()
-    assert len(lines) == 1, f"{args}: stderr is {err!r}"
-    assert lines[0].startswith("gyrostand: error: "), lines[0]
-    assert case.message in lines[0], lines[0]
-    assert code == case.code, (code, lines[0])
-    assert db_state(db) == before, f"{args} changed the database"
-    assert not (tmp / "new.sqlite").exists(), f"{args} created a database"
-
-
-@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+@pytest.mark.parametrize("case", TABLES, ids=ids(TABLES))
 def test_bad_input_is_one_line_and_touches_nothing(case: Case, stand: Stand, tmp_path: Path):
     check(case, stand, tmp_path, stand.db_copy(tmp_path))
 
 
 @pytest.mark.parametrize("existing", [True, False], ids=["existing db", "new db"])
-@pytest.mark.parametrize("case", REPLAY, ids=[c.id for c in REPLAY])
+@pytest.mark.parametrize("case", REPLAY, ids=ids(REPLAY))
 def test_unreadable_log_replays_nothing(case: Case, existing: bool, stand: Stand, tmp_path: Path):
     db = stand.db_copy(tmp_path) if existing else tmp_path / "new.sqlite"
     check(case, stand, tmp_path, db, ("--plan", str(stand.plan), "--db", str(db)))

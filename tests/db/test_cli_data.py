@@ -39,7 +39,10 @@ def test_import_without_plan_says_which_constants_it_used(paper: Path, db_path: 
     code, out, err = gyrostand("import", paper, "--db", db_path, "--operator", "V. Potemkin")
     assert code == 0
     assert out == f"imported {paper} (trials form, 6 trials, N = 5) as campaign 1\n"
-    assert err.startswith("no --plan: used the seed 000 example") and err.count("\n") == 1
+    assert (
+        err.startswith("no --plan: used the example instrument and site of Potemkin (1982)")
+        and err.count("\n") == 1
+    )
     stored = campaign(db_path, 1)
     assert (stored.operator, stored.latitude_deg, stored.source) == ("V. Potemkin", 46.5, "import")
 
