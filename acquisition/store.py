@@ -245,11 +245,6 @@ class CampaignStore:
         self._writes = 0
         return self._skip
 
-    @property
-    def re_running(self) -> bool:
-        """Still re-deriving what earlier runs committed (`re_run`)."""
-        return self._writes < self._skip
-
     def _series(self, session: Session, trial: int, j: int) -> Series:
         sid = self._series_ids.get((trial, j))
         if sid is not None:

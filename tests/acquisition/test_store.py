@@ -3,18 +3,19 @@ before the trial was marked completed (waiting for the stand's stop acknowledgem
 
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from sqlalchemy import select
+from sqlalchemy import func, select
 from typer.testing import CliRunner
 
 from gyrostand.acquisition.engine import Engine, ObservationResult
 from gyrostand.acquisition.runner import resume_store
-from gyrostand.acquisition.store import CampaignStore
+from gyrostand.acquisition.store import CampaignStore, ReRunMismatch
 from gyrostand.cli import app
 from gyrostand.db.lease import CampaignBusy, held_elsewhere
-from gyrostand.db.models import Event, Trial
+from gyrostand.db.models import Event, Observation, Trial
 from gyrostand.db.queries import ResumePoint, campaign_summary, first_incomplete_series
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.plan.model import parse_plan
@@ -121,3 +122,20 @@ def test_the_lease_stops_a_second_process_and_dies_with_its_holder(tmp_path: Pat
     with store.sessions() as session:
         kinds = session.scalars(select(Event.kind).order_by(Event.id)).all()
     assert kinds[-2:] == ["interrupted", "resume"]
+
+
+def test_a_re_run_skips_the_committed_writes_and_checks_each_observation(tmp_path: Path) -> None:
+    """`CampaignStore.re_run`: the writes earlier runs committed are skipped in order, an
+    observation re-derived differently is refused, and writes past them are stored."""
+    store = killed_after_trial_2(tmp_path)
+    committed = 2 + 2 * 2 * 3 + 2 + 1  # trials started, observations, series and trial completed
+    again = CampaignStore(store.sessions, store.campaign_id)
+    store.lease.release()
+    assert again.re_run() == committed
+    again.trial_started(1)
+    first = ObservationResult(1, 1, 1, 100.0, 0, 1, 10, 0, "")
+    again.observation(first)  # equal to the stored one: skipped
+    with pytest.raises(ReRunMismatch, match="trial 1 series 1 observation 2"):
+        again.observation(replace(first, k=2, value_deg=100.5))
+    with store.sessions() as session:
+        assert session.scalar(select(func.count(Observation.id))) == 12
