@@ -175,7 +175,7 @@ def run_campaign(
     def mark(kind: str, severity: str, message: str, status: str) -> None:
         """An event saying why, and the campaign's status (as far as the database lets us)."""
         try:
-            store.event(kind, severity, message)
+            store.run_event(kind, severity, message)
             store.set_status(status)
         except OperationalError:  # still refused: the campaign stays "running" (interrupted)
             pass

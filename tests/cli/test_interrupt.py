@@ -90,6 +90,10 @@ def test_sigint_while_the_campaign_is_stored_stops_it_with_an_event(
     assert out.startswith("campaign 2 stopped: 0 trials completed, 0 failed, 0 observations")
     assert "gyrostand campaign resume 2" in out
     assert campaign(db, 2) == ("stopped", [STOPPED_BEFORE], 0)
+    # the run's own event is no acquisition write: a resume that re-runs skips none for it
+    with sqlite3.connect(db) as connection:
+        row = connection.execute("SELECT engine_writes FROM campaign WHERE id = 2").fetchone()
+    assert row == (0,)
 
 
 def test_sigint_while_the_bus_opens_stops_the_campaign_with_an_event(
