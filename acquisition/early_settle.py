@@ -1,55 +1,55 @@
-"""When a series may start observing: the band criterion, and early settle from the settle point
-estimated online on the transient (seed 003).
+"""When a series may start observing: the band criterion, or the compass's transient model
+(seed 003, Bezvesilna & Gura) fitted online, across the stand's steps (`analysis.transient`).
 
-Record. The estimator sees the engine's settle blocks, not frames: each block is as long as one
+Record. The engine keeps every window mean since it started: settle blocks (each as long as an
 observation window, i.e. whole rocking periods while rocking, so a block mean cancels the
-reading's components at the rocking frequency p and 2p, and averages the sensor's correlated
-noise (20 s correlation time against 30-60 s blocks). One estimate per block: a modest cadence
-(every 30-60 stand seconds) on a record of at most a few hundred points. The mean over a block of
-e^(-xi t) (A_c sin(omega t) + A_s cos(omega t)) is again of that form at the block's middle (other
-A_c, A_s), so the block means fitted at their mid times leave the settle point R unbiased, and
-the fitted model predicts window means: what an observation is.
+reading's components at the rocking frequency p and 2p and averages the sensor's correlated
+noise) and observations, and the stand time of each start/stop acknowledgement (a step of the
+compass's equilibrium). The series' settle point R_j is fitted with the state carried over from
+the series before (the element does not jump at a step), so only R_j is new: this is what makes
+an estimate good after ~20 minutes of an 84-minute compass rather than ~40.
 
-Rule. With tol = tolerance_fraction x the plan's expected S{<delta>}_e (seed 000 eq 2.6), the
-series observes from the end of the first block at which
+Rule. With tol = tolerance_fraction x the plan's expected S{<delta>}_e (Potemkin 1982, eq 2.6),
+the series observes from the end of the first block at which
 
-1. the least-squares fit of the record so far (seed 003 eqs 5-6, damped basis of eq 3 with the
-   plan's omega and xi) gives R^ a standard error <= tol,
-2. the last `stable_estimates` estimates R^ lie within tol of each other (max - min), and
-3. the fitted transient, predicted over the N observation windows to come, stays within +-tol
-   of R^: the observations are measured readings, so this is what keeps each of them within
-   tol of the settle point.
+1. R_j has a standard error <= tol, and
+2. the last `stable_estimates` estimates of R_j lie within tol of each other (max - min), and
+3. method "estimate": the transient predicted over the N observation windows to come, plus
+   2 standard errors, stays within transient_fraction x S_e: so the transient left in each
+   observation is bounded by a stated fraction of S_e. Method "compensated" skips 3: each
+   observation is compensated instead (the fitted transient over its window is subtracted at
+   the end of the series, `compensation`), and R_j's standard error is the compensation's.
 
-Condition 3 is what takes the time: the estimate is typically stable after ~20 minutes of an
-84-minute compass, the reading needs ~40 to come within 0.015 deg of it. The band criterion is
-not a fallback (it may hold on the overshoot of a damped transient, 4.6 % of the step for
-xi/omega0 = 0.7, before the estimate does); it is only evaluated to record the time saved:
-measured when it held before, else predicted from the fitted transient. A transient the model
-does not describe (wrong period or damping in the plan) keeps the standard error up and ends in
-the settle timeout.
-
-omega and xi come from the plan (instrument data), not from the record: fitting them too
-(`analysis.settle.estimate_settle_point_free`) on records shorter than a period gave confident but
-wrong fits (on the paper campaign, 4 of 12 series started within 10 minutes, 0.10-0.28 deg off)
-at ~100 times the cost. Fit them once on a whole recorded transient instead, and know them well:
-a plan 10 % short on the period, or 0.05 low on the damping ratio, about doubles the error of the
-series means; as much the other way only costs time (bench/bench_early_settle.py).
+The band criterion is only evaluated to record the time saved: measured when it held before,
+else predicted from the fitted transient. A transient the model does not describe (wrong period
+or damping in the plan) keeps the standard error up and ends in the settle timeout. omega0 and
+the damping come from the plan (instrument data); the analysis re-estimates them from the whole
+record (`report.transient`). A plan 10 % short on the period, or 0.05 low on the damping ratio,
+biases the estimate (bench/bench_early_settle.py prints by how much).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from gyrostand.analysis.angles import about, wrap180
 from gyrostand.analysis.errors import AnalysisError
-from gyrostand.analysis.settle import SettleEstimate, SettleOutcome, estimate_settle_point
+from gyrostand.analysis.settle import SettleOutcome
+from gyrostand.analysis.transient import (
+    Segments,
+    TransientFit,
+    TransientModel,
+    Windows,
+    fit_transient,
+)
 from gyrostand.plan.model import EstimatePlan, SettlePlan
 
-MIN_BLOCKS = 6  # 3 state parameters + 3 degrees of freedom for S^2 and the noise correlation
-_PREDICTION_POINTS = 64  # grid on which the transient is predicted over the observation span
+MIN_BLOCKS = 6  # window means of the series before its first estimate
+KEEP_SEGMENTS = 4  # the record fitted: this series and the three before (older ones add little)
 
 
 def _drift(means: Sequence[float]) -> float:
@@ -75,40 +75,97 @@ def hold_blocks(settle: SettlePlan, width_s: float) -> int:
     return max(1, math.ceil(settle.hold_s / width_s))
 
 
+class TransientRecord:
+    """Window means (stand seconds, headings) and the steps of the equilibrium since the engine
+    started; fitted on the last KEEP_SEGMENTS segments."""
+
+    def __init__(self) -> None:
+        self._steps: list[float] = []
+        self._free: list[bool] = []
+        self._rows: list[tuple[int, float, float, float]] = []  # segment, mid, width, deg
+        self._branch: float | None = None
+
+    @property
+    def segment(self) -> int:
+        """The current segment (series) index; -1 before the first step."""
+        return len(self._steps) - 1
+
+    def step(self, t_s: float) -> None:
+        """The equilibrium may move at stand second t_s (a start or stop took effect). A
+        segment that got no window mean is dropped and its successor starts free."""
+        empty = bool(self._steps) and not any(r[0] == self.segment for r in self._rows)
+        if empty:
+            self._steps.pop()
+            self._free.pop()
+        self._free.append(not self._steps or empty)
+        self._steps.append(t_s)
+
+    def add(self, start_s: float, end_s: float, heading_deg: float) -> None:
+        """A window mean over [start_s, end_s); a window before any step starts segment 0."""
+        if not self._steps:
+            self.step(start_s)
+        if self._branch is None:
+            self._branch = heading_deg
+        value = float(about(self._branch, heading_deg))
+        self._rows.append((self.segment, (start_s + end_s) / 2, end_s - start_s, value))
+
+    def fit(self, model: TransientModel) -> tuple[TransientFit, int] | None:
+        """The fit of the last KEEP_SEGMENTS segments and the current segment's index in it;
+        None while it cannot be fitted (too short, degenerate)."""
+        first = max(0, self.segment - KEEP_SEGMENTS + 1)
+        rows = [(k - first, *rest) for k, *rest in self._rows if k >= first]
+        seg = Segments(tuple(self._steps[first:]), (True, *self._free[first + 1 :]))
+        try:
+            return fit_transient(model, seg, Windows.of(rows)), self.segment - first
+        except AnalysisError:
+            return None
+
+
 @dataclass(frozen=True)
 class SettleCheck:
-    """The early-settle rule evaluated at the end of a settle block, ``t_s`` stand seconds from
-    the settle start; angles are deviations (deg) from the trial's reference heading."""
+    """The rule evaluated at the end of a settle block, ``t_s`` stand seconds from the settle
+    start; ``settle_point_deg`` is R_j (a heading; None while the record cannot be fitted)."""
 
     t_s: float
-    estimate: SettleEstimate | None  # None while the record cannot be fitted yet
+    settle_point_deg: float | None
+    standard_error_deg: float
     spread_deg: float  # max - min of the last `stable_estimates` estimates (inf: fewer yet)
-    transient_deg: float  # largest |predicted transient| over the observation span
-    tolerance_deg: float
+    transient_deg: float  # largest |predicted transient| + 2 SE over the observation windows
+    plan: EstimatePlan
 
     @property
     def stable(self) -> bool:
         """Conditions 1 and 2: the estimate itself is known within the tolerance."""
-        e, tol = self.estimate, self.tolerance_deg
-        return e is not None and e.standard_error_deg <= tol and self.spread_deg <= tol
+        tol = self.plan.tolerance_deg
+        known = self.settle_point_deg is not None and self.standard_error_deg <= tol
+        return known and self.spread_deg <= tol
 
     @property
     def ready(self) -> bool:
-        """All three conditions: observe from here."""
-        return self.stable and self.transient_deg <= self.tolerance_deg
+        """Observe from here (condition 3 unless compensated)."""
+        bounded = self.transient_deg <= self.plan.transient_tolerance_deg
+        return self.stable and (self.plan.compensated or bounded)
 
 
 def describe(outcome: SettleOutcome, check: SettleCheck) -> str:
-    """The "early settle" event message (for people: the series stores `outcome` itself);
-    `check` adds the rule's figures."""
+    """The "early settle" event message (for people: the series stores `outcome` itself)."""
+    plan = check.plan
     text = (
-        f"settled by the estimate after {outcome.settle_s:.1f} s: settle point "
+        f"settled by the transient model after {outcome.settle_s:.1f} s: settle point "
         f"{outcome.estimate_deg:.5f} deg (SE {outcome.standard_error_deg:.5f} deg, stable since "
         f"{outcome.stable_since_s:.1f} s at {outcome.stable_estimate_deg:.5f} deg, last estimates "
-        f"within {check.spread_deg:.5f} deg, "
-        f"predicted transient over the observations {check.transient_deg:.5f} deg; "
-        f"tolerance {check.tolerance_deg:.5f} deg); "
+        f"within {check.spread_deg:.5f} deg; tolerance {plan.tolerance_deg:.5f} deg); "
     )
+    if plan.compensated:
+        text += (
+            f"transient over the observations {check.transient_deg:.5f} deg (fit + 2 SE), "
+            "to be compensated; "
+        )
+    else:
+        text += (
+            f"transient over the observations at most {check.transient_deg:.5f} deg (fit + 2 SE; "
+            f"bound {plan.transient_tolerance_deg:.5f} deg); "
+        )
     if outcome.band_s is None:
         return text + "band criterion not predicted within max_wait_s: time saved unknown"
     how = "held" if outcome.band_measured else "predicted"
@@ -118,66 +175,79 @@ def describe(outcome: SettleOutcome, check: SettleCheck) -> str:
 
 
 class EarlySettle:
-    """The settle record of one series and the rule above, fed one settle block at a time."""
+    """The rule above for one series, fed one settle block at a time (the blocks themselves go
+    to the shared `TransientRecord` first)."""
 
-    def __init__(self, plan: EstimatePlan, observe_span_s: float) -> None:
+    def __init__(
+        self,
+        plan: EstimatePlan,
+        record: TransientRecord,
+        settle_start_ms: int,
+        window_s: float,
+        step_s: float,
+        n_obs: int,
+    ) -> None:
         self.plan = plan
-        self.observe_span_s = observe_span_s
-        self._t_s: list[float] = []
-        self._mean_deg: list[float] = []
-        self._estimates_deg: list[float] = []
+        self.record = record
+        self.settle_start_ms = settle_start_ms
+        self.window_s = window_s
+        self.step_s = step_s  # window + spacing: where the observation windows will lie
+        self.n_obs = n_obs
+        self._estimates: list[float] = []
+        self._blocks = 0
         self.last: SettleCheck | None = None
         self.stable: SettleCheck | None = None  # first check meeting conditions 1-2
+        self.fit: tuple[TransientFit, int] | None = None
         self.band_s: float | None = None  # first block end where the band criterion held
 
-    def add_block(self, mid_s: float, mean_deg: float, end_s: float, band: bool) -> SettleCheck:
-        """Add a block mean (deg) at its middle time, note whether the band criterion holds at
-        its end, and evaluate the rule there (times in stand seconds from the settle start)."""
+    def check(self, end_ms: int, band: bool) -> SettleCheck:
+        """Evaluate the rule at a block end (stand ms) after its mean went to the record; `band`
+        tells whether the band criterion holds there."""
+        since, end_s = (end_ms - self.settle_start_ms) / 1000, end_ms / 1000
         if band and self.band_s is None:
-            self.band_s = end_s
-        self._t_s.append(mid_s)
-        self._mean_deg.append(mean_deg)
-        tol = self.plan.tolerance_deg
-        estimate = self._fit() if len(self._t_s) >= MIN_BLOCKS else None
-        spread = transient = math.inf
-        if estimate is not None:
-            r = estimate.settle_point_deg
-            self._estimates_deg.append(r)
-            recent = self._estimates_deg[-self.plan.stable_estimates :]
+            self.band_s = since
+        self._blocks += 1
+        r, se, spread, transient = None, math.inf, math.inf, math.inf
+        self.fit = self.record.fit(self.plan.model) if self._blocks >= MIN_BLOCKS else None
+        if self.fit is not None:
+            fit, j = self.fit
+            r, se = fit.settle_point(j)
+            self._estimates.append(r)
+            recent = self._estimates[-self.plan.stable_estimates :]
             if len(recent) == self.plan.stable_estimates:
                 spread = max(recent) - min(recent)
-            ahead = np.linspace(end_s, end_s + self.observe_span_s, _PREDICTION_POINTS)
-            transient = float(np.max(np.abs(estimate.predict(ahead) - r)))
-        self.last = SettleCheck(end_s, estimate, spread, transient, tol)
+            mids = end_s + self.window_s / 2 + self.step_s * np.arange(self.n_obs)
+            transient = fit.bound(j, mids, self.window_s)
+        self.last = SettleCheck(since, r, se, spread, transient, self.plan)
         if self.last.stable and self.stable is None:
             self.stable = self.last
         return self.last
 
-    def _fit(self) -> SettleEstimate | None:
-        t, y, p = np.array(self._t_s), np.array(self._mean_deg), self.plan
-        try:
-            return estimate_settle_point(t, y, p.omega_rad_s, p.damping_per_s)
-        except AnalysisError:  # too short or degenerate yet: no estimate at this block
-            return None
-
     def outcome(
-        self, reference_deg: float, means_deg: Sequence[float], width_s: float, settle: SettlePlan
+        self, reference_deg: float, means_deg: Sequence[float], settle: SettlePlan
     ) -> SettleOutcome:
-        """The outcome once `last` is ready; `means_deg` are all block means of the series (for
-        the band prediction), `reference_deg` turns deviations into headings."""
-        check, stable = self.last, self.stable
-        assert check is not None and check.ready and check.estimate is not None
-        assert stable is not None and stable.estimate is not None
+        """The outcome once `last` is ready; `means_deg` are all block means of the series as
+        deviations from `reference_deg` (for the band prediction)."""
+        check, stable, fitted = self.last, self.stable, self.fit
+        assert check is not None and check.ready and check.settle_point_deg is not None
+        assert stable is not None and stable.settle_point_deg is not None and fitted is not None
         band_s = self.band_s
         if band_s is None:
-            band_s = predict_band_settle_s(means_deg, width_s, check.t_s, check.estimate, settle)
+            fit, j = fitted
+            start = self.settle_start_ms / 1000
+
+            def predict(t_s: np.ndarray) -> np.ndarray:
+                value = fit.settle_point(j)[0] + fit.transient(j, start + t_s, self.window_s)[0]
+                return wrap180(value - reference_deg)
+
+            band_s = predict_band_settle_s(means_deg, self.window_s, check.t_s, predict, settle)
         return SettleOutcome(
-            criterion="estimate",
+            criterion="compensated" if self.plan.compensated else "estimate",
             settle_s=check.t_s,
-            estimate_deg=reference_deg + check.estimate.settle_point_deg,
-            standard_error_deg=check.estimate.standard_error_deg,
+            estimate_deg=float(about(reference_deg, check.settle_point_deg)),
+            standard_error_deg=check.standard_error_deg,
             stable_since_s=stable.t_s,
-            stable_estimate_deg=reference_deg + stable.estimate.settle_point_deg,
+            stable_estimate_deg=float(about(reference_deg, stable.settle_point_deg)),
             band_s=band_s,
             band_measured=self.band_s is not None,
         )
@@ -187,7 +257,7 @@ def predict_band_settle_s(
     means_deg: Sequence[float],
     width_s: float,
     end_s: float,
-    estimate: SettleEstimate,
+    predict: Callable[[np.ndarray], np.ndarray],
     settle: SettlePlan,
 ) -> float | None:
     """When (stand seconds from the settle start) the band criterion would first hold if the
@@ -197,7 +267,7 @@ def predict_band_settle_s(
     need = hold_blocks(settle, width_s)
     n_ahead = max(0, math.floor((settle.max_wait_s - end_s) / width_s))
     ahead_end = end_s + width_s * np.arange(1, n_ahead + 1)
-    record = [*means_deg, *estimate.predict(ahead_end - width_s / 2).tolist()]
+    record = [*means_deg, *predict(ahead_end - width_s / 2).tolist()]
     for k, t in enumerate(ahead_end, start=len(means_deg) + 1):
         if k >= need and band_settled(record[k - need : k], settle):
             return float(t)

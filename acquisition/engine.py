@@ -8,8 +8,9 @@ how the stream is cut into batches nor on how fast it arrives. Per trial i (seed
     stand tracks it -> settle -> N observations, series j = 2 -> stop
 
 Settled means the plan's band criterion holds over the settle blocks (window-long means), or,
-with `[settle] method = "estimate"`, that the settle point estimated online from the transient
-is stable and the reading predicted to stay near it (`acquisition.early_settle`, seed 003).
+with `[settle] method = "estimate"` / "compensated", the compass's transient model fitted online
+(`acquisition.early_settle`, seed 003): the settle point is known and the transient left over
+the observations bounded, or compensated at the end of the series.
 
 Commands go out through a `Commander` (the live one talks to the stand; replay's does nothing):
 in both cases the engine waits for the stand's acknowledgement IN THE STREAM, so a replay of the
@@ -33,13 +34,19 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Literal, Protocol
 
 import numpy as np
 
-from gyrostand.acquisition.early_settle import EarlySettle, band_settled, describe, hold_blocks
+from gyrostand.acquisition.early_settle import (
+    EarlySettle,
+    TransientRecord,
+    band_settled,
+    describe,
+    hold_blocks,
+)
 from gyrostand.analysis.angles import wrap180
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.frames.batch import FrameBatch, Headings, Statuses
@@ -100,6 +107,17 @@ class ObservationResult:
 
 
 @dataclass(frozen=True)
+class SeriesCompensation:
+    """The transient subtracted from observations ``first_k``, ``first_k + 1``, ... of a
+    compensated series (deg each, the fitted transient over the observation's window) and the
+    standard error of the series' settle point, which the compensated mean carries."""
+
+    first_k: int
+    transient_deg: tuple[float, ...]
+    standard_error_deg: float
+
+
+@dataclass(frozen=True)
 class Measured:
     """What the stand reported doing during series j = 2 (mean of its status frames)."""
 
@@ -117,7 +135,9 @@ class Sink(Protocol):
     def series_settling(self, trial: int, j: int, t_ms: int) -> None: ...
     def series_settled(self, trial: int, j: int, t_ms: int, outcome: SettleOutcome) -> None: ...
     def observation(self, obs: ObservationResult) -> None: ...
-    def series_completed(self, trial: int, j: int) -> None: ...
+    def series_completed(
+        self, trial: int, j: int, compensation: SeriesCompensation | None = None
+    ) -> None: ...
     def trial_completed(self, trial: int, measured: Measured | None) -> None: ...
     def trial_failed(self, trial: int, j: int | None, reason: str) -> None: ...
     def event(
@@ -308,9 +328,12 @@ class Engine:
         self._then = Phase.DONE
         self._phase_start_ms = 0
         self._window: _Window | None = None
-        self._blocks: list[tuple[float, int]] = []  # (mean deviation ndeg, end ms) per block
+        self._blocks: list[tuple[int, int, float]] = []  # (start ms, end ms, mean dev ndeg)
         self._settle_start: int | None = None
-        self._early: EarlySettle | None = None  # settle.method = "estimate"
+        self._early: EarlySettle | None = None  # settle.method = "estimate" / "compensated"
+        self._record = TransientRecord()  # window means and equilibrium steps of this run
+        self._step_ms: int | None = None  # the last start/stop that took effect (this run)
+        self._windows: list[tuple[int, int]] = []  # the series' observation windows (ms)
         self._series_errors = 0
         self._motion: list[tuple[float, float, float]] = []
         self._last_status_text = ""
@@ -333,6 +356,7 @@ class Engine:
         self._j = 2 if 1 in done.series_done else 1
         self._k = done.committed.get(self._j, 0) + 1
         self._values = []
+        self._windows = []
         commands: list[Command] = [] if self._stopped else [Command("stop")]
         if self._j == 1:
             self._send(commands, Phase.STILL)
@@ -375,10 +399,6 @@ class Engine:
             self._window = None
             self._series_errors = 0
             self._early = None
-            estimate = self.plan.settle.estimate
-            if estimate is not None:
-                step_ms = self._window_ms() + round(self.plan.observation.spacing_s * 1000)
-                self._early = EarlySettle(estimate, self.plan.n_obs * step_ms / 1000)
 
     @property
     def _tidx(self) -> int | None:
@@ -732,6 +752,9 @@ class Engine:
         command = self._pending.pop(0)
         if command.kind == "stop":
             self._stopped = True
+        if command.kind in ("start", "stop"):  # the compass's equilibrium may move now
+            self._step_ms = ack.stand_time_ms
+            self._record.step(ack.stand_time_ms / 1000)
         if self._pending:
             self._issue_next()
         elif self._then is Phase.DONE:
@@ -1048,27 +1071,40 @@ class Engine:
 
     def _close_settle_block(self, w: _Window) -> None:
         assert self._settle_start is not None and self._trial is not None
-        self._blocks.append((w.mean_ndeg(), w.end_ms))
+        self._blocks.append((w.start_ms, w.end_ms, w.mean_ndeg()))
         width = w.end_ms - w.start_ms
         settle = self.plan.settle
         need = hold_blocks(settle, width / 1000)
-        recent = [m / NANO for m, _ in self._blocks[-need:]]
+        recent = [m / NANO for _, _, m in self._blocks[-need:]]
         band = len(recent) == need and not any(math.isnan(m) for m in recent)
         band = band and band_settled(recent, settle)
         outcome: SettleOutcome | None = None
         waited_s = (w.end_ms - self._settle_start) / 1000
-        if self._early is None:
+        if w.used:  # (frames are only used once the reference heading is known)
+            assert self._ref is not None
+            self._record.add(w.start_ms / 1000, w.end_ms / 1000, self._ref + w.mean_ndeg() / NANO)
+        estimate = settle.estimate
+        if estimate is None:
             if band:
                 assert self._ref is not None
                 outcome = SettleOutcome(
                     "band", waited_s, self._ref + sum(recent) / need, band_s=waited_s
                 )
-        elif w.used:  # (frames are only used once the reference heading is known)
-            start = self._settle_start
-            mid_s, end_s = ((w.start_ms + w.end_ms) / 2 - start) / 1000, (w.end_ms - start) / 1000
-            if self._early.add_block(mid_s, w.mean_ndeg() / NANO, end_s, band).ready:
+        elif w.used:
+            if self._early is None:
+                spacing = round(self.plan.observation.spacing_s * 1000)
+                self._early = EarlySettle(
+                    estimate,
+                    self._record,
+                    self._settle_start,
+                    width / 1000,
+                    (width + spacing) / 1000,
+                    self.plan.n_obs,
+                )
+            if self._early.check(w.end_ms, band).ready:
                 outcome = self._early_settled(w)
         if outcome is not None:
+            outcome = replace(outcome, step_ms=self._step_ms, blocks=self._settle_record())
             self._settle_durations.append(w.end_ms - self._settle_start)
             self.sink.series_settled(self._trial.index, self._j, w.end_ms, outcome)
             self._enter(Phase.OBSERVE)
@@ -1085,24 +1121,34 @@ class Engine:
             next_start += (self._last_t - next_start) // width * width
         self._window = _Window(next_start, next_start + width)
 
+    def _settle_record(self) -> tuple[tuple[int, int, float], ...]:
+        """The series' settle blocks as (start ms, end ms, mean heading deg), those with frames."""
+        assert self._ref is not None
+        return tuple(
+            (start, end, self._ref + mean / NANO)
+            for start, end, mean in self._blocks
+            if not math.isnan(mean)
+        )
+
     def _why_not(self) -> str:
-        """What the early-settle rule last saw, for the settle timeout message."""
+        """What the transient-model rule last saw, for the settle timeout message."""
         check = None if self._early is None else self._early.last
-        if check is None or check.estimate is None:
+        if check is None or check.settle_point_deg is None:
             return ""
+        plan = check.plan
         return (
-            f" (estimate: SE {check.estimate.standard_error_deg:.5f} deg, last estimates within "
-            f"{check.spread_deg:.5f} deg, predicted transient {check.transient_deg:.5f} deg; "
-            f"tolerance {check.tolerance_deg:.5f} deg)"
+            f" (transient model: SE {check.standard_error_deg:.5f} deg, last estimates within "
+            f"{check.spread_deg:.5f} deg, tolerance {plan.tolerance_deg:.5f} deg; transient "
+            f"over the observations {check.transient_deg:.5f} deg, bound "
+            f"{plan.transient_tolerance_deg:.5f} deg)"
         )
 
     def _early_settled(self, w: _Window) -> SettleOutcome:
         """How an early-settle series settled (also told in an "early settle" event with the
         estimate and the time saved against the band criterion)."""
         assert self._early is not None and self._early.last is not None and self._ref is not None
-        means = [m / NANO for m, _ in self._blocks if not math.isnan(m)]
-        width_s = (w.end_ms - w.start_ms) / 1000
-        outcome = self._early.outcome(self._ref, means, width_s, self.plan.settle)
+        means = [m / NANO for _, _, m in self._blocks if not math.isnan(m)]
+        outcome = self._early.outcome(self._ref, means, self.plan.settle)
         message = describe(outcome, self._early.last)
         self.sink.event("early settle", "info", message, self._tidx, self._j, w.end_ms)
         return outcome
@@ -1129,6 +1175,8 @@ class Engine:
             trial.index, self._j, self._k, value, w.start_ms, w.end_ms, w.used, w.lost, flags
         )
         self.sink.observation(obs)
+        self._record.add(w.start_ms / 1000, w.end_ms / 1000, value)
+        self._windows.append((w.start_ms, w.end_ms))
         if stuck:
             self.sink.event(
                 "stuck sensor",
@@ -1155,13 +1203,30 @@ class Engine:
             start = w.end_ms + round(self.plan.observation.spacing_s * 1000)
             self._window = _Window(start, start + (w.end_ms - w.start_ms), runs=True)
             return
-        self.sink.series_completed(trial.index, self._j)
+        self.sink.series_completed(trial.index, self._j, self._compensation())
         self._window = None
+        self._windows = []
         if self._j == 1:
             self._j, self._k, self._values = 2, 1, []
             self._send(self._rocking_commands(), Phase.TRACKING)
         else:
             self._send([Command("stop")], Phase.DONE)
+
+    def _compensation(self) -> SeriesCompensation | None:
+        """Compensated series: the fitted transient over each observation window of this run
+        (the fit now includes the observations themselves). None otherwise, or when the record
+        cannot be fitted (the analysis then says the series is not compensated)."""
+        estimate = self.plan.settle.estimate
+        if estimate is None or not estimate.compensated or not self._windows:
+            return None
+        fitted = self._record.fit(estimate.model)
+        if fitted is None:
+            return None
+        fit, j = fitted
+        ms = np.array(self._windows, dtype=float)
+        values, _ = fit.transient(j, ms.mean(axis=1) / 1000, (ms[:, 1] - ms[:, 0]) / 1000)
+        first_k = self.plan.n_obs - len(self._windows) + 1
+        return SeriesCompensation(first_k, tuple(float(v) for v in values), fit.settle_point(j)[1])
 
     def _trial_completed(self) -> None:
         assert self._trial is not None
@@ -1181,7 +1246,7 @@ class Engine:
     def snapshot(self) -> Snapshot:
         spread = None
         if self.phase is Phase.SETTLE and len(self._blocks) >= 2:
-            means = [m for m, _ in self._blocks[-5:] if not math.isnan(m)]
+            means = [m for _, _, m in self._blocks[-5:] if not math.isnan(m)]
             if means:
                 spread = (max(means) - min(means)) / NANO / 2
         return Snapshot(

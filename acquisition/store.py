@@ -13,7 +13,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand import SOFTWARE_VERSION
-from gyrostand.acquisition.engine import Measured, ObservationResult, TrialState
+from gyrostand.acquisition.engine import Measured, ObservationResult, SeriesCompensation, TrialState
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.db.lease import take_lease
 from gyrostand.db.models import Campaign, Event, Observation, RawLogSegment, Series, Trial
@@ -300,8 +300,22 @@ class CampaignStore:
             )
 
     @_engine_write
-    def series_completed(self, session: Session, trial: int, j: int) -> None:
-        self._series(session, trial, j).status = "completed"
+    def series_completed(
+        self,
+        session: Session,
+        trial: int,
+        j: int,
+        compensation: SeriesCompensation | None = None,
+    ) -> None:
+        series = self._series(session, trial, j)
+        series.status = "completed"
+        if compensation is None:
+            return
+        series.compensation_se_deg = compensation.standard_error_deg
+        ks = range(compensation.first_k, compensation.first_k + len(compensation.transient_deg))
+        by_k = dict(zip(ks, compensation.transient_deg, strict=True))
+        for obs in session.scalars(select(Observation).where(Observation.series_id == series.id)):
+            obs.compensation_deg = by_k.get(obs.k)
 
     @_engine_write
     def trial_completed(self, session: Session, trial: int, measured: Measured | None) -> None:

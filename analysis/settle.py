@@ -35,12 +35,15 @@ SETTLE_CRITERIA = ("band", "estimate")
 @dataclass(frozen=True)
 class SettleOutcome:
     """How a series settled, as acquisition records it with the series: by the plan's band
-    criterion (``criterion`` "band": it waited ``settle_s``) or by the settle point estimated
-    from the transient ("estimate", Bezvesilna & Gura). ``settle_s`` counts stand seconds from
-    the settle start; ``estimate_deg`` is the settle point the series starts from. For an early
-    settle: the estimate's standard error, since when it was stable and where, and when the band
-    criterion held on the readings (``band_measured``) or is predicted to hold on the fitted
-    transient (None: not within the plan's max_wait_s)."""
+    criterion (``criterion`` "band": it waited ``settle_s``) or by the compass's transient model
+    ("estimate"; "compensated": observed during the transient, Bezvesilna & Gura). ``settle_s``
+    counts stand seconds from the settle start; ``estimate_deg`` is the settle point the series
+    starts from. For the model criteria: the estimate's standard error, since when it was stable
+    and where, and when the band criterion held on the readings (``band_measured``) or is
+    predicted to hold on the fitted transient (None: not within the plan's max_wait_s).
+    ``step_ms`` is the stand time of the start/stop that began the series' transient (None: not
+    seen in this run) and ``blocks`` the settle record, (start ms, end ms, mean heading deg) per
+    block, so the analysis can fit the transient afterwards whatever the criterion."""
 
     criterion: str
     settle_s: float
@@ -50,6 +53,8 @@ class SettleOutcome:
     stable_estimate_deg: float | None = None
     band_s: float | None = None
     band_measured: bool = True
+    step_ms: int | None = None
+    blocks: tuple[tuple[int, int, float], ...] = ()
 
     @property
     def saved_s(self) -> float | None:
@@ -62,7 +67,8 @@ class SettleOutcome:
 
     @classmethod
     def from_dict(cls, record: dict[str, object]) -> Self:
-        return cls(**record)  # type: ignore[arg-type]
+        blocks = tuple(tuple(b) for b in record.get("blocks", ()))  # type: ignore[attr-defined]
+        return cls(**{**record, "blocks": blocks})  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -72,7 +78,7 @@ class SettleEstimate:
     ``settle_point_deg`` is R^ on the branch of the record's first reading (heading is unwrapped
     first, so near north it may lie outside [0, 360)). ``standard_error_deg`` is the standard
     error of R^ from S^2 (X^T X)^-1, multiplied by ``se_inflation`` for correlated reading noise
-    (see ``_variance_inflation``). ``amplitude_deg`` and
+    (see ``variance_inflation``). ``amplitude_deg`` and
     ``phase_rad`` describe the oscillation at ``t0_s``; ``omega_se_rad_s`` and
     ``damping_se_per_s`` are set only when omega and xi were estimated too."""
 
@@ -170,7 +176,7 @@ def _estimate(
 ) -> SettleEstimate:
     dof = t.size - n_params
     s2 = float(np.sum(residuals**2)) / dof if dof > 0 else float("nan")
-    inflation = np.sqrt(_variance_inflation(residuals))
+    inflation = np.sqrt(variance_inflation(residuals))
     se = np.sqrt(s2 * var_r_unscaled) * inflation
     return SettleEstimate(
         settle_point_deg=float(coef[0]),
@@ -189,7 +195,7 @@ def _estimate(
     )
 
 
-def _variance_inflation(residuals: np.ndarray) -> float:
+def variance_inflation(residuals: np.ndarray) -> float:
     """Long-run variance factor 1 + 2 sum_k rho_k of the residuals, for noise that is
     exponentially correlated plus white (seed 004's model: rho_k = rho_1 phi^(k-1), k >= 1), so
     1 + 2 rho_1 / (1 - phi), phi from the lag where rho falls to rho_1 / 2. For AR(1) noise it is

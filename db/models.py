@@ -171,6 +171,7 @@ class Trial(Base):
         CheckConstraint("meas_period_s IS NULL OR meas_period_s > 0", name="meas_period"),
         CheckConstraint(nonnegative_or_null("summary_delta_var_deg2"), name="summary_var"),
         CheckConstraint("summary_n IS NULL OR summary_n >= 2", name="summary_n"),
+        CheckConstraint(nonnegative_or_null("compensation_se_deg"), name="compensation_se"),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
@@ -236,6 +237,7 @@ class Series(Base):
         ),
         CheckConstraint(nonnegative_or_null("summary_variance_deg2"), name="summary_variance"),
         CheckConstraint("summary_n IS NULL OR summary_n >= 2", name="summary_n"),
+        CheckConstraint(nonnegative_or_null("compensation_se_deg"), name="compensation_se"),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
@@ -250,6 +252,9 @@ class Series(Base):
     summary_mean_deg: Mapped[float | None] = mapped_column(Float)
     summary_variance_deg2: Mapped[float | None] = mapped_column(Float)
     summary_n: Mapped[int | None] = mapped_column(Integer)
+    compensation_se_deg: Mapped[float | None] = mapped_column(Float)
+    """Compensated series: the SE of its settle point from the transient fit, which the mean of
+    its compensated observations carries on top of their scatter."""
 
     trial: Mapped[Trial] = relationship(back_populates="series")
     observations: Mapped[list[Observation]] = relationship(
@@ -287,6 +292,13 @@ class Observation(Base):
     frames_lost: Mapped[int | None] = mapped_column(Integer)
     flags: Mapped[str] = mapped_column(String(200), default="")
     """Comma-separated anomaly flags (empty when clean)."""
+    compensation_deg: Mapped[float | None] = mapped_column(Float)
+    """The fitted transient over the window (compensated series; NULL: not compensated)."""
+
+    @property
+    def corrected_deg(self) -> float:
+        """The reading the analysis uses: value_deg minus the compensation, if any."""
+        return self.value_deg - (self.compensation_deg or 0.0)
 
     series: Mapped[Series] = relationship(back_populates="observations")
 

@@ -37,6 +37,7 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
+from gyrostand.analysis.transient import TransientModel
 from gyrostand.stand.protocol import SignalMap
 from gyrostand.stand.simconfig import SimConfigError, simulator_config, simulator_tables
 from gyrostand.stand.tables import TABLE_CONFIG, check, problems
@@ -52,7 +53,9 @@ ESTIMATE_KEYS = (
     "expected_se_deg",
     "tolerance_fraction",
     "stable_estimates",
+    "transient_fraction",
 )
+TRANSIENT_KEYS = ESTIMATE_KEYS[:2]  # instrument data: also the analysis's transient bound
 MAX_N_OBS = 2**31 - 1
 """Largest N: observation k is an Integer column of the database (32-bit signed in PostgreSQL
 and MySQL), and so is the campaign's n_obs."""
@@ -260,20 +263,33 @@ class ObservationPlan(_Table):
 
 @dataclass(frozen=True)
 class EstimatePlan:
-    """Early settle (Bezvesilna & Gura): observe once the settle point estimated from the transient
-    is stable. The transient's undamped period 2 pi / omega0 and damping ratio xi / omega0 are
-    instrument data; the tolerance is `tolerance_fraction` x the expected S{<delta>}_e
-    (Potemkin 1982, eq 2.6). Derived from [settle] (`SettlePlan.estimate`)."""
+    """Settle by the compass's transient model (Bezvesilna & Gura): observe once the settle point
+    estimated from the transient is known within `tolerance_fraction` x the expected
+    S{<delta>}_e (Potemkin 1982, eq 2.6) and, method "estimate", the transient left over the
+    observations is bounded by `transient_fraction` x S_e; method "compensated" observes at once
+    and subtracts the fitted transient from each observation. The undamped period 2 pi / omega0
+    and damping ratio xi / omega0 are instrument data. Derived from [settle]
+    (`SettlePlan.estimate`)."""
 
     undamped_period_s: float
     damping_ratio: float
     expected_se_deg: float
     tolerance_fraction: float
     stable_estimates: int
+    transient_fraction: float
+    compensated: bool = False
 
     @property
     def tolerance_deg(self) -> float:
         return self.tolerance_fraction * self.expected_se_deg
+
+    @property
+    def transient_tolerance_deg(self) -> float:
+        return self.transient_fraction * self.expected_se_deg
+
+    @property
+    def model(self) -> TransientModel:
+        return TransientModel(self.undamped_period_s, self.damping_ratio)
 
     @property
     def omega_rad_s(self) -> float:
@@ -290,8 +306,9 @@ class SettlePlan(_Table):
     """[settle]: when a series may start observing. Method "band": the window means over the
     last `hold_s` stand seconds all lie within +-`band_deg` of their mean and their trend moves
     the reading by at most `drift_deg` over that time. Method "estimate": once the settle point
-    estimated from the damped transient is stable; the band criterion then only measures the
-    time saved. `max_wait_s` bounds both."""
+    estimated from the damped transient is known and the transient left over the observations
+    is bounded; "compensated": observe during the transient and subtract it (`EstimatePlan`).
+    The band criterion then only measures the time saved. `max_wait_s` bounds all three."""
 
     band_deg: float = Field(0.02, gt=0)
     """Half-width of the band, deg."""
@@ -301,18 +318,22 @@ class SettlePlan(_Table):
     """Stand seconds the window means must stay in the band."""
     max_wait_s: float = Field(4 * 3600.0, gt=0)
     """Stand seconds after which an unsettled series fails (>= hold_s)."""
-    method: Literal["band", "estimate"] = "band"
-    """"band" or "estimate" (early settle; needs the keys below)."""
+    method: Literal["band", "estimate", "compensated"] = "band"
+    """"band", "estimate" or "compensated" (the transient model; need the keys below)."""
     undamped_period_s: float | None = Field(None, gt=0)
-    """Estimate: the compass's undamped precession period 2 pi / omega0, s (instrument data)."""
+    """The compass's undamped precession period 2 pi / omega0, s (instrument data; with "band"
+    optional, for the analysis's bound on the transient left in each series)."""
     damping_ratio: float | None = Field(None, ge=0, lt=1)
-    """Estimate: the damping ratio xi / omega0 of the precession (instrument data)."""
+    """The damping ratio xi / omega0 of the precession (instrument data, as above)."""
     expected_se_deg: float | None = Field(None, gt=0)
     """Estimate: the expected S{<delta>}_e, deg (Potemkin 1982, eq 2.6)."""
     tolerance_fraction: float = Field(0.5, gt=0, le=1)
     """Estimate: tolerance = tolerance_fraction x expected_se_deg."""
     stable_estimates: int = Field(3, ge=2)
     """Estimate: consecutive estimates that must agree within the tolerance."""
+    transient_fraction: float = Field(0.2, gt=0, le=1)
+    """Estimate: the transient left over the observations (|fit| + 2 SE) must stay within
+    transient_fraction x expected_se_deg."""
 
     @model_validator(mode="after")
     def _consistent(self) -> SettlePlan:
@@ -320,8 +341,14 @@ class SettlePlan(_Table):
         if self.max_wait_s < self.hold_s:
             problems.append(("max_wait_s", "must be >= hold_s"))
         if self.method == "band":
-            given = [key for key in ESTIMATE_KEYS if key in self.model_fields_set]
-            problems += [(key, "only applies when method = 'estimate'") for key in given]
+            given = [
+                key
+                for key in ESTIMATE_KEYS
+                if key in self.model_fields_set and key not in TRANSIENT_KEYS
+            ]
+            problems += [(key, "does not apply when method = 'band'") for key in given]
+            if len([key for key in TRANSIENT_KEYS if getattr(self, key) is not None]) == 1:
+                problems.append(("damping_ratio", "give both undamped_period_s and damping_ratio"))
         else:
             required = ESTIMATE_KEYS[:3]
             problems += [(key, "missing") for key in required if getattr(self, key) is None]
@@ -330,10 +357,18 @@ class SettlePlan(_Table):
 
     @property
     def estimate(self) -> EstimatePlan | None:
-        """The early-settle parameters (method "estimate"), else None."""
-        if self.method != "estimate":
+        """The transient-model parameters (methods "estimate", "compensated"), else None."""
+        if self.method == "band":
             return None
-        return EstimatePlan(*(getattr(self, key) for key in ESTIMATE_KEYS))
+        values = (getattr(self, key) for key in ESTIMATE_KEYS)
+        return EstimatePlan(*values, compensated=self.method == "compensated")
+
+    @property
+    def transient_model(self) -> TransientModel | None:
+        """The compass's transient (Bezvesilna & Gura eq 1) when the plan gives it."""
+        if self.undamped_period_s is None or self.damping_ratio is None:
+            return None
+        return TransientModel(self.undamped_period_s, self.damping_ratio)
 
 
 class TrackingPlan(_Table):

@@ -3,7 +3,8 @@ folders stay at the top of the repository; pyproject maps them to `gyrostand.<fo
 
 - `analysis` (pure computation) and `db` (schema, persistence) import no internal package;
 - `stand` (protocol, simulator) imports analysis's pure helpers only;
-- `plan` (the one plan model) imports stand; `frames` (raw log, vectorised decoder) imports stand;
+- `plan` (the one plan model) imports stand and analysis (the transient model); `frames` (raw
+  log, vectorised decoder) imports stand;
 - `acquisition` (the write side) imports stand, db, analysis, plan, frames;
 - `report` (the read side: stored campaign -> analysis -> report/export) imports db, analysis,
   plan, frames, stand and never acquisition;
@@ -22,7 +23,7 @@ ALLOWED = {
     "analysis": set(),
     "db": set(),
     "stand": {"analysis"},
-    "plan": {"stand"},
+    "plan": {"stand", "analysis"},
     "frames": {"stand"},
     "acquisition": {"stand", "db", "analysis", "plan", "frames"},
     "report": {"db", "analysis", "plan", "frames", "stand"},

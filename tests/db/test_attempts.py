@@ -102,6 +102,7 @@ def test_migration_0004_round_trip_keeps_every_row(db_path: Path) -> None:
     with sessions.begin() as session:
         observed(session, n_trials=2)
     sessions.kw["bind"].dispose()
+    downgrade(db_path, "0004")  # later migrations' columns aside
     version, rows = state(db_path)
     assert version == ["0004"] and len(rows["observation"]) == 12 and len(rows["event"]) == 2
 
@@ -116,6 +117,7 @@ def test_migration_0004_round_trip_keeps_every_row(db_path: Path) -> None:
             )
 
     open_database(sqlite_url(db_path)).kw["bind"].dispose()  # upgrades to the head
+    downgrade(db_path, "0004")
     assert state(db_path) == (["0004"], rows)
     with sqlite3.connect(db_path) as conn:
         assert conn.execute("SELECT attempt FROM trial").fetchall() == [(1,), (1,)]

@@ -1,0 +1,246 @@
+"""The compass's transient over a campaign: one damped precession whose equilibrium steps each
+time the stand starts or stops rocking (Bezvesilna & Gura eqs 1-3; seed 003).
+
+Between two steps, s_j <= t < s_(j+1), the noise-free reading is the small-angle solution of
+eq 1 in initial-value form (eq 2 with A, phi replaced by the state at the step):
+
+    y(t) = R_j + x_j a(tau) + v_j b(tau),  tau = t - s_j,
+    a = e^(-xi tau) (cos w tau + xi/w sin w tau),  b = w0 e^(-xi tau) sin(w tau) / w,
+
+with w = sqrt(w0^2 - xi^2), R_j the settle point of the series and v_j the velocity in units of
+w0 (deg). The sensitive element does not jump at a step, only its equilibrium does, so the state
+carries over: x_(j+1) = y(s_(j+1)) - R_(j+1), v_(j+1) = y'(s_(j+1)) / w0. The whole record is
+therefore LINEAR in theta = (R_1, ..., R_S, and x_j, v_j of each segment whose state at its step
+is unknown: the first one, or one after an unobserved change). Least squares on the window means
+of the settle record and of the observations (each weighted by its window length) gives every
+R_j with its covariance, and the transient y - R_j left in any window with its standard error.
+
+A series starting right after a step is then pinned by the series before it: its state at the
+step is known from that series' record, and only R_j is new. That is what lets a series be
+observed during its transient and compensated (`TransientFit.transient`), and what bounds the
+transient left in a series whatever criterion started it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from gyrostand.analysis.errors import SingularDesignError
+from gyrostand.analysis.settle import variance_inflation
+
+COVERAGE_K = 2.0  # a bound is |estimate| + 2 SE (about 95 %)
+
+
+@dataclass(frozen=True)
+class TransientModel:
+    """The precession's undamped period 2 pi / w0 (s) and damping ratio xi / w0."""
+
+    undamped_period_s: float
+    damping_ratio: float
+
+    @property
+    def w0(self) -> float:
+        return 2.0 * math.pi / self.undamped_period_s
+
+    @property
+    def xi(self) -> float:
+        return self.damping_ratio * self.w0
+
+    @property
+    def w(self) -> float:
+        return self.w0 * math.sqrt(1.0 - self.damping_ratio**2)
+
+    def basis(self, tau_s: np.ndarray, width_s: np.ndarray | float = 0.0) -> tuple[np.ndarray, ...]:
+        """a, b (position per unit x, v at the step) and their derivatives / w0 (eq 2), each
+        averaged over a window of ``width_s`` centred on tau (0: the value at tau). With
+        s = -xi + i w, e^(-xi tau) (cos, sin)(w tau) = (Re, Im) e^(s tau), whose mean over the
+        window is e^(s tau) sinh(s W / 2) / (s W / 2): so a window mean is exact, not its middle."""
+        tau = np.asarray(tau_s, dtype=float)
+        s = complex(-self.xi, self.w)
+        half = s * np.asarray(width_s, dtype=float) / 2
+        safe = np.where(half == 0, 1.0, half)
+        z = np.exp(s * tau) * np.where(half == 0, 1.0, np.sinh(safe) / safe)
+        c, sin = z.real, z.imag
+        r, k = self.xi / self.w, self.w0 / self.w
+        return c + r * sin, k * sin, -k * sin, c - r * sin
+
+
+@dataclass(frozen=True)
+class Segments:
+    """The steps of the equilibrium: stand seconds ``step_s`` (increasing) and which segments
+    start from an unknown state (``free``; the first always does)."""
+
+    step_s: tuple[float, ...]
+    free: tuple[bool, ...]
+
+    def __post_init__(self) -> None:
+        if not self.step_s or len(self.free) != len(self.step_s):
+            raise ValueError("segments need one free flag per step, and at least one step")
+        if not self.free[0]:
+            raise ValueError("the first segment's state is unknown: it must be free")
+        if any(b < a for a, b in zip(self.step_s, self.step_s[1:], strict=False)):
+            raise ValueError("segment steps must be in time order")
+
+    @property
+    def n_params(self) -> int:
+        return len(self.step_s) + 2 * sum(self.free)
+
+
+def _state_maps(model: TransientModel, seg: Segments) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per segment, x_j and v_j as linear forms in theta (carried over the steps)."""
+    s = len(seg.step_s)
+    maps: list[tuple[np.ndarray, np.ndarray]] = []
+    extra = s
+    for j in range(s):
+        x, v = np.zeros(seg.n_params), np.zeros(seg.n_params)
+        if seg.free[j]:
+            x[extra], v[extra + 1] = 1.0, 1.0
+            extra += 2
+        else:
+            px, pv = maps[j - 1]
+            a, b, da, db = model.basis(np.array(seg.step_s[j] - seg.step_s[j - 1]))
+            x = px * a + pv * b
+            x[j - 1] += 1.0  # the position y(s_j) = R_(j-1) + x a + v b ...
+            x[j] -= 1.0  # ... measured from the new equilibrium R_j
+            v = px * da + pv * db
+        maps.append((x, v))
+    return maps
+
+
+def design(
+    model: TransientModel,
+    seg: Segments,
+    segment: np.ndarray,
+    t_s: np.ndarray,
+    width_s: np.ndarray | float = 0.0,
+) -> np.ndarray:
+    """Rows d y / d theta for the means of the reading over windows of ``width_s`` centred on
+    ``t_s`` in segments ``segment`` (indices)."""
+    segment = np.asarray(segment, dtype=int)
+    t = np.asarray(t_s, dtype=float)
+    maps = _state_maps(model, seg)
+    steps = np.asarray(seg.step_s)
+    a, b, _, _ = model.basis(t - steps[segment], width_s)
+    x = np.array([m[0] for m in maps])[segment]
+    v = np.array([m[1] for m in maps])[segment]
+    rows = x * a[:, None] + v * b[:, None]
+    rows[np.arange(t.size), segment] += 1.0
+    return rows
+
+
+@dataclass(frozen=True)
+class Windows:
+    """Window means of the reading: segment index, middle and length (stand seconds), value
+    (deg, on one branch), in time order. Weighted by length: the variance of a window mean of
+    noise correlated over much less than a window falls as 1 / length."""
+
+    segment: np.ndarray
+    mid_s: np.ndarray
+    width_s: np.ndarray
+    value_deg: np.ndarray
+
+    @classmethod
+    def of(cls, rows: Sequence[tuple[int, float, float, float]]) -> Windows:
+        """From (segment, mid_s, width_s, value_deg) rows."""
+        a = np.array(rows, dtype=float).reshape(-1, 4)
+        return cls(a[:, 0].astype(int), a[:, 1], a[:, 2], a[:, 3])
+
+
+@dataclass(frozen=True)
+class TransientFit:
+    """Least-squares state of the transient: theta, its covariance (s^2 (X^T W X)^-1, times
+    the correlated-noise inflation), the residual s.d. of a window mean of unit weight; the
+    period and damping ratio's SE when they were estimated too."""
+
+    model: TransientModel
+    segments: Segments
+    theta: np.ndarray = field(repr=False)
+    covariance: np.ndarray = field(repr=False)
+    residual_sd_deg: float
+    n: int
+    period_se_s: float | None = None
+    damping_ratio_se: float | None = None
+
+    def settle_point(self, j: int) -> tuple[float, float]:
+        """R_j and its standard error (deg)."""
+        return float(self.theta[j]), float(math.sqrt(self.covariance[j, j]))
+
+    def _transient_rows(self, j: int, t_s: np.ndarray, width_s: np.ndarray | float) -> np.ndarray:
+        t = np.atleast_1d(np.asarray(t_s, dtype=float))
+        rows = design(self.model, self.segments, np.full(t.size, j), t, width_s)
+        rows[:, j] -= 1.0
+        return rows
+
+    def transient(
+        self, j: int, t_s: np.ndarray, width_s: np.ndarray | float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Mean of y - R_j over windows of segment j, and the standard errors."""
+        rows = self._transient_rows(j, t_s, width_s)
+        se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", rows, self.covariance, rows), 0.0))
+        return rows @ self.theta, se
+
+    def mean_transient(
+        self, j: int, t_s: np.ndarray, width_s: np.ndarray | float
+    ) -> tuple[float, float]:
+        """The transient averaged over a series' windows, and its standard error."""
+        g = self._transient_rows(j, t_s, width_s).mean(axis=0)
+        return float(g @ self.theta), float(math.sqrt(max(g @ self.covariance @ g, 0.0)))
+
+    def bound(self, j: int, t_s: np.ndarray, width_s: np.ndarray | float) -> float:
+        """Largest |transient| + 2 SE over the windows, deg."""
+        value, se = self.transient(j, t_s, width_s)
+        return float(np.max(np.abs(value) + COVERAGE_K * se))
+
+
+def _weighted_rows(
+    model: TransientModel, seg: Segments, data: Windows
+) -> tuple[np.ndarray, np.ndarray]:
+    sw = np.sqrt(data.width_s / np.mean(data.width_s))
+    rows = design(model, seg, data.segment, data.mid_s, data.width_s)
+    return rows * sw[:, None], data.value_deg * sw
+
+
+def fit_transient(model: TransientModel, seg: Segments, data: Windows) -> TransientFit:
+    """Weighted least squares of the window means on the transient model."""
+    rows, y = _weighted_rows(model, seg, data)
+    n, p = rows.shape
+    if n <= p:
+        raise SingularDesignError(f"transient fit needs more than {p} window means, got {n}")
+    u, s, vt = np.linalg.svd(rows, full_matrices=False)
+    if s[-1] <= s[0] * 1e-12:
+        raise SingularDesignError("transient model columns are linearly dependent")
+    theta = vt.T @ ((u.T @ y) / s)
+    resid = y - rows @ theta
+    s2 = float(resid @ resid) / (n - p)
+    cov = (vt.T / s**2) @ vt * s2 * variance_inflation(resid)
+    return TransientFit(model, seg, theta, cov, math.sqrt(s2), n)
+
+
+def fit_transient_free(start: TransientModel, seg: Segments, data: Windows) -> TransientFit:
+    """``fit_transient`` with the period and damping ratio estimated too (variable projection:
+    theta is solved for each (period, ratio), scipy's least_squares moves the pair)."""
+
+    def residuals(q: np.ndarray) -> np.ndarray:
+        model = TransientModel(start.undamped_period_s * q[0], q[1])
+        rows, y = _weighted_rows(model, seg, data)
+        return y - rows @ np.linalg.lstsq(rows, y, rcond=None)[0]
+
+    result = least_squares(
+        residuals, [1.0, start.damping_ratio], bounds=([0.2, 0.05], [5.0, 0.99]), x_scale=0.1
+    )
+    if not result.success:
+        raise SingularDesignError(f"transient fit with free period and damping: {result.message}")
+    model = TransientModel(start.undamped_period_s * float(result.x[0]), float(result.x[1]))
+    fit = fit_transient(model, seg, data)
+    jac = result.jac / np.array([start.undamped_period_s, 1.0])  # d r / d(period, ratio)
+    cov_q = np.linalg.pinv(jac.T @ jac) * fit.residual_sd_deg**2
+    return replace(
+        fit,
+        period_se_s=float(math.sqrt(cov_q[0, 0])),
+        damping_ratio_se=float(math.sqrt(cov_q[1, 1])),
+    )
