@@ -19,6 +19,8 @@ the series observes from the end of the first block at which
    observation is bounded by a stated fraction of S_e. Method "compensated" skips 3: each
    observation is compensated instead (the fitted transient over its window is subtracted at
    the end of the series, `compensation`), and R_j's standard error is the compensation's.
+   Only a series whose state is carried over is compensated: the first one of a run (state
+   unknown, a 3-parameter fit of a short record: its SE comes out low) waits for 3.
 
 The band criterion is only evaluated to record the time saved: measured when it held before,
 else predicted from the fitted transient. A transient the model does not describe (wrong period
@@ -86,6 +88,11 @@ class TransientRecord:
         self._branch: float | None = None
 
     @property
+    def chained(self) -> bool:
+        """The current segment's state at its step follows from the record before it."""
+        return bool(self._free) and not self._free[-1]
+
+    @property
     def segment(self) -> int:
         """The current segment (series) index; -1 before the first step."""
         return len(self._steps) - 1
@@ -132,6 +139,12 @@ class SettleCheck:
     spread_deg: float  # max - min of the last `stable_estimates` estimates (inf: fewer yet)
     transient_deg: float  # largest |predicted transient| + 2 SE over the observation windows
     plan: EstimatePlan
+    chained: bool  # the series' state at its step is carried over from the record
+
+    @property
+    def compensates(self) -> bool:
+        """Compensated: only with the state carried over (a free state needs a long record)."""
+        return self.plan.compensated and self.chained
 
     @property
     def stable(self) -> bool:
@@ -144,7 +157,7 @@ class SettleCheck:
     def ready(self) -> bool:
         """Observe from here (condition 3 unless compensated)."""
         bounded = self.transient_deg <= self.plan.transient_tolerance_deg
-        return self.stable and (self.plan.compensated or bounded)
+        return self.stable and (self.compensates or bounded)
 
 
 def describe(outcome: SettleOutcome, check: SettleCheck) -> str:
@@ -156,7 +169,7 @@ def describe(outcome: SettleOutcome, check: SettleCheck) -> str:
         f"{outcome.stable_since_s:.1f} s at {outcome.stable_estimate_deg:.5f} deg, last estimates "
         f"within {check.spread_deg:.5f} deg; tolerance {plan.tolerance_deg:.5f} deg); "
     )
-    if plan.compensated:
+    if check.compensates:
         text += (
             f"transient over the observations {check.transient_deg:.5f} deg (fit + 2 SE), "
             "to be compensated; "
@@ -218,7 +231,7 @@ class EarlySettle:
                 spread = max(recent) - min(recent)
             mids = end_s + self.window_s / 2 + self.step_s * np.arange(self.n_obs)
             transient = fit.bound(j, mids, self.window_s)
-        self.last = SettleCheck(since, r, se, spread, transient, self.plan)
+        self.last = SettleCheck(since, r, se, spread, transient, self.plan, self.record.chained)
         if self.last.stable and self.stable is None:
             self.stable = self.last
         return self.last
@@ -242,7 +255,7 @@ class EarlySettle:
 
             band_s = predict_band_settle_s(means_deg, self.window_s, check.t_s, predict, settle)
         return SettleOutcome(
-            criterion="compensated" if self.plan.compensated else "estimate",
+            criterion="compensated" if check.compensates else "estimate",
             settle_s=check.t_s,
             estimate_deg=float(about(reference_deg, check.settle_point_deg)),
             standard_error_deg=check.standard_error_deg,

@@ -1219,6 +1219,8 @@ class Engine:
         estimate = self.plan.settle.estimate
         if estimate is None or not estimate.compensated or not self._windows:
             return None
+        if self._early is None or self._early.last is None or not self._early.last.compensates:
+            return None  # settled by the bound (a free state) or resumed mid-series
         fitted = self._record.fit(estimate.model)
         if fitted is None:
             return None

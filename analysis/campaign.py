@@ -40,7 +40,12 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
 - ``admissible``: {C_gcm2s2: [lo, hi], T_s: [lo, hi]} or null; ``warnings``: list of strings;
 - ``left_out``: the source's trials not in ``trials``, each index, attempt, role, status,
   reason, superseded_by (a stored campaign's failed trials, attempts superseded by a retry with
-  the attempt that replaced them, trials not acquired; empty for a table of trials).
+  the attempt that replaced them, trials not acquired; empty for a table of trials);
+- ``transient``: null, or the compass's transient fitted to a stored campaign's whole record
+  (`analysis.transient.TransientCheck`): undamped_period_s, damping_ratio, from_record,
+  record_period_s, record_period_se_s, record_damping_ratio, record_damping_ratio_se,
+  plan_period_s, plan_damping_ratio, residual_sd_deg, and per series trial, j,
+  compensation_se_deg, left_deg, standard_error_deg, bound_deg.
 """
 
 from collections import Counter
@@ -75,6 +80,7 @@ from gyrostand.analysis.forecast import (
 )
 from gyrostand.analysis.gyro_model import PARAMETERS, Conditions, KnownConstants, RollingErrorModel
 from gyrostand.analysis.nlsq import COND_LIMIT, FitResult, fit_nonlinear
+from gyrostand.analysis.transient import TransientCheck
 from gyrostand.analysis.trials import TrialInput, TrialStats, trial_statistics
 
 VARIANCE_BASIS = (
@@ -124,6 +130,7 @@ class CampaignAnalysis:
     admissible: AdmissibleRegion | None
     warnings: tuple[str, ...]
     left_out: tuple[LeftOutTrial, ...] = ()  # named by the caller that chose the trials
+    transient: TransientCheck | None = None  # by the caller that has the settle records
 
     @property
     def estimates(self) -> dict[str, float]:
@@ -181,6 +188,7 @@ class CampaignAnalysis:
             "admissible": asdict(self.admissible) if self.admissible else None,
             "warnings": list(self.warnings),
             "left_out": [asdict(t) for t in self.left_out],
+            "transient": None if self.transient is None else self.transient.to_dict(),
         }
         return json_safe(data)
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -244,3 +244,86 @@ def fit_transient_free(start: TransientModel, seg: Segments, data: Windows) -> T
         period_se_s=float(math.sqrt(cov_q[0, 0])),
         damping_ratio_se=float(math.sqrt(cov_q[1, 1])),
     )
+
+
+WARN_FRACTION = 0.3  # warn when the transient left in a series mean may exceed 0.3 S_e
+
+
+@dataclass(frozen=True)
+class SeriesTransient:
+    """The transient left in one series' mean (after its compensation, if compensated) as the
+    fit of the whole record gives it, with its standard error; ``bound_deg`` = |left| + 2 SE.
+    ``compensation_se_deg``: a compensated series' settle point SE in the whole-record fit
+    (None: not compensated)."""
+
+    trial: int
+    j: int
+    compensation_se_deg: float | None
+    left_deg: float
+    standard_error_deg: float
+
+    @property
+    def bound_deg(self) -> float:
+        return abs(self.left_deg) + COVERAGE_K * self.standard_error_deg
+
+    def warning(self, s_e_deg: float) -> str | None:
+        """Not compensated: the bound exceeds WARN_FRACTION x S_e (Potemkin 1982, eq 2.6).
+        Compensated (its SE is in the series variance already): what is left exceeds 3 SE of
+        the compensation and the whole-record fit together."""
+        where = f"trial {self.trial} series {self.j}"
+        if self.compensation_se_deg is None:
+            limit = WARN_FRACTION * s_e_deg
+            if self.bound_deg <= limit:
+                return None
+            return (
+                f"{where}: the compass's transient left in the series mean may reach "
+                f"{self.bound_deg:.4f} deg (fit {self.left_deg:+.4f} deg, SE "
+                f"{self.standard_error_deg:.4f} deg), more than {WARN_FRACTION:g} S_e = "
+                f"{limit:.4f} deg"
+            )
+        se = math.hypot(self.compensation_se_deg, self.standard_error_deg)
+        if abs(self.left_deg) <= 3 * se:
+            return None
+        return (
+            f"{where}: the compensation differs from the whole record's transient by "
+            f"{self.left_deg:+.4f} deg, more than 3 SE ({3 * se:.4f} deg)"
+        )
+
+
+@dataclass(frozen=True)
+class TransientCheck:
+    """The transient model fitted to the campaign's whole record (settle blocks and
+    observations of every series) and what it leaves in each series. The period and damping
+    ratio used are the plan's unless ``from_record``; the record's own estimates (None: not
+    determined by the record) with their SE are kept for comparison."""
+
+    undamped_period_s: float
+    damping_ratio: float
+    from_record: bool
+    record_period_s: float | None
+    record_period_se_s: float | None
+    record_damping_ratio: float | None
+    record_damping_ratio_se: float | None
+    plan_period_s: float
+    plan_damping_ratio: float
+    residual_sd_deg: float
+    series: tuple[SeriesTransient, ...]
+
+    def warnings(self, s_e_deg: float) -> tuple[str, ...]:
+        found = (s.warning(s_e_deg) for s in self.series)
+        plan = (
+            [
+                f"the record gives the compass's precession period {self.undamped_period_s:.0f} s"
+                f" and damping ratio {self.damping_ratio:.3f}, the plan {self.plan_period_s:g} s"
+                f" and {self.plan_damping_ratio:g}: the record's are used"
+            ]
+            if self.from_record
+            else []
+        )
+        return (*plan, *(w for w in found if w is not None))
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            **{k: v for k, v in asdict(self).items() if k != "series"},
+            "series": [{**asdict(s), "bound_deg": s.bound_deg} for s in self.series],
+        }

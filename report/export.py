@@ -8,15 +8,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 from sqlalchemy.orm import Session
 
-from gyrostand.analysis.trials import combine_series, series_moments
+from gyrostand.analysis.trials import combine_series
 from gyrostand.db.io import FORM_COLUMNS, OBS_FIELDS, OBSERVATION_EXTRAS
 from gyrostand.db.models import Trial
 from gyrostand.db.queries import current_trials, load_campaign
-from gyrostand.report.stored import applied_conditions
+from gyrostand.report.stored import applied_conditions, series_summary
 
 EXPORT_FORMATS = ("csv", "parquet", "xlsx")
 INTEGER_COLUMNS = ("window_start_ms", "window_end_ms", "frames_used", "frames_lost", "n_obs")
@@ -35,16 +34,9 @@ class CampaignFrames:
 
 
 def _series_stats(trial: Trial) -> dict[int, tuple[float, float, int]]:
-    """Mean (eq 2.1), variance (eq 2.2) and N of each series: from its observations, else as
-    imported pre-averaged."""
-    stats = {}
-    for s in trial.series:
-        if len(s.observations) >= 2:
-            mean, var = series_moments(np.array([o.value_deg for o in s.observations]))
-            stats[s.j] = (float(mean), float(var), len(s.observations))
-        elif s.summary_mean_deg is not None:
-            stats[s.j] = (s.summary_mean_deg, s.summary_variance_deg2, s.summary_n)
-    return stats
+    """Mean (eq 2.1), variance (eq 2.2) and N of each series (`report.stored.series_summary`)."""
+    summaries = {s.j: series_summary(s) for s in trial.series}
+    return {j: (m.mean_deg, m.var_deg2, m.n) for j, m in summaries.items() if m is not None}
 
 
 def campaign_frames(session: Session, campaign_id: int) -> CampaignFrames:

@@ -38,8 +38,8 @@ from gyrostand.analysis.campaign import (
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.gyro_model import KnownConstants
 from gyrostand.analysis.settle import SettleOutcome
-from gyrostand.analysis.trials import SeriesSummary, TrialInput
-from gyrostand.db.models import AnalysisRun, Campaign, Trial
+from gyrostand.analysis.trials import SeriesSummary, TrialInput, series_moments
+from gyrostand.db.models import AnalysisRun, Campaign, Series, Trial
 from gyrostand.db.queries import campaign_constants, current_trials, load_campaign
 from gyrostand.frames.logfile import sha256_of
 from gyrostand.plan.codec import codec_for
@@ -65,6 +65,7 @@ from gyrostand.report.model import (
 from gyrostand.report.settings import AnalysisSettings, fallback_notes, settings_from_plan
 from gyrostand.report.signal import SignalSection, signal_section
 from gyrostand.report.signal_record import acceptance_of, headings_in, still_series_record
+from gyrostand.report.transient import transient_check
 
 TRACE_BINS = 600  # per trial: enough for a page-wide plot, small enough for inline SVG
 
@@ -107,15 +108,13 @@ def trial_input(trial: Trial) -> TrialInput | str:
         return f"not acquired (trial {trial.status})"
     common = {"index": trial.index} | applied_conditions(trial)
     series = {s.j: s for s in trial.series}
-    values = {j: tuple(o.value_deg for o in s.observations) for j, s in series.items()}
-    if all(len(values.get(j, ())) >= 2 for j in (1, 2)):
+    values = {j: tuple(o.corrected_deg for o in s.observations) for j, s in series.items()}
+    compensated = any(s.compensation_se_deg is not None for s in series.values())
+    if all(len(values.get(j, ())) >= 2 for j in (1, 2)) and not compensated:
         return TrialInput(**common, before_deg=values[1], under_deg=values[2])
-    if all(j in series and series[j].summary_mean_deg is not None for j in (1, 2)):
-        before, under = (
-            SeriesSummary(s.summary_mean_deg, s.summary_variance_deg2, s.summary_n)
-            for s in (series[1], series[2])
-        )
-        return TrialInput(**common, before=before, under=under)
+    summaries = {j: series_summary(s) for j, s in series.items()}
+    if all(summaries.get(j) is not None for j in (1, 2)):
+        return TrialInput(**common, before=summaries[1], under=summaries[2])
     if trial.summary_delta_mean_deg is not None:
         return TrialInput(
             **common,
@@ -124,6 +123,23 @@ def trial_input(trial: Trial) -> TrialInput | str:
             n_obs=trial.summary_n,
         )
     return "no observations or summaries stored for both series"
+
+
+def series_summary(series: Series) -> SeriesSummary | None:
+    """Mean (eq 2.1), variance (eq 2.2) and N of a stored series: of its observations, else as
+    imported pre-averaged (None: neither). A compensated series' observations are corrected by
+    their compensation, and the settle point's SE s_c, common to all N of them, is added to
+    the variance as N s_c^2, so that S^2/N, the variance of the mean, includes it."""
+    if len(series.observations) >= 2:
+        values = np.array([o.corrected_deg for o in series.observations])
+        mean, var = (float(x) for x in series_moments(values))
+        n = values.size
+        return SeriesSummary(mean, var + n * (series.compensation_se_deg or 0.0) ** 2, n)
+    if series.summary_mean_deg is not None:
+        return SeriesSummary(
+            series.summary_mean_deg, series.summary_variance_deg2, series.summary_n
+        )
+    return None
 
 
 def stored_settings(campaign: Campaign) -> tuple[AnalysisSettings, tuple[str, ...]]:
@@ -196,6 +212,10 @@ def analyze_stored(session: Session, campaign_id: int) -> StoredAnalysis:
         forecast=s.forecast,
     )
     analysis = replace(analysis, left_out=inputs.left_out)
+    check = transient_check(campaign, _plan(campaign))
+    if not isinstance(check, str):
+        warnings = analysis.warnings + check.warnings(analysis.cochran.s_e)
+        analysis = replace(analysis, transient=check, warnings=warnings)
     results, digest, version = analysis.to_dict(), inputs.sha256(), SOFTWARE_VERSION
     run = session.scalars(
         select(AnalysisRun)

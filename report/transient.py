@@ -1,0 +1,162 @@
+"""The compass's transient in a stored campaign, whatever settle criterion the plan used: the
+transient model (Bezvesilna & Gura eqs 1-3, across the stand's steps: `analysis.transient`)
+fitted to every series' settle record and observations, and what it leaves in each series mean.
+
+Series follow one another in trial order, each starting at the start/stop that moved the
+compass's equilibrium (its stored ``step_ms``). The state carries over from the series before
+only when both ran in one run of the stand clock (first attempts, in order, times increasing);
+otherwise the series starts from an unknown state. The period and damping ratio are the plan's
+(instrument data) unless the record determines them (relative SE below 10 %) and contradicts
+the plan by more than 3 SE; the record's estimates are reported either way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gyrostand.analysis.angles import about
+from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.settle import SettleOutcome
+from gyrostand.analysis.transient import (
+    Segments,
+    SeriesTransient,
+    TransientCheck,
+    TransientFit,
+    TransientModel,
+    Windows,
+    fit_transient,
+    fit_transient_free,
+)
+from gyrostand.db.models import Campaign, Series
+from gyrostand.db.queries import current_trials
+from gyrostand.plan.model import Plan
+
+WELL_DETERMINED = 0.1  # relative SE below which the record's period and damping are trusted
+REJECT_SE = 3.0  # ... and used instead of the plan's when these many SE off
+
+
+@dataclass(frozen=True)
+class _Segment:
+    trial: int
+    j: int
+    start_ms: int
+    free: bool
+    windows: list[tuple[float, float, float]]  # start ms, end ms, heading deg (time order)
+    observed: list[tuple[float, float]]  # the observation windows (ms)
+    compensation_deg: float | None  # mean compensation of a compensated series
+
+
+def _segments(campaign: Campaign) -> list[_Segment]:
+    out: list[_Segment] = []
+    previous: tuple[int, int] | None = None  # (trial attempt, end ms) of the last series
+    for trial in sorted(current_trials(campaign.trials), key=lambda t: t.index):
+        for s in sorted(trial.series, key=lambda s: s.j):
+            seg = _segment(trial.index, trial.attempt, s, previous)
+            if seg is not None:
+                out.append(seg)
+                previous = (trial.attempt, int(max(w[1] for w in seg.windows)))
+    return out
+
+
+def _segment(
+    index: int, attempt: int, s: Series, previous: tuple[int, int] | None
+) -> _Segment | None:
+    outcome = None if s.settle_outcome is None else SettleOutcome.from_dict(s.settle_outcome)
+    blocks = [] if outcome is None else [tuple(map(float, b)) for b in outcome.blocks]
+    timed = [o for o in s.observations if o.window_start_ms is not None]
+    observed = [(float(o.window_start_ms), float(o.window_end_ms)) for o in timed]
+    windows = blocks + [(a, b, o.value_deg) for (a, b), o in zip(observed, timed, strict=True)]
+    if not windows:
+        return None
+    step = None if outcome is None else outcome.step_ms
+    chained = (
+        previous is not None
+        and step is not None
+        and attempt == previous[0] == 1
+        and previous[1] <= step <= windows[0][0]
+    )
+    comp = [o.compensation_deg for o in timed if o.compensation_deg is not None]
+    return _Segment(
+        trial=index,
+        j=s.j,
+        start_ms=step if chained and step is not None else int(windows[0][0]),
+        free=not chained,
+        windows=windows,
+        observed=observed,
+        compensation_deg=float(np.mean(comp)) if comp else None,
+    )
+
+
+def _fit(
+    plan_model: TransientModel, seg: Segments, data: Windows
+) -> tuple[TransientFit, TransientFit | None]:
+    """The fit used and the fit with the record's own period and damping ratio (None: not
+    determined by the record, relative SE above WELL_DETERMINED). The fit used has the plan's
+    values unless the record's contradict them by more than REJECT_SE standard errors."""
+    fit = fit_transient(plan_model, seg, data)
+    try:
+        free = fit_transient_free(plan_model, seg, data)
+    except AnalysisError:
+        return fit, None
+    assert free.period_se_s is not None and free.damping_ratio_se is not None
+    if not (
+        free.period_se_s < WELL_DETERMINED * free.model.undamped_period_s
+        and free.damping_ratio_se < WELL_DETERMINED * free.model.damping_ratio
+    ):
+        return fit, None
+    off = max(
+        abs(free.model.undamped_period_s - plan_model.undamped_period_s) / free.period_se_s,
+        abs(free.model.damping_ratio - plan_model.damping_ratio) / free.damping_ratio_se,
+    )
+    return (free if off > REJECT_SE else fit), free
+
+
+def transient_check(campaign: Campaign, plan: Plan | None) -> TransientCheck | str:
+    """The transient left in each series of a stored campaign, or why it is not assessed."""
+    model = None if plan is None else plan.settle.transient_model
+    if model is None:
+        return (
+            "not assessed: the plan gives no transient model of the compass ([settle] "
+            "undamped_period_s and damping_ratio)"
+        )
+    segments = _segments(campaign)
+    if not segments:
+        return "not assessed: no series recorded its settle blocks or observation windows"
+    rows = [
+        (k, (a + b) / 2000, (b - a) / 1000, value)
+        for k, s in enumerate(segments)
+        for a, b, value in s.windows
+    ]
+    rows.sort(key=lambda r: (r[0], r[1]))
+    branch = rows[0][3]
+    rows = [(k, t, w, float(about(branch, v))) for k, t, w, v in rows]
+    seg = Segments(tuple(s.start_ms / 1000 for s in segments), tuple(s.free for s in segments))
+    try:
+        fit, record = _fit(model, seg, Windows.of(rows))
+    except AnalysisError as exc:
+        return f"not assessed: the transient model cannot be fitted to the record ({exc})"
+    series = []
+    for k, s in enumerate(segments):
+        if not s.observed:
+            continue
+        ms = np.array(s.observed)
+        left, se = fit.mean_transient(k, ms.mean(axis=1) / 1000, (ms[:, 1] - ms[:, 0]) / 1000)
+        if s.compensation_deg is not None:
+            left -= s.compensation_deg
+        comp_se = fit.settle_point(k)[1] if s.compensation_deg is not None else None
+        series.append(SeriesTransient(s.trial, s.j, comp_se, left, se))
+    return TransientCheck(
+        undamped_period_s=fit.model.undamped_period_s,
+        damping_ratio=fit.model.damping_ratio,
+        from_record=fit is record,
+        record_period_s=None if record is None else record.model.undamped_period_s,
+        record_period_se_s=None if record is None else record.period_se_s,
+        record_damping_ratio=None if record is None else record.model.damping_ratio,
+        record_damping_ratio_se=None if record is None else record.damping_ratio_se,
+        plan_period_s=model.undamped_period_s,
+        plan_damping_ratio=model.damping_ratio,
+        residual_sd_deg=fit.residual_sd_deg,
+        series=tuple(series),
+    )
