@@ -55,6 +55,35 @@ def left_out_section(a: CampaignAnalysis) -> list[str]:
     ]
 
 
+def transient_section(a: CampaignAnalysis) -> list[str]:
+    t = a.transient
+    assert t is not None
+    source = "the record's (the plan's are contradicted)" if t.from_record else "the plan's"
+    lines = [
+        "TRANSIENT LEFT IN EACH SERIES (transient model, Bezvesilna & Gura)",
+        f"period {t.undamped_period_s:.0f} s, damping ratio {t.damping_ratio:.3f}: {source}",
+    ]
+    if t.record_period_s is not None:
+        lines.append(
+            f"the record alone: {t.record_period_s:.0f} +/- {t.record_period_se_s:.0f} s, "
+            f"{t.record_damping_ratio:.3f} +/- {t.record_damping_ratio_se:.3f}"
+        )
+    rows = [
+        [
+            str(s.trial),
+            str(s.j),
+            "no" if s.compensation_se_deg is None else f"SE {s.compensation_se_deg:.4f}",
+            f"{s.left_deg:+.4f}",
+            f"{s.standard_error_deg:.4f}",
+            f"{s.bound_deg:.4f}",
+            f"{s.bound_deg / a.cochran.s_e:.2f}",
+        ]
+        for s in t.series
+    ]
+    headers = ["i", "j", "compensated", "left deg", "SE deg", "bound deg", "bound/S_e"]
+    return [*lines, *_table(headers, rows), "bound = |left| + 2 SE"]
+
+
 def cochran_section(a: CampaignAnalysis) -> list[str]:
     c = a.cochran
     verdict = "homogeneous" if c.homogeneous else f"NOT homogeneous (trial {c.largest})"
@@ -173,6 +202,7 @@ def render_text(analysis: CampaignAnalysis) -> str:
         controls_section(analysis),
         assumptions_section(analysis),
         forecasts_section(analysis),
+        *([transient_section(analysis)] if analysis.transient else []),
     ]
     if analysis.warnings:
         sections.append(["WARNINGS", *(f"- {w}" for w in analysis.warnings)])
