@@ -94,15 +94,26 @@ def test_exact_record_gives_the_settle_point_and_the_first_safe_block() -> None:
 
 
 def test_compensated_rule_starts_once_the_settle_point_is_known() -> None:
-    record, early = exact_rule(
-        EstimatePlan(T0_S, ZETA, TOL_DEG, 1.0, 3, transient_fraction=1.0, compensated=True)
-    )
-    k = 0
-    while not early.last or not early.last.ready:
-        k += 1
-        feed(record, early, k)
-    assert early.last.t_s == (MIN_BLOCKS + 2) * WINDOW_S  # conditions 1-2 only
-    assert early.last.transient_deg > 0.1  # observed well inside the transient
+    """With the state carried over (a settled series before the step) conditions 1-2 decide;
+    with the state unknown (the run's first series) the transient bound does, as "estimate"."""
+    plan = EstimatePlan(T0_S, ZETA, TOL_DEG, 1.0, 3, transient_fraction=1.0, compensated=True)
+    starts = {}
+    for chained in (True, False):
+        record, early = exact_rule(plan)
+        if chained:  # the element at rest at the old equilibrium for ten windows, then the step
+            for k in range(-10, 0):
+                record.add(k * WINDOW_S, (k + 1) * WINDOW_S, SETTLED_DEG + STEP_DEG)
+            record.step(0.0)
+        k = 0
+        while not early.last or not early.last.ready:
+            k += 1
+            feed(record, early, k)
+        assert early.last.compensates == chained
+        assert early.last.settle_point_deg == pytest.approx(SETTLED_DEG, abs=1e-9)
+        starts[chained] = early.last
+    assert starts[True].t_s == (MIN_BLOCKS + 2) * WINDOW_S  # conditions 1-2 only
+    assert starts[True].transient_deg > 0.1  # observed well inside the transient
+    assert starts[False].t_s > 2000.0 and starts[False].transient_deg <= TOL_DEG
 
 
 def test_the_state_carries_over_a_step() -> None:
@@ -249,6 +260,8 @@ def test_model_criterion_bounds_the_transient_left(band, early) -> None:
 
 
 def test_compensated_series_start_early_and_compensate_the_transient(band, compensated) -> None:
+    """Every series after the run's first starts inside its transient and is compensated; the
+    first (state unknown) waits for the transient bound."""
     waited, comp_s = settle_s(band[0]), settle_s(compensated[0])
     transients = [key for key in waited if key != (1, 1)]  # (1, 1): the compass starts settled
     assert all(comp_s[key] < 0.3 * waited[key] for key in transients)
@@ -263,7 +276,9 @@ def test_compensated_series_start_early_and_compensate_the_transient(band, compe
     comp_err, band_err = errors_deg(compensated[0], config), errors_deg(band[0], config)
     assert rms(comp_err) < rms(band_err)
     done = {(a[0], a[1]): a[2] for a in compensated[0].of("series_completed")}
-    for key, comp in done.items():
+    assert done[(1, 1)] is None
+    for key in transients:
+        comp = done[key]
         assert comp.first_k == 1 and len(comp.transient_deg) == 4
         assert abs(comp_err[key]) < 3 * comp.standard_error_deg + 0.004  # its SE + the noise
 
@@ -278,7 +293,7 @@ def test_the_outcome_records_estimate_and_time_saved(band, compensated) -> None:
         outcome = settled[key][3]
         assert event[5] == settled[key][2]  # the event tells the decision at its stand time
         assert f"settle point {outcome.estimate_deg:.5f} deg" in event[2]
-        assert outcome.criterion == "compensated"
+        assert outcome.criterion == ("estimate" if key == (1, 1) else "compensated")
         assert outcome.settle_s == comp_s[key]
         assert outcome.standard_error_deg <= 0.015
         assert outcome.stable_since_s <= outcome.settle_s
@@ -321,14 +336,20 @@ def test_stored_and_reported(tmp_path: Path, compensated) -> None:
         stored = {}
         for index, s in series:
             outcome = SettleOutcome.from_dict(s.settle_outcome)
-            assert outcome.criterion == "compensated" and outcome.standard_error_deg <= 0.015
+            first = (index, s.j) == (1, 1)  # the run's first series: not compensated
+            assert outcome.criterion == ("estimate" if first else "compensated")
+            assert outcome.standard_error_deg <= 0.015
             assert s.settle_estimate_deg == outcome.estimate_deg
             assert (s.settle_done_ms - s.settle_started_ms) / 1000 == outcome.settle_s
             stored[(index, s.j)] = (s.settle_estimate_deg, outcome.saved_s)
             # the raw readings and the compensation, as the engine computed them
             comp = done[(index, s.j)]
-            assert s.compensation_se_deg == comp.standard_error_deg
             rows = session.scalars(select(Observation).where(Observation.series_id == s.id))
+            if first:
+                assert comp is None and s.compensation_se_deg is None
+                assert all(o.compensation_deg is None for o in rows)
+                continue
+            assert s.compensation_se_deg == comp.standard_error_deg
             assert tuple(o.compensation_deg for o in rows) == comp.transient_deg
     assert len(stored) == 4
     with sessions.begin() as session:
@@ -342,7 +363,7 @@ def test_stored_and_reported(tmp_path: Path, compensated) -> None:
     rows = {(r.trial, r.j): r for r in report.signal.settle}
     assert rows.keys() == stored.keys()
     for key, (estimate, saved) in stored.items():
-        assert rows[key].criterion == "compensated"
+        assert rows[key].criterion == ("estimate" if key == (1, 1) else "compensated")
         assert rows[key].estimate_deg == estimate and rows[key].saved_s == saved
 
 
@@ -359,12 +380,13 @@ def test_estimate_plan_derives_the_transient() -> None:
     assert plan.estimate.stable_estimates == 3
     band = parse_plan(scaled_plan(BAND_SETTLE)).settle
     assert band.method == "band" and band.estimate is None
-    paper_early = load_plan(ROOT / "examples" / "paper-early.toml")
+    compensated = load_plan(ROOT / "examples" / "paper-compensated.toml")
     paper = load_plan(ROOT / "examples" / "paper.toml")
-    assert paper_early.trials == paper.trials
-    shared = {"band_deg", "drift_deg", "hold_s", "max_wait_s"}
-    assert paper_early.settle.model_dump(include=shared) == paper.settle.model_dump(include=shared)
-    assert paper.settle.method == "band" and paper.settle.estimate is None
+    assert compensated.trials == paper.trials
+    shared = set(type(paper.settle).model_fields) - {"method"}
+    assert compensated.settle.model_dump(include=shared) == paper.settle.model_dump(include=shared)
+    assert paper.settle.method == "estimate" and compensated.settle.method == "compensated"
+    assert compensated.settle.estimate.compensated and not paper.settle.estimate.compensated
 
 
 @pytest.mark.parametrize(

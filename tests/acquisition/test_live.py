@@ -39,13 +39,16 @@ damping_ratio = 0.8
 
 
 def paper_plan_text(tmp: Path, *, seed: int = 3) -> str:
+    """The paper plan on a fast compass (300 s period). Its windows stay the paper's: with
+    windows under ~3 noise correlation times the settle decision and the first observation
+    share noise, and the fitted T came out 1-8 SE low on 7 of 8 seeds (30 s windows, 20 s)."""
     text = (ROOT / "examples" / "paper.toml").read_text()
     replacements = {
         'database = "runs/gyrostand.sqlite"': f'database = "{tmp / "live.sqlite"}"',
-        "still_window_s = 60.0": "still_window_s = 30.0",
-        "rocking_window_periods = 8": "rocking_window_periods = 4",
         "hold_s = 1800.0": "hold_s = 120.0",
         "drift_deg = 0.006": "drift_deg = 0.05",
+        "undamped_period_s = 5064.0": "undamped_period_s = 300.0",  # the fast compass below
+        "damping_ratio = 0.7 ": "damping_ratio = 0.8 ",
         "seed = 1": f"seed = {seed}",
     }
     for old, new in replacements.items():
