@@ -1,7 +1,7 @@
 """End-to-end validation of the whole chain over simulated campaigns, per settle criterion.
 
 `validation/monte_carlo.py` validates the analysis alone, on synthetic trial tables. This script
-runs whole campaigns as `gyrostand campaign run PLAN --db DB --seed S` does: the simulated
+runs whole campaigns as `gyrostand campaign run PLAN --db DB` does: the simulated
 compass on its rolling stand (virtual time) -> virtual CAN bus -> acquisition engine (settle
 criterion, observation windows) -> SQLite database; then the stored campaign is analysed as
 `gyrostand analyze ID` does (Potemkin 1982: trial statistics, Cochran, the Gauss-Newton fit of C
@@ -97,16 +97,23 @@ def draws(n: int, seed: int) -> list[Draw]:
     return out
 
 
-def plan_text(criterion: str, draw: Draw, base: str | None = None) -> str:
-    """The plan the campaign runs: the criterion's plan file (or `base`, a plan's text) with the
-    criterion's [settle] keys and the draw's compass. The simulator seed and the database are
-    given as `campaign run`'s --seed and --db."""
+def plan_text(criterion: str, draw: Draw, folder: Path, base: str | None = None) -> str:
+    """The plan file the campaign runs: the criterion's plan file (or `base`, a plan's text)
+    with the criterion's [settle] keys, the draw's compass and simulator seed, and the raw CAN
+    logs in `folder` (the database is given as `campaign run`'s --db)."""
     from gyrostand.plan.overrides import with_keys
 
     name, settle = CRITERIA[criterion]
     text = base if base is not None else (EXAMPLES / name).read_text()
-    compass = {"C_gcm2s2": draw.C_gcm2s2, "T_s": draw.T_s}
-    return with_keys(text, {"settle": settle, "bus.simulator.compass": compass})
+    return with_keys(
+        text,
+        {
+            "campaign": {"raw_log_dir": str(folder / "raw")},
+            "settle": settle,
+            "bus": {"seed": draw.bus_seed},
+            "bus.simulator.compass": {"C_gcm2s2": draw.C_gcm2s2, "T_s": draw.T_s},
+        },
+    )
 
 
 def _where(exc: BaseException) -> str:
@@ -142,12 +149,12 @@ def campaign_row(
     start = time.perf_counter()
     try:
         with _folder(folder) as where:
-            text = plan_text(criterion, draw, base)
+            text = plan_text(criterion, draw, where, base)
             row["settle_method"] = parse_plan(text).settle.method
             plan = where / "plan.toml"
             plan.write_text(text)
             db = str(where / "campaign.sqlite")
-            bus = BusOptions(None, None, None, draw.bus_seed, None)
+            bus = BusOptions(None, None, None, None, None)  # the plan's simulated stand
             result, db = new_campaign(plan, db, bus, quiet=True)
             row |= {"campaign_id": result.campaign_id, "outcome": result.outcome}
             sessions = open_db(db, must_exist=True)
