@@ -7,6 +7,7 @@ other fact the report shows, from the database and the raw CAN log.
     report_inputs(session, campaign_id, database=...) -> ReportInputs
     campaign_report(session, campaign_id, database=..., profile=..., generated_at=...) -> Report
     campaign_signal(session, campaign_id) -> SignalSection   (report section 10 alone)
+    trial_stand_spans(campaign) -> {trial index: (first, last) stand ms}
 
 An analysis run is recorded once per distinct result: analysing an unchanged campaign again with
 the same software reuses the run already stored, so the database (and the report's JSON) does not
