@@ -117,9 +117,16 @@ def plan_text(criterion: str, draw: Draw, folder: Path, base: str | None = None)
 
 
 def _where(exc: BaseException) -> str:
-    """The innermost traceback line of an exception: file:line in function."""
-    frame = traceback.extract_tb(exc.__traceback__)[-1]
-    return f"{Path(frame.filename).name}:{frame.lineno} in {frame.name}"
+    """Where an exception was raised: the innermost traceback line in gyrostand's code
+    (path:line in function), and the innermost of all when that is in a library."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    ours = [f for f in frames if Path(f.filename).is_relative_to(ROOT)]
+    shown = ([ours[-1]] if ours else []) + ([frames[-1]] if frames[-1] not in ours[-1:] else [])
+    return ", raised at ".join(
+        f"{Path(f.filename).relative_to(ROOT) if f in ours else Path(f.filename).name}:"
+        f"{f.lineno} in {f.name}"
+        for f in shown
+    )
 
 
 @contextmanager
