@@ -30,10 +30,12 @@ criterion, stand time <= 0.35 x the band criterion's.
 
 Run: .venv/bin/python validation/end_to_end.py [--campaigns 100] [--seed 1]
          [--criteria band,estimate] [--jobs 2] [--out rows.json]
-One campaign takes ~15-20 s of one core (the paper campaign, 6 trials, N = 5, ~15 h of stand
-time): 100 campaigns x 2 criteria on 2 cores ~30-40 min on an idle machine. Progress goes to
-stderr, one line per campaign. The same arguments give the same table (virtual time; only the
-wall times differ).
+     .venv/bin/python validation/end_to_end.py --table-from rows.json   (tables of kept rows)
+A campaign takes ~16 s of one core with the band criterion (the paper campaign: 6 trials,
+N = 5, ~15 h of stand time), ~8 s with early settle: 100 campaigns x these 2 criteria on 2 cores
+~20 min on an idle machine, about an hour on a shared one. Progress goes to stderr, one line per
+campaign; --out keeps the rows as they come. The same arguments give the same table (virtual
+time; only the wall times differ).
 """
 
 from __future__ import annotations
@@ -346,6 +348,27 @@ def progress(done: int, total: int, row: Mapping[str, Any]) -> str:
     return head + ", ".join(parts) + f" ({row['wall_s']:.0f} s)"
 
 
+def save(path: Path, args: argparse.Namespace, rows: list[dict[str, Any]], done: bool) -> None:
+    """The rows so far as one JSON document, replacing the file whole (a run that is stopped
+    keeps the campaigns it finished: `--table-from` prints their tables)."""
+    document = {
+        "arguments": {k: str(v) for k, v in vars(args).items() if k != "table_from"},
+        "complete": done,
+        "rows": rows,
+    }
+    partial = path.with_name(path.name + ".partial")
+    partial.write_text(json.dumps(document, indent=1))
+    partial.replace(path)
+
+
+def print_tables(rows: list[dict[str, Any]], chosen: list[str]) -> None:
+    rows.sort(key=lambda r: (chosen.index(r["criterion"]), r["index"]))
+    by = {c: [r for r in rows if r["criterion"] == c] for c in chosen}
+    for criterion in chosen:
+        print()
+        print(summarize(criterion, by[criterion], by.get(REFERENCE, [])))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--campaigns", type=int, default=100)
@@ -356,7 +379,12 @@ def main() -> int:
         help=f"comma-separated labels of CRITERIA: {', '.join(CRITERIA)}",
     )
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
-    parser.add_argument("--out", type=Path, help="write the per-campaign rows here (JSON)")
+    parser.add_argument(
+        "--out", type=Path, help="keep the per-campaign rows here (JSON, rewritten as they come)"
+    )
+    parser.add_argument(
+        "--table-from", type=Path, help="print the tables of the rows kept by --out; run nothing"
+    )
     args = parser.parse_args()
     chosen = [c.strip() for c in args.criteria.split(",") if c.strip()]
     unknown = [c for c in chosen if c not in CRITERIA]
@@ -366,6 +394,14 @@ def main() -> int:
             if unknown
             else "need at least one criterion, campaign and job"
         )
+    if args.table_from is not None:
+        document = json.loads(args.table_from.read_text())
+        rows = [r for r in document["rows"] if r["criterion"] in chosen]
+        chosen = [c for c in chosen if any(r["criterion"] == c for r in rows)]
+        state = "complete" if document["complete"] else "INCOMPLETE (the run was stopped)"
+        print(f"{len(rows)} campaigns from {args.table_from}, {state}: {document['arguments']}")
+        print_tables(rows, chosen)
+        return 0
     runs = [(c, d) for d in draws(args.campaigns, args.seed) for c in chosen]  # paired, in order
     print(
         f"{args.campaigns} campaigns per criterion (draws --seed {args.seed}): true C uniform in "
@@ -376,27 +412,27 @@ def main() -> int:
     )
     start = time.perf_counter()
     rows: list[dict[str, Any]] = []
+
+    def finished(row: dict[str, Any]) -> None:
+        rows.append(row)
+        print(progress(len(rows), len(runs), row), file=sys.stderr, flush=True)
+        if args.out is not None:
+            save(args.out, args, rows, done=False)
+
     if args.jobs == 1:
         for criterion, draw in runs:
-            rows.append(campaign_row(criterion, draw))
-            print(progress(len(rows), len(runs), rows[-1]), file=sys.stderr, flush=True)
+            finished(campaign_row(criterion, draw))
     else:
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
             futures = [pool.submit(campaign_row, c, d) for c, d in runs]
             for future in as_completed(futures):
-                rows.append(future.result())
-                print(progress(len(rows), len(runs), rows[-1]), file=sys.stderr, flush=True)
-    rows.sort(key=lambda r: (chosen.index(r["criterion"]), r["index"]))
+                finished(future.result())
     elapsed = time.perf_counter() - start
-    by = {c: [r for r in rows if r["criterion"] == c] for c in chosen}
-    for criterion in chosen:
-        print()
-        print(summarize(criterion, by[criterion], by.get(REFERENCE, [])))
+    print_tables(rows, chosen)
     print(f"\nelapsed {elapsed:.0f} s wall with {args.jobs} jobs")
     if args.out is not None:
-        document = {"arguments": {k: str(v) for k, v in vars(args).items()}, "rows": rows}
-        args.out.write_text(json.dumps(document, indent=1))
-        print(f"rows written to {args.out}")
+        save(args.out, args, rows, done=True)
+        print(f"rows in {args.out}")
     return 1 if any(r["error"] for r in rows) else 0
 
 
