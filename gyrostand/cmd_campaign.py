@@ -207,13 +207,36 @@ def run_campaign(
 
 @dataclass(frozen=True)
 class BusOptions:
-    """The command line's bus options of `campaign resume` and `campaign retry`."""
+    """The command line's bus options of `campaign run`, `resume` and `retry`."""
 
     interface: str | None
     channel: str | None
     speedup: float | None
     seed: int | None
     timing: str | None
+
+
+def new_campaign(plan: Path, db: str | None, bus: BusOptions, quiet: bool) -> tuple[RunResult, str]:
+    """`campaign run PLAN`: a new campaign of the plan file with the command line's options,
+    acquired (`run_campaign`); its outcome and the database it went to. Everything is checked
+    before anything is written (one-line errors: `_load`, `checked_plan`, `preflight`)."""
+    from gyrostand.acquisition.store import CampaignStore
+
+    with signals_deferred() as stop:
+        checked = checked_plan(
+            _load(plan),
+            interface=bus.interface,
+            channel=bus.channel,
+            db=db,
+            speedup=bus.speedup,
+            seed=bus.seed,
+            timing=bus.timing,
+        )
+        preflight(checked)
+        sessions = open_db(checked.database, must_exist=False)
+        not_interrupted(stop, "the campaign was stored")
+        store = CampaignStore.create(sessions, checked)
+        return run_campaign(checked, store, quiet, stop, checked.database), checked.database
 
 
 def continue_campaign(
@@ -334,24 +357,9 @@ def register(app: typer.Typer) -> None:
         quiet: Quiet = False,
     ) -> None:
         """Run a campaign plan on the stand (the simulated stand when the plan says so)."""
-        from gyrostand.acquisition.store import CampaignStore
-
-        with signals_deferred() as stop:
-            checked = checked_plan(
-                _load(plan),
-                interface=interface,
-                channel=channel,
-                db=db,
-                speedup=speedup,
-                seed=seed,
-                timing=timing,
-            )
-            preflight(checked)
-            sessions = open_db(checked.database, must_exist=False)
-            not_interrupted(stop, "the campaign was stored")
-            store = CampaignStore.create(sessions, checked)
-            outcome = run_campaign(checked, store, quiet, stop, checked.database)
-        print_outcome(outcome, checked.database)
+        bus = BusOptions(interface, channel, speedup, seed, timing)
+        outcome, database = new_campaign(plan, db, bus, quiet)
+        print_outcome(outcome, database)
 
     @campaign_app.command("resume")
     def campaign_resume(

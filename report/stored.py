@@ -7,6 +7,7 @@ other fact the report shows, from the database and the raw CAN log.
     report_inputs(session, campaign_id, database=...) -> ReportInputs
     campaign_report(session, campaign_id, database=..., profile=..., generated_at=...) -> Report
     campaign_signal(session, campaign_id) -> SignalSection   (report section 10 alone)
+    trial_stand_spans(campaign) -> {trial index: (first, last) stand ms}
 
 An analysis run is recorded once per distinct result: analysing an unchanged campaign again with
 the same software reuses the run already stored, so the database (and the report's JSON) does not
@@ -402,6 +403,22 @@ def _stand_span_ms(series: tuple[SeriesRecord, ...], events: list[int]) -> tuple
     return (min(times), max(times)) if times else None
 
 
+def trial_stand_spans(campaign: Campaign) -> dict[int, tuple[int, int]]:
+    """Per trial index (its latest attempt) the stand-time span [first, last] in ms of its
+    settles, observation windows and events: the stand time the trial took."""
+    current = current_trials(campaign.trials)
+    event_times: dict[int, list[int]] = {t.index: [] for t in current}
+    by_id = {t.id: t.index for t in current}
+    for e in campaign.events:
+        if e.trial_id in by_id and e.stand_time_ms is not None:
+            event_times[by_id[e.trial_id]].append(e.stand_time_ms)
+    return {
+        t.index: span
+        for t in current
+        if (span := _stand_span_ms(_series_records(t), event_times[t.index])) is not None
+    }
+
+
 def _binned(
     span_ms: tuple[int, int], t_ms: np.ndarray, heading_deg: np.ndarray, bins: int
 ) -> HeadingTrace | None:
@@ -447,16 +464,7 @@ def _records(
     current = current_trials(campaign.trials)
     series = {t.index: _series_records(t) for t in current}
     has_observations = any(s.observations for rows in series.values() for s in rows)
-    event_times: dict[int, list[int]] = {t.index: [] for t in current}
-    by_id = {t.id: t.index for t in current}
-    for e in campaign.events:
-        if e.trial_id in by_id and e.stand_time_ms is not None:
-            event_times[by_id[e.trial_id]].append(e.stand_time_ms)
-    spans = {
-        t.index: span
-        for t in current
-        if (span := _stand_span_ms(series[t.index], event_times[t.index])) is not None
-    }
+    spans = trial_stand_spans(campaign)
     traces: dict[int, HeadingTrace | None] = {}
     if logs and plan is not None and spans:
         traces = heading_traces(logs, plan, spans)

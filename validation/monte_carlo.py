@@ -1,4 +1,4 @@
-"""Monte-Carlo validation of the seed-000 analysis (issue 3, section 7).
+"""Monte-Carlo validation of the analysis (Potemkin 1982) on synthetic trials (issue 3, section 7).
 
 Simulates campaigns with known C, T and Gaussian reading noise (analysis.synthetic), runs each
 through `analyze_campaign`, and prints per parameter: bias, the SD of the estimates against the
