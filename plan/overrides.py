@@ -1,7 +1,8 @@
 """A plan file's text with some keys of some tables set, the rest of the file (comments, order)
 as it was: ``with_keys(text, {"settle": {"hold_s": 2700.0}, "bus.simulator.compass":
 {"T_s": 0.9}})``. A key found in its table's header section is replaced (its line, comment and
-all), a missing key is added under the table's header, a missing table is appended at the end.
+all), a missing key is added under the table's header, a missing table is appended at the end;
+a key set to None is removed.
 
 This is the text-level counterpart of `plan.model.revised` (which changes the parsed model and
 keeps the file's text): use it when the changed plan must be stored as it ran, as a plan file
@@ -44,7 +45,8 @@ def _set_keys(lines: list[str], table: str, keys: Mapping[str, Any]) -> list[str
         (i for i, line in enumerate(lines) if (m := _HEADER.match(line)) and m[1] == table), None
     )
     if header is None:
-        return [*lines, "", f"[{table}]", *(f"{k} = {toml_value(v)}" for k, v in keys.items())]
+        new = (f"{k} = {toml_value(v)}" for k, v in keys.items() if v is not None)
+        return [*lines, "", f"[{table}]", *new]
     end = next(
         (i for i in range(header + 1, len(lines)) if _ANY_HEADER.match(lines[i])), len(lines)
     )
@@ -53,7 +55,10 @@ def _set_keys(lines: list[str], table: str, keys: Mapping[str, Any]) -> list[str
     for key, value in keys.items():
         pattern = re.compile(rf"^\s*{re.escape(key)}\s*=")
         found = [i for i in range(header + 1, end) if pattern.match(lines[i])]
-        if found:
+        if value is None:
+            for i in found:
+                lines[i] = ""
+        elif found:
             lines[found[0]] = f"{key} = {toml_value(value)}"
         else:
             missing.append(f"{key} = {toml_value(value)}")
@@ -61,8 +66,8 @@ def _set_keys(lines: list[str], table: str, keys: Mapping[str, Any]) -> list[str
 
 
 def with_keys(text: str, tables: Mapping[str, Mapping[str, Any]]) -> str:
-    """`text` with, per table (dotted name: ``bus.simulator.compass``), the given keys set
-    (ValueError when the result does not read back with exactly these values)."""
+    """`text` with, per table (dotted name: ``bus.simulator.compass``), the given keys set, or
+    removed where None (ValueError when the result does not read back with exactly these)."""
     lines = text.splitlines()
     for table, keys in tables.items():
         if keys:
@@ -77,6 +82,8 @@ def with_keys(text: str, tables: Mapping[str, Mapping[str, Any]]) -> str:
         for part in table.split("."):
             found = found.get(part, {}) if isinstance(found, dict) else {}
         for key, value in keys.items():
+            if value is None and key not in found:
+                continue
             if key not in found or found[key] != (
                 list(value) if isinstance(value, tuple) else value
             ):
