@@ -331,7 +331,7 @@ class SettlePlan(_Table):
     """Estimate: tolerance = tolerance_fraction x expected_se_deg."""
     stable_estimates: int = Field(3, ge=2)
     """Estimate: consecutive estimates that must agree within the tolerance."""
-    transient_fraction: float = Field(0.2, gt=0, le=1)
+    transient_fraction: float = Field(0.05, gt=0, le=1)
     """Estimate: the transient left over the observations (|fit| + 2 SE) must stay within
     transient_fraction x expected_se_deg."""
 
