@@ -246,8 +246,8 @@ def compensated() -> tuple[Recorder, Lockstep, Engine]:
 
 def test_model_criterion_bounds_the_transient_left(band, early) -> None:
     """The band criterion holds on the overshoot (-0.013 and -0.015 deg left in trial 2); the
-    model criterion waits until the fitted transient + 2 SE over the windows is within 0.2 S_e
-    (0.003 deg): what is left is the noise of a 4-observation mean (~0.004 deg)."""
+    model criterion waits until the fitted transient + 2 SE over the windows is within 0.05 S_e
+    (0.00075 deg): what is left is the noise of a 4-observation mean (~0.004 deg)."""
     waited, model_s = settle_s(band[0]), settle_s(early[0])
     assert waited.keys() == model_s.keys() and len(waited) == 4
     config = scaled_config()
@@ -447,6 +447,6 @@ def test_timeout_says_what_the_estimate_last_saw() -> None:
     assert failures and all(
         re.fullmatch(r"not settled within 1500 s \(transient model: SE [\d.]+ deg, .*tolerance "
                      r"0\.01500 deg; transient over the observations [\d.]+ deg, bound "
-                     r"0\.00300 deg\)", f)
+                     r"0\.00075 deg\)", f)
         for f in failures
     )  # fmt: skip
