@@ -252,6 +252,17 @@ def per_trial_s(row: Mapping[str, Any]) -> float | None:
     return sum(stand.values()) / len(stand) if stand else None
 
 
+def _rms_expected(dofs: set[int]) -> str:
+    """What an unbiased estimate gives: (est - true) / SE follows Student's t with the fit's
+    residual dof, whose RMS is sqrt(dof / (dof - 2)) (none for dof <= 2)."""
+    if len(dofs) != 1:
+        return ""
+    (dof,) = dofs
+    if dof <= 2:
+        return f"unbiased: t({dof}), no finite RMS; judge by coverage"
+    return f"unbiased: t({dof}), RMS {math.sqrt(dof / (dof - 2)):.2f}"
+
+
 def _flag(ok: bool) -> str:
     return "ok" if ok else "MISS"
 
@@ -289,7 +300,9 @@ def summarize(criterion: str, rows: list[dict[str, Any]], reference: list[dict[s
         + " ".join(_flag(abs(m) <= BIAS_TARGET) for m, _ in bias.values())
     )
     lines.append(
-        f"  {'RMS of (est - true) / SE':<28}" + "".join(f"{v:>18.2f}" for v in rms.values())
+        f"  {'RMS of (est - true) / SE':<28}"
+        + "".join(f"{v:>18.2f}" for v in rms.values())
+        + f"   {_rms_expected({r['dof'] for r in fitted})}"
     )
     lines.append(
         f"  {'95 % CI coverage':<28}"
