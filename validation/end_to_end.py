@@ -30,10 +30,12 @@ criterion, stand time <= 0.35 x the band criterion's.
 
 Run: .venv/bin/python validation/end_to_end.py [--campaigns 100] [--seed 1]
          [--criteria band,estimate,compensated] [--jobs 2] [--out rows.json]
+     .venv/bin/python validation/end_to_end.py ... --out rows.json --resume   (a stopped run)
      .venv/bin/python validation/end_to_end.py --table-from rows.json   (tables of kept rows)
 A campaign takes ~16 s of one core with the band criterion (the paper campaign: 6 trials,
-N = 5, ~15 h of stand time), ~8 s with early settle: 100 campaigns x these 2 criteria on 2 cores
-~20 min on an idle machine, about an hour on a shared one. Progress goes to stderr, one line per
+N = 5, ~15 h of stand time), ~40 s with "estimate" (~20 h of stand time), ~10 s compensated
+(~5.5 h); on a shared 2-core machine two to three times that: 100 campaigns x the three
+criteria take a few hours, so run it with --out and --resume. Progress goes to stderr, one line per
 campaign; --out keeps the rows as they come. The same arguments give the same table (virtual
 time; only the wall times differ).
 """
@@ -255,6 +257,17 @@ def per_trial_s(row: Mapping[str, Any]) -> float | None:
     return sum(stand.values()) / len(stand) if stand else None
 
 
+def _rms_expected(dofs: set[int]) -> str:
+    """What an unbiased estimate gives: (est - true) / SE follows Student's t with the fit's
+    residual dof, whose RMS is sqrt(dof / (dof - 2)) (none for dof <= 2)."""
+    if len(dofs) != 1:
+        return ""
+    (dof,) = dofs
+    if dof <= 2:
+        return f"unbiased: t({dof}), no finite RMS; judge by coverage"
+    return f"unbiased: t({dof}), RMS {math.sqrt(dof / (dof - 2)):.2f}"
+
+
 def _flag(ok: bool) -> str:
     return "ok" if ok else "MISS"
 
@@ -292,7 +305,9 @@ def summarize(criterion: str, rows: list[dict[str, Any]], reference: list[dict[s
         + " ".join(_flag(abs(m) <= BIAS_TARGET) for m, _ in bias.values())
     )
     lines.append(
-        f"  {'RMS of (est - true) / SE':<28}" + "".join(f"{v:>18.2f}" for v in rms.values())
+        f"  {'RMS of (est - true) / SE':<28}"
+        + "".join(f"{v:>18.2f}" for v in rms.values())
+        + f"   {_rms_expected({r['dof'] for r in fitted})}"
     )
     lines.append(
         f"  {'95 % CI coverage':<28}"
@@ -387,6 +402,11 @@ def main() -> int:
         "--out", type=Path, help="keep the per-campaign rows here (JSON, rewritten as they come)"
     )
     parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="with --out: keep the rows already there for the same draws, run only the rest",
+    )
+    parser.add_argument(
         "--table-from", type=Path, help="print the tables of the rows kept by --out; run nothing"
     )
     args = parser.parse_args()
@@ -407,6 +427,19 @@ def main() -> int:
         print_tables(rows, chosen)
         return 0
     runs = [(c, d) for d in draws(args.campaigns, args.seed) for c in chosen]  # paired, in order
+    kept: list[dict[str, Any]] = []
+    if args.resume:
+        if args.out is None or not args.out.is_file():
+            parser.error("--resume continues the rows of an --out file that exists")
+        earlier = {
+            (r["criterion"], r["index"]): r for r in json.loads(args.out.read_text())["rows"]
+        }
+        for c, d in runs:  # the same criterion and draw (C, T, simulator seed), else run again
+            r = earlier.get((c, d.index))
+            if r is not None and all(r[k] == v for k, v in asdict(d).items()):
+                kept.append(r)
+        done = {(r["criterion"], r["index"]) for r in kept}
+        runs = [(c, d) for c, d in runs if (c, d.index) not in done]
     print(
         f"{args.campaigns} campaigns per criterion (draws --seed {args.seed}): true C uniform in "
         f"{C_RANGE[0] / 1e7:g}-{C_RANGE[1] / 1e7:g} x 10^7 g cm^2 s^-2, T uniform in "
@@ -414,12 +447,14 @@ def main() -> int:
         "every criterion",
         flush=True,
     )
+    if kept:
+        print(f"{len(kept)} campaigns kept from {args.out}, {len(runs)} to run", flush=True)
     start = time.perf_counter()
-    rows: list[dict[str, Any]] = []
+    rows: list[dict[str, Any]] = list(kept)
 
     def finished(row: dict[str, Any]) -> None:
         rows.append(row)
-        print(progress(len(rows), len(runs), row), file=sys.stderr, flush=True)
+        print(progress(len(rows) - len(kept), len(runs), row), file=sys.stderr, flush=True)
         if args.out is not None:
             save(args.out, args, rows, done=False)
 
@@ -432,10 +467,11 @@ def main() -> int:
             for future in as_completed(futures):
                 finished(future.result())
     elapsed = time.perf_counter() - start
+    if args.out is not None:
+        save(args.out, args, rows, done=True)
     print_tables(rows, chosen)
     print(f"\nelapsed {elapsed:.0f} s wall with {args.jobs} jobs")
     if args.out is not None:
-        save(args.out, args, rows, done=True)
         print(f"rows in {args.out}")
     return 1 if any(r["error"] for r in rows) else 0
 
