@@ -42,9 +42,9 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
   reason, superseded_by (a stored campaign's failed trials, attempts superseded by a retry with
   the attempt that replaced them, trials not acquired; empty for a table of trials);
 - ``transient``: null, or the compass's transient fitted to a stored campaign's whole record
-  (`analysis.transient.TransientCheck`): undamped_period_s, damping_ratio, from_record,
-  record_period_s, record_period_se_s, record_damping_ratio, record_damping_ratio_se,
-  plan_period_s, plan_damping_ratio, residual_sd_deg, and per series trial, j,
+  (`analysis.transient.TransientCheck`): undamped_period_s, damping_ratio (the plan's),
+  plan_contradicted, record_period_s, record_period_se_s, record_damping_ratio,
+  record_damping_ratio_se, residual_sd_deg, and per series trial, j,
   compensation_se_deg, left_deg, standard_error_deg, bound_deg.
 """
 

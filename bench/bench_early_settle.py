@@ -24,7 +24,8 @@ observations, as the analysis uses them. z = error / the standard error of the m
 states: sqrt(SE_c^2 + s^2 / N), with s the scatter of the N (compensated) observations and SE_c
 the compensation's standard error (0 for a series not compensated); RMS z near 1 means the stated
 uncertainty is honest. Last, the period and damping ratio that the whole record of each run
-gives (the analysis re-estimates them, `report.transient`), with the plan's right and off.
+gives (the analysis reports them and warns when they contradict the plan's), with the plan's
+right and off.
 """
 
 from __future__ import annotations
@@ -43,15 +44,16 @@ from gyrostand.acquisition.engine import Engine, ObservationResult, Phase, Serie
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.transient import (
+    REJECT_SE,
     Segments,
     TransientFit,
     TransientModel,
     Windows,
+    contradicts,
     fit_transient_free,
 )
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.plan.model import Plan, parse_plan
-from gyrostand.report.transient import REJECT_SE, WELL_DETERMINED
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import SimConfig
 
@@ -280,21 +282,13 @@ def ratios(by_label: dict[str, list[Run]]) -> None:
 
 
 def from_record(fit: TransientFit | None, plan: TransientModel) -> str:
-    """The period and damping ratio a whole record gives, +- SE; "*" where the analysis would use
-    them instead of the plan's (well determined and more than REJECT_SE SE from the plan's)."""
+    """The period and damping ratio a whole record gives, +- SE; "*" where the analysis warns
+    that they contradict the plan's (`analysis.transient.contradicts`)."""
     if fit is None or fit.period_se_s is None or fit.damping_ratio_se is None:
         return f"{'not fitted':<25}"
     period, ratio = fit.model.undamped_period_s, fit.model.damping_ratio
-    determined = (
-        fit.period_se_s < WELL_DETERMINED * period
-        and fit.damping_ratio_se < WELL_DETERMINED * ratio
-    )
-    off = max(
-        abs(period - plan.undamped_period_s) / fit.period_se_s,
-        abs(ratio - plan.damping_ratio) / fit.damping_ratio_se,
-    )
-    used = "*" if determined and off > REJECT_SE else " "
-    return f"{period:4.0f}+-{fit.period_se_s:<3.0f} s {ratio:.3f}+-{fit.damping_ratio_se:.3f}{used}"
+    mark = "*" if contradicts(fit, plan) else " "
+    return f"{period:4.0f}+-{fit.period_se_s:<3.0f} s {ratio:.3f}+-{fit.damping_ratio_se:.3f}{mark}"
 
 
 def sensitivity(by_label: dict[str, list[Run]]) -> None:
@@ -305,7 +299,7 @@ def sensitivity(by_label: dict[str, list[Run]]) -> None:
     print(
         "\nThe period and damping ratio the whole record gives (+- SE), per seed, as the analysis"
     )
-    print(f"re-estimates them (*: it would use them, off the plan's by > {REJECT_SE:g} SE):")
+    print(f"re-estimates them (*: it warns they contradict the plan's, > {REJECT_SE:g} SE):")
     for label in SENSITIVITY:
         plan = plan_for(label).settle.transient_model
         assert plan is not None

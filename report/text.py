@@ -58,15 +58,15 @@ def left_out_section(a: CampaignAnalysis) -> list[str]:
 def transient_section(a: CampaignAnalysis) -> list[str]:
     t = a.transient
     assert t is not None
-    source = "the record's (the plan's are contradicted)" if t.from_record else "the plan's"
     lines = [
         "TRANSIENT LEFT IN EACH SERIES (transient model, Bezvesilna & Gura)",
-        f"period {t.undamped_period_s:.0f} s, damping ratio {t.damping_ratio:.3f}: {source}",
+        f"period {t.undamped_period_s:.0f} s, damping ratio {t.damping_ratio:.3f}: the plan's",
     ]
     if t.record_period_s is not None:
         lines.append(
             f"the record alone: {t.record_period_s:.0f} +/- {t.record_period_se_s:.0f} s, "
             f"{t.record_damping_ratio:.3f} +/- {t.record_damping_ratio_se:.3f}"
+            + (": CONTRADICTS the plan's" if t.plan_contradicted else "")
         )
     rows = [
         [

@@ -6,8 +6,8 @@ Series follow one another in trial order, each starting at the start/stop that m
 compass's equilibrium (its stored ``step_ms``). The state carries over from the series before
 only when both ran in one run of the stand clock (first attempts, in order, times increasing);
 otherwise the series starts from an unknown state. The period and damping ratio are the plan's
-(instrument data) unless the record determines them (relative SE below 10 %) and contradicts
-the plan by more than 3 SE; the record's estimates are reported either way.
+(instrument data); the record's own estimates are reported beside them, with a warning when they
+contradict the plan's (`analysis.transient.contradicts`).
 """
 
 from __future__ import annotations
@@ -24,17 +24,14 @@ from gyrostand.analysis.transient import (
     SeriesTransient,
     TransientCheck,
     TransientFit,
-    TransientModel,
     Windows,
+    contradicts,
     fit_transient,
     fit_transient_free,
 )
 from gyrostand.db.models import Campaign, Series
 from gyrostand.db.queries import current_trials
 from gyrostand.plan.model import Plan
-
-WELL_DETERMINED = 0.1  # relative SE below which the record's period and damping are trusted
-REJECT_SE = 3.0  # ... and used instead of the plan's when these many SE off
 
 
 @dataclass(frozen=True)
@@ -89,30 +86,6 @@ def _segment(
     )
 
 
-def _fit(
-    plan_model: TransientModel, seg: Segments, data: Windows
-) -> tuple[TransientFit, TransientFit | None]:
-    """The fit used and the fit with the record's own period and damping ratio (None: not
-    determined by the record, relative SE above WELL_DETERMINED). The fit used has the plan's
-    values unless the record's contradict them by more than REJECT_SE standard errors."""
-    fit = fit_transient(plan_model, seg, data)
-    try:
-        free = fit_transient_free(plan_model, seg, data)
-    except AnalysisError:
-        return fit, None
-    assert free.period_se_s is not None and free.damping_ratio_se is not None
-    if not (
-        free.period_se_s < WELL_DETERMINED * free.model.undamped_period_s
-        and free.damping_ratio_se < WELL_DETERMINED * free.model.damping_ratio
-    ):
-        return fit, None
-    off = max(
-        abs(free.model.undamped_period_s - plan_model.undamped_period_s) / free.period_se_s,
-        abs(free.model.damping_ratio - plan_model.damping_ratio) / free.damping_ratio_se,
-    )
-    return (free if off > REJECT_SE else fit), free
-
-
 def transient_check(campaign: Campaign, plan: Plan | None) -> TransientCheck | str:
     """The transient left in each series of a stored campaign, or why it is not assessed."""
     model = None if plan is None else plan.settle.transient_model
@@ -133,10 +106,15 @@ def transient_check(campaign: Campaign, plan: Plan | None) -> TransientCheck | s
     branch = rows[0][3]
     rows = [(k, t, w, float(about(branch, v))) for k, t, w, v in rows]
     seg = Segments(tuple(s.start_ms / 1000 for s in segments), tuple(s.free for s in segments))
+    data = Windows.of(rows)
     try:
-        fit, record = _fit(model, seg, Windows.of(rows))
+        fit = fit_transient(model, seg, data)
     except AnalysisError as exc:
         return f"not assessed: the transient model cannot be fitted to the record ({exc})"
+    try:
+        record: TransientFit | None = fit_transient_free(model, seg, data)
+    except AnalysisError:
+        record = None
     series = []
     for k, s in enumerate(segments):
         if not s.observed:
@@ -150,13 +128,11 @@ def transient_check(campaign: Campaign, plan: Plan | None) -> TransientCheck | s
     return TransientCheck(
         undamped_period_s=fit.model.undamped_period_s,
         damping_ratio=fit.model.damping_ratio,
-        from_record=fit is record,
+        plan_contradicted=record is not None and contradicts(record, model),
         record_period_s=None if record is None else record.model.undamped_period_s,
         record_period_se_s=None if record is None else record.period_se_s,
         record_damping_ratio=None if record is None else record.model.damping_ratio,
         record_damping_ratio_se=None if record is None else record.damping_ratio_se,
-        plan_period_s=model.undamped_period_s,
-        plan_damping_ratio=model.damping_ratio,
         residual_sd_deg=fit.residual_sd_deg,
         series=tuple(series),
     )
