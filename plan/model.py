@@ -291,16 +291,6 @@ class EstimatePlan:
     def model(self) -> TransientModel:
         return TransientModel(self.undamped_period_s, self.damping_ratio)
 
-    @property
-    def omega_rad_s(self) -> float:
-        """Damped angular frequency omega = sqrt(omega0^2 - xi^2)."""
-        return 2.0 * math.pi / self.undamped_period_s * math.sqrt(1.0 - self.damping_ratio**2)
-
-    @property
-    def damping_per_s(self) -> float:
-        """xi, the decay rate of the transient."""
-        return 2.0 * math.pi / self.undamped_period_s * self.damping_ratio
-
 
 class SettlePlan(_Table):
     """[settle]: when a series may start observing. Method "band": the window means over the

@@ -374,8 +374,8 @@ def test_estimate_plan_derives_the_transient() -> None:
     plan = parse_plan(scaled_plan(EARLY_SETTLE)).settle
     assert plan.method == "estimate" and plan.estimate is not None
     w0 = 2 * math.pi / SCALED_T0_S
-    assert plan.estimate.omega_rad_s == pytest.approx(w0 * math.sqrt(1 - ZETA**2))  # eq 2
-    assert plan.estimate.damping_per_s == pytest.approx(ZETA * w0)
+    assert plan.estimate.model.w == pytest.approx(w0 * math.sqrt(1 - ZETA**2))  # eq 2
+    assert plan.estimate.model.xi == pytest.approx(ZETA * w0)
     assert plan.estimate.tolerance_deg == pytest.approx(0.015)
     assert plan.estimate.stable_estimates == 3
     band = parse_plan(scaled_plan(BAND_SETTLE)).settle
