@@ -1,15 +1,14 @@
-"""CLI: demo -- the whole chain on the embedded defaults: the paper's campaign (seed 000) on the
+"""CLI: demo -- the whole chain on the embedded defaults: the campaign of Potemkin (1982) on the
 simulated gyrocompass + roll stand over an in-process python-can virtual bus, stored in SQLite
 under ./runs/, analysed, and written up as the stand report."""
 
 from importlib.resources import files
+from pathlib import Path
 
 import typer
 
-from gyrostand.cmd_campaign import checked_plan, print_outcome, run_campaign
-from gyrostand.cmd_data import open_db
+from gyrostand.cmd_campaign import BusOptions, new_campaign, print_outcome
 from gyrostand.cmd_report import DEFAULT_OUT, write_campaign_report
-from gyrostand.errors import fail
 
 DEMO_PLAN = files("gyrostand") / "plans" / "paper.toml"  # also examples/paper.toml
 
@@ -22,22 +21,15 @@ def register(app: typer.Typer) -> None:
         quiet: bool = typer.Option(False, "--quiet", help="No live progress display."),
     ) -> None:
         """Run the paper's campaign on the simulated stand, analyse it, write its report."""
-        from gyrostand.acquisition.store import CampaignStore
-        from gyrostand.plan.model import PlanError, parse_plan
-
-        try:
-            plan = parse_plan(DEMO_PLAN.read_text())
-        except PlanError as exc:  # the shipped plan is tested; this guards a broken install
-            fail("embedded demo plan invalid: " + "; ".join(exc.problems))
-        plan = checked_plan(plan, interface=None, channel=None, db=None, speedup=None, seed=None)
+        bus = BusOptions(interface=None, channel=None, speedup=None, seed=None, timing=None)
         typer.echo(
-            f"1/2 campaign: {len(plan.trials)} trials of the example of Potemkin (1982) on the "
-            f"simulated stand (virtual CAN bus, {plan.bus.timing} time) into {plan.database}"
+            "1/2 campaign: the example of Potemkin (1982) on the simulated stand (virtual CAN "
+            "bus, virtual time)"
         )
-        store = CampaignStore.create(open_db(plan.database, must_exist=False), plan)
-        print_outcome(run_campaign(plan, store, quiet), plan.database)
+        result, database = new_campaign(Path(str(DEMO_PLAN)), None, bus, quiet)
+        print_outcome(result, database)
         typer.echo("2/2 analysis and report")
-        written = write_campaign_report(plan.database, store.campaign_id, DEFAULT_OUT)
+        written = write_campaign_report(database, result.campaign_id, DEFAULT_OUT)
         for kind, path in written.items():
             typer.echo(f"  {kind}: {path}")
         typer.echo(f"report: {written['html']}")

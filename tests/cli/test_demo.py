@@ -30,3 +30,24 @@ def test_examples_are_plain_files_and_the_demo_plan_is_the_example() -> None:
     assert not [p.name for p in examples.iterdir() if p.is_symlink()]
     packaged = (files("gyrostand") / "plans" / "paper.toml").read_text()
     assert packaged == (examples / "paper.toml").read_text()
+
+
+def test_the_demo_runs_the_whole_chain(tmp_path: Path, monkeypatch) -> None:
+    """`gyrostand demo` on a small plan in its place: campaign, analysis, report files (the
+    command once called the campaign runner with a stale signature and no test ran it)."""
+    from typer.testing import CliRunner
+
+    from gyrostand import cmd_demo
+    from gyrostand.cli import app
+
+    from ..acquisition.harness import plan_text
+
+    plan = tmp_path / "plan.toml"
+    plan.write_text(plan_text(n_obs=3, database="runs/demo.sqlite", raw_dir="runs/raw"))
+    monkeypatch.setattr(cmd_demo, "DEMO_PLAN", plan)
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(app, ["demo", "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert "campaign 1 completed: 2 trials completed, 0 failed, 12 observations" in result.output
+    report = result.output.splitlines()[-1].removeprefix("report: ")
+    assert (tmp_path / report).is_file() and (tmp_path / "runs" / "demo.sqlite").is_file()
