@@ -54,7 +54,6 @@ class RiceCrossings:
     upcrossings_upper: float
     downcrossings_lower: float
     mean_excursions: float
-    mean_time_between_s: float
     bandwidth: float
     p_poisson: float
     p_vanmarcke: float
@@ -76,7 +75,6 @@ class ExcursionAcceptance:
     mean: float
     duration_s: float
     sigma: float
-    correlation_time_s: float
     p_start_inside: float
     p_no_excursion: float
     method: str
@@ -171,7 +169,6 @@ def _rice(
         upcrossings_upper=float(n2),
         downcrossings_lower=float(n1),
         mean_excursions=float(n),
-        mean_time_between_s=float(duration_s / n) if n > 0 else float("inf"),
         bandwidth=q,
         p_poisson=float(np.exp(-n)),  # (8.84) from the Poisson law (8.83)
         p_vanmarcke=float(p_vanmarcke),
@@ -223,7 +220,6 @@ def excursion_acceptance(
         mean=m,
         duration_s=float(duration_s),
         sigma=sigma,
-        correlation_time_s=model.correlation_time_s,
         p_start_inside=p_inside,
         p_no_excursion=float(alpha),
         method=method,
