@@ -36,7 +36,7 @@ CHECKED_MIN_BANDWIDTH = 0.15
 # simulated alpha in every case of that grid (crossings cluster). Not so for a broad band.
 CLUSTERING_MAX_BANDWIDTH = 0.35
 
-_GRID_STEP = 0.01  # finite-difference step in sigma: alpha converges to ~1e-5 (step halved)
+_GRID_STEP = 0.01  # finite-difference step in sigma: alpha within ~1e-5 (relative) of the limit
 _MIN_NODES = 16
 _MAX_MODES = 400  # enough for s >= 1e-4; below, the left-out modes change alpha by < 1e-4
 _NEGLIGIBLE = 60.0  # modes decayed by e^(-60) are left out
@@ -107,7 +107,7 @@ def spectral_bandwidth(model: CorrelationModel) -> float:
     """Vanmarcke's q of the smooth model, in closed form. Its spectral density is that of a
     damped oscillator driven by white noise, S(w) ~ 1 / ((w0^2 - w^2)^2 + 4 mu^2 w^2),
     w0^2 = mu^2 + beta^2, whose moments are lambda_0 = sigma^2, lambda_2 = sigma^2 w0^2 (8.86) and
-    lambda_1 = sigma^2 w0^2 (2 / pi) arctan(beta / mu) / beta (-> 2 sigma^2 / pi at beta = 0)."""
+    lambda_1 = sigma^2 w0^2 (2 / pi) arctan(beta / mu) / beta (-> 2 sigma^2 mu / pi at beta = 0)."""
     if not model.is_smooth:
         raise AnalysisError("the exponential correlation has no finite spectral moment lambda_2")
     mu, beta = model.decay_per_s, model.frequency_rad_s
@@ -125,18 +125,22 @@ def _markov_no_excursion(a: float, b: float, s: float) -> float:
     start. With v = sqrt(phi) u the operator is the symmetric -v'' + (z^2/4 - 1/2) v, so
     alpha = sum_k c_k^2 e^(-lambda_k s), c_k = <sqrt(phi), psi_k>: the eigenpairs of its
     finite-difference matrix (tridiagonal, scipy.linalg.eigh_tridiagonal)."""
+    # Kolmogorov's backward equation (Sveshnikov §8.3 before eq 8.80, his eq 1.147), seed 004
     a, b = max(a, -_FAR), min(b, _FAR)
     if not b > a:
         return 0.0
     n = max(int(np.ceil((b - a) / _GRID_STEP)), _MIN_NODES)
     h = (b - a) / n
     z = a + h * np.arange(1, n)
-    diagonal = 2 / h**2 + z**2 / 4 - 0.5
+    potential = z**2 / 4 - 0.5
     off = np.full(n - 2, -1 / h**2)
     # lambda_k ~ (k pi / (b - a))^2 + k: the modes below e^(-60) decay, at most _MAX_MODES
     modes = (b - a) / np.pi * np.sqrt(_NEGLIGIBLE / s) + 10
     last = int(min(modes, _MAX_MODES, n - 1)) - 1
-    lam, psi = eigh_tridiagonal(diagonal, off, select="i", select_range=(0, last))
+    lam, psi = eigh_tridiagonal(2 / h**2 + potential, off, select="i", select_range=(0, last))
+    # the 3-point -v'' is -v'' - (h^2/12) v'''' + ...: adding (h^2/12) |psi''|^2 with
+    # psi'' = (V - lambda) psi makes lambda O(h^4) (its O(h^2) error would grow with s)
+    lam += h**2 / 12 * np.sum(((potential[:, None] - lam) * psi) ** 2, axis=0)
     c = np.sqrt(h) * (np.sqrt(norm.pdf(z)) @ psi)
     return float(np.sum(c**2 * np.exp(-lam * s)))
 
@@ -147,8 +151,8 @@ def _rice(
     """Rice's numbers for the standardised bounds a < b (in sigma from the mean) and Vanmarcke's
     alpha = P(start inside) e^(-T h) with the hazard of first crossings in a cluster
 
-    h T = n (1 - e^(-n_E / n)) / (1 - e^(-r^2 / 2))   (Vanmarcke 1975, double barrier; the
-    q^1.2 form as in Der Kiureghian 1980), n_E = sqrt(2 pi) q^1.2 r nu_0 T e^(-r^2 / 2) the
+    h T = n (1 - e^(-n_E / n)) / (1 - e^(-r^2 / 2))   (Vanmarcke 1975 eq 29, double barrier;
+    with q^1.2 as in Der Kiureghian 1980 eq 2), n_E = sqrt(2 pi) q^1.2 r nu_0 T e^(-r^2 / 2) the
     envelope's up-crossings of the nearer bound r, nu_0 = sigma_v / (2 pi sigma). With a
     symmetric band this is Vanmarcke's formula; with an asymmetric one the clusters are counted
     on the envelope at the nearer bound and n keeps both."""
@@ -159,10 +163,11 @@ def _rice(
     n = n1 + n2  # (8.82; 8.88 for a mid-band mean)
     q = spectral_bandwidth(model)
     r = min(-a, b)
-    p_vanmarcke = 0.0
+    p_vanmarcke = 0.0  # the mean is not inside the band
     if r > 0:
         envelope = np.sqrt(2 * np.pi) * q**1.2 * r * nu0_t * np.exp(-(r**2) / 2)
-        clusters = n * -np.expm1(-envelope / n) / -np.expm1(-(r**2) / 2)
+        # first crossings of clusters (Vanmarcke 1975 eq 29); n underflows 40 sigma out
+        clusters = n * -np.expm1(-envelope / n) / -np.expm1(-(r**2) / 2) if n > 0 else 0.0
         p_vanmarcke = p_inside * np.exp(-clusters)
     return RiceCrossings(
         sigma_dot=sigma_dot,
@@ -206,7 +211,7 @@ def excursion_acceptance(
     sigma = float(np.sqrt(model.variance))
     m = (lower + upper) / 2 if mean is None else float(mean)
     a, b = (lower - m) / sigma, (upper - m) / sigma
-    p_inside = float(norm.cdf(b) - norm.cdf(a))
+    p_inside = float(norm.cdf(b) - norm.cdf(a))  # the band (8.79) at t = 0
     rice = None
     if model.is_smooth:
         rice = _rice(model, a, b, duration_s, p_inside)
