@@ -209,7 +209,7 @@ def test_alpha_rises_with_the_band_and_never_exceeds_a_start_inside(
     """Monotone in eps, as the inverse problem needs (the method may change with eps, but only
     from a lower bound up to an estimate)."""
     alphas, inside = [], []
-    for eps in np.linspace(0.8, 5.0, 85):
+    for eps in np.linspace(0.8, 5.0, 43):
         band = excursion_acceptance(model, -eps, eps, 30.0, mean=offset)
         alphas.append(band.p_no_excursion)
         inside.append(band.p_start_inside)
@@ -231,3 +231,47 @@ def test_inverse_problem_round_trips(model: CorrelationModel, alpha: float, offs
     assert jump == (model is MODEL and alpha == 0.55)
     if not jump:
         assert above.p_no_excursion == pytest.approx(alpha, rel=1e-6)
+
+
+# --- the reference cases, against simulation -----------------------------------------------
+
+# alpha simulated by `validation/excursions_mc.py --paths 200000 --seed 2024` (the smooth model
+# discretised exactly at dt = 0.02 / w0; the exponential one by AR(1) steps at mu dt = 0.002 with
+# the Brownian-bridge correction, residual bias O(mu dt) ~ 0.2 %): model, band about a zero
+# mean, control time, simulated alpha and its standard error.
+REFERENCE = {
+    "a narrow band, clusters": (NARROW, -2.0, 3.0, 200.0, 0.0232, 0.0003),
+    "b broad band, rare": (MODEL, -3.0, 3.0, 50.0, 0.6770, 0.0010),
+    "c Markov, slow": (CorrelationModel(1.0, 0.05), -2.0, 2.0, 40.0, 0.5619, 0.0011),
+    "d Markov, fast": (CorrelationModel(1.0, 0.5), -1.5, 2.5, 10.0, 0.2028, 0.0009),
+}
+
+
+@pytest.mark.parametrize("case", REFERENCE)
+def test_reference_cases_against_simulation(case: str) -> None:
+    """Within 10 % of simulation, or declared a lower bound that the simulation respects."""
+    model, lower, upper, duration, simulated, se = REFERENCE[case]
+    band = excursion_acceptance(model, lower, upper, duration, mean=0.0)
+    alpha = band.p_no_excursion
+    if case.startswith("a"):  # the issue: Poisson 2.5x too low while it claimed to be valid
+        assert simulated / band.rice.p_poisson > 2.4
+        assert (band.method, band.is_bound) == ("poisson", True)
+        assert alpha <= simulated - 3 * se
+        # Vanmarcke alone misses by 13 % here: that is why n = 4.7 is outside the region
+        assert abs(band.rice.p_vanmarcke / simulated - 1) > 0.10
+    elif case.startswith("b"):  # rare excursions: Poisson and Vanmarcke both fine
+        assert (band.method, band.is_bound) == ("vanmarcke", False)
+        assert abs(alpha / simulated - 1) < 0.10
+        assert abs(band.p_start_inside * band.rice.p_poisson / simulated - 1) < 0.10
+    else:  # exact: only the simulation's noise and its bias of ~0.2 %
+        assert (band.method, band.is_bound) == ("kolmogorov", False)
+        assert abs(alpha - simulated) < 3 * se + 0.003 * simulated
+
+
+def test_smooth_in_test_simulation() -> None:
+    """Case b re-simulated here with 3000 records (dt = 0.01 s: 45 samples a period)."""
+    model, lower, upper, duration, _, _ = REFERENCE["b broad band, rare"]
+    band = excursion_acceptance(model, lower, upper, duration, mean=0.0)
+    inside = smooth_survival(model, lower, upper, duration, 0.01, 3000, 5)
+    se = inside.std() / math.sqrt(inside.size)
+    assert abs(band.p_no_excursion - inside.mean()) < 0.10 * inside.mean() + 3 * se
