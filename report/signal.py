@@ -231,9 +231,9 @@ class ExcursionVerdict:
     detail: str
 
 
-def excursion_method_text(result: ExcursionAcceptance) -> str:
-    """alpha and where it comes from, e.g. "P(none) 0.0227 (Vanmarcke's clustering correction,
-    ...; the Poisson value e^(-n) 0.0092 is lower)"."""
+def _method_text(result: ExcursionAcceptance) -> str:
+    """alpha and where it comes from, e.g. "P(none) 0.9938 (Vanmarcke's clustering correction,
+    ...; the Poisson value e^(-n) 0.9923 is lower)", with the unchecked estimates beside a bound."""
     alpha = f"P(none) {'>= ' if result.is_bound else ''}{result.p_no_excursion:.4g}"
     rice = result.rice
     if rice is None:
@@ -264,7 +264,7 @@ def excursion_verdict(model: CorrelationModel, criterion: ExcursionCriterion) ->
         risk = f"is at most {result.risk:.3g}, {within} the allowed {criterion.max_risk:g}"
     else:
         risk = f"= {result.risk:.3g} {'<=' if passed else '>'} the allowed {criterion.max_risk:g}"
-    detail = f"P(excursion in {duration:g} s) {risk}: {excursion_method_text(result)}."
+    detail = f"P(excursion in {duration:g} s) {risk}: {_method_text(result)}."
     return ExcursionVerdict(
         criterion, result, result.risk, eps_risk, PASS if passed else FAIL, detail
     )
