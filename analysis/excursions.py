@@ -9,12 +9,13 @@ on K, and the result says which method gave it and how far it can be trusted:
   follows exactly from the Kolmogorov equation with absorbing bounds, the route §8.3 names for
   this correlation (Rice's formula does not apply: the reading crosses a level infinitely often);
 - smooth K = sigma^2 e^(-mu|tau|)(cos(beta tau) + mu/beta sin(beta |tau|)): Rice's mean numbers
-  of crossings (8.80-8.88). The Poisson law e^(-n) (8.84) treats excursions as independent, but
-  a narrow-band reading crosses in clusters and Poisson then understates alpha (by 2.5x in the
-  simulations behind validation/excursions_mc.py); Vanmarcke's (1975) correction counts only the
-  first crossing of each cluster. It came within 10 % of simulation only where n is at most 0.5
-  and the nearer bound is at least 2 sigma from the mean; elsewhere alpha is given as a lower
-  bound (the risk 1 - alpha as an upper bound).
+  of crossings (8.80-8.88). The Poisson law e^(-n) (8.84) treats excursions as independent; a
+  narrow-band reading crosses in clusters and Poisson then understates alpha (2.5x in case a of
+  validation/excursions_mc.py), while Vanmarcke's (1975) correction, which counts the first
+  crossing of each cluster, overstates it as n grows. Against that simulation grid (damping
+  0.02-1, nearer bound 2-3.5 sigma from the mean, n 0.1-3), P(start inside) e^(-n) came within
+  10 % for a broad band (q >= 0.5) up to n = 1 and Vanmarcke's value for any band up to n = 0.3;
+  elsewhere alpha is given as a lower bound (the risk 1 - alpha as an upper bound).
 """
 
 from dataclasses import asdict, dataclass
@@ -27,13 +28,16 @@ from scipy.stats import norm
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.noise import CorrelationModel
 
-# Region where Vanmarcke's alpha came within 10 % of simulation (validation/excursions_mc.py: the
-# smooth model with damping mu / sqrt(mu^2 + beta^2) 0.02-1, bounds 2-3.5 sigma from the mean).
-CHECKED_MAX_EXCURSIONS = 0.5
-CHECKED_MIN_LEVEL = 2.0  # nearer bound from the mean, in sigma
-CHECKED_MIN_BANDWIDTH = 0.15
-# Narrow band (q <= 0.35, nearer bound >= 2 sigma): P(start inside) e^(-n) stayed below the
-# simulated alpha in every case of that grid (crossings cluster). Not so for a broad band.
+# Regions of the smooth model checked by validation/excursions_mc.py (damping
+# mu / sqrt(mu^2 + beta^2) 0.02-1, i.e. q 0.16-0.77; nearer bound 2-3.5 sigma from the mean):
+CHECKED_MIN_LEVEL = 2.0  # nearer bound from the mean, in sigma, for every region
+# P(start inside) e^(-n) within 10 % of simulation: a broad band, crossings nearly independent
+POISSON_MIN_BANDWIDTH = 0.5
+POISSON_MAX_EXCURSIONS = 1.0
+# Vanmarcke's alpha within 10 % of simulation
+VANMARCKE_MIN_BANDWIDTH = 0.15
+VANMARCKE_MAX_EXCURSIONS = 0.3
+# P(start inside) e^(-n) below the simulated alpha for every n: a narrow band, crossings cluster
 CLUSTERING_MAX_BANDWIDTH = 0.35
 
 _GRID_STEP = 0.01  # finite-difference step in sigma: alpha within ~1e-5 (relative) of the limit
@@ -63,10 +67,10 @@ class RiceCrossings:
 class ExcursionAcceptance:
     """alpha = P(no excursion out of (lower, upper) during ``duration_s``) = ``p_no_excursion``.
 
-    ``method``: "kolmogorov" (exponential correlation, exact to ~1e-5), "vanmarcke" (smooth
-    correlation, an approximation that came within 10 % of simulation in this region), or, when
-    ``is_bound``, a lower bound: "poisson" (P(start inside) e^(-n) for a narrow-band reading,
-    below every simulated value) or "rice" (P(start inside) - n, which always holds: the
+    ``method``: "kolmogorov" (exponential correlation, exact to ~1e-5); for the smooth one an
+    approximation that came within 10 % of simulation in this region, "poisson" (P(start inside)
+    e^(-n), broad band) or "vanmarcke"; or, when ``is_bound``, a lower bound: "poisson" (narrow
+    band: below every simulated value) or "rice" (P(start inside) - n, which always holds: the
     probability of any exit is at most the expected number of exits). ``rice`` holds Rice's
     numbers for the smooth model (None for the exponential one)."""
 
@@ -89,17 +93,18 @@ class ExcursionAcceptance:
     @property
     def method_note(self) -> str:
         """What the number is, in words for the report."""
-        return _METHOD_NOTES[self.method]
+        return _METHOD_NOTES[self.method, self.is_bound]
 
     def to_dict(self) -> dict:
         return {**asdict(self), "risk": self.risk, "method_note": self.method_note}
 
 
 _METHOD_NOTES = {
-    "kolmogorov": "exact: Kolmogorov equation for the exponential correlation",
-    "vanmarcke": "Vanmarcke's clustering correction, within 10 % of simulation in this region",
-    "poisson": "lower bound: P(start inside) e^(-n), below every simulation of a narrow band",
-    "rice": "lower bound: P(start inside) minus Rice's expected excursions",
+    ("kolmogorov", False): "exact: Kolmogorov equation for the exponential correlation",
+    ("poisson", False): "Poisson law with P(start inside), within 10 % of simulation here",
+    ("vanmarcke", False): "Vanmarcke's clustering correction, within 10 % of simulation here",
+    ("poisson", True): "lower bound: P(start inside) e^(-n), below every simulated narrow band",
+    ("rice", True): "lower bound: P(start inside) minus Rice's expected excursions",
 }
 
 
@@ -182,15 +187,16 @@ def _rice(
 
 def _smooth_choice(rice: RiceCrossings, level: float, p_inside: float) -> tuple[float, str, bool]:
     """alpha, method and whether it is only a lower bound, by the region checked by simulation."""
-    if (
-        rice.mean_excursions <= CHECKED_MAX_EXCURSIONS
-        and level >= CHECKED_MIN_LEVEL
-        and rice.bandwidth >= CHECKED_MIN_BANDWIDTH
-    ):
-        return rice.p_vanmarcke, "vanmarcke", False
-    if level >= CHECKED_MIN_LEVEL and rice.bandwidth <= CLUSTERING_MAX_BANDWIDTH:
-        return p_inside * rice.p_poisson, "poisson", True
-    return max(p_inside - rice.mean_excursions, 0.0), "rice", True
+    n, q = rice.mean_excursions, rice.bandwidth
+    poisson = p_inside * rice.p_poisson  # (8.84) for a start inside the band
+    if level >= CHECKED_MIN_LEVEL:
+        if q >= POISSON_MIN_BANDWIDTH and n <= POISSON_MAX_EXCURSIONS:
+            return poisson, "poisson", False
+        if q >= VANMARCKE_MIN_BANDWIDTH and n <= VANMARCKE_MAX_EXCURSIONS:
+            return rice.p_vanmarcke, "vanmarcke", False
+        if q <= CLUSTERING_MAX_BANDWIDTH:
+            return poisson, "poisson", True
+    return max(p_inside - n, 0.0), "rice", True
 
 
 def excursion_acceptance(

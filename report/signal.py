@@ -22,8 +22,9 @@ from gyrostand.analysis.angles import about
 from gyrostand.analysis.campaign import json_safe
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.excursions import (
-    CHECKED_MAX_EXCURSIONS,
     CHECKED_MIN_LEVEL,
+    POISSON_MAX_EXCURSIONS,
+    VANMARCKE_MAX_EXCURSIONS,
     ExcursionAcceptance,
     excursion_acceptance,
     tolerance_for_risk,
@@ -44,10 +45,12 @@ NO_ACCEPTANCE = "The plan asks for no acceptance by excursions (no [acceptance] 
 RICE_NOTE = (
     "Computed on the smooth correlation model, whose crossings Rice's formula counts; the white "
     "part of the reading is left out (the excursions of uncorrelated sensor noise depend only on "
-    "how often it is sampled). Vanmarcke's clustering correction is used where it came within "
-    f"10 % of simulation (Rice's expected excursions n at most {CHECKED_MAX_EXCURSIONS:g}, bounds "
-    f"at least {CHECKED_MIN_LEVEL:g} sigma from the mean); elsewhere P(no excursion) is given as a "
-    "lower bound, so the risk is an upper bound and a PASS holds all the same."
+    "how often it is sampled). With the bounds at least "
+    f"{CHECKED_MIN_LEVEL:g} sigma from the mean, P(no excursion) is the Poisson law for a "
+    f"broad-band reading up to Rice's expected excursions n = {POISSON_MAX_EXCURSIONS:g}, or "
+    f"Vanmarcke's clustering correction up to n = {VANMARCKE_MAX_EXCURSIONS:g}: there they came "
+    "within 10 % of simulation. Elsewhere it is given as a lower bound, so the risk is an upper "
+    "bound and a PASS holds all the same."
 )
 
 
@@ -242,6 +245,8 @@ def _method_text(result: ExcursionAcceptance) -> str:
         side = "lower" if rice.p_poisson < result.p_no_excursion else "higher"
         poisson = f"the Poisson value e^(-n) {rice.p_poisson:.4g} is {side}"
         return f"{alpha} ({result.method_note}; {poisson})"
+    if not result.is_bound:
+        return f"{alpha} ({result.method_note}; e^(-n) {rice.p_poisson:.4g})"
     others = [f"Vanmarcke's clustering correction gives {rice.p_vanmarcke:.4g}"]
     if result.method == "rice":
         others.append(f"the Poisson value e^(-n) {rice.p_poisson:.4g}")

@@ -8,7 +8,6 @@ import math
 import numpy as np
 import pytest
 
-from gyrostand.analysis.excursions import excursion_acceptance
 from gyrostand.analysis.noise import CorrelationModel
 from gyrostand.report.compliance import FAIL, PASS
 from gyrostand.report.model import (
@@ -122,14 +121,17 @@ def test_excursion_verdict_against_rice_and_its_inverse() -> None:
     e = verdict.excursions
     n = rice_mid_band(SMOOTH, 0.025, 600.0)
     assert e.rice.mean_excursions == pytest.approx(n, rel=1e-12)
-    assert (e.method, e.is_bound) == ("vanmarcke", False)  # n = 0.046, bounds 4 sigma out
-    assert verdict.risk == pytest.approx(1 - e.p_no_excursion, rel=1e-12)
-    assert verdict.risk < -math.expm1(-n)  # first excursions of clusters only
+    # q = 0.63, n = 0.046, bounds 4 sigma out: the Poisson law (8.84) with a start inside
+    assert (e.method, e.is_bound) == ("poisson", False)
+    inside = math.erf(0.025 / math.sqrt(2 * SMOOTH.variance))
+    assert verdict.risk == pytest.approx(1 - inside * math.exp(-n), rel=1e-12)
     assert verdict.verdict == (PASS if verdict.risk <= 0.05 else FAIL)
     assert verdict.detail.startswith(f"P(excursion in 600 s) = {verdict.risk:.3g} ")
-    assert "Vanmarcke's clustering correction" in verdict.detail
+    assert "Poisson law with P(start inside)" in verdict.detail
     eps = verdict.tolerance_for_max_risk_deg
-    assert excursion_acceptance(SMOOTH, -eps, eps, 600.0).risk == pytest.approx(0.05, rel=1e-8)
+    n_eps = rice_mid_band(SMOOTH, eps, 600.0)
+    inside_eps = math.erf(eps / math.sqrt(2 * SMOOTH.variance))
+    assert 1 - inside_eps * math.exp(-n_eps) == pytest.approx(0.05, rel=1e-8)
     # a band narrower than that tolerance fails, a wider one passes
     assert excursion_verdict(SMOOTH, ExcursionCriterion(0.99 * eps, 600, 0.05)).verdict == FAIL
     assert excursion_verdict(SMOOTH, ExcursionCriterion(1.01 * eps, 600, 0.05)).verdict == PASS
@@ -139,7 +141,7 @@ def test_excursion_verdict_against_rice_and_its_inverse() -> None:
     ("tolerance", "method", "alpha"),
     [
         (0.001, "rice", "P(none) >= 0 (lower bound: P(start inside) minus Rice's"),
-        (0.014, "poisson", "(lower bound: P(start inside) e^(-n), below every simulation"),
+        (0.014, "poisson", "(lower bound: P(start inside) e^(-n), below every simulated"),
     ],
 )
 def test_outside_the_checked_region_the_verdict_rests_on_a_bound(
