@@ -249,8 +249,8 @@ def tolerance_for_risk(
     a + ``mean_offset`` shows no excursion in ``duration_s`` with probability
     ``p_no_excursion`` (alpha in Sveshnikov §8.3; the inverse problem of eqs 8.84, 8.88), by the
     same method as ``excursion_acceptance``. Where that method changes with eps (a lower bound
-    below the region checked by simulation, Vanmarcke's value inside it) alpha jumps upwards and
-    the answer may be the edge of that region.
+    outside a region checked by simulation, an estimate inside it) alpha jumps upwards and the
+    answer may be the edge of that region.
 
     With mean_offset = 0 this is the book's setting; an offset at the edge of the technical
     conditions gives the risk of accepting an instrument that is out of them."""
