@@ -75,7 +75,8 @@ def markov_survival(model, lower, upper, duration_s, mu_dt, reps, seed) -> np.nd
     weight = ((z > a) & (z < b)).astype(float)
     for _ in range(int(round(model.decay_per_s * duration_s / mu_dt))):
         nxt = rho * z + math.sqrt(v) * rng.standard_normal(reps)
-        cross = np.exp(-2 * (b - z) * (b - nxt) / v) + np.exp(-2 * (z - a) * (nxt - a) / v)
+        up, down = np.clip(b - z, 0, None) * (b - nxt), np.clip(z - a, 0, None) * (nxt - a)
+        cross = np.exp(-2 * np.clip(up, 0, None) / v) + np.exp(-2 * np.clip(down, 0, None) / v)
         weight *= np.where((nxt > a) & (nxt < b), np.clip(1 - cross, 0, None), 0.0)
         z = nxt
     return weight
