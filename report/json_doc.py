@@ -39,9 +39,13 @@ Schema ``gyrostand.report/2`` (plain JSON types; absent values are null). Versio
   max_correlation, correlated), correlated_observations, ``settle`` (trial, j, started_ms,
   done_ms, settle_s, estimate_deg, observed_mean_deg, offset_deg, criterion,
   standard_error_deg, band_s, band_measured, saved_s), time_saved_s (sum of the known savings),
-  ``acceptance`` {criterion {tolerance_deg, duration_s, max_risk}, excursions (Rice's numbers,
-  `analysis.excursions.ExcursionAcceptance`), risk, tolerance_for_max_risk_deg, verdict, detail}
-  or null, acceptance_note;
+  ``acceptance`` {criterion {tolerance_deg, duration_s, max_risk}, excursions
+  (`analysis.excursions.ExcursionAcceptance.to_dict`: lower, upper, mean, duration_s, sigma,
+  p_start_inside, p_no_excursion, method ("kolmogorov": exact; "vanmarcke": approximation
+  within 10 % of simulation; "poisson", "rice": lower bounds), is_bound, risk, method_note,
+  ``rice`` {sigma_dot, upcrossings_upper, downcrossings_lower, mean_excursions, bandwidth,
+  p_poisson, p_vanmarcke} or null), risk (an upper bound when is_bound),
+  tolerance_for_max_risk_deg, verdict, detail} or null, acceptance_note;
 - ``signatures``: tested_by, checked_by, date.
 """
 

@@ -110,15 +110,24 @@ def render_signal_text(section: SignalSection) -> str:
     else:
         e, c = a.excursions, a.criterion
         eps = a.tolerance_for_max_risk_deg
-        out += [
+        out.append(
             f"  band mean +-{c.tolerance_deg:g} deg, control time {c.duration_s:g} s, "
-            f"allowed risk {c.max_risk:g}",
-            f"  sigma {e.sigma:.4g} deg, sigma_v {e.sigma_dot:.4g} deg/s; expected excursions "
-            f"{e.mean_excursions:.4g}; P(none) {e.p_no_excursion:.6f}; risk {a.risk:.4g}",
-            f"  Poisson assumption: mean time between excursions {e.mean_time_between_s:.4g} s "
-            f"vs tau_k {e.correlation_time_s:.3g} s: {'holds' if e.poisson_valid else 'FAILS'}",
+            f"allowed risk {c.max_risk:g}"
+        )
+        if e.rice is not None:
+            out += [
+                f"  sigma {e.sigma:.4g} deg, sigma_v {e.rice.sigma_dot:.4g} deg/s; expected "
+                f"excursions (Rice) {e.rice.mean_excursions:.4g}; bandwidth q "
+                f"{e.rice.bandwidth:.3g}",
+                f"  Poisson e^(-n) {e.rice.p_poisson:.6f}; Vanmarcke {e.rice.p_vanmarcke:.6f}",
+            ]
+        out += [
+            f"  P(start inside) {e.p_start_inside:.6f}; P(none) "
+            f"{'>= ' if e.is_bound else ''}{e.p_no_excursion:.6f} by {e.method}; risk "
+            f"{'<= ' if e.is_bound else ''}{a.risk:.4g}",
             "  tolerance for the allowed risk: "
             + ("none (control time too short)" if eps is None else f"+-{eps:.4f} deg"),
             f"  verdict: {a.verdict}. {a.detail}",
+            f"  {section.acceptance_note}",
         ]
     return "\n".join(out) + "\n"

