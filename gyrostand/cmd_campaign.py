@@ -215,6 +215,18 @@ class BusOptions:
     seed: int | None
     timing: str | None
 
+    def checked(self, plan: Plan, db: str | None) -> Plan:
+        """`checked_plan` with these options."""
+        return checked_plan(
+            plan,
+            interface=self.interface,
+            channel=self.channel,
+            db=db,
+            speedup=self.speedup,
+            seed=self.seed,
+            timing=self.timing,
+        )
+
 
 def new_campaign(plan: Path, db: str | None, bus: BusOptions, quiet: bool) -> tuple[RunResult, str]:
     """`campaign run PLAN`: a new campaign of the plan file with the command line's options,
@@ -223,15 +235,7 @@ def new_campaign(plan: Path, db: str | None, bus: BusOptions, quiet: bool) -> tu
     from gyrostand.acquisition.store import CampaignStore
 
     with signals_deferred() as stop:
-        checked = checked_plan(
-            _load(plan),
-            interface=bus.interface,
-            channel=bus.channel,
-            db=db,
-            speedup=bus.speedup,
-            seed=bus.seed,
-            timing=bus.timing,
-        )
+        checked = bus.checked(_load(plan), db)
         preflight(checked)
         sessions = open_db(checked.database, must_exist=False)
         not_interrupted(stop, "the campaign was stored")
@@ -271,15 +275,7 @@ def continue_campaign(
             fail(str(exc))
         except PlanError as exc:
             fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
-        checked = checked_plan(
-            stored,
-            interface=bus.interface,
-            channel=bus.channel,
-            db=db,
-            speedup=bus.speedup,
-            seed=bus.seed,
-            timing=bus.timing,
-        )
+        checked = bus.checked(stored, db)
         preflight(checked)
         not_interrupted(stop, f"campaign {campaign_id} was taken over")
         try:
