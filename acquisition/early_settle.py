@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -77,53 +77,53 @@ def hold_blocks(settle: SettlePlan, width_s: float) -> int:
     return max(1, math.ceil(settle.hold_s / width_s))
 
 
+@dataclass
+class _Segment:
+    step_s: float  # stand second the equilibrium moved
+    free: bool  # its state at the step is not known from the record before it
+    rows: list[tuple[float, float, float]] = field(default_factory=list)  # mid, width, deg
+
+
 class TransientRecord:
     """Window means (stand seconds, headings) and the steps of the equilibrium since the engine
-    started; fitted on the last KEEP_SEGMENTS segments."""
+    started; the last KEEP_SEGMENTS segments are kept and fitted (so the work per block stays
+    bounded over a campaign)."""
 
     def __init__(self) -> None:
-        self._steps: list[float] = []
-        self._free: list[bool] = []
-        self._rows: list[tuple[int, float, float, float]] = []  # segment, mid, width, deg
+        self._segments: list[_Segment] = []
         self._branch: float | None = None
 
     @property
     def chained(self) -> bool:
         """The current segment's state at its step follows from the record before it."""
-        return bool(self._free) and not self._free[-1]
-
-    @property
-    def segment(self) -> int:
-        """The current segment (series) index; -1 before the first step."""
-        return len(self._steps) - 1
+        return bool(self._segments) and not self._segments[-1].free
 
     def step(self, t_s: float) -> None:
         """The equilibrium may move at stand second t_s (a start or stop took effect). A
         segment that got no window mean is dropped and its successor starts free."""
-        empty = bool(self._steps) and not any(r[0] == self.segment for r in self._rows)
+        empty = bool(self._segments) and not self._segments[-1].rows
         if empty:
-            self._steps.pop()
-            self._free.pop()
-        self._free.append(not self._steps or empty)
-        self._steps.append(t_s)
+            self._segments.pop()
+        self._segments.append(_Segment(t_s, free=empty or not self._segments))
+        del self._segments[:-KEEP_SEGMENTS]
 
     def add(self, start_s: float, end_s: float, heading_deg: float) -> None:
-        """A window mean over [start_s, end_s); a window before any step starts segment 0."""
-        if not self._steps:
+        """A window mean over [start_s, end_s); a window before any step starts a segment."""
+        if not self._segments:
             self.step(start_s)
         if self._branch is None:
             self._branch = heading_deg
         value = float(about(self._branch, heading_deg))
-        self._rows.append((self.segment, (start_s + end_s) / 2, end_s - start_s, value))
+        self._segments[-1].rows.append(((start_s + end_s) / 2, end_s - start_s, value))
 
     def fit(self, model: TransientModel) -> tuple[TransientFit, int] | None:
-        """The fit of the last KEEP_SEGMENTS segments and the current segment's index in it;
-        None while it cannot be fitted (too short, degenerate)."""
-        first = max(0, self.segment - KEEP_SEGMENTS + 1)
-        rows = [(k - first, *rest) for k, *rest in self._rows if k >= first]
-        seg = Segments(tuple(self._steps[first:]), (True, *self._free[first + 1 :]))
+        """The fit of the kept segments and the current segment's index in it; None while it
+        cannot be fitted (too short, degenerate)."""
+        kept = self._segments
+        rows = [(k, *row) for k, s in enumerate(kept) for row in s.rows]
+        seg = Segments(tuple(s.step_s for s in kept), (True, *(s.free for s in kept[1:])))
         try:
-            return fit_transient(model, seg, Windows.of(rows)), self.segment - first
+            return fit_transient(model, seg, Windows.of(rows)), len(kept) - 1
         except AnalysisError:
             return None
 

@@ -117,12 +117,19 @@ class EventRecord:
 
 @dataclass(frozen=True)
 class ObservationRecord:
-    """delta_jik of seed 000 eq 2.1 as stored: the mean heading over one window."""
+    """delta_jik of seed 000 eq 2.1 as stored: the mean heading over one window, and the
+    transient subtracted from it (compensated series; None: not compensated)."""
 
     k: int
     value_deg: float
     window_start_ms: int | None
     window_end_ms: int | None
+    compensation_deg: float | None = None
+
+    @property
+    def corrected_deg(self) -> float:
+        """The reading the analysis uses (`db.models.Observation.corrected_deg`)."""
+        return self.value_deg - (self.compensation_deg or 0.0)
 
 
 @dataclass(frozen=True)

@@ -161,10 +161,11 @@ def observation_correlations(
 @dataclass(frozen=True)
 class SettleRow:
     """The settle of one series as stored: start and end (stand ms), the settle time, the settle
-    estimate and how far the mean of the series' observations came out from it; by which
-    criterion it settled (None: not recorded), the estimate's standard error (early settle),
-    when the band criterion held or is predicted to hold (s from the settle start) and the
-    stand seconds saved against waiting for it (see ``TIME_SAVED_NOTE``)."""
+    estimate and how far the mean of the series' observations (compensated ones corrected)
+    came out from it; by which criterion it settled (None: not recorded), the estimate's
+    standard error (transient model), when the band criterion held or is predicted to hold
+    (s from the settle start) and the stand seconds saved against waiting for it (see
+    ``TIME_SAVED_NOTE``)."""
 
     trial: int
     j: int
@@ -189,7 +190,7 @@ def settle_rows(records: tuple[TrialRecord, ...]) -> tuple[SettleRow, ...]:
             stored = (s.settle_started_ms, s.settle_done_ms, s.settle_estimate_deg)
             if all(v is None for v in stored):
                 continue
-            values = [o.value_deg for o in s.observations]
+            values = [o.corrected_deg for o in s.observations]
             mean = float(np.mean(values)) if values else None
             known = s.settle_started_ms is not None and s.settle_done_ms is not None
             how = s.settle

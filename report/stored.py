@@ -384,7 +384,9 @@ def _series_records(trial: Trial) -> tuple[SeriesRecord, ...]:
             settle_done_ms=s.settle_done_ms,
             settle_estimate_deg=s.settle_estimate_deg,
             observations=tuple(
-                ObservationRecord(o.k, o.value_deg, o.window_start_ms, o.window_end_ms)
+                ObservationRecord(
+                    o.k, o.value_deg, o.window_start_ms, o.window_end_ms, o.compensation_deg
+                )
                 for o in s.observations
             ),
             settle=None if s.settle_outcome is None else SettleOutcome.from_dict(s.settle_outcome),
