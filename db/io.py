@@ -4,7 +4,9 @@ writes the same forms back.
 Three file forms, detected from the columns (extra per-observation columns are optional):
 
 - observations: trial, role, direction_deg, amplitude_cm, period_s, j, k, value_deg
-  [, window_start_ms, window_end_ms, frames_used, frames_lost, flags]
+  [, window_start_ms, window_end_ms, frames_used, frames_lost, flags, compensation_deg,
+  compensation_se_deg]  (a compensated series: the transient subtracted from each raw value_deg,
+  and the SE of the compensation, the same on all the series' rows)
 - series:       trial, role, direction_deg, amplitude_cm, period_s, j, mean_deg, variance_deg2,
   n_obs
 - trials (the paper's table, seed 000 example): trial, role, direction_deg, amplitude_cm,
@@ -40,8 +42,18 @@ FORM_COLUMNS = {
     "series": COMMON_COLUMNS + ("j", "mean_deg", "variance_deg2", "n_obs"),
     "trials": COMMON_COLUMNS + ("delta_mean_deg", "delta_var_deg2", "n_obs"),
 }
-OBSERVATION_EXTRAS = ("window_start_ms", "window_end_ms", "frames_used", "frames_lost", "flags")
-OBS_FIELDS = ("k", "value_deg") + OBSERVATION_EXTRAS
+OBS_FIELDS = (
+    "k",
+    "value_deg",
+    "window_start_ms",
+    "window_end_ms",
+    "frames_used",
+    "frames_lost",
+    "flags",
+    "compensation_deg",  # the fitted transient subtracted from value_deg (compensated series)
+)
+SERIES_FIELDS = ("compensation_se_deg",)  # per series, repeated on each of its observation rows
+OBSERVATION_EXTRAS = OBS_FIELDS[2:] + SERIES_FIELDS  # optional columns of the observations form
 MAX_REPORTED = 10
 
 # seed 000 example: known constants B of the two-rotor gyrocompass and the site
@@ -199,6 +211,10 @@ FIELDS: dict[str, Field] = {
     "flags": Field(
         _to_str, "text", lambda v: len(v) <= 200, "at most 200 characters", optional=True
     ),
+    "compensation_deg": Field(
+        _to_float, NUMBER, lambda v: abs(v) <= 360, "within +-360", optional=True
+    ),
+    "compensation_se_deg": Field(_to_float, NUMBER, lambda v: v >= 0, ">= 0", optional=True),
 }
 
 
@@ -236,6 +252,7 @@ class ImportedObservation:
     frames_used: int | None = None
     frames_lost: int | None = None
     flags: str = ""
+    compensation_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -245,6 +262,7 @@ class ImportedSeries:
     mean_deg: float | None = None  # seed 000 eq 2.1, when imported pre-averaged
     variance_deg2: float | None = None  # seed 000 eq 2.2
     n_obs: int | None = None
+    compensation_se_deg: float | None = None  # SE of the compensation (compensated series)
 
 
 @dataclass(frozen=True)
@@ -411,7 +429,30 @@ def _series(
         ImportedObservation(**{name: values[name] for name in values if name in OBS_FIELDS})
         for _, values in sorted(rows, key=lambda row: row[1]["k"])
     )
-    return ImportedSeries(j, observations=observations)
+    return ImportedSeries(
+        j, observations=observations, compensation_se_deg=_compensation_se(index, j, rows, problems)
+    )
+
+
+def _compensation_se(
+    index: int, j: int, rows: list[tuple[str, dict[str, Any]]], problems: list[str]
+) -> float | None:
+    """The series' compensation SE: one value on all its rows, given when (and only when) an
+    observation carries a compensation."""
+    first_where = rows[0][0]
+    ses = {v.get("compensation_se_deg") for _, v in rows}
+    compensated = any(v.get("compensation_deg") is not None for _, v in rows)
+    if len(ses) > 1:
+        problems.append(f"{first_where}: trial {index} j = {j} compensation_se_deg differs by row")
+        return None
+    (se,) = ses
+    if compensated != (se is not None):
+        problems.append(
+            f"{first_where}: trial {index} j = {j} "
+            + ("has compensation_deg without" if compensated else "has no compensation_deg for")
+            + " compensation_se_deg"
+        )
+    return se
 
 
 # ---------------------------------------------------------------- storing
@@ -510,6 +551,7 @@ def store_import(session: Session, data: ImportedFile, metadata: Mapping[str, An
                         summary_mean_deg=s.mean_deg,
                         summary_variance_deg2=s.variance_deg2,
                         summary_n=s.n_obs,
+                        compensation_se_deg=s.compensation_se_deg,
                         observations=[Observation(**vars(o)) for o in s.observations],
                     )
                     for s in trial.series

@@ -12,7 +12,7 @@ import pandas as pd
 from sqlalchemy.orm import Session
 
 from gyrostand.analysis.trials import combine_series
-from gyrostand.db.io import FORM_COLUMNS, OBS_FIELDS, OBSERVATION_EXTRAS
+from gyrostand.db.io import FORM_COLUMNS, OBS_FIELDS, OBSERVATION_EXTRAS, SERIES_FIELDS
 from gyrostand.db.models import Trial
 from gyrostand.db.queries import current_trials, load_campaign
 from gyrostand.report.stored import applied_conditions, series_summary
@@ -49,7 +49,12 @@ def campaign_frames(session: Session, campaign_id: int) -> CampaignFrames:
         common = {"trial": trial.index} | applied_conditions(trial)
         for s in trial.series:
             observations += [
-                {**common, "j": s.j, **{name: getattr(o, name) for name in OBS_FIELDS}}
+                {
+                    **common,
+                    "j": s.j,
+                    **{name: getattr(o, name) for name in OBS_FIELDS},
+                    **{name: getattr(s, name) for name in SERIES_FIELDS},
+                }
                 for o in s.observations
             ]
         stats = _series_stats(trial)

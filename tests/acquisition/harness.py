@@ -68,7 +68,7 @@ bus_silence_s = 5.0
 
 [bus]
 simulated = true
-{timing}seed = {seed}
+seed = {seed}
 {bus_extra}
 {trials}
 """
@@ -101,7 +101,6 @@ def plan_text(
     on_failure: str = "continue",
     hold_s: float = 60.0,
     spacing_s: float = 0.0,
-    speedup: float | None = None,
     seed: int = 1,
     raw_dir: str = "runs/raw",
     bus_extra: str = "",
@@ -114,7 +113,6 @@ def plan_text(
         on_failure=on_failure,
         hold_s=hold_s,
         spacing_s=spacing_s,
-        timing="" if speedup is None else f'timing = "realtime"\nspeedup = {speedup}\n',
         seed=seed,
         raw_dir=raw_dir,
         bus_extra=bus_extra,

@@ -414,3 +414,64 @@ def test_a_failure_while_storing_rolls_everything_back(
     assert dump(db_path) == before
     with sessions() as session:
         assert session.scalars(select(Event)).all() == []
+
+
+def compensated_rows() -> pd.DataFrame:
+    """observation_rows with trial 2's still series compensated: a decaying transient per
+    observation and the settle point's SE repeated on its rows."""
+    frame = observation_rows()
+    frame["compensation_deg"] = np.nan
+    frame["compensation_se_deg"] = np.nan
+    rows = (frame.trial == 2) & (frame.j == 1)
+    frame.loc[rows, "compensation_deg"] = [0.04, 0.02, 0.01, 0.005]
+    frame.loc[rows, "compensation_se_deg"] = 0.003
+    return frame
+
+
+def test_compensation_survives_export_and_import(
+    sessions: sessionmaker[Session], tmp_path: Path
+) -> None:
+    frame = compensated_rows()
+    frame.to_csv(tmp_path / "obs.csv", index=False)
+    first = import_file(sessions, tmp_path / "obs.csv", SEED_000_METADATA)
+    with sessions() as session:
+        exported = export_campaign(session, first, "csv", tmp_path / "export.csv")
+    second = import_file(sessions, tmp_path / "export.csv", SEED_000_METADATA)
+    with sessions() as session:
+        again = campaign_frames(session, second)
+    pd.testing.assert_frame_equal(again.observations, exported.observations, check_exact=True)
+    # the analysis's series: value - compensation, variance + N SE^2 (report.stored.series_summary)
+    rows = frame[(frame.trial == 2) & (frame.j == 1)]
+    corrected = (rows.value_deg - rows.compensation_deg).to_numpy()
+    series = again.series.set_index(["trial", "j"]).loc[(2, 1)]
+    assert series.mean_deg == pytest.approx(corrected.mean(), rel=1e-15)
+    assert series.variance_deg2 == pytest.approx(np.var(corrected, ddof=1) + 4 * 0.003**2)
+    raw = frame[(frame.trial == 2) & (frame.j == 2)].value_deg.to_numpy()
+    delta = again.trials.set_index("trial").loc[2].delta_mean_deg
+    assert delta == pytest.approx(raw.mean() - corrected.mean(), abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("edit", "problem"),
+    [
+        (
+            lambda f: f.assign(compensation_se_deg=np.nan),
+            "has compensation_deg without compensation_se_deg",
+        ),
+        (
+            lambda f: f.assign(compensation_deg=np.nan),
+            "has no compensation_deg for compensation_se_deg",
+        ),
+        (
+            lambda f: f.assign(
+                compensation_se_deg=f.compensation_se_deg.where(f.compensation_deg != 0.02, 0.004)
+            ),
+            "compensation_se_deg differs by row",
+        ),
+    ],
+)
+def test_inconsistent_compensation_is_refused(tmp_path: Path, edit, problem: str) -> None:
+    edit(compensated_rows()).to_csv(tmp_path / "obs.csv", index=False)
+    with pytest.raises(ImportFileError) as caught:
+        read_import_file(tmp_path / "obs.csv")
+    assert caught.value.problems == [f"line 10: trial 2 j = 1 {problem}"]  # its first row
