@@ -31,6 +31,35 @@ class RetriedTrial:
     reason: str
 
 
+def new_attempt(session: Session, failed: Trial) -> Trial:
+    """Add (and flush) the next attempt of the failed trial `failed`, pending with the same plan
+    values, and the "retry" event naming the attempt it supersedes and why that one failed."""
+    attempt = Trial(
+        campaign_id=failed.campaign_id,
+        index=failed.index,
+        attempt=failed.attempt + 1,
+        role=failed.role,
+        cmd_direction_deg=failed.cmd_direction_deg,
+        cmd_amplitude_cm=failed.cmd_amplitude_cm,
+        cmd_period_s=failed.cmd_period_s,
+        status="pending",
+    )
+    session.add(attempt)
+    session.flush()
+    reason = failed.failure_reason or ""
+    session.add(
+        Event(
+            campaign_id=failed.campaign_id,
+            trial_id=attempt.id,
+            kind="retry",
+            severity="info",
+            message=f"trial {failed.index}: attempt {attempt.attempt} supersedes attempt "
+            f"{failed.attempt}, which failed: {reason}",
+        )
+    )
+    return attempt
+
+
 def retry_trials(
     sessions: sessionmaker[Session], campaign_id: int, indices: Sequence[int] | None
 ) -> tuple[RetriedTrial, ...]:
@@ -69,30 +98,8 @@ def retry_trials(
         retried = []
         for index in wanted:
             failed = latest[index]
-            attempt = Trial(
-                campaign_id=campaign_id,
-                index=index,
-                attempt=failed.attempt + 1,
-                role=failed.role,
-                cmd_direction_deg=failed.cmd_direction_deg,
-                cmd_amplitude_cm=failed.cmd_amplitude_cm,
-                cmd_period_s=failed.cmd_period_s,
-                status="pending",
-            )
-            session.add(attempt)
-            session.flush()
-            reason = failed.failure_reason or ""
-            session.add(
-                Event(
-                    campaign_id=campaign_id,
-                    trial_id=attempt.id,
-                    kind="retry",
-                    severity="info",
-                    message=f"trial {index}: attempt {attempt.attempt} supersedes attempt "
-                    f"{failed.attempt}, which failed: {reason}",
-                )
-            )
-            retried.append(RetriedTrial(index, attempt.attempt, reason))
+            attempt = new_attempt(session, failed)
+            retried.append(RetriedTrial(index, attempt.attempt, failed.failure_reason or ""))
         if retried and campaign.status == "completed":
             campaign.status = "paused"  # it has trials to acquire again
     return tuple(retried)

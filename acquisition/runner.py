@@ -140,6 +140,7 @@ def run_live(
         progress = None  # from the campaign's start
     else:
         if start == "restarted":
+            store.redo_uncompensated()
             store.complete_acquired()
         progress = store.progress()
     raw_log = raw_log_path(plan, store.campaign_id, len(segments))

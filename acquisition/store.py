@@ -14,6 +14,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand import SOFTWARE_VERSION
 from gyrostand.acquisition.engine import Measured, ObservationResult, SeriesCompensation, TrialState
+from gyrostand.acquisition.retry import new_attempt
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.db.lease import take_lease
 from gyrostand.db.models import Campaign, Event, Observation, RawLogSegment, Series, Trial
@@ -176,6 +177,38 @@ class CampaignStore:
                 "motion of this trial was not recorded (commanded values apply)",
                 t.index,
             )
+
+    def redo_uncompensated(self) -> None:
+        """Trials stopped inside a compensated series, before its end stored the compensation:
+        the transient record it needs went with the stopped run, so its observations (taken
+        during the transient) can never be compensated. Each such trial fails with that reason
+        and gets a new attempt, as a retry does; the stopped attempt keeps what it committed.
+        For a resume that restarts the stand (a re-run in virtual time re-derives the record)."""
+        with self._tx() as session:
+            stopped = session.scalars(
+                select(Series)
+                .join(Trial, Series.trial_id == Trial.id)
+                .where(
+                    Trial.campaign_id == self.campaign_id,
+                    latest_attempt(),
+                    Series.status != "completed",
+                    Series.observations.any(),
+                )
+            ).all()
+            for series in stopped:
+                if (series.settle_outcome or {}).get("criterion") != "compensated":
+                    continue
+                trial = series.trial
+                trial.status = "failed"
+                trial.failure_reason = (
+                    f"stopped in compensated series {series.j}: its observations were taken "
+                    "during the transient and the record to compensate them went with the "
+                    "stopped run"
+                )
+                self._trial_ids[trial.index] = new_attempt(session, trial).id
+                self._series_ids = {
+                    key: sid for key, sid in self._series_ids.items() if key[0] != trial.index
+                }
 
     def set_status(self, status: str) -> None:
         with self._tx() as session:

@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 from gyrostand.acquisition.engine import Engine, ObservationResult
 from gyrostand.acquisition.runner import resume_store
 from gyrostand.acquisition.store import CampaignStore, ReRunMismatch
+from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.cli import app
 from gyrostand.db.lease import CampaignBusy, held_elsewhere
 from gyrostand.db.models import Event, Observation, Trial
@@ -81,6 +82,70 @@ def test_resume_completes_the_acquired_trial_with_an_event(tmp_path: Path) -> No
         events = session.scalars(select(Event).where(Event.kind == "resume")).all()
     assert sum("completed on resume" in e.message for e in events) == 1
     assert sum(e.message.startswith("resumed by process") for e in events) == 2
+
+
+def stopped_in_trial_2(tmp_path: Path, criterion: str) -> CampaignStore:
+    """Trial 1 completed; trial 2's first series settled by `criterion` and 2 of its N = 3
+    observations committed when the run stopped."""
+    sessions = open_database(sqlite_url(tmp_path / "db.sqlite"))
+    store = CampaignStore.create(sessions, parse_plan(plan_text(THREE)))
+    for trial, stored in ((1, 3), (2, 2)):
+        store.trial_started(trial)
+        for j in (1, 2) if trial == 1 else (1,):
+            store.series_settled(trial, j, 0, SettleOutcome(criterion, 600.0, 100.0, 0.002))
+            for k in range(1, stored + 1):
+                store.observation(ObservationResult(trial, j, k, 100.0, 0, 1, 10, 0, ""))
+            if trial == 1:
+                store.series_completed(trial, j)
+    store.trial_completed(1, None)
+    return store
+
+
+def test_a_trial_stopped_in_a_compensated_series_is_redone(tmp_path: Path) -> None:
+    """Its observations were taken in the transient and the record that compensates them is
+    gone: a resume that restarts the stand fails that attempt, keeps it, and acquires a new one."""
+    store = stopped_in_trial_2(tmp_path, "compensated")
+    _, resumed = resume_store(store.sessions, store.campaign_id)
+    resumed.redo_uncompensated()
+    resumed.complete_acquired()
+    with store.sessions() as session:
+        trials = session.execute(
+            select(Trial.index, Trial.attempt, Trial.status, Trial.failure_reason).order_by(
+                Trial.index, Trial.attempt
+            )
+        ).all()
+        resume = first_incomplete_series(session, store.campaign_id)
+        retry = session.scalars(select(Event.message).where(Event.kind == "retry")).one()
+        kept = session.scalar(select(func.count(Observation.id)))
+    assert [t[:3] for t in trials] == [
+        (1, 1, "completed"),
+        (2, 1, "failed"),
+        (2, 2, "pending"),
+        (3, 1, "pending"),
+    ]
+    assert trials[1].failure_reason.startswith("stopped in compensated series 1: its observ")
+    assert retry.startswith("trial 2: attempt 2 supersedes attempt 1, which failed: stopped in")
+    assert kept == 8 and resume is not None and (resume.trial_index, resume.j, resume.next_k) == (2, 1, 1)
+    resumed.trial_started(2)  # the engine's writes go to the new attempt
+    resumed.observation(ObservationResult(2, 1, 1, 100.5, 0, 1, 10, 0, ""))
+    with store.sessions() as session:
+        attempt = session.scalars(
+            select(Trial.attempt)
+            .join(Trial.series)
+            .join(Observation)
+            .where(Observation.value_deg == 100.5)
+        ).one()
+    assert attempt == 2
+
+
+def test_a_trial_stopped_in_a_bounded_series_continues(tmp_path: Path) -> None:
+    store = stopped_in_trial_2(tmp_path, "estimate")
+    _, resumed = resume_store(store.sessions, store.campaign_id)
+    resumed.redo_uncompensated()
+    with store.sessions() as session:
+        resume = first_incomplete_series(session, store.campaign_id)
+        attempts = session.scalar(select(func.max(Trial.attempt)))
+    assert attempts == 1 and (resume.trial_index, resume.j, resume.next_k) == (2, 1, 3)
 
 
 def status_line(folder: Path) -> str:
