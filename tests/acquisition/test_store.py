@@ -125,7 +125,11 @@ def test_a_trial_stopped_in_a_compensated_series_is_redone(tmp_path: Path) -> No
     ]
     assert trials[1].failure_reason.startswith("stopped in compensated series 1: its observ")
     assert retry.startswith("trial 2: attempt 2 supersedes attempt 1, which failed: stopped in")
-    assert kept == 8 and resume is not None and (resume.trial_index, resume.j, resume.next_k) == (2, 1, 1)
+    assert (
+        kept == 8
+        and resume is not None
+        and (resume.trial_index, resume.j, resume.next_k) == (2, 1, 1)
+    )
     resumed.trial_started(2)  # the engine's writes go to the new attempt
     resumed.observation(ObservationResult(2, 1, 1, 100.5, 0, 1, 10, 0, ""))
     with store.sessions() as session:
