@@ -109,8 +109,9 @@ def _stop_on_signals(stop: threading.Event) -> Iterator[None]:
 
 def raw_log_path(plan: Plan, campaign_id: int, earlier: int) -> Path:
     """campaign-ID.blf for the first run, campaign-ID-resumeN.blf for each resume (`earlier`:
-    the campaign's segments so far), never an existing file."""
-    folder = Path(plan.raw_log_dir)
+    the campaign's segments so far), never an existing file; absolute, so that the database
+    finds it from any working directory."""
+    folder = Path(plan.raw_log_dir).resolve()
     folder.mkdir(parents=True, exist_ok=True)
     names = (f"campaign-{campaign_id}" + (f"-resume{n}" if n else "") for n in count(earlier))
     return next(p for name in names if not (p := folder / f"{name}.{plan.raw_log_format}").exists())

@@ -272,9 +272,13 @@ def analyze_campaign(
     eps: dict[str, float] | None = None,
     eps_se: float = 1e-3,
     n_repeat: int | None = None,
+    independence: AssumptionCheck | None = None,
 ) -> CampaignAnalysis:
     """Run the seed-000 method on a campaign.
 
+    independence: the check of independent observations when the caller has better evidence
+    than the N observations themselves (the reading's correlation function, report.signal);
+    default the lag-1 Ljung-Box test on the series.
     q: significance level of every test; start: (C0 in g cm^2 s^-2, T0 in s); eps: absolute
     thresholds of eq 1.8 per parameter (default: eps_se x the standard error at the iterate, i.e.
     steps below 0.1 % of a standard error); n_repeat: N of the mean-of-N prediction variant
@@ -341,7 +345,7 @@ def analyze_campaign(
     )
     assumptions = (
         normality_check(trials, q),
-        independence_check(trials, q),
+        independence or independence_check(trials, q),
         homogeneity_check(cochran),
     )
     if forecast is None:

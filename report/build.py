@@ -180,10 +180,15 @@ def build_report(
     profile: Profile,
     *,
     generated_at: str,
+    signal: SignalSection | None = None,
 ) -> Report:
     """Assemble the report; ``analysis`` is the analysis or, when it failed, the reason.
-    ``generated_at`` is the report's only wall-clock field (ISO 8601 text)."""
-    signal = signal_section(inputs.reading, inputs.reading_note, inputs.records, inputs.acceptance)
+    ``generated_at`` is the report's only wall-clock field (ISO 8601 text); ``signal`` the
+    signal analysis the analysis used (default: made from the inputs' reading record)."""
+    if signal is None:
+        signal = signal_section(
+            inputs.reading, inputs.reading_note, inputs.records, inputs.acceptance
+        )
     if isinstance(analysis, str):
         return Report(
             schema=SCHEMA,

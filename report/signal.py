@@ -19,6 +19,7 @@ import numpy as np
 from scipy.integrate import quad
 
 from gyrostand.analysis.angles import about
+from gyrostand.analysis.assumptions import AssumptionCheck
 from gyrostand.analysis.campaign import json_safe
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.excursions import (
@@ -313,6 +314,26 @@ class SignalSection:
         if not self.observations:
             return None
         return any(o.correlated for o in self.observations)
+
+    def independence(self) -> AssumptionCheck | None:
+        """The campaign's one check of independent observations, from the reading's fitted
+        correlation function (eqs 8.92-8.94); None when no series could be assessed (the
+        analysis then tests the N observations themselves)."""
+        if not self.observations:
+            return None
+        largest = max(self.observations, key=lambda o: abs(o.correlation))
+        correlated = [o for o in self.observations if o.correlated]
+        return AssumptionCheck(
+            "independence",
+            "correlation of successive observations from the reading's correlation function "
+            "(Sveshnikov, section 8.3, eqs 8.92-8.94)",
+            largest.correlation,
+            None,
+            not correlated,
+            f"{len(correlated)} of {len(self.observations)} series have successive "
+            f"observations correlated beyond |rho| = {largest.max_correlation:.2f} (largest "
+            f"{largest.correlation:+.3f}, trial {largest.trial} series {largest.j})",
+        )
 
     def to_dict(self) -> dict[str, Any]:
         r, a = self.record, self.acceptance

@@ -193,16 +193,22 @@ def stored_inputs(campaign: Campaign) -> StoredInputs:
 
 @dataclass(frozen=True)
 class StoredAnalysis:
+    """The analysis of a stored campaign, its inputs, the recorded run, and the signal analysis
+    of its reading (section 10), whose independence check the analysis uses."""
+
     analysis: CampaignAnalysis
     inputs: StoredInputs
     run_id: int
+    signal: SignalSection
 
 
 def analyze_stored(session: Session, campaign_id: int) -> StoredAnalysis:
     """Analyse a stored campaign and record the run (AnalysisError for unusable data,
-    CampaignNotFound for a wrong id). The caller commits."""
+    CampaignNotFound for a wrong id, LogFileError for a raw log that verifies but cannot be
+    read). The caller commits."""
     campaign = load_campaign(session, campaign_id)
     inputs = stored_inputs(campaign)
+    signal = campaign_signal(session, campaign_id)
     s = inputs.settings
     analysis = analyze_campaign(
         inputs.trials,
@@ -211,8 +217,20 @@ def analyze_stored(session: Session, campaign_id: int) -> StoredAnalysis:
         start=s.start,
         admissible=s.admissible,
         forecast=s.forecast,
+        independence=signal.independence(),
     )
     analysis = replace(analysis, left_out=inputs.left_out)
+    missing = [t for t in inputs.left_out if t.superseded_by is None]
+    if missing:  # first: a reader must know the fit rests on fewer trials than planned
+        lost = [f"trial {t.index} ({t.role}): {t.reason}" for t in missing]
+        analysis = replace(
+            analysis,
+            warnings=(
+                f"not analysed: {'; '.join(lost)}; the fit uses {len(analysis.fit_indices)} fit "
+                f"trials ({analysis.fit.dof} residual degrees of freedom)",
+                *analysis.warnings,
+            ),
+        )
     check = transient_check(campaign, _plan(campaign))
     if not isinstance(check, str):
         warnings = analysis.warnings + check.warnings(analysis.cochran.s_e)
@@ -236,7 +254,7 @@ def analyze_stored(session: Session, campaign_id: int) -> StoredAnalysis:
         )
         session.add(run)
         session.flush()
-    return StoredAnalysis(analysis, inputs, run.id)
+    return StoredAnalysis(analysis, inputs, run.id, signal)
 
 
 # -------------------------------------------------------------------------- report inputs
@@ -598,5 +616,8 @@ def campaign_report(
     except AnalysisError as exc:
         stored, reason = None, str(exc)
     inputs = report_inputs(session, campaign_id, stored, database=database)
-    result = reason if stored is None else stored.analysis
-    return build_report(inputs, result, profile, generated_at=generated_at)
+    if stored is None:
+        return build_report(inputs, reason, profile, generated_at=generated_at)
+    return build_report(
+        inputs, stored.analysis, profile, generated_at=generated_at, signal=stored.signal
+    )

@@ -74,6 +74,8 @@ CRITERIA: dict[str, tuple[str, dict[str, Any]]] = {
     "band": ("paper.toml", {"method": "band"} | dict.fromkeys(MODEL_ONLY)),
     "estimate": ("paper.toml", {}),  # as shipped: the transient model, left <= 0.05 S_e
     "compensated": ("paper-compensated.toml", {}),  # as shipped: observed in the transient
+    # the run's first series (not compensated: its state is unknown) waiting for a looser bound
+    "compensated-first-0.2": ("paper-compensated.toml", {"transient_fraction": 0.2}),
 }
 REFERENCE = "band"  # stand time ratios are to this criterion's, on the same draws
 

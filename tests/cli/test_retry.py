@@ -229,6 +229,11 @@ def test_retry_acquires_a_new_attempt_and_keeps_the_failed_one(runs: Runs, tmp_p
     }
     assert analysis["left_out"] == [superseded, failed]
     assert err == f"warning: trial 4 left out of the analysis (trial failed: {STUCK})\n"
+    # the analysis says so first (a superseded attempt is replaced, not missing)
+    assert analysis["warnings"][0] == (
+        f"not analysed: trial 4 (control): trial failed: {STUCK}; the fit uses 3 fit trials "
+        f"({analysis['fit']['dof']} residual degrees of freedom)"
+    )
 
     code, out, _ = invoke("analyze", "1", "--db", str(db))
     assert code == 0

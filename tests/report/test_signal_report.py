@@ -162,3 +162,30 @@ def test_an_imported_campaign_has_no_record(paper_report: Report, paper_files: R
     assert section.record is None and section.noise is None and section.settle == ()
     html = paper_files.files["html"].read_text()
     assert "Noise not characterised" in html and "Settle points: not recorded" in html
+
+
+def test_one_independence_verdict_everywhere(
+    simulated: Simulated, simulated_report: Report, paper: Stored
+) -> None:
+    """The question "are successive observations independent?" has one test: the reading's
+    correlation function when the campaign has a record; the analysis, its warnings, `analyze`
+    and the report's glance box all carry that verdict."""
+    section = simulated_report.signal
+    correlated = [o for o in section.observations if abs(o.correlation) > 0.1]
+    (check,) = [c for c in simulated_report.analysis.assumptions if c.name == "independence"]
+    assert check.holds is (not correlated)
+    assert "correlation function" in check.method
+    assert check.detail.startswith(f"{len(correlated)} of {len(section.observations)} series")
+    largest = max(section.observations, key=lambda o: abs(o.correlation))
+    assert check.statistic == largest.correlation
+    warned = [w for w in simulated_report.analysis.warnings if "independence" in w]
+    expected = f"assumption of independence violated: {check.detail}"
+    assert warned == ([expected] if correlated else [])
+    text = runner.invoke(app, ["analyze", str(simulated.campaign_id), "--db", simulated.url])
+    assert f"independence: {check.verdict} ({check.method}" in text.stdout
+    html = render_html(simulated_report)
+    badge = '<span class="badge fail">NO</span>' if correlated else "badge pass"
+    assert f"observations independent: {badge}" in html
+    # without a record (the paper's imported table) the N observations themselves are tested
+    (imported,) = [c for c in paper.report().analysis.assumptions if c.name == "independence"]
+    assert imported.method.startswith("lag-1 autocorrelation (Ljung-Box Q)")
