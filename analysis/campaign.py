@@ -54,6 +54,7 @@ from dataclasses import asdict, dataclass, fields, is_dataclass
 from typing import Any
 
 import numpy as np
+from scipy.stats import t as student_t
 
 from gyrostand.analysis.adequacy import Adequacy, ControlResult, adequacy_test, judge_controls
 from gyrostand.analysis.assumptions import (
@@ -136,6 +137,16 @@ class CampaignAnalysis:
     def estimates(self) -> dict[str, float]:
         return self.fit.estimates
 
+    @property
+    def confidence_intervals(self) -> dict[str, tuple[float, float]]:
+        """Each parameter's (1 - q) confidence interval: a +- t(1 - q/2; n - 2) S{a}, S{a} by
+        eq 1.10 and the t quantile as eq 2.11 takes it."""
+        t = float(student_t.ppf(1 - self.q / 2, self.fit.dof))
+        return {
+            name: (value - t * self.fit.std_errors[name], value + t * self.fit.std_errors[name])
+            for name, value in self.fit.estimates.items()
+        }
+
     def to_dict(self) -> dict[str, Any]:
         fit = self.fit
         log = [
@@ -155,6 +166,7 @@ class CampaignAnalysis:
                 "start": self.start,
                 "estimates": fit.estimates,
                 "std_errors": fit.std_errors,
+                "confidence_intervals": self.confidence_intervals,
                 "covariance": fit.covariance,
                 "correlation": fit.correlation,
                 "xtx_inv": fit.xtx_inv,

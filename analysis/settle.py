@@ -125,7 +125,9 @@ def check_solvability(tau_s: np.ndarray, omega_rad_s: float) -> None:
     phases omega t_i hit at least three distinct points of the circle: a line meets it twice."""
     n = len(tau_s)
     if n < 3:
-        raise SingularDesignError(f"settle estimate needs n >= 3 readings (seed 003 eq 7), got {n}")
+        raise SingularDesignError(
+            f"settle estimate needs n >= 3 readings (Bezvesilna & Gura, eq 7), got {n}"
+        )
     phases = omega_rad_s * np.asarray(tau_s, dtype=float)
     away_from_first = _circular_distance(phases, phases[0]) > _PHASE_TOL_RAD
     second = phases[np.argmax(away_from_first)]
@@ -133,7 +135,8 @@ def check_solvability(tau_s: np.ndarray, omega_rad_s: float) -> None:
         lam = omega_rad_s * float(np.median(np.diff(tau_s)))
         raise SingularDesignError(
             f"readings fall on at most two phases of the oscillation: lambda = omega*dt = "
-            f"{lam:.6g} rad is a multiple of pi (seed 003 eq 7); change the sampling interval"
+            f"{lam:.6g} rad is a multiple of pi (Bezvesilna & Gura, eq 7); change the sampling "
+            "interval"
         )
 
 
@@ -146,8 +149,8 @@ def _lsq(rows: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     u, s, vt = np.linalg.svd(rows, full_matrices=False)
     if s[-1] <= s[0] * rows.shape[0] * np.finfo(float).eps:
         raise SingularDesignError(
-            "settle model columns are linearly dependent (seed 003 eq 7): record too short "
-            "or sampled at a forbidden interval"
+            "settle model columns are linearly dependent (Bezvesilna & Gura, eq 7): record too "
+            "short or sampled at a forbidden interval"
         )
     coef = vt.T @ ((u.T @ y) / s)
     return coef, (vt.T / s**2) @ vt

@@ -26,6 +26,7 @@ def write_campaign_report(
     out: Path = DEFAULT_OUT,
     formats: tuple[str, ...] = FORMATS,
     profile: str = SHIPPED,
+    number: str | None = None,
 ) -> dict[str, Path]:
     """Analyse and report one campaign; the files written by format (one-line CLI errors,
     every input checked before the analysis run is recorded). A line on stderr per stage: the
@@ -59,7 +60,12 @@ def write_campaign_report(
         generated = datetime.now(UTC).isoformat(sep=" ", timespec="seconds")
         with sessions.begin() as session:  # the analysis run is recorded with the report
             report = campaign_report(
-                session, campaign_id, database=db, profile=limits, generated_at=generated
+                session,
+                campaign_id,
+                database=db,
+                profile=limits,
+                generated_at=generated,
+                report_number=number,
             )
         if report.analysis is None:
             typer.echo(
@@ -98,11 +104,19 @@ def register(app: typer.Typer) -> None:
             str,
             typer.Option(help="Compliance limits: a shipped profile name or a TOML file."),
         ] = SHIPPED,
+        number: Annotated[
+            str | None,
+            typer.Option("--number", help="Report number (default: the plan's \\[report] number)."),
+        ] = None,
     ) -> None:
         """Write the stand report (HTML, PDF, JSON, trial-table CSV) of a campaign."""
         formats = tuple(f.strip().lower() for f in format.split(",") if f.strip())
         unknown = [f for f in formats if f not in FORMATS]
         if unknown or not formats:
             fail(f"--format: {', '.join(unknown) or 'nothing'} not among {', '.join(FORMATS)}")
-        for kind, path in write_campaign_report(db, campaign, out, formats, profile).items():
+        if number is not None and not number.strip():
+            fail("--number: the report number is empty")
+        for kind, path in write_campaign_report(
+            db, campaign, out, formats, profile, number
+        ).items():
             typer.echo(f"wrote {kind}: {path}")

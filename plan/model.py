@@ -353,6 +353,32 @@ class SettlePlan(_Table):
         values = (getattr(self, key) for key in ESTIMATE_KEYS)
         return EstimatePlan(*values, compensated=self.method == "compensated")
 
+    def describe(self) -> str:
+        """The criterion in words, as the report states it."""
+        give_up = f"a series fails after {self.max_wait_s:g} s unsettled"
+        if self.method == "band":
+            trend = "" if math.isinf(self.drift_deg) else f", trend <= {self.drift_deg:g} deg"
+            return (
+                f"band: window means within +-{self.band_deg:g} deg{trend} over "
+                f"{self.hold_s:g} s; {give_up}"
+            )
+        e = self.estimate
+        assert e is not None  # method is not "band"
+        known = (
+            f"the compass's transient (Bezvesilna & Gura; undamped period "
+            f"{e.undamped_period_s:g} s, damping ratio {e.damping_ratio:g}) fitted online; the "
+            f"settle point known within {e.tolerance_fraction:g} S_e (S_e expected "
+            f"{e.expected_se_deg:g} deg, over {e.stable_estimates} estimates)"
+        )
+        bound = f"the transient left over the N windows within {e.transient_fraction:g} S_e"
+        if e.compensated:
+            return (
+                f"compensated: {known}, then observed during the transient and the fitted "
+                f"transient subtracted from each observation (the first series of a run waits "
+                f"until {bound}); {give_up}"
+            )
+        return f"estimate: {known} and {bound}; {give_up}"
+
     @property
     def transient_model(self) -> TransientModel | None:
         """The compass's transient (Bezvesilna & Gura eq 1) when the plan gives it."""
@@ -509,6 +535,27 @@ class AcceptancePlan(_Table):
     """Largest acceptable probability of an excursion."""
 
 
+class ReportPlan(_Table):
+    """[report]: what the stand report identifies besides the campaign (the items of ISO/IEC
+    17025, 7.8.2); a key left out is printed "not stated" (for a simulated stand, what does
+    not apply says so)."""
+
+    number: Text | None = None
+    """Report number the laboratory assigns (`gyrostand report --number` overrides it)."""
+    laboratory: Text | None = None
+    """Laboratory: name and address, and where the trials were made if elsewhere."""
+    customer: Text | None = None
+    """Customer: name and address."""
+    stand: Text | None = None
+    """Rolling stand: make, model, serial number."""
+    stand_calibration: Text | None = None
+    """Stand calibration: certificate, date, next due."""
+    reference_heading: Text | None = None
+    """Reference heading: its source and uncertainty."""
+    environment: Text | None = None
+    """Environmental conditions during the trials (temperature, humidity, supply)."""
+
+
 _SIGNALS_SCHEMA = {
     "properties": {name: {"type": "string"} for name in _SIGNALS},
     "additionalProperties": False,
@@ -540,6 +587,7 @@ class Plan(_Table):
     signals: Signals = Field(default_factory=dict, json_schema_extra=_SIGNALS_SCHEMA)
     """The lab's DBC signals, "MESSAGE.SIGNAL" per quantity (docs/protocol.md)."""
     acceptance: AcceptancePlan | None = None
+    report: ReportPlan = Field(default_factory=ReportPlan)
     _text: str = PrivateAttr("")
 
     @field_validator("trials")
@@ -703,6 +751,7 @@ class PartialPlan(_Table):
     site: SitePlan
     analysis: AnalysisPlan | None = None
     forecast: ForecastPlan | None = None
+    report: ReportPlan = Field(default_factory=ReportPlan)
 
 
 def _error(kind: str, loc: tuple[str | int, ...], message: str) -> InitErrorDetails:

@@ -18,7 +18,7 @@ from gyrostand.report.compliance import Compliance, Profile, assess
 from gyrostand.report.model import ReportInputs
 from gyrostand.report.signal import SignalSection, signal_section
 
-SCHEMA = "gyrostand.report/2"
+SCHEMA = "gyrostand.report/3"
 COURSE_STEP_DEG = 5.0  # forecast grid
 TABLE_COURSE_STEP_DEG = 15.0  # forecast table
 

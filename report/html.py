@@ -109,6 +109,32 @@ def _figures(report: Report) -> dict[str, object]:
     return figures
 
 
+def _contents(report: Report) -> list[tuple[str, str]]:
+    """The table of contents: (section id, title), in the document's order."""
+    results = [
+        ("trials", "Trial table"),
+        ("reproducibility", "Reproducibility"),
+        ("fit", "Fit of model 1.1"),
+        ("adequacy", "Adequacy and assumptions"),
+        ("controls", "Control trials"),
+        ("forecast", "Forecast at sea"),
+    ]
+    appendices = [("plan-text", "Appendix B: the plan as submitted")]
+    if report.analysis is not None:
+        appendices.insert(0, ("observations", "Appendix A: every observation"))
+    return [
+        ("identification", "Identification"),
+        ("method", "Method and references"),
+        ("plan", "The plan"),
+        ("acquisition", "Acquisition summary"),
+        *results,
+        ("signal", "The reading's random part and the settle points"),
+        ("compliance", "Compliance"),
+        ("signatures", "Signatures"),
+        *appendices,
+    ]
+
+
 def render_html(report: Report) -> str:
     """The whole report as HTML text."""
     template = _environment().from_string(
@@ -122,6 +148,7 @@ def render_html(report: Report) -> str:
         inputs=report.inputs,
         ident=report.inputs.identification,
         figures=_figures(report),
+        toc=_contents(report),
         css=Markup(css),
         variance_basis=VARIANCE_BASIS,
         sign_convention=SIGN_CONVENTION,

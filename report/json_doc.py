@@ -1,8 +1,10 @@
 """The report as one JSON document: every number the report prints, for machines and for diffing
 two reports. Deterministic: the same database gives the same text except ``generated_at``.
 
-Schema ``gyrostand.report/2`` (plain JSON types; absent values are null). Version 2 added
-``signal``; everything else is as in version 1.
+Schema ``gyrostand.report/3`` (plain JSON types; absent values are null). Version 2 added
+``signal``; version 3 the laboratory items of ``identification`` (the plan's [report] table),
+``plan.settle_criterion`` (text, in place of the band's three numbers), ``signatures``
+{recorded_operator} and the parameters' ``fit.confidence_intervals``.
 
 - ``schema``, ``generated_at`` (the only wall-clock field);
 - ``identification``: the fields of `report.model.Identification`;
@@ -46,7 +48,7 @@ Schema ``gyrostand.report/2`` (plain JSON types; absent values are null). Versio
   ``rice`` {sigma_dot, upcrossings_upper, downcrossings_lower, mean_excursions, bandwidth,
   p_poisson, p_vanmarcke} or null), risk (an upper bound when is_bound),
   tolerance_for_max_risk_deg, verdict, detail} or null, acceptance_note;
-- ``signatures``: tested_by, checked_by, date.
+- ``signatures``: recorded_operator (the signature lines are filled in by hand).
 """
 
 import json

@@ -48,6 +48,14 @@ class Identification:
     plan_sha256: str
     raw_logs: tuple[RawLogFile, ...]  # the campaign's raw log segments, in order
     raw_log_check: str  # "verified", "MISMATCH (...)", "file not found", "no raw log"
+    simulated: bool  # the instrument was the simulator: every page says so
+    report_number: str | None  # None: not stated (the report says so on every page)
+    laboratory: str  # the plan's [report] items, "not stated" when it gives none
+    customer: str
+    stand_identity: str
+    stand_calibration: str
+    reference_heading: str
+    environment: str
 
 
 @dataclass(frozen=True)
@@ -70,9 +78,7 @@ class PlanSummary:
     still_window_s: float | None
     rocking_window_periods: int | None
     spacing_s: float | None
-    settle_band_deg: float | None
-    settle_hold_s: float | None
-    settle_max_wait_s: float | None
+    settle_criterion: str | None  # `plan.model.SettlePlan.describe`
     notes: tuple[str, ...]  # e.g. which settings were taken from the seed-000 example
     plan_toml: str
 
@@ -198,11 +204,10 @@ class ExcursionCriterion:
 
 @dataclass(frozen=True)
 class Signatures:
-    """Section 11. Empty strings leave a line to sign on."""
+    """The signature block: lines to fill in by hand. ``recorded_operator`` is who ran the
+    campaign as the database records it (shown beside, never as a signature)."""
 
-    tested_by: str
-    checked_by: str = ""
-    date: str = ""
+    recorded_operator: str
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from sqlalchemy import select
@@ -44,7 +45,7 @@ from gyrostand.db.models import AnalysisRun, Campaign, Series, Trial
 from gyrostand.db.queries import campaign_constants, current_trials, load_campaign
 from gyrostand.frames.logfile import sha256_of
 from gyrostand.plan.codec import codec_for
-from gyrostand.plan.model import Plan, PlanError, parse_any_plan
+from gyrostand.plan.model import PartialPlan, Plan, PlanError, ReportPlan, parse_any_plan
 from gyrostand.report.build import Report, build_report
 from gyrostand.report.compliance import Profile
 from gyrostand.report.model import (
@@ -290,6 +291,32 @@ def _raw_log_check(campaign: Campaign) -> tuple[str, list[Path]]:
     return "verified", [Path(s.path) for s in segments]
 
 
+NOT_STATED = "not stated"
+
+
+def _lab_items(campaign: Campaign, number: str | None) -> dict[str, Any]:
+    """The identification items of the stored plan's [report] table, whole or partial
+    (`Identification`); for a simulated stand, what does not apply says so."""
+    try:
+        plan: Plan | PartialPlan | None = parse_any_plan(campaign.plan_toml)
+    except PlanError:
+        plan = None
+    items = ReportPlan() if plan is None else plan.report
+    simulated = campaign.source != "import" and isinstance(plan, Plan) and plan.bus.simulated
+    na = "not applicable: simulated instrument and stand" if simulated else NOT_STATED
+    return {
+        "simulated": simulated,
+        "report_number": number or items.number,
+        "laboratory": items.laboratory or NOT_STATED,
+        "customer": items.customer or NOT_STATED,
+        "stand_identity": items.stand or ("gyrostand simulated stand" if simulated else NOT_STATED),
+        "stand_calibration": items.stand_calibration or na,
+        "reference_heading": items.reference_heading
+        or ("the simulator's commanded heading (exact)" if simulated else NOT_STATED),
+        "environment": items.environment or na,
+    }
+
+
 def _stand(campaign: Campaign, plan: Plan | None) -> str:
     if campaign.source == "import" or plan is None:
         return "none: measurements imported from a file (see the import event)"
@@ -327,22 +354,20 @@ def _plan_summary(campaign: Campaign, plan: Plan | None, notes: tuple[str, ...])
         )
         o, st = plan.observation, plan.settle
         windows = (o.still_window_s, o.rocking_window_periods, o.spacing_s)
-        settle = (st.band_deg, st.hold_s, st.max_wait_s)
+        settle: str | None = st.describe()
     else:
         trials = tuple(
             PlannedTrial(t.index, t.role, t.cmd_direction_deg, t.cmd_amplitude_cm, t.cmd_period_s)
             for t in current_trials(campaign.trials)
         )
-        windows, settle = (None, None, None), (None, None, None)
+        windows, settle = (None, None, None), None
     return PlanSummary(
         n_obs=campaign.n_obs,
         trials=trials,
         still_window_s=windows[0],
         rocking_window_periods=windows[1],
         spacing_s=windows[2],
-        settle_band_deg=settle[0],
-        settle_hold_s=settle[1],
-        settle_max_wait_s=settle[2],
+        settle_criterion=settle,
         notes=notes,
         plan_toml=campaign.plan_toml,
     )
@@ -552,7 +577,12 @@ def campaign_signal(session: Session, campaign_id: int) -> SignalSection:
 
 
 def report_inputs(
-    session: Session, campaign_id: int, stored: StoredAnalysis | None, *, database: str
+    session: Session,
+    campaign_id: int,
+    stored: StoredAnalysis | None,
+    *,
+    database: str,
+    report_number: str | None = None,
 ) -> ReportInputs:
     """Everything the report shows besides the analysis results: identification, plan,
     acquisition summary, every event, the heading records and the stationary reading record
@@ -586,6 +616,7 @@ def report_inputs(
             RawLogFile(s.path, s.sha256, s.frames, s.start, s.ending) for s in campaign.raw_logs
         ),
         raw_log_check=check,
+        **_lab_items(campaign, report_number),
     )
     return ReportInputs(
         identification=ident,
@@ -598,7 +629,7 @@ def report_inputs(
         events=_events(campaign),
         records=records,
         raw_log_note=note,
-        signatures=Signatures(tested_by=campaign.operator),
+        signatures=Signatures(recorded_operator=campaign.operator),
         reading=reading,
         reading_note=reading_note,
         acceptance=acceptance,
@@ -606,7 +637,13 @@ def report_inputs(
 
 
 def campaign_report(
-    session: Session, campaign_id: int, *, database: str, profile: Profile, generated_at: str
+    session: Session,
+    campaign_id: int,
+    *,
+    database: str,
+    profile: Profile,
+    generated_at: str,
+    report_number: str | None = None,
 ) -> Report:
     """Analyse the stored campaign (recording the run) and assemble its report. A campaign
     that cannot be analysed (e.g. every trial failed) still gets its report: plan,
@@ -615,7 +652,9 @@ def campaign_report(
         stored: StoredAnalysis | None = analyze_stored(session, campaign_id)
     except AnalysisError as exc:
         stored, reason = None, str(exc)
-    inputs = report_inputs(session, campaign_id, stored, database=database)
+    inputs = report_inputs(
+        session, campaign_id, stored, database=database, report_number=report_number
+    )
     if stored is None:
         return build_report(inputs, reason, profile, generated_at=generated_at)
     return build_report(

@@ -115,6 +115,11 @@ def fit_section(a: CampaignAnalysis) -> list[str]:
         *_table(headers, rows),
         "",
         *fit.summary().splitlines(),
+        *(
+            f"{1 - a.q:.0%} confidence interval of {n} (eq 1.10, t as eq 2.11): "
+            f"[{lo:.6g}, {hi:.6g}]"
+            for n, (lo, hi) in a.confidence_intervals.items()
+        ),
         f"correlation(C, T) = {corr:+.3f}",
     ]
 
@@ -161,7 +166,7 @@ def controls_section(a: CampaignAnalysis) -> list[str]:
 
 
 def assumptions_section(a: CampaignAnalysis) -> list[str]:
-    lines = ["ASSUMPTIONS (section 2)"]
+    lines = ["ASSUMPTIONS (Potemkin 1982, section 2)"]
     for check in a.assumptions:
         stat = "" if check.statistic is None else f", statistic {check.statistic:.4g}"
         p = "" if check.p_value is None else f", p = {check.p_value:.3g}"

@@ -207,9 +207,6 @@ def _analysis(analysis: Any, draw: Draw) -> dict[str, Any]:
     """What the rows keep of a CampaignAnalysis: per parameter the estimate, its SE and 95 %
     confidence interval, and each control trial's residual against its prediction interval."""
     fit = analysis.fit
-    # the analysis reports each estimate's SE with the fit's dof and q; the interval is
-    # estimate +- t(1 - q/2; dof) SE (as validation/monte_carlo.py)
-    t_q = float(stats.t.ppf(1 - analysis.q / 2, fit.dof))
     out: dict[str, Any] = {
         "q": analysis.q,
         "dof": fit.dof,
@@ -223,7 +220,7 @@ def _analysis(analysis: Any, draw: Draw) -> dict[str, Any]:
             "true": true,
             "estimate": est,
             "se": se,
-            "ci": [est - t_q * se, est + t_q * se],
+            "ci": list(analysis.confidence_intervals[name]),
             "z": (est - true) / se if se > 0 else math.nan,
         }
     out["controls"] = [

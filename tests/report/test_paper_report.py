@@ -15,6 +15,7 @@ from sqlalchemy import func, select
 from gyrostand.db.models import AnalysisRun
 from gyrostand.report.build import Report
 from gyrostand.report.errors import ReportError
+from gyrostand.report.html import _contents
 from gyrostand.report.json_doc import report_json
 from gyrostand.report.writer import write_report
 
@@ -50,26 +51,36 @@ def test_trial_table_is_the_paper_table_with_model_values(paper_report: Report) 
     assert controls == pytest.approx({5: 0.302, 6: -0.129}, abs=2e-3)  # issue: +0.302, -0.129
 
 
-def test_pdf_has_every_section_and_the_key_numbers(paper_files: Rendered) -> None:
+def test_pdf_has_every_section_and_the_key_numbers(
+    paper_files: Rendered, paper_report: Report
+) -> None:
     text = paper_files.pdf_text
-    assert 4 <= paper_files.pdf_pages <= 8
-    for heading in (
+    assert 5 <= paper_files.pdf_pages <= 10
+    headings = (
         "1. Identification",
-        "2. The plan",
-        "3. Acquisition summary",
-        "4. Trial table",
-        "5. Reproducibility",
-        "6. Fit of model 1.1",
-        "7. Adequacy",
-        "8. Control trials",
-        "9. Forecast at sea",
-        "10. The reading's random part",
-        "11. Compliance",
-        "12. Signatures",
-    ):
-        assert heading in text
-    positions = [text.index(f"{n}. ") for n in range(1, 13)]
+        "2. Method and references",
+        "3. The plan",
+        "4. Acquisition summary",
+        "5. Trial table",
+        "6. Reproducibility",
+        "7. Fit of model 1.1",
+        "8. Adequacy",
+        "9. Control trials",
+        "10. Forecast at sea",
+        "11. The reading's random part",
+        "12. Compliance",
+        "13. Signatures",
+        "Appendix A: every observation",
+        "Appendix B: the plan as submitted",
+    )
+    body = text[text.index(headings[-1]) + 1 :]  # after the table of contents
+    assert [h for h in headings if h not in body] == []
+    positions = [body.index(h) for h in headings]
     assert positions == sorted(positions)
+    contents = text[text.index("Contents") : text.index(headings[-1]) + len(headings[-1]) + 200]
+    for n, (_, title) in enumerate(_contents(paper_report), 1):  # each with its page
+        number = f"{n}. " if n <= 13 else ""
+        assert re.search(re.escape(number + title) + r"[ .]*\d+", contents), title
     for number in ("0.4936", "0.5175", "1.409", "-2.328", "0.534", "3.634"):
         assert number in text, number
     assert re.search(r"5\.941\d\s*×\s*10\s*7", text)  # C, superscript exponent
@@ -102,7 +113,7 @@ def test_json_is_deterministic_and_the_run_is_recorded_once(paper: Stored) -> No
             select(func.count(AnalysisRun.id)).where(AnalysisRun.campaign_id == paper.campaign_id)
         )
     assert runs == 1
-    assert first["schema"] == "gyrostand.report/2"
+    assert first["schema"] == "gyrostand.report/3"
     assert first["analysis"]["cochran"]["g_ex"] == pytest.approx(REFERENCE["g_ex"], abs=1e-4)
     assert first["identification"]["analysis_run"] >= 1
 

@@ -88,7 +88,7 @@ def test_html_and_json_show_the_saving(early_report: Report, early_files: Render
     section = early_report.signal
     assert f"Stand time saved: {section.time_saved_s:.1f} s" in html
     assert html.count("<td>estimate</td>") == len(section.settle)
-    assert section.noise is not None and "10. The reading's random part" in html
+    assert section.noise is not None and "<h2>The reading's random part" in html
     doc = report_document(early_report)["signal"]
     assert doc["time_saved_s"] == section.time_saved_s
     assert [r["criterion"] for r in doc["settle"]] == ["estimate"] * len(section.settle)
@@ -97,7 +97,7 @@ def test_html_and_json_show_the_saving(early_report: Report, early_files: Render
 def test_pdf_shows_the_new_sections(early_report: Report, early_files: Rendered) -> None:
     section = early_report.signal
     for needle in (
-        "10. The reading's random part",
+        "11. The reading's random part",
         "Correlation function (eqs 8.92, 8.89)",
         "Spectrum and hidden harmonics",
         "Allan deviation",
@@ -108,7 +108,7 @@ def test_pdf_shows_the_new_sections(early_report: Report, early_files: Rendered)
         "Acceptance by excursions",
         f"{section.acceptance.verdict} P(excursion",
         f"{section.noise.exponential.decay_per_s:.4g}",
-        "11. Compliance",
+        "12. Compliance",
     ):
         assert needle in early_files.pdf_text, needle
 
