@@ -1,5 +1,5 @@
 """The report as one self-contained HTML document: Jinja2 template with autoescape on (operator
-text and every stored string come out inert), CSS inline, plots inline as SVG.
+text and every stored string come out inert), CSS inline, plots inline as PNG data URIs.
 
 The template only formats: every number is a field of the `Report` or of its `CampaignAnalysis`.
 """
@@ -75,7 +75,7 @@ def _heading_title(t: TrialAcquisition) -> str:
 
 
 def _figures(report: Report) -> dict[str, object]:
-    """Every plot of the report as SVG markup (trusted: made here from numbers only)."""
+    """Every plot of the report as an <img> element (trusted: made here from numbers only)."""
     trials = {t.index: t for t in report.inputs.acquisition}
     figures: dict[str, object] = {
         "headings": {

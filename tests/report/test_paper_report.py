@@ -97,7 +97,8 @@ def test_operator_text_is_inert(paper_files: Rendered) -> None:
 def test_html_is_self_contained(paper_files: Rendered) -> None:
     html = paper_files.files["html"].read_text()
     assert not re.search(r"""(src|href)\s*=\s*["']?(https?:|//|file:)""", html)
-    assert html.count("<svg") >= 4  # measured vs model, residuals, iterations, forecast
+    assert html.count('<img src="data:image/png;base64,') >= 4  # measured vs model, residuals,
+    # iterations, forecast
     assert "@page" in html
 
 
