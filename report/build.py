@@ -193,7 +193,7 @@ def build_report(
             analysis_error=analysis,
             trials=(),
             forecast=None,
-            compliance=assess(profile, None, None),
+            compliance=assess(profile, None),
             signal=signal,
         )
     section = (
@@ -209,6 +209,6 @@ def build_report(
         analysis_error=None,
         trials=trial_rows(analysis),
         forecast=section,
-        compliance=assess(profile, analysis, None if section is None else section.grid),
+        compliance=assess(profile, analysis, inputs.plan),
         signal=signal,
     )
