@@ -17,7 +17,8 @@ Decision rules (stated in each item's ``detail``):
   standard's test moves several axes at once (the stand rocks about one);
 - rolling_error_forecast: the largest |alpha_p| + half-width of the (1 - q) prediction interval
   (eqs 1.1, 2.10-2.11) over the whole envelope (`envelope_worst`), relative to the limit at each
-  latitude; always indicative: a prediction by model 1.1 (Potemkin 1982), not the standard's test.
+  latitude; always indicative: a prediction by model 1.1 of Potemkin (1982), not the standard's
+  test.
 A judged requirement PASSes when the value does not exceed the limit, FAILs otherwise; when the
 limit (or the envelope it needs) is not verified, or the evidence is indicative, the verdict is
 INDICATIVE PASS or INDICATIVE FAIL instead. `Compliance.verdict` sums the items up.
@@ -125,6 +126,8 @@ class ComplianceItem:
     evidence: str
     source: str
     verified: bool
+    stated_limit_deg: float | None
+    secant_latitude: bool
     limit_deg: float | None
     limit_text: str
     value_deg: float | None
@@ -149,6 +152,16 @@ class Compliance:
     def count(self, verdict: str) -> int:
         """How many requirements got this verdict."""
         return sum(item.verdict == verdict for item in self.items)
+
+    def limit_at(self, evidence: str, latitude_deg: float) -> float | None:
+        """The limit of the first requirement judged on this evidence, at this latitude (None:
+        no such requirement, or it states no limit)."""
+        item = next((i for i in self.items if i.evidence == evidence), None)
+        if item is None or item.stated_limit_deg is None:
+            return None
+        if not item.secant_latitude:
+            return item.stated_limit_deg
+        return float(secant_limit(item.stated_limit_deg, latitude_deg))
 
     @property
     def verdict(self) -> str:
@@ -361,7 +374,7 @@ def _procedure_differs(req: Requirement, e: Evidence) -> str | None:
         return f"{standard}; the campaign's reading times are not recorded (imported data)"
     interval = plan.still_window_s + (plan.spacing_s or 0.0)
     n = plan.n_obs
-    if n == proc.readings and abs(interval - proc.interval_s) <= INTERVAL_TOLERANCE * proc.interval_s:
+    if n == proc.readings and abs(interval / proc.interval_s - 1) <= INTERVAL_TOLERANCE:
         return None
     return (
         f"{standard}; the campaign took {n} readings per still series, each the mean of a "
@@ -405,7 +418,7 @@ def _heading_rms(req: Requirement, e: Evidence) -> Finding:
         )
     rms = {i: math.sqrt(s.var_deg2 * (s.n - 1) / s.n) for i, s in still}  # eq 2.2, N - 1 -> N
     worst = max(rms, key=rms.__getitem__)
-    window = "" if e.plan is None else f", each reading the mean of a {e.plan.still_window_s:g} s window"
+    window = "" if e.plan is None else f", each reading a {e.plan.still_window_s:g} s window mean"
     return Finding(
         rms[worst],
         e.site_latitude_deg,
@@ -490,7 +503,7 @@ def _rolling_error_forecast(req: Requirement, e: Evidence) -> Finding:
         f"{w.latitude_deg:.1f} deg; at {env.max_latitude_deg:g} deg the same motion gives "
         f"{abs(at_max.alpha_deg) + at_max.half_width_deg:.3f} deg. Model 1.1 predicts the "
         "steady error of one-axis motion; yaw and simultaneous axes are not modelled",
-        indicative="a prediction by model 1.1 (Potemkin 1982), not a test by the standard's "
+        indicative="a prediction by model 1.1 of Potemkin (1982), not a test by the standard's "
         "procedure",
         worst=w,
     )
@@ -548,6 +561,8 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
         evidence=req.evidence,
         source=req.source,
         verified=verified,
+        stated_limit_deg=req.limit_deg,
+        secant_latitude=req.secant_latitude,
         limit_deg=limit,
         limit_text=limit_text,
         value_deg=value,
