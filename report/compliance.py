@@ -205,7 +205,7 @@ def _get(table: dict[str, Any], key: str, kind: type | tuple[type, ...], where: 
     value = table.get(key)
     wrong_bool = isinstance(value, bool) != (kind is bool)
     if not isinstance(value, kind) or wrong_bool:
-        raise ReportError(f"compliance profile {where}: {key} is missing or of the wrong type")
+        raise ReportError(f"{where}: {key} is missing or of the wrong type")
     return value
 
 
@@ -216,7 +216,7 @@ def _optional(table: dict[str, Any], key: str, kind: type, where: str) -> Any:
 def _numbers(table: dict[str, Any], key: str, where: str) -> tuple[float, ...]:
     values = _get(table, key, list, where)
     if not values or not all(isinstance(v, int | float) for v in values):
-        raise ReportError(f"compliance profile {where}: {key} must be a list of numbers")
+        raise ReportError(f"{where}: {key} must be a list of numbers")
     return tuple(float(v) for v in values)
 
 
@@ -241,17 +241,24 @@ def load_profile(name_or_path: str | Path = SHIPPED) -> Profile:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ReportError(f"compliance profile {path}: not valid TOML ({exc})") from None
-    head = _get(doc, "profile", dict, path)
+    try:
+        return _profile(doc, path)
+    except ReportError as exc:
+        raise ReportError(f"compliance profile {path}: {exc}") from None
+
+
+def _profile(doc: dict[str, Any], path: str) -> Profile:
+    head = _get(doc, "profile", dict, "top level")
     return Profile(
         id=_get(head, "id", str, "[profile]"),
         name=_get(head, "name", str, "[profile]"),
         edition=_get(head, "edition", str, "[profile]"),
         source=_get(head, "source", str, "[profile]"),
         caution=str(head.get("caution", "")),
-        envelope=_envelope(_get(doc, "envelope", dict, path)),
+        envelope=_envelope(_get(doc, "envelope", dict, "top level")),
         requirements=tuple(
             _requirement(row, f"requirements[{n}]")
-            for n, row in enumerate(_get(doc, "requirements", list, path), start=1)
+            for n, row in enumerate(_get(doc, "requirements", list, "top level"), start=1)
         ),
         path=path,
     )
@@ -261,7 +268,7 @@ def _envelope(env: dict[str, Any]) -> Envelope:
     where = "[envelope]"
     period = _numbers(env, "period_s", where)
     if len(period) != 2 or not 0 < period[0] < period[1]:
-        raise ReportError("compliance profile [envelope]: period_s must be [low, high]")
+        raise ReportError("[envelope]: period_s must be [low, high]")
     envelope = Envelope(
         period_s=(period[0], period[1]),
         max_acceleration_m_s2=_number(env, "max_acceleration_m_s2", where),
@@ -273,24 +280,25 @@ def _envelope(env: dict[str, Any]) -> Envelope:
         verified=_get(env, "verified", bool, where),
     )
     if not 0 < envelope.max_latitude_deg < 90:
-        raise ReportError("compliance profile [envelope]: max_latitude_deg must lie in (0, 90)")
+        raise ReportError("[envelope]: max_latitude_deg must lie in (0, 90)")
     if min(envelope.max_acceleration_m_s2, envelope.max_roll_deg, envelope.max_pitch_deg) <= 0:
-        raise ReportError("compliance profile [envelope]: the motion limits must be positive")
+        raise ReportError("[envelope]: the motion limits must be positive")
     return envelope
 
 
-def _requirement(row: dict[str, Any], where: str) -> Requirement:
+def _requirement(row: Any, where: str) -> Requirement:
+    if not isinstance(row, dict):
+        raise ReportError(f"{where}: must be a table ([[requirements]])")
     evidence = _get(row, "evidence", str, where)
     if evidence not in EVIDENCE:
         raise ReportError(
-            f"compliance profile {where}: unknown evidence {evidence!r} "
-            f"(known: {', '.join(sorted(EVIDENCE))})"
+            f"{where}: unknown evidence {evidence!r} (known: {', '.join(sorted(EVIDENCE))})"
         )
     limit = _optional(row, "limit_deg", (int, float), where)
     if limit is not None and limit <= 0:
-        raise ReportError(f"compliance profile {where}: limit_deg must be a positive number")
+        raise ReportError(f"{where}: limit_deg must be a positive number")
     if limit is None and evidence in NEEDS_LIMIT:
-        raise ReportError(f"compliance profile {where}: evidence {evidence} needs limit_deg")
+        raise ReportError(f"{where}: evidence {evidence} needs limit_deg")
     procedure = _optional(row, "procedure", dict, where)
     return Requirement(
         id=_get(row, "id", str, where),
@@ -310,9 +318,9 @@ def _procedure(table: dict[str, Any], where: str) -> Procedure:
     interval = _optional(table, "interval_s", (int, float), where)
     axes = _optional(table, "axes", int, where)
     if (readings is None) != (interval is None):
-        raise ReportError(f"compliance profile {where}: give readings and interval_s together")
+        raise ReportError(f"{where}: give readings and interval_s together")
     if any(v is not None and v <= 0 for v in (readings, interval, axes)):
-        raise ReportError(f"compliance profile {where}: readings, interval_s, axes must be > 0")
+        raise ReportError(f"{where}: readings, interval_s, axes must be > 0")
     return Procedure(
         text=_get(table, "text", str, where),
         readings=readings,
