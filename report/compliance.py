@@ -117,8 +117,8 @@ class Profile:
 @dataclass(frozen=True)
 class ComplianceItem:
     """One requirement judged: the limit as evaluated, the value compared, the verdict, whether
-    the limit (and the envelope it needs) was verified, and the envelope's worst case for a
-    forecast."""
+    the limit was verified in its source (an unverified envelope also makes the verdict
+    indicative: ``detail`` says so), and the envelope's worst case for a forecast."""
 
     id: str
     clause: str
@@ -537,7 +537,6 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
     if limit is not None and req.secant_latitude:
         limit_text += " x sec(latitude)"
     uses_envelope = req.evidence in NEEDS_ENVELOPE
-    verified = req.verified and (profile.envelope.verified or not uses_envelope)
     verdict, detail = NOT_ASSESSED, finding.detail
     if value is None or limit is None:
         limit = None
@@ -568,7 +567,7 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
         requirement=req.requirement,
         evidence=req.evidence,
         source=req.source,
-        verified=verified,
+        verified=req.verified,
         stated_limit_deg=req.limit_deg,
         secant_latitude=req.secant_latitude,
         limit_deg=limit,

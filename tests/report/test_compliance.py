@@ -141,10 +141,15 @@ def test_heading_rms_needs_the_standards_reading_procedure() -> None:
     assert item(followed, "settle_point_error").verdict == NOT_ASSESSED
 
 
-def test_a_multi_axis_test_procedure_is_not_assessed_on_the_one_axis_stand() -> None:
-    stand = item(assess(load_profile("iso-22090-1"), paper_analysis()), "rolling_error_stand")
+def test_iso_draft_a_multi_axis_test_and_a_forecast_on_a_verified_limit() -> None:
+    c = assess(load_profile("iso-22090-1"), paper_analysis())
+    stand = item(c, "rolling_error_stand")
     assert stand.verdict == NOT_ASSESSED and "the stand procedure differs" in stand.detail
     assert "Scorsby test" in stand.detail and "one axis at a time" in stand.detail
+    forecast = item(c, "rolling_error_forecast")  # 5.3.2 verified in the draft, yet indicative:
+    assert forecast.verified and forecast.verdict == INDICATIVE_FAIL  # a model, an unverified
+    assert "the motion envelope is not verified" in forecast.detail  # acceleration limit
+    assert forecast.limit_deg == pytest.approx(1.5)  # at latitude 0, where the margin is least
 
 
 @pytest.mark.parametrize(
