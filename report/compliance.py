@@ -426,12 +426,18 @@ def _heading_rms(req: Requirement, e: Evidence) -> Finding:
         )
     rms = {i: math.sqrt(s.var_deg2 * (s.n - 1) / s.n) for i, s in still}  # eq 2.2, N - 1 -> N
     worst = max(rms, key=rms.__getitem__)
-    window = "" if e.plan is None else f", each reading a {e.plan.still_window_s:g} s window mean"
+    seconds = None if e.plan is None else e.plan.still_window_s
+    window = "" if seconds is None else f", each reading a {seconds:g} s window mean"
     return Finding(
         rms[worst],
         e.site_latitude_deg,
         f"largest RMS about the series mean over {len(rms)} still series (trial {worst}, "
-        f"N = {dict(still)[worst].n}){window}; the readings follow the standard's procedure",
+        f"N = {dict(still)[worst].n}){window}; "
+        + (
+            "the profile states no reading procedure to compare with"
+            if req.procedure is None
+            else f"the readings follow the standard's procedure ({req.procedure.text})"
+        ),
     )
 
 

@@ -51,7 +51,7 @@ def paper_analysis(latitude_deg: float = 46.5) -> CampaignAnalysis:
     )
 
 
-def plan(n_obs: int, window_s: float, spacing_s: float) -> PlanSummary:
+def plan(n_obs: int, window_s: float | None, spacing_s: float | None) -> PlanSummary:
     return PlanSummary(n_obs, (), window_s, 8, spacing_s, None, None, None, (), "")
 
 
@@ -139,6 +139,24 @@ def test_heading_rms_needs_the_standards_reading_procedure() -> None:
     assert rms.verdict == PASS and rms.verified  # 0.148 < 0.363 on a verified limit
     # settle point error still needs a true heading, whatever the procedure
     assert item(followed, "settle_point_error").verdict == NOT_ASSESSED
+
+
+def test_heading_rms_of_a_profile_stating_no_procedure(tmp_path: Path) -> None:
+    procedure = A821.split('evidence = "heading_rms"')[1].split("[[requirements]]")[0]
+    start = procedure.index("[requirements.procedure]")
+    text = A821.replace(procedure[start:], "\n", 1)
+    analysis = paper_analysis()
+    still = SeriesSummary(0.0, 0.04, 5)
+    trials = tuple(replace(t, before=still) for t in analysis.trials)
+    imported = plan(5, None, None)  # no window: an imported campaign
+    rms = item(
+        assess(
+            load_profile(profile_file(tmp_path, text)), replace(analysis, trials=trials), imported
+        ),
+        "heading_rms",
+    )
+    assert rms.value_deg == pytest.approx(math.sqrt(0.04 * 4 / 5))
+    assert rms.verdict == PASS and "states no reading procedure" in rms.detail
 
 
 def test_iso_draft_a_multi_axis_test_and_a_forecast_on_a_verified_limit() -> None:
