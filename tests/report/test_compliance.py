@@ -267,6 +267,10 @@ def test_envelope_worst_case_is_eq_1_1_written_out() -> None:
     assert w.half_width_deg == pytest.approx(half, rel=1e-12)
     assert w.acceleration_m_s2 == pytest.approx(a * p**2 / 100.0, rel=1e-12)
     assert w.ratio == pytest.approx(abs(alpha) + half, rel=1e-12)  # latitude 0: sec = 1
+    # alpha ~ (A p^2)^2 / (1 + p^2 T^2): worst where h theta_max p^2 = a_max
+    assert w.period_s == pytest.approx(
+        2 * math.pi * math.sqrt(ARM_CM * math.radians(20) / 100), abs=1e-3
+    )
 
 
 # ----------------------------------------------------------------------------- bad profiles
