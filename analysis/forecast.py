@@ -1,4 +1,5 @@
-"""Prediction from the fitted model (seed 000 eqs 2.10-2.11) at stand or ship conditions.
+"""Prediction from the fitted model (Potemkin 1982, eqs 2.10-2.11) at stand or ship conditions,
+and its worst case over a box of ship motion (`envelope_worst`).
 
 Sign convention (ship): K is the direction of the horizontal acceleration of the compass base,
 measured clockwise from the meridian (north), in degrees. Rolling (side to side) accelerates the
@@ -229,4 +230,127 @@ def forecast_grid(
         q=predictor.q,
         alpha_deg=np.broadcast_to(p.alpha_deg, shape).copy(),
         half_width_deg=np.broadcast_to(p.half_width_deg, shape).copy(),
+    )
+
+
+def horizontal_acceleration_m_s2(amplitude_cm: Any, period_s: Any) -> Any:
+    """Peak horizontal acceleration A p^2 of harmonic rocking of arc amplitude A (p = 2 pi / tau,
+    eq 1.1), in m/s^2."""
+    return np.asarray(amplitude_cm) * (2 * np.pi / np.asarray(period_s)) ** 2 / 100.0
+
+
+@dataclass(frozen=True)
+class MotionBox:
+    """The ship motion a forecast is bounded over: the angle of the plan's motion (roll or pitch)
+    up to ``max_angle_deg``, periods in ``period_s``, the compass's peak horizontal acceleration
+    up to ``max_acceleration_m_s2``, any course, latitudes 0 to ``max_latitude_deg`` (alpha and
+    its interval depend on |phi| only)."""
+
+    max_angle_deg: float
+    period_s: tuple[float, float]
+    max_acceleration_m_s2: float
+    max_latitude_deg: float
+
+    def angle_cap_deg(self, period_s: Any, arm_cm: float) -> Any:
+        """The largest angle inside the box at this period: the angle limit, or the angle whose
+        arc A = theta0 h gives A p^2 = the acceleration limit, whichever is smaller."""
+        p2 = (2 * np.pi / np.asarray(period_s, dtype=float)) ** 2
+        if arm_cm <= 0:
+            return np.full_like(p2, self.max_angle_deg)
+        by_acceleration = np.degrees(self.max_acceleration_m_s2 * 100.0 / (arm_cm * p2))
+        return np.minimum(self.max_angle_deg, by_acceleration)
+
+
+@dataclass(frozen=True)
+class EnvelopeWorst:
+    """The point of a `MotionBox` where |alpha_p| + (1 - q) half-width, divided by the limit's
+    latitude factor (sec phi for a limit x sec(latitude), else 1), is largest: ``ratio`` is that
+    quotient, so a limit L x factor is met everywhere in the box when ``ratio`` <= L."""
+
+    course_deg: float
+    direction_deg: float
+    angle_deg: float
+    period_s: float
+    acceleration_m_s2: float
+    latitude_deg: float
+    amplitude_cm: float
+    alpha_deg: float
+    half_width_deg: float
+    ratio: float
+    motion: str
+    arm_cm: float
+    q: float
+
+    @property
+    def bound_deg(self) -> float:
+        """|alpha_p| + half-width at the worst point."""
+        return abs(self.alpha_deg) + self.half_width_deg
+
+
+ENVELOPE_GRID = {"course": 73, "angle": 5, "period": 19, "latitude": 13}
+"""Points per axis of the coarse search before the local refinement (course every 5 deg)."""
+
+
+def envelope_worst(
+    predictor: Predictor,
+    box: MotionBox,
+    *,
+    arm_cm: float,
+    motion: str,
+    secant_latitude: bool,
+) -> EnvelopeWorst:
+    """The worst case of the forecast over the box: a grid over course x angle x period x
+    latitude, the angle as a fraction of its cap at each period (so every point obeys the
+    acceleration limit), then a bounded Powell search from the grid's worst point."""
+    from scipy import optimize
+
+    lo, hi = box.period_s
+
+    def evaluate(course: Any, fraction: Any, period: Any, lat: Any) -> tuple[Any, ...]:
+        angle = np.asarray(fraction) * box.angle_cap_deg(period, arm_cm)
+        amplitude = np.radians(angle) * arm_cm  # A = theta0 h (module docstring)
+        k = acceleration_direction_deg(course, motion)
+        p = predictor.predict(Conditions(k, amplitude, period, lat))
+        factor = 1 / np.cos(np.radians(lat)) if secant_latitude else np.ones_like(lat)
+        ratio = (np.abs(p.alpha_deg) + p.half_width_deg) / factor
+        return ratio, angle, amplitude, k, p
+
+    axes = np.meshgrid(
+        np.linspace(0.0, 360.0, ENVELOPE_GRID["course"]),
+        np.linspace(0.0, 1.0, ENVELOPE_GRID["angle"]),
+        np.linspace(lo, hi, ENVELOPE_GRID["period"]),
+        np.linspace(0.0, box.max_latitude_deg, ENVELOPE_GRID["latitude"]),
+        indexing="ij",
+    )
+    ratio = evaluate(*axes)[0]
+    start = np.array([a[np.unravel_index(int(np.argmax(ratio)), ratio.shape)] for a in axes])
+    bounds = [(0.0, 360.0), (0.0, 1.0), (lo, hi), (0.0, box.max_latitude_deg)]
+    found = optimize.minimize(
+        lambda x: -float(evaluate(*x)[0]),
+        start,
+        method="Powell",
+        bounds=bounds,
+        options={"xtol": 1e-10, "ftol": 1e-14},
+    )
+    best = found.x if -found.fun >= float(np.max(ratio)) else start
+    for i, edges in enumerate(bounds):  # a coordinate that ends within xtol of a bound: onto it
+        for edge in edges:
+            moved = np.where(np.arange(4) == i, edge, best)
+            if evaluate(*moved)[0] >= evaluate(*best)[0] * (1 - 1e-12):
+                best = moved
+    value, angle, amplitude, k, p = evaluate(*best)
+    return EnvelopeWorst(
+        course_deg=float(best[0]),
+        direction_deg=float(k),
+        angle_deg=float(angle),
+        period_s=float(best[2]),
+        acceleration_m_s2=float(horizontal_acceleration_m_s2(amplitude, best[2])),
+        latitude_deg=float(best[3]),
+        amplitude_cm=float(amplitude),
+        alpha_deg=float(p.alpha_deg),
+        half_width_deg=float(p.half_width_deg),
+        ratio=float(value),
+        motion=motion,
+        arm_cm=float(arm_cm),
+        q=predictor.q,
     )

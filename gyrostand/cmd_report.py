@@ -15,7 +15,7 @@ import typer
 from gyrostand.cmd_data import DEFAULT_DB, CampaignId, DbOption, open_db
 from gyrostand.errors import fail, printable
 from gyrostand.report import FORMATS
-from gyrostand.report.compliance import SHIPPED
+from gyrostand.report.compliance import SHIPPED, SHIPPED_PROFILES
 
 DEFAULT_OUT = Path("runs/reports")
 
@@ -102,7 +102,12 @@ def register(app: typer.Typer) -> None:
         ] = ",".join(FORMATS),
         profile: Annotated[
             str,
-            typer.Option(help="Compliance limits: a shipped profile name or a TOML file."),
+            typer.Option(
+                help=(
+                    f"Compliance limits: a shipped profile ({', '.join(SHIPPED_PROFILES)}) "
+                    "or a profile TOML file."
+                )
+            ),
         ] = SHIPPED,
         number: Annotated[
             str | None,

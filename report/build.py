@@ -14,7 +14,14 @@ from gyrostand.analysis.forecast import (
     acceleration_direction_deg,
     forecast_grid,
 )
-from gyrostand.report.compliance import Compliance, Profile, assess
+from gyrostand.report.compliance import (
+    INDICATIVE,
+    NOT_ASSESSED,
+    PASS,
+    Compliance,
+    Profile,
+    assess,
+)
 from gyrostand.report.model import ReportInputs
 from gyrostand.report.signal import SignalSection, signal_section
 
@@ -77,6 +84,63 @@ class ForecastSection:
 
 
 @dataclass(frozen=True)
+class Conformity:
+    """The report's one statement of conformity: ``verdict`` (PASS, FAIL, INDICATIVE or NOT
+    ASSESSED), the sentence that states it, and every reason a PASS became INDICATIVE."""
+
+    verdict: str
+    statement: str
+    reasons: tuple[str, ...]
+
+
+def conformity(
+    compliance: Compliance,
+    analysis: CampaignAnalysis | None,
+    analysis_error: str | None,
+    simulated: bool,
+    planned_trials: int,
+) -> Conformity:
+    """The profile's verdict (`Compliance.verdict`), qualified by what it rests on: a PASS is
+    only INDICATIVE when trials are missing, a statistical check of the method failed, or the
+    instrument was simulated; a FAIL on a verified limit stands whatever else holds."""
+    if analysis is None:
+        return Conformity(
+            NOT_ASSESSED,
+            f"NOT ASSESSED: the campaign could not be analysed ({analysis_error}).",
+            (),
+        )
+    reasons = []
+    if simulated:
+        reasons.append("the instrument and the stand were simulated")
+    missing = [t.index for t in analysis.left_out if t.superseded_by is None]
+    if missing:
+        reasons.append(
+            f"{len(analysis.trials)} of {planned_trials} planned trials analysed "
+            f"(trial {', '.join(map(str, missing))} not)"
+        )
+    checks = {
+        "the trial variances are not homogeneous (Cochran)": not analysis.cochran.homogeneous,
+        "the model is not adequate (F test)": not analysis.adequacy.adequate,
+        "a control trial lies outside its prediction interval": any(
+            not c.within_interval for c in analysis.controls
+        ),
+        **{
+            f"the assumption of {c.name} is violated": c.holds is False
+            for c in analysis.assumptions
+            if c.name != "homogeneity"
+        },
+    }
+    reasons += [reason for reason, broken in checks.items() if broken]
+    verdict = compliance.verdict
+    if verdict == PASS and reasons:
+        verdict = INDICATIVE
+    statement = f"{verdict}: {compliance.summary}."
+    if reasons:
+        statement += " The result rests on a campaign in which " + "; ".join(reasons) + "."
+    return Conformity(verdict, statement, tuple(reasons))
+
+
+@dataclass(frozen=True)
 class Report:
     """``analysis`` is None when the campaign could not be analysed (``analysis_error`` says
     why): the report then documents the acquisition and assesses nothing of the fit. The
@@ -91,6 +155,7 @@ class Report:
     forecast: ForecastSection | None
     compliance: Compliance
     signal: SignalSection
+    conformity: Conformity
 
 
 def trial_rows(analysis: CampaignAnalysis) -> tuple[TrialRow, ...]:
@@ -189,31 +254,29 @@ def build_report(
         signal = signal_section(
             inputs.reading, inputs.reading_note, inputs.records, inputs.acceptance
         )
-    if isinstance(analysis, str):
-        return Report(
-            schema=SCHEMA,
-            generated_at=generated_at,
-            inputs=inputs,
-            analysis=None,
-            analysis_error=analysis,
-            trials=(),
-            forecast=None,
-            compliance=assess(profile, None, None),
-            signal=signal,
-        )
+    fitted = None if isinstance(analysis, str) else analysis
+    compliance = assess(profile, fitted, None if fitted is None else inputs.plan)
     section = (
-        forecast_section(analysis, profile.envelope.forecast_periods_s)
-        if analysis.forecasts
+        forecast_section(fitted, profile.envelope.forecast_periods_s)
+        if fitted is not None and fitted.forecasts
         else None
     )
+    error = analysis if isinstance(analysis, str) else None
     return Report(
         schema=SCHEMA,
         generated_at=generated_at,
         inputs=inputs,
-        analysis=analysis,
-        analysis_error=None,
-        trials=trial_rows(analysis),
+        analysis=fitted,
+        analysis_error=error,
+        trials=() if fitted is None else trial_rows(fitted),
         forecast=section,
-        compliance=assess(profile, analysis, None if section is None else section.grid),
+        compliance=compliance,
         signal=signal,
+        conformity=conformity(
+            compliance,
+            fitted,
+            error,
+            inputs.identification.simulated,
+            len(inputs.plan.trials),
+        ),
     )

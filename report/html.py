@@ -13,7 +13,14 @@ from gyrostand.analysis.campaign import VARIANCE_BASIS
 from gyrostand.analysis.forecast import SIGN_CONVENTION
 from gyrostand.report import plots
 from gyrostand.report.build import COURSE_STEP_DEG, Report
-from gyrostand.report.compliance import FAIL, NOT_ASSESSED, PASS
+from gyrostand.report.compliance import (
+    FAIL,
+    INDICATIVE,
+    INDICATIVE_FAIL,
+    INDICATIVE_PASS,
+    NOT_ASSESSED,
+    PASS,
+)
 from gyrostand.report.model import TrialAcquisition
 from gyrostand.report.signal import TIME_SAVED_NOTE
 
@@ -44,10 +51,21 @@ def level(q: float) -> str:
     return f"{1 - q:.0%}"
 
 
+BADGES = {
+    PASS: "pass",
+    FAIL: "fail",
+    INDICATIVE: "indicative",
+    INDICATIVE_PASS: "indicative",
+    INDICATIVE_FAIL: "indicative-fail",
+}
+"""The badge class of each verdict text (others: grey)."""
+
+
 def verdict(value: bool | str | None, yes: str = "yes", no: str = "NO") -> Markup:
-    """A verdict as a coloured badge: True/PASS green, False/FAIL red, None grey."""
+    """A verdict as a coloured badge: True/PASS green, False/FAIL red, indicative amber (an
+    indicative fail outlined red), None and NOT ASSESSED grey."""
     if isinstance(value, str):
-        text, kind = value, {PASS: "pass", FAIL: "fail", NOT_ASSESSED: "na"}.get(value, "na")
+        text, kind = value, BADGES.get(value, "na")
     elif value is None:
         text, kind = "not assessed", "na"
     else:
@@ -97,14 +115,8 @@ def _figures(report: Report) -> dict[str, object]:
     figures["residuals"] = Markup(plots.residuals_plot(report.trials, a.cochran.s_e, bound))
     figures["iterations"] = Markup(plots.iteration_path_plot(a))
     if report.forecast is not None:
-        limit = next(
-            (
-                i.limit_deg
-                for i in report.compliance.items
-                if i.evidence == "rolling_error_forecast" and i.limit_deg is not None
-            ),
-            None,
-        )
+        latitude = report.forecast.point.conditions.latitude_deg
+        limit = report.compliance.limit_at("rolling_error_forecast", latitude)
         figures["forecast"] = Markup(plots.forecast_plot(report.forecast, limit))
     return figures
 
@@ -157,4 +169,6 @@ def render_html(report: Report) -> str:
         PASS=PASS,
         FAIL=FAIL,
         NOT_ASSESSED=NOT_ASSESSED,
+        INDICATIVE_PASS=INDICATIVE_PASS,
+        INDICATIVE_FAIL=INDICATIVE_FAIL,
     )

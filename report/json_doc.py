@@ -4,9 +4,10 @@ two reports. Deterministic: the same database gives the same text except ``gener
 Schema ``gyrostand.report/3`` (plain JSON types; absent values are null). Version 2 added
 ``signal``; version 3 the laboratory items of ``identification`` (the plan's [report] table),
 ``plan.settle_criterion`` (text, in place of the band's three numbers), ``signatures``
-{recorded_operator} and the parameters' ``fit.confidence_intervals``.
+{recorded_operator}, the parameters' ``fit.confidence_intervals`` and ``conformity``.
 
 - ``schema``, ``generated_at`` (the only wall-clock field);
+- ``conformity``: verdict, statement, reasons (`report.build.Conformity`);
 - ``identification``: the fields of `report.model.Identification`;
 - ``plan``: `PlanSummary` (n_obs, trials [index, role, direction_deg, amplitude_cm, period_s],
   windows, settle criterion, notes, plan_toml);
@@ -27,8 +28,14 @@ Schema ``gyrostand.report/3`` (plain JSON types; absent values are null). Versio
   alpha_deg and half_width_deg as nested lists indexed [course][roll][period][latitude]}, table,
   worst_by_period, worst (grid points: course_deg, direction_deg, roll_deg, period_s,
   latitude_deg, alpha_deg, half_width_deg, bound_deg)};
-- ``compliance``: profile_id, profile_name, source, caution, envelope, site_latitude_deg, items
-  (id, clause, requirement, evidence, limit_deg, limit_text, value_deg, verdict, detail);
+- ``compliance``: profile_id, profile_name, edition, source, caution, envelope,
+  envelope_source, envelope_verified, site_latitude_deg, verdict (PASS, FAIL, INDICATIVE or
+  NOT ASSESSED: `Compliance.verdict`), summary, items (id, clause, requirement, evidence, source,
+  verified, stated_limit_deg, secant_latitude, limit_deg, limit_text, value_deg, verdict (PASS,
+  FAIL, INDICATIVE PASS, INDICATIVE FAIL or NOT ASSESSED), detail, worst: null or the forecast's
+  worst case over the envelope {course_deg, direction_deg, angle_deg, period_s,
+  acceleration_m_s2, latitude_deg, amplitude_cm, alpha_deg, half_width_deg, ratio, motion,
+  arm_cm, q});
 - ``signal`` (section 10, `report.signal.SignalSection.to_dict`): ``record`` {source,
   start_ms, dt_s, n, duration_s, frames, filled} or null, record_note, trend_deg_per_h,
   ``noise`` (`analysis.noise.NoiseCharacterisation.to_dict`: correlation {lag_s, covariance,
@@ -112,6 +119,7 @@ def report_document(report: Report) -> dict[str, Any]:
         {
             "schema": report.schema,
             "generated_at": report.generated_at,
+            "conformity": asdict(report.conformity),
             "identification": asdict(inputs.identification),
             "plan": asdict(inputs.plan),
             "acquisition": {
@@ -125,7 +133,11 @@ def report_document(report: Report) -> dict[str, Any]:
             "analysis": None if report.analysis is None else report.analysis.to_dict(),
             "analysis_error": report.analysis_error,
             "forecast": forecast,
-            "compliance": asdict(report.compliance),
+            "compliance": {
+                **asdict(report.compliance),
+                "verdict": report.compliance.verdict,
+                "summary": report.compliance.summary,
+            },
             "signal": report.signal.to_dict(),
             "signatures": asdict(inputs.signatures),
         }

@@ -62,3 +62,37 @@ def test_analyze_a_stored_campaign_records_one_run(stored: Stored) -> None:
     assert "COCHRAN" in text.stdout and "FORECAST" in text.stdout
     with stored.sessions() as session:
         assert session.scalar(select(func.count(AnalysisRun.id))) == 1
+
+
+@pytest.mark.parametrize("profile", ["imo-a424", "imo-a821", "iso-22090-1"])
+def test_report_takes_each_shipped_profile(stored: Stored, tmp_path: Path, profile: str) -> None:
+    out = tmp_path / "out"
+    args = ["report", "1", "--db", stored.url, "--out", str(out), "-f", "json"]
+    result = runner.invoke(app, [*args, "--profile", profile])
+    assert result.exit_code == 0, result.output
+    compliance = json.loads((out / "campaign-1.json").read_text())["compliance"]
+    assert compliance["profile_id"] == profile
+    assert compliance["verdict"] == "INDICATIVE"  # the 1982 compass: forecast beyond the limit
+    assert compliance["summary"].startswith(f"INDICATIVE against {profile}: ")
+    worst = next(i["worst"] for i in compliance["items"] if i["worst"] is not None)
+    assert worst["angle_deg"] == pytest.approx(20.0) and worst["period_s"] > 10.0
+
+
+def test_report_help_lists_the_shipped_profiles() -> None:
+    result = runner.invoke(app, ["report", "--help"], env={"COLUMNS": "200"})
+    assert "imo-a424, imo-a821, iso-22090-1" in result.stdout
+
+
+def test_a_profile_without_verified_flags_is_refused_in_one_line(
+    stored: Stored, tmp_path: Path
+) -> None:
+    shipped = Path(__file__).resolve().parents[2] / "report/profiles/imo-a821.toml"
+    bad = tmp_path / "bad.toml"
+    bad.write_text(shipped.read_text().replace("verified = true\n", "", 1))
+    result = runner.invoke(app, ["report", "1", "--db", stored.url, "--profile", str(bad)])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert result.stderr.strip().splitlines() == [
+        f"gyrostand: error: compliance profile {bad}: requirements[1]: verified is missing or "
+        "of the "
+        "wrong type"
+    ]

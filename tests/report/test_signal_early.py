@@ -98,9 +98,9 @@ def test_pdf_shows_the_new_sections(early_report: Report, early_files: Rendered)
     section = early_report.signal
     for needle in (
         "11. The reading's random part",
-        "Correlation function (eqs 8.92, 8.89)",
-        "Spectrum and hidden harmonics",
-        "Allan deviation",
+        "Correlation function of the reading (eq 8.92)",  # figure captions (the figures are
+        "Spectrum of the reading",  # images: their titles are not text)
+        "Allan deviation of the reading",
         "Sampling interval and independence",
         f"{section.noise.sampling.interval_s:.3g} s",
         "Settle points",
