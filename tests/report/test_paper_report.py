@@ -145,3 +145,38 @@ def test_missing_pdf_engine_is_one_clear_error(
     with pytest.raises(ReportError, match=r"apt-get install libpango.*written: .*campaign-1\.html"):
         write_report(paper_report, tmp_path, ("html", "pdf"))
     assert (tmp_path / "campaign-1.html").exists() and not (tmp_path / "campaign-1.pdf").exists()
+
+
+def test_one_statement_of_conformity(paper_report: Report, paper_files: Rendered) -> None:
+    """The profile's verdict, qualified: a PASS rests on the whole campaign and its checks."""
+    from dataclasses import replace
+
+    from gyrostand.analysis.campaign import LeftOutTrial
+    from gyrostand.report.build import conformity
+    from gyrostand.report.compliance import FAIL, INDICATIVE, PASS
+
+    c, a = paper_report.compliance, paper_report.analysis
+    stated = paper_report.conformity
+    assert stated.verdict == c.verdict and stated.statement.startswith(f"{c.verdict}: {c.summary}")
+    assert stated.reasons == ()  # the paper's campaign: every check of the method holds
+    assert "Statement of conformity." in paper_files.pdf_text
+    passed = replace(c, items=tuple(replace(i, verdict=PASS) for i in c.items))
+    assert conformity(passed, a, None, False, 6).verdict == PASS
+    simulated = conformity(passed, a, None, True, 6)
+    assert simulated.verdict == INDICATIVE
+    assert simulated.reasons == ("the instrument and the stand were simulated",)
+    dropped = replace(a, left_out=(LeftOutTrial(7, 1, "fit", "failed", "trial failed: x"),))
+    missing = conformity(passed, dropped, None, False, 7)
+    assert missing.verdict == INDICATIVE
+    assert missing.reasons == (f"{len(a.trials)} of 7 planned trials analysed (trial 7 not)",)
+    unequal = replace(a, cochran=replace(a.cochran, homogeneous=False))
+    assert conformity(passed, unequal, None, False, 6).reasons == (
+        "the trial variances are not homogeneous (Cochran)",
+    )
+    failed = replace(c, items=(replace(c.items[0], verdict=FAIL, verified=True),))
+    assert conformity(failed, unequal, None, True, 6).verdict == FAIL  # a verified FAIL stands
+    not_analysed = conformity(passed, None, "every trial failed", False, 6)
+    assert (not_analysed.verdict, not_analysed.statement) == (
+        "NOT ASSESSED",
+        "NOT ASSESSED: the campaign could not be analysed (every trial failed).",
+    )
