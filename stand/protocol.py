@@ -449,6 +449,12 @@ class Codec:
         for frame_id in status_messages:
             self._decoders[frame_id] = self._decode_status
 
+    @classmethod
+    def of(cls, dbc_path: str | Path | None, signals: Mapping[str, object]) -> Codec:
+        """The codec of a DBC (None: the shipped one) and a `[signals]` table as plans write it
+        (the acquisition's and the simulated stand's one reading of a lab's message layout)."""
+        return cls(Path(dbc_path) if dbc_path else DBC_PATH, SignalMap.from_mapping(signals))
+
     # ----------------------------------------------------------------------------- set-up helpers
     def _resolve(self, key: str, ref: SignalRef) -> _Bound:
         try:
