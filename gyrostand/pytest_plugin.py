@@ -153,9 +153,11 @@ def gyro_stand_factory(pytestconfig: pytest.Config) -> Iterator[Callable[..., Si
         try:
             stand = SimulatedStand(spec)
         except StandSetupError as exc:
-            pytest.fail(str(exc), pytrace=False)
-        stands.append(stand)
-        return stand
+            reason = str(exc)
+        else:
+            stands.append(stand)
+            return stand
+        pytest.fail(reason, pytrace=False)
 
     yield make
     for stand in reversed(stands):
@@ -188,6 +190,7 @@ def gyro_campaign(
         try:
             return run_plan(gyro_stand, Path(plan), folder)
         except CampaignNotRun as exc:
-            pytest.fail(str(exc), pytrace=False)
+            reason = str(exc)
+        pytest.fail(reason, pytrace=False)
 
     return run

@@ -199,6 +199,16 @@ class SimulatedStand:
             for key, n in sorted(self._counts.snapshot().items(), key=lambda kv: kv[0] or -1)
         }
 
+    def frames_of(self, key: str) -> int:
+        """How many frames the stand sent of the message carrying the signal-map entry `key`
+        ("heading", "status_time", "ack_command", ...: the `[signals]` keys), whatever the
+        DBC calls it."""
+        layout = self.codec.layout([key])
+        if not layout:
+            raise StandSetupError(f"frames_of: no signal-map entry {key!r} in this stand's map")
+        ((message, _),) = layout
+        return self._counts.snapshot()[message.frame_id]
+
     def inject_fault(self, **knobs: Any) -> FaultParams:
         """Change fault knobs (`FaultParams` fields) from the current stand time on: in virtual
         time exactly at `stand_time_s`. Windows (`silence_at_s`, `stuck_at_s`) are stand times;
