@@ -17,6 +17,7 @@ import os
 import socket
 import sys
 from collections.abc import Callable, Iterator
+from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -121,7 +122,7 @@ def gyro_stand_factory(pytestconfig: pytest.Config) -> Iterator[Callable[..., Si
     ("virtual" or "realtime"), speedup, heading_rate_hz, status_rate_hz; dbc (path) and signals
     (a [signals] mapping, or a TOML file holding one); interface ("virtual" or "socketcan") and
     channel. The command line's --gyrostand-* options are the defaults."""
-    stands: list[SimulatedStand] = []
+    closing = ExitStack()  # every stand stopped, even when one fails to stop
 
     def make(**knobs: Any) -> SimulatedStand:
         from gyrostand.simulated_stand import (
@@ -141,27 +142,26 @@ def gyro_stand_factory(pytestconfig: pytest.Config) -> Iterator[Callable[..., Si
                 pytest.skip(reason)
         dbc = given.pop("dbc", None)
         signals = given.pop("signals", None) or {}
-        if isinstance(signals, str | Path):
-            signals = read_signals(Path(signals))
-        spec = StandSpec(
-            simulator=given,
-            dbc=Path(dbc).resolve() if dbc else None,
-            signals=signals,
-            interface=interface,
-            channel=channel,
-        )
         try:
+            if isinstance(signals, str | Path):
+                signals = read_signals(Path(signals))
+            spec = StandSpec(
+                simulator=given,
+                dbc=Path(dbc).resolve() if dbc else None,
+                signals=signals,
+                interface=interface,
+                channel=channel,
+            )
             stand = SimulatedStand(spec)
         except StandSetupError as exc:
             reason = str(exc)
         else:
-            stands.append(stand)
+            closing.callback(stand.close)
             return stand
         pytest.fail(reason, pytrace=False)
 
-    yield make
-    for stand in reversed(stands):
-        stand.close()
+    with closing:
+        yield make
 
 
 @pytest.fixture
