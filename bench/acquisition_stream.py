@@ -3,16 +3,15 @@ in lockstep with the campaign engine (no bus, no clock), and written to a python
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from pathlib import Path
 
 import can
 
-from gyrostand.acquisition.engine import Command, Engine, Phase
-from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.acquisition.engine import Engine
+from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.plan.model import Plan, parse_plan
-from gyrostand.stand.engine import StandEngine
-from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import SimConfig
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,38 +32,10 @@ class _Null:
         return lambda *args, **kwargs: None
 
 
-class _Stand:
-    """Commands reach the simulated stand between steps; its answers join the stream."""
-
-    def __init__(self, config: SimConfig) -> None:
-        self.codec = Codec()
-        self.stand = StandEngine(config, Codec())
-        self.pending: list[can.Message] = []
-
-    def issue(self, command: Command, now_ms: int = 0) -> None:
-        if command.kind == "set":
-            msg = self.codec.encode_command_set(
-                command.direction_deg, command.amplitude_cm, command.period_s
-            )
-        elif command.kind == "start":
-            msg = self.codec.encode_command_start()
-        else:
-            msg = self.codec.encode_command_stop()
-        msg.timestamp = self.stand.stand_time_s
-        self.pending += [msg, *self.stand.receive(msg)]
-
-
 def campaign_frames(plan: Plan, seed: int = 1, step_s: float = 20.0) -> Iterator[can.Message]:
     """Every frame of a campaign run of `plan` on the simulated stand, in stream order."""
-    stand = _Stand(SimConfig(seed=seed))
-    engine = Engine(plan, _Null(), stand)
-    decoder = BatchDecoder(Codec())
-    t, position = 0.0, 0
-    while engine.phase is not Phase.DONE:
-        t += step_s
-        frames, stand.pending = stand.pending + stand.stand.advance_to(t), []
-        engine.feed(decoder.decode(RawFrames.from_messages(position, frames)))
-        position += len(frames)
+    stand = Lockstep(SimConfig(seed=seed), step_s)
+    for frames in stand.steps(Engine(plan, _Null(), stand), max_stand_s=math.inf):
         yield from frames
 
 

@@ -38,9 +38,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from acquisition_stream import ROOT, _Stand
+from acquisition_stream import ROOT
 
-from gyrostand.acquisition.engine import Engine, ObservationResult, Phase, SeriesCompensation
+from gyrostand.acquisition.engine import Engine, ObservationResult, SeriesCompensation
+from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.transient import (
@@ -52,9 +53,7 @@ from gyrostand.analysis.transient import (
     contradicts,
     fit_transient_free,
 )
-from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.plan.model import Plan, parse_plan
-from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import SimConfig
 
 SEEDS = (1, 2, 3)
@@ -210,14 +209,10 @@ def record_fit(plan: Plan, sink: _Record) -> TransientFit | None:
 
 def drive(plan: Plan, seed: int) -> tuple[Engine, _Record]:
     """The campaign in lockstep with the simulated stand."""
-    stand, sink = _Stand(SimConfig(seed=seed)), _Record()
+    stand, sink = Lockstep(SimConfig(seed=seed), STEP_S), _Record()
     engine = Engine(plan, sink, stand)
-    decoder, t, position = BatchDecoder(Codec()), 0.0, 0
-    while engine.phase is not Phase.DONE:
-        t += STEP_S
-        frames, stand.pending = stand.pending + stand.stand.advance_to(t), []
-        engine.feed(decoder.decode(RawFrames.from_messages(position, frames)))
-        position += len(frames)
+    for _ in stand.steps(engine, max_stand_s=math.inf):
+        pass
     return engine, sink
 
 

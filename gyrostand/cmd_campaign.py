@@ -228,14 +228,17 @@ class BusOptions:
         )
 
 
-def new_campaign(plan: Path, db: str | None, bus: BusOptions, quiet: bool) -> tuple[RunResult, str]:
-    """`campaign run PLAN`: a new campaign of the plan file with the command line's options,
-    acquired (`run_campaign`); its outcome and the database it went to. Everything is checked
-    before anything is written (one-line errors: `_load`, `checked_plan`, `preflight`)."""
+def new_campaign(
+    plan: Path | Plan, db: str | None, bus: BusOptions, quiet: bool
+) -> tuple[RunResult, str]:
+    """`campaign run PLAN`: a new campaign of the plan file (or parsed plan) with the command
+    line's options, acquired (`run_campaign`); its outcome and the database it went to.
+    Everything is checked before anything is written (one-line errors: `_load`, `checked_plan`,
+    `preflight`)."""
     from gyrostand.acquisition.store import CampaignStore
 
     with signals_deferred() as stop:
-        checked = bus.checked(_load(plan), db)
+        checked = bus.checked(_load(plan) if isinstance(plan, Path) else plan, db)
         preflight(checked)
         sessions = open_db(checked.database, must_exist=False)
         not_interrupted(stop, "the campaign was stored")

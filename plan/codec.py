@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from gyrostand.plan.model import Plan, PlanError
-from gyrostand.stand.protocol import DBC_PATH, Codec, ProtocolError, SignalMap
+from gyrostand.stand.protocol import Codec, ProtocolError
 
 
 def codec_for(plan: Plan) -> Codec:
     """The plan's DBC and signal map as a codec (PlanError naming the problem)."""
     try:
-        dbc = Path(plan.dbc_path) if plan.dbc_path else DBC_PATH
-        return Codec(dbc, SignalMap.from_mapping(plan.signals))
+        return Codec.of(plan.dbc_path, plan.signals)
     except ProtocolError as exc:
         raise PlanError([str(exc)]) from None

@@ -114,12 +114,7 @@ class StandController(can.Listener):
         self._seq = (self._seq + 1) % 16
         seq = self._seq
         # ProtocolError (a ValueError) for out-of-range values
-        if name == "set":
-            msg = self._codec.encode_command_set(direction_deg, amplitude_cm, period_s, seq=seq)
-        elif name == "start":
-            msg = self._codec.encode_command_start(seq=seq)
-        else:
-            msg = self._codec.encode_command_stop(seq=seq)
+        msg = self._codec.encode_command(name, direction_deg, amplitude_cm, period_s, seq=seq)
         with self._cond:
             self._acks.clear()
         try:

@@ -8,7 +8,9 @@ schedule runs it as fast as the machine allows."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import dataclass
 
 import can
 import numpy as np
@@ -16,13 +18,23 @@ import numpy as np
 from gyrostand.stand.packing import BatchEncoder
 from gyrostand.stand.physics import CorrelatedNoise, DampedPrecession
 from gyrostand.stand.protocol import HEADING_KEYS, STATUS_KEYS, Codec, CommandFrame, Reason
-from gyrostand.stand.simconfig import SimConfig
+from gyrostand.stand.simconfig import FaultParams, SimConfig
 
 # columns of the per-sample uniform draws for the fault knobs (always drawn, so switching one
 # knob on does not change the noise or the other faults)
 _DROP, _JUMP, _JUMP_SIZE, _INVALID, _OOR, _OOR_VALUE, _CORRUPT, _CORRUPT_BIT, _ERROR = range(9)
 _N_FAULT_DRAWS = 9
 _EPS = 1e-9  # tolerance when turning stand times into sample indices
+
+
+@dataclass(frozen=True)
+class ReceivedCommand:
+    """A command the stand received: its stand time, the command, and what the stand did
+    ("accepted", a refusal `Reason`, or "unanswered" under `no_ack` or a silence)."""
+
+    stand_time_s: float
+    command: CommandFrame
+    answer: str
 
 
 class StandEngine:
@@ -58,9 +70,20 @@ class StandEngine:
         self._status_encoders = [BatchEncoder(*g) for g in self.codec.layout(STATUS_KEYS)]
         self._setting: tuple[float, float, float] | None = None  # commanded K deg, A cm, tau s
         self._rocking_since_s: float | None = None
-        self._compass_status = self.codec.encode_compass_status(  # constant while simulated
-            True, compass.fluid_temp_c, config.faults.compass_fault_bits
+        self._compass_status = self._compass_status_frame()
+        self.received: list[ReceivedCommand] = []  # every command, in order
+
+    def _compass_status_frame(self) -> can.Message:
+        """GYRO_STATUS: constant while the fault knobs stay as they are."""
+        return self.codec.encode_compass_status(
+            True, self.config.compass.fluid_temp_c, self.config.faults.compass_fault_bits
         )
+
+    def set_faults(self, faults: FaultParams) -> None:
+        """Change the fault knobs from the current stand time on (the rolling error of a stand
+        already rocking keeps the amplitude it started with)."""
+        self.config = dataclasses.replace(self.config, faults=faults)
+        self._compass_status = self._compass_status_frame()
 
     # ------------------------------------------------------------------------------ state
     @property
@@ -214,8 +237,10 @@ class StandEngine:
         if not isinstance(frame, CommandFrame):
             return []
         if self.config.faults.no_ack or self._silent(self._time_s):
+            self.received.append(ReceivedCommand(self._time_s, frame, "unanswered"))
             return []
         reason = self._apply(frame)
+        self.received.append(ReceivedCommand(self._time_s, frame, reason or "accepted"))
         ack = self.codec.encode_ack(
             frame.command,
             reason is None,

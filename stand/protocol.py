@@ -414,6 +414,7 @@ class Codec:
         except (OSError, ValueError, cantools.database.UnsupportedDatabaseFormatError) as exc:
             # ValueError: a file name cantools cannot tell the format of, a text it cannot decode
             raise ProtocolError(f"cannot load DBC {dbc_path}: {exc}") from None
+        self.dbc_path = dbc_path
         self.signal_map = signal_map or SignalMap.default()
         self._bound: dict[str, _Bound] = {}
         for f in fields(self.signal_map):
@@ -447,6 +448,12 @@ class Codec:
         }
         for frame_id in status_messages:
             self._decoders[frame_id] = self._decode_status
+
+    @classmethod
+    def of(cls, dbc_path: str | Path | None, signals: Mapping[str, object]) -> Codec:
+        """The codec of a DBC (None: the shipped one) and a `[signals]` table as plans write it
+        (the acquisition's and the simulated stand's one reading of a lab's message layout)."""
+        return cls(Path(dbc_path) if dbc_path else DBC_PATH, SignalMap.from_mapping(signals))
 
     # ----------------------------------------------------------------------------- set-up helpers
     def _resolve(self, key: str, ref: SignalRef) -> _Bound:
@@ -599,6 +606,22 @@ class Codec:
         }
         (msg,) = self._encode(values)
         return msg
+
+    def encode_command(
+        self,
+        name: str,
+        direction_deg: float = 0.0,
+        amplitude_cm: float = 0.0,
+        period_s: float = 0.0,
+        *,
+        seq: int = 0,
+    ) -> can.Message:
+        """A command by name: "set" (with its motion K deg, A cm, tau s), "start" or "stop"."""
+        if name not in COMMANDS:
+            raise ProtocolError(f"unknown command {name!r} (one of {', '.join(COMMANDS)})")
+        if name != "set":
+            direction_deg = amplitude_cm = period_s = 0.0
+        return self._command_msg(name, seq, direction_deg, amplitude_cm, period_s)
 
     def encode_command_set(
         self, direction_deg: float, amplitude_cm: float, period_s: float, *, seq: int = 0

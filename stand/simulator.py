@@ -82,10 +82,48 @@ class Simulator:
         self._commands: list[tuple[int, can.Message]] = []
         self._processed_ms: int | None = None
         self.late_commands = 0
+        # how far the frames are on the bus (stand time), for `wait_until`; fault knobs to take
+        # effect at the stand time the thread next sees them (`inject_faults`)
+        self._progress = threading.Condition()
+        self._sent_to_s = -1.0
+        self._faults: list[FaultParams] = []
 
     @property
     def stand_time_s(self) -> float:
         return self.engine.stand_time_s
+
+    def wait_until(self, stand_s: float, timeout_s: float = 60.0) -> None:
+        """Return once every frame up to stand time `stand_s` is on the bus (in virtual time the
+        controller must have let the stand run that far). TimeoutError after `timeout_s` of wall
+        time (a bound against a hang, not a pace); the thread's error if it failed."""
+        with self._progress:
+            reached = self._progress.wait_for(
+                lambda: self._sent_to_s >= stand_s or self.error is not None, timeout_s
+            )
+        if self.error is not None:
+            raise self.error
+        if not reached:
+            raise TimeoutError(
+                f"the simulated stand did not reach stand time {stand_s:g} s within {timeout_s:g} "
+                f"s of wall time (at {self._sent_to_s:g} s)"
+            )
+
+    def inject_faults(self, faults: FaultParams) -> None:
+        """New fault knobs, taking effect at the stand time the simulator reaches before its next
+        frames (in virtual time: the time the controller last let it run to)."""
+        with self._progress:
+            self._faults.append(faults)
+
+    def _take_faults(self) -> None:
+        with self._progress:
+            faults, self._faults = self._faults, []
+        for f in faults:
+            self.engine.set_faults(f)
+
+    def _reached(self, t_s: float) -> None:
+        with self._progress:
+            self._sent_to_s = max(self._sent_to_s, t_s)
+            self._progress.notify_all()
 
     def start(self) -> None:
         if self._thread is not None:
@@ -122,11 +160,14 @@ class Simulator:
         except Exception as exc:  # reported by stop(); the thread must not die silently
             log.exception("simulator stopped")
             self.error = exc
+            self._reached(-1.0)  # wakes `wait_until`
 
     def _run_realtime(self) -> None:
         wall0 = time.monotonic()
         while not self._stop.is_set():
+            self._take_faults()
             self._send(self._advance(wall0))
+            self._reached(self.engine.stand_time_s)
             msg = self._recv(self._batch_wall_s)
             while msg is not None:  # answer each command at the stand time it arrives
                 self._send(self._advance(wall0))
@@ -139,6 +180,7 @@ class Simulator:
             while msg is not None:
                 self._on_virtual(msg)
                 msg = self._recv(0)
+            self._take_faults()
             for at_ms, command in self._commands:
                 self._run_to(at_ms / 1000)
                 # the command on the bus at the stand time it takes effect, then the answer
@@ -151,6 +193,7 @@ class Simulator:
                 self._send([echo, *self.engine.receive(command)])
             self._commands.clear()
             self._run_to(self._horizon_ms / 1000)
+            self._reached(self.engine.stand_time_s)
 
     def _on_virtual(self, msg: can.Message) -> None:
         """Take in a SIM_SYNC (how far to run, when the next command applies) or a command."""

@@ -1,5 +1,5 @@
-"""Test helpers: plans in a few lines, a recording sink, and a lockstep simulated stand that
-feeds the engine without a bus or a clock (deterministic for a given seed)."""
+"""Test helpers: plans in a few lines, a recording sink (the lockstep simulated stand that feeds
+the engine without a bus or a clock is `gyrostand.acquisition.lockstep`)."""
 
 from __future__ import annotations
 
@@ -7,13 +7,8 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-import can
-
-from gyrostand.acquisition.engine import Command, Engine, Measured, ObservationResult
-from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.acquisition.engine import Command, Measured, ObservationResult
 from gyrostand.plan.model import Plan, parse_plan
-from gyrostand.stand.engine import StandEngine
-from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import CompassParams, FaultParams, NoiseParams, SimConfig
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -157,43 +152,6 @@ class Recorder:
     @property
     def measured(self) -> list[Measured | None]:
         return [args[1] for args in self.of("trial_completed")]
-
-
-class Lockstep:
-    """The simulated stand advanced in fixed stand-time steps; commands reach it between steps.
-    Every frame (including the commands sent) is kept in `stream`, as a raw log would."""
-
-    def __init__(self, config: SimConfig, step_s: float = 5.0) -> None:
-        self.codec = Codec()
-        self.stand = StandEngine(config, Codec())
-        self.step_s = step_s
-        self.stream: list[can.Message] = []
-        self._pending: list[can.Message] = []
-
-    def issue(self, command: Command, now_ms: int = 0) -> None:
-        if command.kind == "set":
-            msg = self.codec.encode_command_set(
-                command.direction_deg, command.amplitude_cm, command.period_s
-            )
-        elif command.kind == "start":
-            msg = self.codec.encode_command_start()
-        else:
-            msg = self.codec.encode_command_stop()
-        msg.timestamp = self.stand.stand_time_s
-        self._pending.append(msg)
-        self._pending.extend(self.stand.receive(msg))
-
-    def run(self, engine: Engine, max_stand_s: float = 200_000.0) -> None:
-        decoder = BatchDecoder(Codec())
-        position = 0
-        t = 0.0
-        while engine.phase.name != "DONE" and t < max_stand_s:
-            t += self.step_s
-            frames = self._pending + self.stand.advance_to(t)
-            self._pending = []
-            self.stream.extend(frames)
-            engine.feed(decoder.decode(RawFrames.from_messages(position, frames)))
-            position += len(frames)
 
 
 class NoCommands:

@@ -29,6 +29,7 @@ from gyrostand.acquisition.early_settle import (
     predict_band_settle_s,
 )
 from gyrostand.acquisition.engine import Engine
+from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.db.models import Event, Observation, Series, Trial
@@ -40,7 +41,7 @@ from gyrostand.report.stored import campaign_report
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import CompassParams, SimConfig
 
-from .harness import ROOT, Lockstep, NoCommands, Recorder, plan_text
+from .harness import ROOT, NoCommands, Recorder, plan_text
 
 # --- the rule on exact block means ------------------------------------------------------------
 

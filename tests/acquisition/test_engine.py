@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from gyrostand.acquisition.engine import Engine
+from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.stand.protocol import Codec
 
-from .harness import Lockstep, NoCommands, Recorder, quick_config, small_plan
+from .harness import NoCommands, Recorder, quick_config, small_plan
 
 
 def run(plan_kwargs: dict | None = None, **faults) -> tuple[Recorder, Lockstep, Engine]:

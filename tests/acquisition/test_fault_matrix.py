@@ -19,10 +19,11 @@ import pytest
 from crccheck.crc import Crc8SaeJ1850
 
 from gyrostand.acquisition.engine import Engine
+from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.plan.model import Plan
 from gyrostand.stand.simconfig import FaultParams, StandParams
 
-from .harness import Lockstep, Recorder, quick_config, small_plan
+from .harness import Recorder, quick_config, small_plan
 
 # GYRO_HEADING in stand/gyrostand.dbc (Intel byte order): STAND_TIME 0|32 ms, HEADING 32|19
 # x 0.001 deg [0|359.999], VALID 51|1, COUNTER 52|4, CRC 56|8 (CRC-8/SAE-J1850 over the 8 bytes

@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 
 from gyrostand.acquisition.engine import Command, Engine
+from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.plan.model import parse_plan
 from gyrostand.stand.protocol import Codec
 
-from .harness import Lockstep, NoCommands, Recorder, plan_text, quick_config, small_plan
+from .harness import NoCommands, Recorder, plan_text, quick_config, small_plan
 
 HEADING_ID = Codec().heading_arbitration_id
 CRC_BYTE = 7  # GYRO_HEADING.CRC : 56|8 in stand/gyrostand.dbc

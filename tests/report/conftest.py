@@ -17,6 +17,7 @@ import pytest
 from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand.acquisition.engine import Engine
+from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.io import SEED_000_METADATA, import_file
 from gyrostand.db.session import open_database, sqlite_url
@@ -25,7 +26,7 @@ from gyrostand.report.build import Report
 from gyrostand.report.compliance import load_profile
 from gyrostand.report.stored import campaign_report
 from gyrostand.report.writer import write_report
-from tests.acquisition.harness import Lockstep, plan_text, quick_config
+from tests.acquisition.harness import plan_text, quick_config
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER_CSV = ROOT / "examples" / "paper.csv"

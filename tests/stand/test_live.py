@@ -1,21 +1,21 @@
-"""Controller + simulator in-process on python-can's `virtual` bus (one channel per test)."""
+"""Controller + the plugin's simulated stand in real time on python-can's `virtual` bus (one
+channel per test)."""
 
 import errno
 import threading
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import can
 import numpy as np
 import pytest
 from can.interfaces.virtual import VirtualBus
 
+from gyrostand.simulated_stand import SimulatedStand, StandSpec
 from gyrostand.stand.controller import StandController, StandError, StandRefused, StandTimeout
 from gyrostand.stand.protocol import Codec, HeadingFrame, Reason
-from gyrostand.stand.simulator import CompassParams, Simulator
-from tests.conftest import socketcan_channel
-from tests.stand.frames import config
+from gyrostand.stand.simulator import CompassParams
 
 
 class Collector(can.Listener):
@@ -51,35 +51,24 @@ class Collector(can.Listener):
 
 
 class Rig:
-    """A simulator on one end of a fresh virtual channel; controller + collector on the other."""
+    """The plugin's simulated stand in real time (virtual time is tested with the acquisition
+    that drives it); a controller + collector on their own node of its bus."""
 
-    def __init__(
-        self,
-        ack_timeout_s: float = 2.0,
-        interface: str = "virtual",
-        channel: str | None = None,
-        sim_bus: can.BusABC | None = None,
-        **groups,
-    ) -> None:
-        channel = channel or f"gyrostand-test-{uuid.uuid4()}"
-        self.sim_bus = sim_bus or can.Bus(interface=interface, channel=channel)
-        self.bus = can.Bus(interface=interface, channel=channel)
+    def __init__(self, stand: SimulatedStand, ack_timeout_s: float = 2.0) -> None:
+        self.stand = stand
+        self.simulator = stand.simulator
+        self.bus = stand.open_bus()
         self.codec = Codec()
         self.controller = StandController(self.bus, self.codec, ack_timeout_s=ack_timeout_s)
         self.collector = Collector(self.codec)
-        # the wall-clock timing (virtual time is tested with the acquisition that drives it)
-        self.simulator = Simulator(self.sim_bus, config(timing="realtime", **groups))
 
     def __enter__(self) -> "Rig":
         self.notifier = can.Notifier(self.bus, [self.controller, self.collector], timeout=0.05)
-        self.simulator.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self.simulator.stop()
         self.notifier.stop()
-        self.bus.shutdown()
-        self.sim_bus.shutdown()
+        self.stand.close()
 
     def wait_status(self, predicate, timeout_s: float = 10.0) -> None:
         deadline = time.monotonic() + timeout_s
@@ -92,8 +81,18 @@ class Rig:
 
 
 @pytest.fixture
-def rig() -> Iterator[Rig]:
-    with Rig(speedup=200) as r:
+def realtime(gyro_stand_factory) -> Callable[..., Rig]:
+    """`realtime(ack_timeout_s=..., **knobs)`: a Rig on a stand paced by the wall clock."""
+
+    def make(ack_timeout_s: float = 2.0, **knobs) -> Rig:
+        return Rig(gyro_stand_factory(timing="realtime", **knobs), ack_timeout_s)
+
+    return make
+
+
+@pytest.fixture
+def rig(realtime) -> Iterator[Rig]:
+    with realtime(speedup=200) as r:
         yield r
 
 
@@ -123,16 +122,16 @@ def test_refusal_is_a_typed_error(rig: Rig) -> None:
         rig.controller.start()
 
 
-def test_silent_stand_times_out() -> None:
-    with Rig(ack_timeout_s=0.3, speedup=200, faults={"no_ack": True}) as rig:
+def test_silent_stand_times_out(realtime) -> None:
+    with realtime(ack_timeout_s=0.3, speedup=200, faults={"no_ack": True}) as rig:
         started = time.monotonic()
         with pytest.raises(StandTimeout, match="did not acknowledge 'set' within 0.3 s"):
             rig.controller.set_rocking(31.0, 23.5, 6.2)
         assert 0.3 <= time.monotonic() - started < 2.0
 
 
-def test_wrong_amplitude_shows_in_tracking() -> None:
-    with Rig(speedup=200, faults={"amplitude_factor": 0.8}) as rig:
+def test_wrong_amplitude_shows_in_tracking(realtime) -> None:
+    with realtime(speedup=200, faults={"amplitude_factor": 0.8}) as rig:
         rig.controller.set_rocking(45.0, 30.0, 5.0)
         rig.controller.start()
         rig.wait_status(lambda s: s.rocking)
@@ -141,10 +140,11 @@ def test_wrong_amplitude_shows_in_tracking() -> None:
         assert not error.within(0.05, 1.0)
 
 
-def test_start_stop_rocking_cycle_settles_at_model_1_1() -> None:
+def test_start_stop_rocking_cycle_settles_at_model_1_1(realtime) -> None:
     # a compass with a 10-minute precession period so the cycle takes ~1.5 h of stand time
     compass = {"undamped_period_s": 600.0}
-    with Rig(speedup=2000, heading_rate_hz=2.0, status_rate_hz=0.5, compass=compass, seed=5) as rig:
+    knobs = {"heading_rate_hz": 2.0, "status_rate_hz": 0.5, "compass": compass, "seed": 5}
+    with realtime(speedup=2000, **knobs) as rig:
         rig.collector.wait_until(600_000)
         at_rest = rig.collector.mean_between(0, 600_000)
         rig.controller.set_rocking(45.0, 40.0, 4.0)
@@ -196,8 +196,9 @@ class LinkDownOnce(VirtualBus):
 def test_stand_keeps_running_through_a_link_down() -> None:
     """ENETDOWN on receive is counted, not fatal; a frame that meets ENETDOWN is dropped at once
     (only a full transmit queue is retried); commands are answered afterwards."""
-    channel = f"gyrostand-test-{uuid.uuid4()}"
-    with Rig(speedup=200, channel=channel, sim_bus=LinkDownOnce(channel)) as rig:
+    channel = f"gyrostand-test-{uuid.uuid4()}-link"
+    spec = StandSpec({"timing": "realtime", "speedup": 200}, channel=channel)
+    with Rig(SimulatedStand(spec, sim_bus=LinkDownOnce(channel))) as rig:
         rig.controller.set_rocking(31.0, 23.5, 6.2)
         rig.controller.start()
         rig.wait_status(lambda s: s.rocking)
@@ -206,8 +207,8 @@ def test_stand_keeps_running_through_a_link_down() -> None:
 
 
 @pytest.mark.socketcan
-def test_command_cycle_over_socketcan() -> None:
-    with Rig(interface="socketcan", channel=socketcan_channel(), speedup=100) as rig:
+def test_command_cycle_over_socketcan(realtime, socketcan_channel: str) -> None:
+    with realtime(interface="socketcan", channel=socketcan_channel, speedup=100) as rig:
         rig.controller.set_rocking(31.0, 23.5, 6.2)
         rig.controller.start()
         rig.wait_status(lambda s: s.rocking and s.amplitude_cm == 23.5)

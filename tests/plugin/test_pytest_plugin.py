@@ -1,0 +1,170 @@
+"""The plugin as a user meets it: the example of docs/testing.md run by pytester against the
+simulated stand, with gyrostand's DBC and with a lab's DBC and signal map; the socketcan skip;
+bad knobs in one line; and a run that uses no fixture imports nothing heavy."""
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import gyrostand.stand_campaign  # noqa: F401  (loaded once: pytester's in-process runs unload
+
+# what they import, and numpy cannot be loaded twice in a process)
+from gyrostand.pytest_plugin import socketcan_missing
+
+ROOT = Path(__file__).resolve().parents[2]
+LAB_DBC = ROOT / "docs" / "examples" / "lab.dbc"
+LAB_SIGNALS = ROOT / "docs" / "examples" / "lab-signals.toml"
+LAB_OPTIONS = ("--gyrostand-dbc", str(LAB_DBC), "--gyrostand-signals", str(LAB_SIGNALS))
+
+
+def example() -> str:
+    """The example test file of docs/testing.md (its one python block)."""
+    (block,) = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "testing.md").read_text(), re.S)
+    return block
+
+
+def expected_outcomes() -> dict[str, int]:
+    """Five tests; the socketcan one is skipped where this machine has no vcan0."""
+    if socketcan_missing("vcan0") is None:
+        return {"passed": 5}
+    return {"passed": 4, "skipped": 1}
+
+
+@pytest.mark.parametrize("options", [(), LAB_OPTIONS], ids=["gyrostand-dbc", "lab-dbc"])
+def test_the_documented_example_passes(pytester: pytest.Pytester, options: tuple) -> None:
+    pytester.makepyfile(test_lab=example())
+    result = pytester.runpytest("-p", "no:cacheprovider", *options)
+    result.assert_outcomes(**expected_outcomes())
+
+
+NAMES = """
+def test_names(gyro_stand):
+    gyro_stand.advance(2.0)
+    print("sent", sorted(gyro_stand.frames_per_message().items()))
+"""
+
+
+@pytest.mark.parametrize(
+    ("options", "heading", "status", "motion", "compass"),
+    [
+        ((), "GYRO_HEADING", "STAND_STATUS", "STAND_MOTION", "GYRO_STATUS"),
+        (LAB_OPTIONS, "LAB_ANGLE", "LAB_STAND_STATE", "LAB_STAND_MOTION", "LAB_GYRO_HEALTH"),
+    ],
+)
+def test_the_stand_speaks_the_dbc_it_is_given(
+    pytester: pytest.Pytester, options: tuple, heading, status, motion, compass
+) -> None:
+    pytester.makepyfile(test_names=NAMES)
+    result = pytester.runpytest("-s", *options)
+    result.assert_outcomes(passed=1)
+    # 2 s of stand time: headings at 10 Hz from 0 to 2 s, the status messages at 2 Hz, the
+    # virtual-time clock every whole second
+    sent = sorted([(heading, 21), (status, 5), (motion, 5), (compass, 5), ("SIM_CLOCK", 3)])
+    assert f"sent {sent}" in result.stdout.str()
+
+
+SOCKETCAN = """
+import pytest
+
+@pytest.mark.socketcan
+def test_marked():
+    pass
+
+def test_fixture(socketcan_channel):
+    pass
+
+def test_stand(gyro_stand_factory):
+    gyro_stand_factory(interface="socketcan")
+"""
+
+
+def test_socketcan_tests_skip_with_the_reason_without_the_interface(
+    pytester: pytest.Pytester,
+) -> None:
+    pytester.makepyfile(test_can=SOCKETCAN)
+    result = pytester.runpytest("-rs", "--gyrostand-channel", "gyrostand-none")
+    result.assert_outcomes(skipped=3)
+    assert result.stdout.str().count("no SocketCAN interface 'gyrostand-none'") == 3
+
+
+def test_socketcan_tests_skip_with_the_reason_off_linux(
+    pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    pytester.makepyfile(test_can=SOCKETCAN)
+    monkeypatch.setattr(sys, "platform", "darwin")
+    result = pytester.runpytest("-rs")
+    result.assert_outcomes(skipped=3)
+    assert result.stdout.str().count("SocketCAN needs Linux; this is darwin") == 3
+
+
+BAD = """
+import pytest
+
+@pytest.mark.gyro_stand(faults={"dorp_rate": 0.1}, seed=1)
+def test_typo(gyro_stand):
+    pass
+
+@pytest.mark.gyro_stand(noise={"white_sigma_deg": -1.0})
+def test_negative(gyro_stand):
+    pass
+
+def test_injected(gyro_stand):
+    gyro_stand.inject_fault(drop_rate=2.0)
+"""
+
+
+def test_bad_knobs_fail_in_one_line(pytester: pytest.Pytester) -> None:
+    pytester.makepyfile(test_bad=BAD)
+    result = pytester.runpytest()
+    result.assert_outcomes(errors=2, failed=1)
+    result.stdout.fnmatch_lines(
+        [
+            "*simulated stand: faults.dorp_rate: Extra inputs are not permitted",
+            "*simulated stand: noise.white_sigma_deg: must be a number >= 0, got -1.0",
+            "E * inject_fault: drop_rate must be a probability in ?0, 1?",
+        ],
+        consecutive=False,
+    )
+    # the knobs of the fixture fail in their line alone (the call in the test body shows where)
+    assert result.stdout.str().count("simulated_stand.py:") == 1
+
+
+UNUSED = """
+def test_plain():
+    assert 1 + 1 == 2
+"""
+
+HEAVY = ("numpy", "scipy", "can", "cantools", "sqlalchemy", "pydantic", "gyrostand.stand")
+
+
+def test_a_run_without_the_fixtures_imports_nothing_heavy(pytester: pytest.Pytester) -> None:
+    """What the plugin costs a run that uses none of its fixtures: its module and pytest's."""
+    pytester.makepyfile(test_plain=UNUSED)
+    pytester.makeconftest(
+        "import sys\n"
+        "def pytest_sessionfinish(session):\n"
+        f"    loaded = sorted(m for m in sys.modules if m.split('.')[0] in {HEAVY!r}\n"
+        "                    or m.startswith('gyrostand.stand'))\n"
+        "    print('heavy', loaded, 'plugin', 'gyrostand.pytest_plugin' in sys.modules)\n"
+    )
+    result = pytester.runpytest_subprocess("-s", "-p", "no:cacheprovider")
+    result.assert_outcomes(passed=1)
+    assert "heavy [] plugin True" in result.stdout.str()
+
+
+def test_the_entry_point_is_the_plugin() -> None:
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import importlib.metadata as m; print([e.value for e in "
+            "m.entry_points(group='pytest11') if e.name == 'gyrostand'])",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    assert out.strip() == "['gyrostand.pytest_plugin']"
