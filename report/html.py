@@ -9,7 +9,6 @@ from importlib.resources import files
 from jinja2 import Environment, StrictUndefined
 from markupsafe import Markup, escape
 
-from gyrostand.analysis.campaign import VARIANCE_BASIS
 from gyrostand.analysis.forecast import SIGN_CONVENTION
 from gyrostand.report import plots
 from gyrostand.report.build import COURSE_STEP_DEG, Report
@@ -162,7 +161,6 @@ def render_html(report: Report) -> str:
         figures=_figures(report),
         toc=_contents(report),
         css=Markup(css),
-        variance_basis=VARIANCE_BASIS,
         sign_convention=SIGN_CONVENTION,
         time_saved_note=TIME_SAVED_NOTE,
         course_step_deg=COURSE_STEP_DEG,
