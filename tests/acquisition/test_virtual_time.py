@@ -45,7 +45,7 @@ def cpu_hog() -> Iterator[None]:
 
 
 def run_in(folder: Path, monkeypatch: pytest.MonkeyPatch, extra: str = "", **kw) -> RunResult:
-    """The small plan in `folder`, with relative paths so that two runs store the same text."""
+    """The small plan in `folder`, with relative paths so that two runs store the same plan."""
     folder.mkdir()
     monkeypatch.chdir(folder)
     plan = parse_plan(plan_text(database="db.sqlite", raw_dir="raw", **kw) + FAST_SIM + extra)
@@ -54,14 +54,20 @@ def run_in(folder: Path, monkeypatch: pytest.MonkeyPatch, extra: str = "", **kw)
 
 
 def content(db: Path) -> dict[str, list[tuple]]:
-    """Every table, row by row, without the wall-clock columns."""
+    """Every table, row by row, without the wall-clock columns; the run's folder (raw log paths
+    are stored absolute) as "FOLDER"."""
+    folder = str(db.parent)
     with closing(sqlite3.connect(db)) as conn:
         tables = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")]
         out = {}
         for table in tables:
             columns = [r[1] for r in conn.execute(f"PRAGMA table_info({table})")]
             keep = ", ".join(f'"{c}"' for c in columns if c not in WALL_CLOCK_COLUMNS)
-            out[table] = conn.execute(f'SELECT {keep} FROM "{table}" ORDER BY 1').fetchall()
+            rows = conn.execute(f'SELECT {keep} FROM "{table}" ORDER BY 1').fetchall()
+            out[table] = [
+                tuple(v.replace(folder, "FOLDER") if isinstance(v, str) else v for v in row)
+                for row in rows
+            ]
     return out
 
 
