@@ -334,7 +334,7 @@ def summarize(criterion: str, rows: list[dict[str, Any]], reference: list[dict[s
     ]
     if pairs:
         ratio = sum(s for s, _ in pairs) / sum(b for _, b in pairs)
-        line += f"; x {ratio:.2f} the {REFERENCE} criterion's on the same {len(pairs)} draws"
+        line += f"; x {ratio:.3f} the {REFERENCE} criterion's on the same {len(pairs)} draws"
         if any(r.get("settle_method") == "compensated" for r in rows):
             line += f"   <= {COMPENSATED_STAND_TARGET}: {_flag(ratio <= COMPENSATED_STAND_TARGET)}"
     else:
