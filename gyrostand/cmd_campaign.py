@@ -47,9 +47,11 @@ def checked_plan(
     timing: str | None = None,
 ) -> Plan:
     """The plan with the command line's bus and database options, validated as the plan file
-    and prepared as the run will use it (one-line errors)."""
+    and prepared as the run will use it (one-line errors). The bus options are written into the
+    plan's text, which a new campaign stores."""
     from gyrostand.acquisition.runner import prepare
-    from gyrostand.plan.model import PlanError, revised
+    from gyrostand.plan.model import PlanError, parse_plan, revised
+    from gyrostand.plan.overrides import with_keys
 
     bus: dict[str, object] = {}
     if timing is not None and timing not in TIMINGS:
@@ -78,10 +80,14 @@ def checked_plan(
         if seed is not None:
             bus["seed"] = seed
     try:
-        plan = revised(plan, bus=bus, campaign={"database": db or plan.database})
+        if bus:  # stored as it runs: a resume, a re-run and the report see these options
+            plan = parse_plan(with_keys(plan.text, {"bus": bus}))
+        plan = revised(plan, campaign={"database": db or plan.database})
         prepare(plan)
     except PlanError as exc:
         fail("invalid plan: " + "; ".join(exc.problems))
+    except ValueError as exc:  # a layout with_keys cannot edit (it never guesses)
+        fail(f"cannot set the bus options in the plan's text ({exc}): set them in the file")
     return plan
 
 

@@ -187,3 +187,21 @@ def test_sigkill_at_random_moments_loses_nothing(tmp_path: Path) -> None:
     # the database stops, `acquisition.runner.resume_start`)
     assert final == reference
     assert statuses(db) == statuses(reference_dir / "db.sqlite")
+
+
+def test_command_line_bus_options_are_stored_with_the_plan(tmp_path: Path) -> None:
+    """`campaign run --seed` is part of what ran: the stored plan says so (a resume re-runs the
+    same simulation, the report names the seed), the rest of the file's text as it was."""
+    from gyrostand.plan.model import parse_plan
+
+    plan = write_plan(tmp_path)
+    code, err = cli("campaign", "run", str(plan), "--quiet", "--seed", "5")
+    assert code == 0, err
+    engine = create_engine(f"sqlite:///{tmp_path / 'db.sqlite'}")
+    with engine.connect() as conn:
+        stored = conn.execute(text("SELECT plan_toml FROM campaign")).scalar_one()
+    engine.dispose()
+    assert parse_plan(stored).bus.seed == 5
+    file_lines, stored_lines = plan.read_text().splitlines(), stored.splitlines()
+    changed = [(a, b) for a, b in zip(file_lines, stored_lines, strict=True) if a != b]
+    assert changed == [("seed = 1", "seed = 5")]
