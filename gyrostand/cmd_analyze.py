@@ -36,7 +36,8 @@ PAPER_NOTE = (
     "note: no --plan given: using the example constants, start values and ship forecast of "
     "Potemkin (1982)"
 )
-SIGNAL_SCHEMA = "gyrostand.signal/1"  # the report JSON's "signal" object, with this key added
+SIGNAL_SCHEMA = "gyrostand.signal/2"  # the report JSON's "signal" object, with this key added;
+# version 2: acceptance.excursions gained method, is_bound and the Kolmogorov/Vanmarcke fields
 
 
 def plan_settings(path: Path) -> tuple[AnalysisSettings, tuple[str, ...]]:

@@ -139,7 +139,7 @@ def test_cli_text_and_json(log: Path, section: SignalSection) -> None:
     result = runner.invoke(app, ["analyze", "--signal", "--log", str(log), "--json"])
     assert result.exit_code == 0
     doc = json.loads(result.stdout)
-    assert doc["schema"] == "gyrostand.signal/1"
+    assert doc["schema"] == "gyrostand.signal/2"
     assert doc["noise"]["exponential"]["decay_per_s"] == section.noise.exponential.decay_per_s
     assert doc["record"]["n"] == section.record.reading_deg.size
     assert doc["acceptance"] is None and doc["settle"] == []

@@ -141,7 +141,7 @@ def test_cli_prints_the_campaign_section(simulated: Simulated, simulated_report:
     assert "SETTLE POINTS" in text.stdout and "stand time saved: 0.0 s" in text.stdout
     result = runner.invoke(app, [*args, "--json"])
     doc = json.loads(result.stdout)
-    assert doc.pop("schema") == "gyrostand.signal/1"
+    assert doc.pop("schema") == "gyrostand.signal/2"
     assert doc == report_document(simulated_report)["signal"]
 
 
