@@ -6,7 +6,11 @@ from gyrostand's own pytest plugin (`gyrostand.pytest_plugin`), as users' tests 
 on a PostgreSQL server started once per session (tests/postgres.py; skipped, with the reason,
 where none can be started)."""
 
+from __future__ import annotations
+
+import itertools
 from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
@@ -27,11 +31,29 @@ def postgres_server() -> Iterator[postgres.Server]:
     server.stop()
 
 
+@dataclass(frozen=True)
+class NewDatabase:
+    """Fresh, empty databases of one back end: each call, the URL of another one (a SQLite
+    file in the test's folder, or a database on the session's PostgreSQL server)."""
+
+    backend: str
+    folder: Path
+    server: postgres.Server | None
+    _count: itertools.count[int] = field(default_factory=itertools.count)
+
+    def __call__(self) -> str:
+        if self.server is not None:
+            return self.server.new_database()
+        return f"sqlite:///{self.folder / f'lab-{next(self._count)}.sqlite'}"
+
+
 @pytest.fixture(params=BACKENDS)
-def db_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
-    """The URL of a fresh, empty database: a SQLite file, or a database on the session's
-    PostgreSQL server."""
-    if request.param == "sqlite":
-        return f"sqlite:///{tmp_path / 'lab.sqlite'}"
-    server: postgres.Server = request.getfixturevalue("postgres_server")
-    return server.new_database()
+def new_db_url(request: pytest.FixtureRequest, tmp_path: Path) -> NewDatabase:
+    server = None if request.param == "sqlite" else request.getfixturevalue("postgres_server")
+    return NewDatabase(request.param, tmp_path, server)
+
+
+@pytest.fixture
+def db_url(new_db_url: NewDatabase) -> str:
+    """The URL of a fresh, empty database, on each back end."""
+    return new_db_url()
