@@ -546,21 +546,24 @@ def register(app: typer.Typer) -> None:
         if as_json:
             typer.echo(json.dumps({"campaigns": [list_item(r) for r in rows]}, indent=2))
             return
-        table = Table("id", "model", "serial", "status", "source", "started", "obs", "labels")
-        for r in rows:
-            cells = (
-                r.campaign_id,
-                r.model,
-                r.serial,
+        lines = [("id", "model", "serial", "status", "source", "started (UTC)", "obs", "labels")]
+        lines += [
+            (
+                str(r.campaign_id),
+                printable(r.model),
+                printable(r.serial),
                 r.status,
                 r.source,
                 r.started_at.strftime("%Y-%m-%d %H:%M"),
-                r.observations,
-                " ".join(f"{k}={v}" for k, v in r.labels.items()),
+                str(r.observations),
+                printable(" ".join(f"{k}={v}" for k, v in r.labels.items())),
             )
-            table.add_row(*(Text(printable(cell)) for cell in cells))
-        _out.print(table)
-        _out.print(f"{len(rows)} campaign{'' if len(rows) == 1 else 's'}")
+            for r in rows
+        ]
+        widths = [max(len(line[i]) for line in lines) for i in range(len(lines[0]))]
+        for line in lines:  # one campaign a line, whatever the terminal's width (for grep)
+            typer.echo("  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)).rstrip())
+        typer.echo(f"{len(rows)} campaign{'' if len(rows) == 1 else 's'}")
 
     @app.command("replay")
     def replay_command(
