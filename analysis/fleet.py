@@ -20,6 +20,10 @@ For each parameter:
   while the SEs hold only the second, so an F built on the SEs would call the type's own scatter
   a group difference. The SEs give the split: mean SE² is the measurement share, the rest
   (S²_within - mean SE², floored at 0) the type's scatter, both reported;
+- which groups differ, step down: while the F test of the groups still in (their means against
+  the fleet's within-group mean square, N - k degrees of freedom) rejects at q, the group whose
+  mean lies farthest from the others' (Student t of the contrast) is set apart; each group's t
+  against the rest of the fleet is reported too;
 - Smirnov's two-sample test (Kolmogorov-Smirnov, `scipy.stats.ks_2samp`) of each group against
   the rest of the fleet, at level q / k (Bonferroni over the k groups);
 - each unit against the type's prediction interval formed from the other units (leave-one-out:
@@ -76,6 +80,10 @@ class GroupStats:
     """Units' scatter about the group mean (None for a single unit)."""
     rms_se: float
     """Root mean square of the units' standard errors (their measurement share)."""
+    t_vs_rest: float
+    """(group mean - mean of the other units) / sqrt(S²_within (1/n + 1/n_rest))."""
+    differs: bool
+    """Set apart by the step-down F tests (see the module doc)."""
 
 
 @dataclass(frozen=True)
@@ -216,6 +224,35 @@ def one_way_anova(groups: Sequence[np.ndarray], ses: Sequence[np.ndarray], q: fl
     )
 
 
+def _contrast(
+    values: dict[str, np.ndarray], group: str, among: Sequence[str], s2_within: float
+) -> float:
+    """Student t of `group`'s mean against the mean of the other units of the groups `among`."""
+    rest = np.concatenate([values[h] for h in among if h != group])
+    scale = math.sqrt(s2_within * (1 / values[group].size + 1 / rest.size))
+    return float((values[group].mean() - rest.mean()) / scale) if scale > 0 else math.inf
+
+
+def set_apart(
+    values: dict[str, np.ndarray], s2_within: float, dof_within: int, q: float
+) -> tuple[str, ...]:
+    """The groups that differ, step down: while the groups still in differ by the F test (their
+    between-group mean square against the fleet's S²_within), the one with the largest |t|
+    against the others is set apart."""
+    remaining, apart = list(values), []
+    while len(remaining) >= 2:
+        data = [values[g] for g in remaining]
+        grand = float(np.concatenate(data).mean())
+        s2_between = sum(d.size * (d.mean() - grand) ** 2 for d in data) / (len(data) - 1)  # S1²
+        f_critical = float(stats.f.ppf(1 - q, len(data) - 1, dof_within))
+        if s2_within > 0 and s2_between / s2_within <= f_critical:
+            break
+        farthest = max(remaining, key=lambda g: abs(_contrast(values, g, remaining, s2_within)))
+        apart.append(farthest)
+        remaining.remove(farthest)
+    return tuple(apart)
+
+
 def prediction_checks(units: Sequence[FleetUnit], parameter: str, q: float) -> list[UnitCheck]:
     """Each unit against the leave-one-out prediction interval of the type, at q / N each."""
     values = np.array([u.value(parameter)[0] for u in units])
@@ -275,17 +312,20 @@ def analyze_fleet(units: Sequence[FleetUnit], *, factor: str, q: float = 0.05) -
             g: np.array([u.value(parameter)[0] for u in units if u.group == g]) for g in names
         }
         ses = {g: np.array([u.value(parameter)[1] for u in units if u.group == g]) for g in names}
-        groups = tuple(
+        anova = one_way_anova([values[g] for g in names], [ses[g] for g in names], q)
+        apart = set_apart(values, anova.s2_within, anova.dof_within, q)
+        groups = [
             GroupStats(
                 group=g,
                 n=int(values[g].size),
                 mean=float(values[g].mean()),
                 sd=_sd(values[g]),
                 rms_se=float(np.sqrt(np.mean(ses[g] ** 2))),
+                t_vs_rest=_contrast(values, g, names, anova.s2_within),
+                differs=g in apart,
             )
             for g in names
-        )
-        anova = one_way_anova([values[g] for g in names], [ses[g] for g in names], q)
+        ]
         smirnov = []
         for g in names:
             rest = np.concatenate([values[h] for h in names if h != g])
@@ -306,7 +346,7 @@ def analyze_fleet(units: Sequence[FleetUnit], *, factor: str, q: float = 0.05) -
                 parameter=parameter,
                 symbol=symbol,
                 unit=unit_name,
-                groups=groups,
+                groups=tuple(groups),
                 anova=anova,
                 smirnov=tuple(smirnov),
                 units=tuple(prediction_checks(units, parameter, q)),

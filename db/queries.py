@@ -9,6 +9,7 @@ import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from typing import Any
 
 from sqlalchemy import ColumnElement, func, select
 from sqlalchemy.orm import Session, aliased, selectinload
@@ -16,6 +17,7 @@ from sqlalchemy.orm import Session, aliased, selectinload
 from gyrostand.db.models import (
     EVENT_SEVERITIES,
     SERIES_J,
+    AnalysisRun,
     Campaign,
     CampaignLabel,
     Event,
@@ -509,3 +511,46 @@ def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
 def _utc(value: datetime) -> datetime:
     """A stored wall time as aware UTC (SQLite gives it back naive)."""
     return value if value.tzinfo is not None else value.replace(tzinfo=UTC)
+
+
+@dataclass(frozen=True)
+class AnalysedCampaign:
+    """A campaign of one instrument model for fleet statistics: its unit, its value of a label
+    key (None: not labelled), when it started and its latest analysis run's results (None: never
+    analysed)."""
+
+    campaign_id: int
+    serial: str
+    label: str | None
+    started_at: datetime
+    results: dict[str, Any] | None
+
+
+def model_campaigns(session: Session, model: str, key: str) -> list[AnalysedCampaign]:
+    """The completed campaigns of instrument `model`, by id, with their label `key` and latest
+    analysis run."""
+    latest = (
+        select(AnalysisRun.campaign_id, func.max(AnalysisRun.id).label("run_id"))
+        .group_by(AnalysisRun.campaign_id)
+        .subquery()
+    )
+    label = aliased(CampaignLabel)
+    rows = session.execute(
+        select(
+            Campaign.id,
+            Instrument.serial,
+            label.value,
+            func.coalesce(Campaign.started_at, Campaign.created_at),
+            AnalysisRun.results_json,
+        )
+        .join(Instrument, Instrument.id == Campaign.instrument_id)
+        .outerjoin(label, (label.campaign_id == Campaign.id) & (label.key == key))
+        .outerjoin(latest, latest.c.campaign_id == Campaign.id)
+        .outerjoin(AnalysisRun, AnalysisRun.id == latest.c.run_id)
+        .where(Instrument.model == model, Campaign.status == "completed")
+        .order_by(Campaign.id)
+    ).all()
+    return [
+        AnalysedCampaign(campaign_id, serial, value, _utc(started), results)
+        for campaign_id, serial, value, started, results in rows
+    ]

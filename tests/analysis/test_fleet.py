@@ -95,3 +95,18 @@ def test_a_unit_without_a_standard_error_is_refused() -> None:
     units[0] = FleetUnit(1, "S1", "A", 6e7, math.nan, 1.1, 0.02)
     with pytest.raises(FleetError, match=r"campaign 1 \(serial S1\): C = 60000000.0 ± nan"):
         analyze_fleet(units, factor="factory")
+
+
+def test_each_group_against_the_rest_names_the_shifted_one() -> None:
+    t = analyze_fleet(fleet(), factor="factory").parameters[1]
+    assert [g.group for g in t.groups if g.differs] == ["C"]
+    s2_within = t.anova.s2_within
+    rest = T_BY_GROUP["A"] + T_BY_GROUP["B"]
+    expected = (np.mean(T_BY_GROUP["C"]) - np.mean(rest)) / math.sqrt(s2_within * (1 / 3 + 1 / 7))
+    (c,) = [g for g in t.groups if g.group == "C"]
+    assert c.t_vs_rest == pytest.approx(expected)
+    # step down: C set apart; A and B alone do not differ (F with the fleet's S² within)
+    a, b = np.array(T_BY_GROUP["A"]), np.array(T_BY_GROUP["B"])
+    grand = np.concatenate([a, b]).mean()
+    f = (4 * (a.mean() - grand) ** 2 + 3 * (b.mean() - grand) ** 2) / s2_within
+    assert f < stats.f.ppf(0.95, 1, 7)
