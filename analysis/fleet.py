@@ -198,7 +198,7 @@ def one_way_anova(groups: Sequence[np.ndarray], ses: Sequence[np.ndarray], q: fl
     q_between = sum(g.size * (m - grand) ** 2 for g, m in zip(groups, means, strict=True))  # Q1
     q_within = sum(float(((g - m) ** 2).sum()) for g, m in zip(groups, means, strict=True))  # Q2
     dof_between, dof_within = k - 1, n - k
-    s2_between = q_between / dof_between  # S1² = Q1 / (k - 1)
+    s2_between = float(q_between) / dof_between  # S1² = Q1 / (k - 1)
     s2_within = q_within / dof_within  # S2² = Q2 / (N - k)
     f = s2_between / s2_within if s2_within > 0 else math.inf  # F = S1² / S2²
     f_critical = float(stats.f.ppf(1 - q, dof_between, dof_within))  # F*(1 - q; k-1, N-k)
@@ -208,17 +208,17 @@ def one_way_anova(groups: Sequence[np.ndarray], ses: Sequence[np.ndarray], q: fl
         k=k,
         n=n,
         grand_mean=grand,
-        q_between=q_between,
+        q_between=float(q_between),
         q_within=q_within,
         dof_between=dof_between,
         dof_within=dof_within,
         s2_between=s2_between,
         s2_within=s2_within,
-        f=f,
+        f=float(f),
         f_critical=f_critical,
         p_value=p_value,
         q=q,
-        groups_differ=f > f_critical,
+        groups_differ=bool(f > f_critical),
         s2_measurement=s2_measurement,
         s2_type=max(0.0, s2_within - s2_measurement),
     )
@@ -276,7 +276,7 @@ def prediction_checks(units: Sequence[FleetUnit], parameter: str, q: float) -> l
                 center=center,
                 half_width=t_critical * scale,  # Student prediction interval, N - 2 dof
                 t_statistic=float(t_stat),
-                outside=abs(t_stat) > t_critical,
+                outside=bool(abs(t_stat) > t_critical),
             )
         )
     return checks
@@ -338,7 +338,7 @@ def analyze_fleet(units: Sequence[FleetUnit], *, factor: str, q: float = 0.05) -
                     statistic=float(test.statistic),
                     p_value=float(test.pvalue),
                     q_each=q / len(names),
-                    differs=float(test.pvalue) < q / len(names),
+                    differs=bool(test.pvalue < q / len(names)),
                 )
             )
         results.append(
