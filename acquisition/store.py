@@ -4,7 +4,7 @@ durable the moment it completes and a killed process loses at most the one in pr
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from datetime import UTC, datetime
 from typing import Concatenate, ParamSpec
@@ -86,9 +86,14 @@ class CampaignStore:
 
     @classmethod
     def create(
-        cls, sessions: sessionmaker[Session], plan: Plan, *, source: str = "stand"
+        cls,
+        sessions: sessionmaker[Session],
+        plan: Plan,
+        *,
+        source: str = "stand",
+        labels: Mapping[str, str] | None = None,
     ) -> CampaignStore:
-        """A new campaign (status running) with its instrument and pending trials."""
+        """A new campaign (status running) with its instrument, `labels` and pending trials."""
         header = CampaignHeader(
             model=plan.instrument.model,
             serial=plan.instrument.serial,
@@ -103,7 +108,7 @@ class CampaignStore:
             software_version=SOFTWARE_VERSION,
         )
         with writer(sessions).begin() as session:
-            campaign = new_campaign(session, header, status="running", source=source)
+            campaign = new_campaign(session, header, status="running", source=source, labels=labels)
             for t in plan.trials:
                 session.add(
                     Trial(

@@ -511,8 +511,14 @@ def metadata_toml(metadata: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def store_import(session: Session, data: ImportedFile, metadata: Mapping[str, Any]) -> Campaign:
-    """Add the imported campaign (status completed, source import) to `session` and flush.
+def store_import(
+    session: Session,
+    data: ImportedFile,
+    metadata: Mapping[str, Any],
+    labels: Mapping[str, str] | None = None,
+) -> Campaign:
+    """Add the imported campaign (status completed, source import, with its `labels`) to
+    `session` and flush.
 
     `metadata`: model, serial, lp_gcm2s2, h1_gcm2s, latitude_deg, earth_rate_rad_s, gravity_cm_s2;
     optional operator, software_version, plan_toml (default: `metadata_toml(metadata)`)."""
@@ -531,7 +537,7 @@ def store_import(session: Session, data: ImportedFile, metadata: Mapping[str, An
         n_obs=data.n_obs,
         software_version=metadata.get("software_version", "unknown"),
     )
-    campaign = new_campaign(session, header, status="completed", source="import")
+    campaign = new_campaign(session, header, status="completed", source="import", labels=labels)
     for trial in data.trials:
         campaign.trials.append(
             Trial(

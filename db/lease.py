@@ -33,7 +33,9 @@ class Lease:
             os.close(self._fd)  # closing the file drops the flock
             self._fd = None
         if self._connection is not None:
-            self._connection.close()  # ending the session drops the advisory lock
+            # ending the session drops the advisory lock: the DBAPI connection is closed, not
+            # returned to the pool (where its session, and the lock, would live on)
+            self._connection.invalidate()
             self._connection = None
 
 

@@ -1,5 +1,5 @@
-"""The ORM schema (SQLAlchemy 2 typed declarative): instrument, campaign, trial, series,
-observation, acquisition event, analysis run.
+"""The ORM schema (SQLAlchemy 2 typed declarative): instrument, campaign and its labels, trial,
+series, observation, acquisition event, analysis run.
 
 Units are in the column names. Stand times (`*_ms`) are milliseconds of the stand's clock, wall
 times are UTC. CHECK, UNIQUE and FOREIGN KEY constraints make impossible states unstorable; every
@@ -143,6 +143,30 @@ class Campaign(Base):
         cascade="all, delete-orphan",
         passive_deletes=True,
     )
+    labels: Mapped[list[CampaignLabel]] = relationship(
+        back_populates="campaign",
+        order_by="CampaignLabel.key",
+        cascade="all, delete-orphan",
+        passive_deletes=True,
+    )
+
+
+class CampaignLabel(Base):
+    """A label of a campaign, key = value: the factory that made the unit, its production lot,
+    the stand that tested it; the factors fleet statistics group campaigns by."""
+
+    __tablename__ = "campaign_label"
+    __table_args__ = (
+        UniqueConstraint("campaign_id", "key"),
+        CheckConstraint("length(key) >= 1", name="key"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    key: Mapped[str] = mapped_column(String(64))
+    value: Mapped[str] = mapped_column(String(200))
+
+    campaign: Mapped[Campaign] = relationship(back_populates="labels")
 
 
 class Trial(Base):

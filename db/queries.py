@@ -5,9 +5,11 @@ constants B of its model."""
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Iterable
+import re
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from typing import Any
 
 from sqlalchemy import ColumnElement, func, select
 from sqlalchemy.orm import Session, aliased, selectinload
@@ -15,7 +17,9 @@ from sqlalchemy.orm import Session, aliased, selectinload
 from gyrostand.db.models import (
     EVENT_SEVERITIES,
     SERIES_J,
+    AnalysisRun,
     Campaign,
+    CampaignLabel,
     Event,
     Instrument,
     Observation,
@@ -127,9 +131,17 @@ class CampaignHeader:
     software_version: str
 
 
-def new_campaign(session: Session, header: CampaignHeader, *, status: str, source: str) -> Campaign:
+def new_campaign(
+    session: Session,
+    header: CampaignHeader,
+    *,
+    status: str,
+    source: str,
+    labels: Mapping[str, str] | None = None,
+) -> Campaign:
     """A campaign row (added to `session`) for a stand run or an import, on the stored instrument
-    with the same model, serial and constants when there is one."""
+    with the same model, serial and constants when there is one, with its `labels`
+    (key = value, e.g. factory = A)."""
     constants = {"lp_gcm2s2": header.lp_gcm2s2, "h1_gcm2s": header.h1_gcm2s}
     campaign = Campaign(
         instrument=instrument_for(session, header.model, header.serial, constants),
@@ -144,9 +156,34 @@ def new_campaign(session: Session, header: CampaignHeader, *, status: str, sourc
         source=source,
         started_at=None if source == "import" else datetime.now(UTC),  # stand runs and replays
         software_version=header.software_version,
+        labels=[CampaignLabel(key=k, value=v) for k, v in sorted((labels or {}).items())],
     )
     session.add(campaign)
     return campaign
+
+
+LABEL_KEY = re.compile(r"[a-z][a-z0-9_]{0,63}")
+LABEL_VALUE_MAX = 200
+
+
+def parse_label(text: str) -> tuple[str, str]:
+    """`key=value` as a campaign label; ValueError (one line) naming what is wrong: the key is
+    lower-case letters, digits and _ (at most 64, starting with a letter), the value printable
+    and at most 200 characters."""
+    key, sep, value = text.partition("=")
+    key, value = key.strip(), value.strip()
+    if not sep:
+        raise ValueError(f"label {text!r} is not key=value (e.g. factory=A)")
+    if not LABEL_KEY.fullmatch(key):
+        raise ValueError(
+            f"label key {key!r}: use lower-case letters, digits and _, starting with a letter "
+            "(at most 64 characters)"
+        )
+    if not value or len(value) > LABEL_VALUE_MAX or not value.isprintable():
+        raise ValueError(
+            f"label {key}: the value must be 1 to {LABEL_VALUE_MAX} printable characters"
+        )
+    return key, value
 
 
 def campaign_constants(campaign: Campaign) -> dict[str, float]:
@@ -373,3 +410,147 @@ def raw_log_segments(session: Session, campaign_id: int) -> list[RawLogSegment]:
             .order_by(RawLogSegment.seq)
         )
     )
+
+
+@dataclass(frozen=True)
+class CampaignFilter:
+    """Which campaigns `campaign_list` returns (None: any). `labels`: every key = value must be
+    among the campaign's labels (the stand is the label `stand`); `since`/`until`: when the
+    campaign started (imports: when they were stored), `until` exclusive."""
+
+    model: str | None = None
+    serial: str | None = None
+    status: str | None = None
+    labels: tuple[tuple[str, str], ...] = ()
+    since: datetime | None = None
+    until: datetime | None = None
+
+
+@dataclass(frozen=True)
+class CampaignRow:
+    """One line of `gyrostand campaign list`."""
+
+    campaign_id: int
+    model: str
+    serial: str
+    status: str
+    source: str
+    operator: str
+    started_at: datetime
+    """When it started (imports: when they were stored)."""
+    finished_at: datetime | None
+    labels: dict[str, str]
+    observations: int
+
+
+def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
+    """The campaigns that pass `where`, by id, with their labels and observation counts."""
+    started = func.coalesce(Campaign.started_at, Campaign.created_at)
+    query = (
+        select(Campaign.id, Instrument.model, Instrument.serial, Campaign.status)
+        .add_columns(Campaign.source, Campaign.operator, started, Campaign.finished_at)
+        .join(Instrument, Instrument.id == Campaign.instrument_id)
+        .order_by(Campaign.id)
+    )
+    for column, value in (
+        (Instrument.model, where.model),
+        (Instrument.serial, where.serial),
+        (Campaign.status, where.status),
+    ):
+        if value is not None:
+            query = query.where(column == value)
+    if where.since is not None:
+        query = query.where(started >= where.since)
+    if where.until is not None:
+        query = query.where(started < where.until)
+    for key, value in where.labels:
+        query = query.where(
+            select(CampaignLabel.id)
+            .where(
+                CampaignLabel.campaign_id == Campaign.id,
+                CampaignLabel.key == key,
+                CampaignLabel.value == value,
+            )
+            .exists()
+        )
+    rows = session.execute(query).all()
+    ids = [row[0] for row in rows]
+    labels: dict[int, dict[str, str]] = {i: {} for i in ids}
+    for campaign_id, key, value in session.execute(
+        select(CampaignLabel.campaign_id, CampaignLabel.key, CampaignLabel.value)
+        .where(CampaignLabel.campaign_id.in_(ids))
+        .order_by(CampaignLabel.key)
+    ):
+        labels[campaign_id][key] = value
+    counts = dict(
+        session.execute(
+            select(Trial.campaign_id, func.count(Observation.id))
+            .join(Series, Series.trial_id == Trial.id)
+            .join(Observation, Observation.series_id == Series.id)
+            .where(Trial.campaign_id.in_(ids))
+            .group_by(Trial.campaign_id)
+        ).all()
+    )
+    return [
+        CampaignRow(
+            campaign_id=i,
+            model=model,
+            serial=serial,
+            status=status,
+            source=source,
+            operator=operator,
+            started_at=_utc(started_at),
+            finished_at=None if finished_at is None else _utc(finished_at),
+            labels=labels[i],
+            observations=counts.get(i, 0),
+        )
+        for i, model, serial, status, source, operator, started_at, finished_at in rows
+    ]
+
+
+def _utc(value: datetime) -> datetime:
+    """A stored wall time as aware UTC (SQLite gives it back naive)."""
+    return value if value.tzinfo is not None else value.replace(tzinfo=UTC)
+
+
+@dataclass(frozen=True)
+class AnalysedCampaign:
+    """A campaign of one instrument model for fleet statistics: its unit, its value of a label
+    key (None: not labelled), when it started and its latest analysis run's results (None: never
+    analysed)."""
+
+    campaign_id: int
+    serial: str
+    label: str | None
+    started_at: datetime
+    results: dict[str, Any] | None
+
+
+def model_campaigns(session: Session, model: str, key: str) -> list[AnalysedCampaign]:
+    """The completed campaigns of instrument `model`, by id, with their label `key` and latest
+    analysis run."""
+    latest = (
+        select(AnalysisRun.campaign_id, func.max(AnalysisRun.id).label("run_id"))
+        .group_by(AnalysisRun.campaign_id)
+        .subquery()
+    )
+    label = aliased(CampaignLabel)
+    rows = session.execute(
+        select(
+            Campaign.id,
+            Instrument.serial,
+            label.value,
+            func.coalesce(Campaign.started_at, Campaign.created_at),
+            AnalysisRun.results_json,
+        )
+        .join(Instrument, Instrument.id == Campaign.instrument_id)
+        .outerjoin(label, (label.campaign_id == Campaign.id) & (label.key == key))
+        .outerjoin(latest, latest.c.campaign_id == Campaign.id)
+        .outerjoin(AnalysisRun, AnalysisRun.id == latest.c.run_id)
+        .where(Instrument.model == model, Campaign.status == "completed")
+        .order_by(Campaign.id)
+    ).all()
+    return [
+        AnalysedCampaign(campaign_id, serial, value, _utc(started), results)
+        for campaign_id, serial, value, started, results in rows
+    ]

@@ -15,7 +15,7 @@ from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from alembic.util import CommandError
-from sqlalchemy import Connection, Engine, create_engine, event, inspect
+from sqlalchemy import Connection, Engine, create_engine, event, inspect, text
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
 from sqlalchemy.orm import Session, sessionmaker
@@ -23,6 +23,7 @@ from sqlalchemy.orm import Session, sessionmaker
 MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
 BUSY_TIMEOUT_MS = 10_000
 IMMEDIATE = "gyrostand_begin_immediate"  # execution option: SQLite write transactions
+MIGRATION_LOCK = 0x67796D6967  # PostgreSQL advisory lock key of migrations ("gymig")
 
 
 def writer(sessions: sessionmaker[Session]) -> sessionmaker[Session]:
@@ -190,6 +191,9 @@ def migrate(engine: Engine, *, upgrade: bool, script_location: Path = MIGRATIONS
         _no_cascades(connection),
         connection.begin(),
     ):
+        if engine.dialect.name == "postgresql":  # one process migrates at a time (SQLite:
+            # BEGIN IMMEDIATE); the lock ends with the transaction
+            connection.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": MIGRATION_LOCK})
         current = set(MigrationContext.configure(connection).get_current_heads())
         if current == heads:  # another process migrated while this one waited for the lock
             return

@@ -25,6 +25,7 @@ from gyrostand import (
     cmd_campaign,
     cmd_data,
     cmd_demo,
+    cmd_fleet,
     cmd_plan,
     cmd_report,
     cmd_simulate,
@@ -162,6 +163,15 @@ def main(
     """Rolling-stand tests of marine gyrocompasses."""
 
 
-for module in (cmd_plan, cmd_simulate, cmd_campaign, cmd_analyze, cmd_report, cmd_data, cmd_demo):
+for module in (
+    cmd_plan,
+    cmd_simulate,
+    cmd_campaign,
+    cmd_analyze,
+    cmd_report,
+    cmd_data,
+    cmd_fleet,
+    cmd_demo,
+):
     module.register(app)
 use_help_layout(app)

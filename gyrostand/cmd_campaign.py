@@ -1,11 +1,12 @@
-"""CLI: campaign run/resume/retry/status, replay."""
+"""CLI: campaign run/resume/retry/status/list, replay."""
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
 
@@ -14,13 +15,14 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from gyrostand.cmd_data import DEFAULT_DB, CampaignId, open_db
+from gyrostand.cmd_data import DEFAULT_DB, CampaignId, TagOption, open_db, parse_tags
 from gyrostand.errors import EXIT_FAILED, fail, printable
 from gyrostand.stand.simconfig import TIMINGS
 
 if TYPE_CHECKING:
     from gyrostand.acquisition.runner import RunResult
     from gyrostand.acquisition.store import CampaignStore
+    from gyrostand.db.queries import CampaignRow
     from gyrostand.plan.model import Plan
 
 _out = Console(highlight=False, soft_wrap=True, markup=False, emoji=False)  # text, never markup
@@ -235,10 +237,15 @@ class BusOptions:
 
 
 def new_campaign(
-    plan: Path | Plan, db: str | None, bus: BusOptions, quiet: bool
+    plan: Path | Plan,
+    db: str | None,
+    bus: BusOptions,
+    quiet: bool,
+    labels: Mapping[str, str] | None = None,
 ) -> tuple[RunResult, str]:
     """`campaign run PLAN`: a new campaign of the plan file (or parsed plan) with the command
-    line's options, acquired (`run_campaign`); its outcome and the database it went to.
+    line's options and `labels`, acquired (`run_campaign`); its outcome and the database it
+    went to.
     Everything is checked before anything is written (one-line errors: `_load`, `checked_plan`,
     `preflight`)."""
     from gyrostand.acquisition.store import CampaignStore
@@ -248,7 +255,7 @@ def new_campaign(
         preflight(checked)
         sessions = open_db(checked.database, must_exist=False)
         not_interrupted(stop, "the campaign was stored")
-        store = CampaignStore.create(sessions, checked)
+        store = CampaignStore.create(sessions, checked, labels=labels)
         return run_campaign(checked, store, quiet, stop, checked.database), checked.database
 
 
@@ -340,11 +347,28 @@ Timing = Annotated[
 Quiet = Annotated[bool, typer.Option("--quiet", help="No live progress display.")]
 
 
+def list_item(row: CampaignRow) -> dict[str, object]:
+    """One campaign of `campaign list --json` (times ISO 8601, UTC)."""
+    finished = None if row.finished_at is None else row.finished_at.isoformat()
+    return {
+        "id": row.campaign_id,
+        "model": row.model,
+        "serial": row.serial,
+        "status": row.status,
+        "source": row.source,
+        "operator": row.operator,
+        "started_at": row.started_at.isoformat(),
+        "finished_at": finished,
+        "labels": row.labels,
+        "observations": row.observations,
+    }
+
+
 def register(app: typer.Typer) -> None:
-    """Add the campaign run/resume/retry/status, replay command(s) to the CLI."""
+    """Add the campaign run/resume/retry/status/list, replay command(s) to the CLI."""
 
     campaign_app = typer.Typer(
-        help="Run, resume, retry and inspect campaigns.", no_args_is_help=True
+        help="Run, resume, retry, inspect and list campaigns.", no_args_is_help=True
     )
     app.add_typer(campaign_app, name="campaign")
 
@@ -359,11 +383,12 @@ def register(app: typer.Typer) -> None:
         speedup: Speedup = None,
         seed: Seed = None,
         timing: Timing = None,
+        tag: TagOption = None,
         quiet: Quiet = False,
     ) -> None:
         """Run a campaign plan on the stand (the simulated stand when the plan says so)."""
         bus = BusOptions(interface, channel, speedup, seed, timing)
-        outcome, database = new_campaign(plan, db, bus, quiet)
+        outcome, database = new_campaign(plan, db, bus, quiet, parse_tags(tag))
         print_outcome(outcome, database)
 
     @campaign_app.command("resume")
@@ -471,6 +496,80 @@ def register(app: typer.Typer) -> None:
                 f"next: trial {s.resume.trial_index}, series j={s.resume.j}, "
                 f"observation {s.resume.next_k}"
             )
+
+    @campaign_app.command("list")
+    def campaign_list(
+        model: Annotated[str | None, typer.Option(help="Instrument model.")] = None,
+        serial: Annotated[str | None, typer.Option(help="Instrument serial number.")] = None,
+        stand: Annotated[
+            str | None, typer.Option(help="The stand (the campaigns' label stand=...).")
+        ] = None,
+        status: Annotated[
+            str | None,
+            typer.Option(help="planned, running, paused, completed, failed or stopped."),
+        ] = None,
+        since: Annotated[
+            datetime | None,
+            typer.Option(formats=["%Y-%m-%d"], help="Started on or after this day (UTC)."),
+        ] = None,
+        until: Annotated[
+            datetime | None,
+            typer.Option(formats=["%Y-%m-%d"], help="Started on or before this day (UTC)."),
+        ] = None,
+        tag: Annotated[
+            list[str] | None,
+            typer.Option("--tag", help="Only campaigns with this label, key=value (repeatable)."),
+        ] = None,
+        as_json: Annotated[bool, typer.Option("--json", help="Print one JSON document.")] = False,
+        db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
+    ) -> None:
+        """List the campaigns of a database, with filters."""
+        import json
+
+        from gyrostand.db.models import CAMPAIGN_STATUSES
+        from gyrostand.db.queries import CampaignFilter, campaign_list
+
+        if status is not None and status not in CAMPAIGN_STATUSES:
+            fail(f"--status must be one of {', '.join(CAMPAIGN_STATUSES)}, not {status!r}")
+        labels = parse_tags(tag)
+        if stand is not None:
+            if labels.get("stand", stand) != stand:
+                fail("--stand and --tag stand=... name different stands")
+            labels["stand"] = stand
+        day = timedelta(days=1)
+        where = CampaignFilter(
+            model=model,
+            serial=serial,
+            status=status,
+            labels=tuple(sorted(labels.items())),
+            since=None if since is None else since.replace(tzinfo=UTC),
+            until=None if until is None else until.replace(tzinfo=UTC) + day,
+        )
+        if where.since is not None and where.until is not None and where.until <= where.since:
+            fail("--until is before --since")
+        with open_db(db, must_exist=True)() as session:
+            rows = campaign_list(session, where)
+        if as_json:
+            typer.echo(json.dumps({"campaigns": [list_item(r) for r in rows]}, indent=2))
+            return
+        lines = [("id", "model", "serial", "status", "source", "started (UTC)", "obs", "labels")]
+        lines += [
+            (
+                str(r.campaign_id),
+                printable(r.model),
+                printable(r.serial),
+                r.status,
+                r.source,
+                r.started_at.strftime("%Y-%m-%d %H:%M"),
+                str(r.observations),
+                printable(" ".join(f"{k}={v}" for k, v in r.labels.items())),
+            )
+            for r in rows
+        ]
+        widths = [max(len(line[i]) for line in lines) for i in range(len(lines[0]))]
+        for line in lines:  # one campaign a line, whatever the terminal's width (for grep)
+            typer.echo("  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)).rstrip())
+        typer.echo(f"{len(rows)} campaign{'' if len(rows) == 1 else 's'}")
 
     @app.command("replay")
     def replay_command(

@@ -25,6 +25,33 @@ and MySQL; a larger number is no campaign anywhere)."""
 CampaignId = Annotated[int, typer.Argument(help="Campaign id.", min=1, max=MAX_CAMPAIGN_ID)]
 
 
+TagOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--tag",
+        help="A label of the campaign, key=value (repeatable): e.g. factory=A, lot=2026-07, "
+        "stand=S2; fleet statistics group campaigns by a key.",
+    ),
+]
+
+
+def parse_tags(tags: list[str] | None) -> dict[str, str]:
+    """The --tag options as labels, or a one-line error naming the bad one (or a key given
+    twice)."""
+    from gyrostand.db.queries import parse_label
+
+    labels: dict[str, str] = {}
+    for tag in tags or []:
+        try:
+            key, value = parse_label(tag)
+        except ValueError as error:
+            fail(f"--tag: {error}")
+        if key in labels:
+            fail(f"--tag: label {key} given twice")
+        labels[key] = value
+    return labels
+
+
 class ExportFormat(StrEnum):
     csv = "csv"
     parquet = "parquet"
@@ -84,6 +111,7 @@ def register(app: typer.Typer) -> None:
             ),
         ] = None,
         operator: Annotated[str | None, typer.Option(help="Who made the measurements.")] = None,
+        tag: TagOption = None,
         db: DbOption = DEFAULT_DB,
     ) -> None:
         """Import historical manual measurements: per observation, per series (mean, variance,
@@ -104,6 +132,7 @@ def register(app: typer.Typer) -> None:
         if operator is not None:
             metadata["operator"] = operator
         metadata["software_version"] = SOFTWARE_VERSION
+        labels = parse_tags(tag)
         try:
             check_metadata(metadata)
             data = read_import_file(file)
@@ -112,7 +141,7 @@ def register(app: typer.Typer) -> None:
         sessions = open_db(db)
         try:
             with sessions.begin() as session:
-                campaign_id = store_import(session, data, metadata).id
+                campaign_id = store_import(session, data, metadata, labels).id
         except OperationalError as error:  # e.g. locked by another writer; rolled back
             fail(f"nothing imported, the database refused the write: {error.orig}")
         if plan is None:

@@ -1,5 +1,59 @@
 """Shared pytest set-up. The `socketcan` marker, its skip and the `socketcan_channel` fixture come
 from gyrostand's own pytest plugin (`gyrostand.pytest_plugin`), as users' tests get them;
-`pytester` runs users' test files against it (tests/plugin)."""
+`pytester` runs users' test files against it (tests/plugin).
+
+`db_url` runs a test against both database back ends: a fresh SQLite file, and a fresh database
+on a PostgreSQL server started once per session (tests/postgres.py; skipped, with the reason,
+where none can be started)."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+from tests import postgres
 
 pytest_plugins = ["pytester"]
+
+BACKENDS = ("sqlite", "postgresql")
+
+
+@pytest.fixture(scope="session")
+def postgres_server() -> Iterator[postgres.Server]:
+    server = postgres.start()
+    if isinstance(server, str):
+        pytest.skip(f"no PostgreSQL server: {server}")
+    yield server
+    server.stop()
+
+
+@dataclass(frozen=True)
+class NewDatabase:
+    """Fresh, empty databases of one back end: each call, the URL of another one (a SQLite
+    file in the test's folder, or a database on the session's PostgreSQL server)."""
+
+    backend: str
+    folder: Path
+    server: postgres.Server | None
+    _count: itertools.count[int] = field(default_factory=itertools.count)
+
+    def __call__(self) -> str:
+        if self.server is not None:
+            return self.server.new_database()
+        return f"sqlite:///{self.folder / f'lab-{next(self._count)}.sqlite'}"
+
+
+@pytest.fixture(params=BACKENDS)
+def new_db_url(request: pytest.FixtureRequest, tmp_path: Path) -> NewDatabase:
+    server = None if request.param == "sqlite" else request.getfixturevalue("postgres_server")
+    return NewDatabase(request.param, tmp_path, server)
+
+
+@pytest.fixture
+def db_url(new_db_url: NewDatabase) -> str:
+    """The URL of a fresh, empty database, on each back end."""
+    return new_db_url()

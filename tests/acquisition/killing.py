@@ -5,14 +5,14 @@ tests/acquisition/test_kill_resume.py and validation/kill_resume.py).
 The moments: the campaign's n-th engine write committed (n drawn at random, so that a kill finds
 something new to lose), then a random wait of up to 20 ms (into the next write, a commit, or the
 re-run of what is stored). The runs are forked from this process (imports done once) and killed
-with SIGKILL: no cleanup runs in them."""
+with SIGKILL: no cleanup runs in them. The databases are SQLite files in the folder unless
+`kill_and_resume` is given two (empty) database URLs, e.g. on PostgreSQL."""
 
 from __future__ import annotations
 
 import os
 import random
 import signal
-import sqlite3
 import sys
 import time
 from collections.abc import Callable
@@ -20,6 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from sqlalchemy import Connection, Engine, create_engine, inspect, text
+from sqlalchemy.exc import DBAPIError
 
 import gyrostand.acquisition.runner  # noqa: F401  (imported once, before the forks)
 import gyrostand.cmd_campaign  # noqa: F401
@@ -28,7 +30,9 @@ from gyrostand.frames.logfile import BatchBLFWriter, read_segments
 from tests.acquisition.harness import FAST_SIM, plan_text
 
 BOOKKEEPING = ("interrupted", "resume", "raw log")  # events of the runs, not of the campaign
-TABLES = {  # table: columns compared (no wall-clock column, no id that bookkeeping shifts)
+# table: columns compared (no wall-clock column, no id that bookkeeping shifts). Ids are compared
+# by rank (`snapshot`): PostgreSQL's sequences do not give back the ids of a killed transaction.
+TABLES = {
     "campaign": "id, status, n_obs, engine_writes",
     "trial": 'id, "index", status, failure_reason, meas_direction_deg, meas_amplitude_cm, '
     "meas_period_s",
@@ -46,13 +50,31 @@ def small_containers(path: Path) -> BatchBLFWriter:
     return BatchBLFWriter(path, max_container_size=4096)
 
 
-def write_plan(folder: Path, seed: int = 0) -> Path:
+def write_plan(folder: Path, database: str, seed: int = 0) -> Path:
     path = folder / "plan.toml"
-    path.write_text(
-        plan_text(database=str(folder / "db.sqlite"), raw_dir=str(folder / "raw"), seed=seed)
-        + FAST_SIM
-    )
+    path.write_text(plan_text(database=database, raw_dir=str(folder / "raw"), seed=seed) + FAST_SIM)
     return path
+
+
+def _reader(url: str) -> Engine:
+    """An engine that only reads `url` (a SQLite file is opened read-only: never created)."""
+    if url.startswith("sqlite:///"):
+        url = f"sqlite:///file:{url.removeprefix('sqlite:///')}?mode=ro&uri=true"
+    return create_engine(url)
+
+
+def _query(url: str, sql: str) -> list[tuple]:
+    """Rows of `sql` on the database at `url` ([] when it has no campaign table yet)."""
+    engine = _reader(url)
+    try:
+        with engine.connect() as conn:
+            if not inspect(conn).has_table("campaign"):
+                return []
+            return [tuple(row) for row in conn.execute(text(sql))]
+    except DBAPIError:  # no SQLite file yet
+        return []
+    finally:
+        engine.dispose()
 
 
 def forked(args: list[str], kill_when: Callable[[], bool] = lambda: False) -> int | None:
@@ -85,16 +107,17 @@ def forked(args: list[str], kill_when: Callable[[], bool] = lambda: False) -> in
 class Writes:
     """The campaign's committed engine writes, read on one connection (-1: no campaign yet)."""
 
-    def __init__(self, db: Path) -> None:
-        self.db = db
-        self._conn: sqlite3.Connection | None = None
+    def __init__(self, url: str) -> None:
+        self.engine = _reader(url)
+        self._conn: Connection | None = None
 
     def __call__(self) -> int:
         try:
             if self._conn is None:
-                self._conn = sqlite3.connect(f"file:{self.db}?mode=ro", uri=True)
-            row = self._conn.execute("SELECT engine_writes FROM campaign").fetchone()
-        except sqlite3.Error:
+                self._conn = self.engine.connect()
+            row = self._conn.execute(text("SELECT engine_writes FROM campaign")).first()
+            self._conn.rollback()  # the next poll sees the writes committed since
+        except DBAPIError:
             self.close()
             return -1
         return -1 if row is None else row[0]
@@ -103,21 +126,37 @@ class Writes:
         if self._conn is not None:
             self._conn.close()
             self._conn = None
+        self.engine.dispose()
 
 
-def snapshot(db: Path) -> dict[str, list[tuple]]:
+def snapshot(url: str) -> dict[str, list[tuple]]:
     """The compared rows of every table (empty before the campaign exists)."""
-    if not db.exists():
-        return {name: [] for name in TABLES}
-    with sqlite3.connect(db) as conn:
-        if not conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'campaign'").fetchall():
-            return {name: [] for name in TABLES}
-        rows = {
-            name: conn.execute(f"SELECT {columns} FROM {name} ORDER BY id").fetchall()
-            for name, columns in TABLES.items()
-        }
+    rows = {
+        name: _query(url, f"SELECT {columns} FROM {name} ORDER BY id")
+        for name, columns in TABLES.items()
+    }
+    rank = {name: {row[0]: i for i, row in enumerate(rows[name], 1)} for name in TABLES}
+    refers = {  # table: (column, table it refers to), the id first
+        "campaign": [(0, "campaign")],
+        "trial": [(0, "trial")],
+        "series": [(0, "series"), (1, "trial")],
+        "observation": [(0, "observation"), (1, "series")],
+        "event": [(0, "trial"), (1, "series")],
+    }
+    for name, columns in refers.items():
+        for i, row in enumerate(rows[name]):
+            cells = list(row)
+            for column, table in columns:
+                cells[column] = rank[table].get(cells[column])
+            rows[name][i] = tuple(cells)
     rows["event"] = [e for e in rows["event"] if e[3] not in BOOKKEEPING]
     return rows
+
+
+def campaign_id(url: str) -> str:
+    """The id of the one campaign (not always 1 on PostgreSQL: a run killed while storing the
+    campaign used up id 1)."""
+    return str(_query(url, "SELECT id FROM campaign")[0][0])
 
 
 @dataclass(frozen=True)
@@ -129,11 +168,10 @@ class Segment:
     ending: str | None
 
 
-def segments(db: Path) -> list[Segment]:
-    with sqlite3.connect(db) as conn:
-        rows = conn.execute(
-            "SELECT path, start, first_frame, frames, ending FROM raw_log_segment ORDER BY seq"
-        ).fetchall()
+def segments(url: str) -> list[Segment]:
+    rows = _query(
+        url, "SELECT path, start, first_frame, frames, ending FROM raw_log_segment ORDER BY seq"
+    )
     return [Segment(Path(path), *rest) for path, *rest in rows]
 
 
@@ -155,25 +193,29 @@ class KillRun:
     seconds: float
 
 
-def kill_and_resume(folder: Path, kills: int, seed: int) -> KillRun:
+def kill_and_resume(
+    folder: Path, kills: int, seed: int, urls: tuple[str, str] | None = None
+) -> KillRun:
     """An uninterrupted run and one killed `kills` times (then resumed to its end) of the same
-    plan (simulator seed `seed`) under `folder`; what differs."""
+    plan (simulator seed `seed`) under `folder`, into the databases `urls` (reference, killed;
+    default: SQLite files in `folder`); what differs."""
     t0 = time.monotonic()
     reference, killed = folder / "reference", folder / "killed"
     reference.mkdir()
     killed.mkdir()
+    ref_db, db = urls or tuple(f"sqlite:///{d / 'db.sqlite'}" for d in (reference, killed))
     problems: list[str] = []
-    if forked(["campaign", "run", str(write_plan(reference, seed)), "--quiet"]) != 0:
+    if forked(["campaign", "run", str(write_plan(reference, ref_db, seed)), "--quiet"]) != 0:
         return KillRun(0, ("the uninterrupted run failed",), (), time.monotonic() - t0)
-    expected = snapshot(reference / "db.sqlite")
+    expected = snapshot(ref_db)
     rng = random.Random(seed)
     moments = sorted(rng.randrange(-1, expected["campaign"][0][3]) for _ in range(kills))
-    db, plan = killed / "db.sqlite", write_plan(killed, seed)
+    plan = write_plan(killed, db, seed)
     writes_now = Writes(db)
     before = snapshot(db)
     done = 0
     for moment in moments:
-        args = ["campaign", "resume", "1", "--db", str(db)] if before["campaign"] else []
+        args = ["campaign", "resume", campaign_id(db), "--db", db] if before["campaign"] else []
         args = args or ["campaign", "run", str(plan)]
         delay = rng.uniform(0.0, 0.02)
 
@@ -196,7 +238,7 @@ def kill_and_resume(folder: Path, kills: int, seed: int) -> KillRun:
                 problems.append(f"{' '.join(args[:2])} ended with exit code {code}")
             break  # finished before the kill came
         done += 1
-    if forked(["campaign", "resume", "1", "--db", str(db), "--quiet"]) != 0:
+    if forked(["campaign", "resume", campaign_id(db), "--db", db, "--quiet"]) != 0:
         problems.append("the last resume failed")
     final = snapshot(db)
     problems += [f"table {name} differs" for name in TABLES if final[name] != expected[name]]
@@ -208,7 +250,7 @@ def kill_and_resume(folder: Path, kills: int, seed: int) -> KillRun:
         problems.append(f"segment endings {[s.ending for s in logs]}")
     if [s.first_frame for s in logs] != list(np.cumsum([0] + [s.frames for s in logs[:-1]])):
         problems.append("segments do not continue one another")
-    got, want = frames(readable), frames([s.path for s in segments(reference / "db.sqlite")])
+    got, want = frames(readable), frames([s.path for s in segments(ref_db)])
     if any(a.shape != b.shape or not np.array_equal(a, b) for a, b in zip(got, want, strict=True)):
         problems.append("the segments read in order differ from the uninterrupted raw log")
     return KillRun(done, tuple(problems), tuple(logs), time.monotonic() - t0)

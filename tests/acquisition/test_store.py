@@ -1,10 +1,10 @@
 """The one resume rule: a process killed after a trial's last observation was committed but
-before the trial was marked completed (waiting for the stand's stop acknowledgement)."""
+before the trial was marked completed (waiting for the stand's stop acknowledgement); the
+lease; a re-run. Each on both database back ends (`db_url`: SQLite and PostgreSQL)."""
 
 import subprocess
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import pytest
 from sqlalchemy import func, select
@@ -18,16 +18,16 @@ from gyrostand.cli import app
 from gyrostand.db.lease import CampaignBusy, held_elsewhere
 from gyrostand.db.models import Event, Observation, Trial
 from gyrostand.db.queries import ResumePoint, campaign_summary, first_incomplete_series
-from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.db.session import open_database
 from gyrostand.plan.model import parse_plan
 from tests.acquisition.harness import plan_text
 
 THREE = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "fit"), (30.0, 20.0, 6.0, "fit")]
 
 
-def killed_after_trial_2(tmp_path: Path) -> CampaignStore:
+def killed_after_trial_2(url: str) -> CampaignStore:
     """Trial 1 completed, trial 2 with both series holding N = 3 observations but "running"."""
-    sessions = open_database(sqlite_url(tmp_path / "db.sqlite"))
+    sessions = open_database(url)
     store = CampaignStore.create(sessions, parse_plan(plan_text(THREE)))
     for trial in (1, 2):
         store.trial_started(trial)
@@ -49,8 +49,8 @@ class Sent:
         self.commands.append(command)
 
 
-def test_status_resume_point_and_engine_agree(tmp_path: Path) -> None:
-    store = killed_after_trial_2(tmp_path)
+def test_status_resume_point_and_engine_agree(db_url: str) -> None:
+    store = killed_after_trial_2(db_url)
     with store.sessions() as session:
         resume = first_incomplete_series(session, store.campaign_id)
         summary = campaign_summary(session, store.campaign_id)
@@ -66,9 +66,9 @@ def test_status_resume_point_and_engine_agree(tmp_path: Path) -> None:
     assert [c.kind for c in sent.commands] == ["stop"]  # trial 3 starts from still, series 1
 
 
-def test_resume_completes_the_acquired_trial_with_an_event(tmp_path: Path) -> None:
+def test_resume_completes_the_acquired_trial_with_an_event(db_url: str) -> None:
     """(what a resume that restarts the stand does first: `run_live`)"""
-    store = killed_after_trial_2(tmp_path)
+    store = killed_after_trial_2(db_url)
     _, resumed = resume_store(store.sessions, store.campaign_id)
     resumed.complete_acquired()
     with store.sessions() as session:
@@ -84,10 +84,10 @@ def test_resume_completes_the_acquired_trial_with_an_event(tmp_path: Path) -> No
     assert sum(e.message.startswith("resumed by process") for e in events) == 2
 
 
-def stopped_in_trial_2(tmp_path: Path, criterion: str) -> CampaignStore:
+def stopped_in_trial_2(url: str, criterion: str) -> CampaignStore:
     """Trial 1 completed; trial 2's first series settled by `criterion` and 2 of its N = 3
     observations committed when the run stopped."""
-    sessions = open_database(sqlite_url(tmp_path / "db.sqlite"))
+    sessions = open_database(url)
     store = CampaignStore.create(sessions, parse_plan(plan_text(THREE)))
     for trial, stored in ((1, 3), (2, 2)):
         store.trial_started(trial)
@@ -101,10 +101,10 @@ def stopped_in_trial_2(tmp_path: Path, criterion: str) -> CampaignStore:
     return store
 
 
-def test_a_trial_stopped_in_a_compensated_series_is_redone(tmp_path: Path) -> None:
+def test_a_trial_stopped_in_a_compensated_series_is_redone(db_url: str) -> None:
     """Its observations were taken in the transient and the record that compensates them is
     gone: a resume that restarts the stand fails that attempt, keeps it, and acquires a new one."""
-    store = stopped_in_trial_2(tmp_path, "compensated")
+    store = stopped_in_trial_2(db_url, "compensated")
     _, resumed = resume_store(store.sessions, store.campaign_id)
     resumed.redo_uncompensated()
     resumed.complete_acquired()
@@ -142,8 +142,8 @@ def test_a_trial_stopped_in_a_compensated_series_is_redone(tmp_path: Path) -> No
     assert attempt == 2
 
 
-def test_a_trial_stopped_in_a_bounded_series_continues(tmp_path: Path) -> None:
-    store = stopped_in_trial_2(tmp_path, "estimate")
+def test_a_trial_stopped_in_a_bounded_series_continues(db_url: str) -> None:
+    store = stopped_in_trial_2(db_url, "estimate")
     _, resumed = resume_store(store.sessions, store.campaign_id)
     resumed.redo_uncompensated()
     with store.sessions() as session:
@@ -152,8 +152,8 @@ def test_a_trial_stopped_in_a_bounded_series_continues(tmp_path: Path) -> None:
     assert attempts == 1 and (resume.trial_index, resume.j, resume.next_k) == (2, 1, 3)
 
 
-def status_line(folder: Path) -> str:
-    result = CliRunner().invoke(app, ["campaign", "status", "1", "--db", str(folder / "db.sqlite")])
+def status_line(url: str) -> str:
+    result = CliRunner().invoke(app, ["campaign", "status", "1", "--db", url])
     assert result.exit_code == 0, result.output
     return result.output.splitlines()[0]
 
@@ -168,8 +168,8 @@ time.sleep(600)
 """
 
 
-def test_the_lease_stops_a_second_process_and_dies_with_its_holder(tmp_path: Path) -> None:
-    store = killed_after_trial_2(tmp_path)
+def test_the_lease_stops_a_second_process_and_dies_with_its_holder(db_url: str) -> None:
+    store = killed_after_trial_2(db_url)
     store.set_status("running")
     url = str(store.sessions.kw["bind"].url)
     store.lease.release()
@@ -177,7 +177,7 @@ def test_the_lease_stops_a_second_process_and_dies_with_its_holder(tmp_path: Pat
     try:
         assert holder.stdout.readline() == "held\n"
         assert held_elsewhere(store.sessions, 1)
-        assert "campaign 1 (stand): running," in status_line(tmp_path)
+        assert "campaign 1 (stand): running," in status_line(db_url)
         with pytest.raises(CampaignBusy, match="campaign 1 is being acquired by another process"):
             resume_store(store.sessions, 1)
     finally:
@@ -185,7 +185,7 @@ def test_the_lease_stops_a_second_process_and_dies_with_its_holder(tmp_path: Pat
         holder.wait()
     assert not held_elsewhere(store.sessions, 1)
     assert "campaign 1 (stand): interrupted (left running by a process that is gone" in (
-        status_line(tmp_path)
+        status_line(db_url)
     )
     _, resumed = resume_store(store.sessions, 1)
     with store.sessions() as session:
@@ -193,10 +193,10 @@ def test_the_lease_stops_a_second_process_and_dies_with_its_holder(tmp_path: Pat
     assert kinds[-2:] == ["interrupted", "resume"]
 
 
-def test_a_re_run_skips_the_committed_writes_and_checks_each_observation(tmp_path: Path) -> None:
+def test_a_re_run_skips_the_committed_writes_and_checks_each_observation(db_url: str) -> None:
     """`CampaignStore.re_run`: the writes earlier runs committed are skipped in order, an
     observation re-derived differently is refused, and writes past them are stored."""
-    store = killed_after_trial_2(tmp_path)
+    store = killed_after_trial_2(db_url)
     committed = 2 + 2 * 2 * 3 + 2 + 1  # trials started, observations, series and trial completed
     again = CampaignStore(store.sessions, store.campaign_id)
     store.lease.release()

@@ -51,6 +51,7 @@ KINDS: list[tuple[str, Make | None, str, str]] = [  # what, made by, --db, messa
 COMMANDS: list[tuple[str, ...]] = [
     ("campaign", "run", "{plan}", "--quiet"),
     ("campaign", "status", "1"),
+    ("campaign", "list"),
     ("campaign", "resume", "1", "--quiet"),
     ("analyze", "1"),
     ("import", PAPER_CSV),
@@ -64,7 +65,8 @@ def name(command: tuple[str, ...]) -> str:
     return " ".join(command[:2] if command[0] == "campaign" else command[:1])
 
 
-READERS = [c for c in COMMANDS if name(c) in ("campaign status", "campaign resume")]
+READERS = [c for c in COMMANDS if name(c) in ("campaign status", "campaign list")]
+READERS += [c for c in COMMANDS if name(c) == "campaign resume"]
 READERS += [c for c in COMMANDS if name(c) in ("analyze", "export", "report")]
 MAKERS = [c for c in COMMANDS if name(c) in ("campaign run", "import", "replay")]  # a new db
 

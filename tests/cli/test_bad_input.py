@@ -192,6 +192,48 @@ CASES = [
         ("campaign", "run", "{plan}", "--db", "{db}", "--speedup", "x"),
         "valid number",
     ),
+    # labels and the campaign list's filters
+    Case(
+        "run tag without value",
+        ("campaign", "run", "{plan}", "--db", "{db}", "--tag", "factory"),
+        "--tag: label 'factory' is not key=value (e.g. factory=A)",
+    ),
+    Case(
+        "run tag bad key",
+        ("campaign", "run", "{plan}", "--db", "{db}", "--tag", "Fac tory=A"),
+        "--tag: label key 'Fac tory': use lower-case letters, digits and _",
+    ),
+    Case(
+        "import tag twice",
+        ("import", str(PAPER_CSV), "--db", "{db}", "--tag", "lot=1", "--tag", "lot=2"),
+        "--tag: label lot given twice",
+    ),
+    Case(
+        "import tag empty value",
+        ("import", str(PAPER_CSV), "--db", "{db}", "--tag", "lot="),
+        "--tag: label lot: the value must be 1 to 200 printable characters",
+    ),
+    Case(
+        "list unknown status",
+        ("campaign", "list", "--db", "{db}", "--status", "done"),
+        "--status must be one of planned, running, paused, completed, failed, stopped",
+    ),
+    Case(
+        "list date not a date",
+        ("campaign", "list", "--db", "{db}", "--since", "yesterday"),
+        "'yesterday' does not match the formats '%Y-%m-%d'",
+    ),
+    Case(
+        "list until before since",
+        ("campaign", "list", "--db", "{db}", "--since", "2026-02-01", "--until", "2026-01-01"),
+        "--until is before --since",
+    ),
+    Case(
+        "list two stands",
+        ("campaign", "list", "--db", "{db}", "--stand", "S1", "--tag", "stand=S2"),
+        "--stand and --tag stand=... name different stands",
+    ),
+    Case("list no database", ("campaign", "list", "--db", "{newdb}"), "no database at"),
     # unknown campaigns, missing databases
     Case("status unknown campaign", ("campaign", "status", "99", "--db", "{db}"), "no campaign 99"),
     Case("status no database", ("campaign", "status", "1", "--db", "{newdb}"), "no database at"),

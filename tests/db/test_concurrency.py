@@ -1,29 +1,33 @@
-"""Two stands, one SQLite file: two `campaign run` processes at once both complete, nothing lost
-or duplicated, nothing "database is locked"."""
+"""Two stands, one lab database (a SQLite file in WAL mode, and PostgreSQL): two `campaign run`
+processes at once both complete, nothing lost or duplicated, nothing "database is locked"; then
+the lab's read side on the same database: `campaign list` by stand, `analyze` and `report`."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
 
 from sqlalchemy import create_engine, text
+from typer.testing import CliRunner
 
+from gyrostand.cli import app
 from tests.acquisition.harness import FAST_SIM, plan_text
 
 TRIALS = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "fit"), (30.0, 20.0, 6.0, "fit")]
 
 
-def test_two_campaigns_into_one_sqlite_file_at_once(tmp_path: Path) -> None:
-    db = tmp_path / "lab.sqlite"
+def test_two_campaigns_into_one_database_at_once(tmp_path: Path, db_url: str) -> None:
     runs = []
     for stand in (1, 2):
         plan = tmp_path / f"stand{stand}.toml"
         plan.write_text(
-            plan_text(TRIALS, database=str(db), raw_dir=str(tmp_path / f"raw{stand}"), seed=stand)
+            plan_text(TRIALS, database=db_url, raw_dir=str(tmp_path / f"raw{stand}"), seed=stand)
             + FAST_SIM
         )
         runs.append(
             subprocess.Popen(
-                [sys.executable, "-m", "gyrostand", "campaign", "run", str(plan), "--quiet"],
+                [sys.executable, "-m", "gyrostand", "campaign", "run", str(plan), "--quiet"]
+                + ["--tag", f"stand=S{stand}"],
                 cwd=tmp_path,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.PIPE,
@@ -34,7 +38,7 @@ def test_two_campaigns_into_one_sqlite_file_at_once(tmp_path: Path) -> None:
         out, err = run.communicate(timeout=600)
         assert run.returncode == 0, err
         assert "locked" not in err
-    engine = create_engine(f"sqlite:///{db}")
+    engine = create_engine(db_url)
     with engine.connect() as conn:
         campaigns = conn.execute(text("SELECT id, status FROM campaign ORDER BY id")).all()
         counts = conn.execute(
@@ -48,3 +52,20 @@ def test_two_campaigns_into_one_sqlite_file_at_once(tmp_path: Path) -> None:
     assert [tuple(c) for c in campaigns] == [(1, "completed"), (2, "completed")]
     # 3 trials x 2 series x N = 3 observations each, none duplicated
     assert [tuple(c) for c in counts] == [(1, 18, 18), (2, 18, 18)]
+    cli = CliRunner()
+    listed = cli.invoke(app, ["campaign", "list", "--stand", "S2", "--json", "--db", db_url])
+    assert listed.exit_code == 0, listed.output
+    (row,) = json.loads(listed.output)["campaigns"]
+    assert (row["labels"], row["observations"], row["status"]) == ({"stand": "S2"}, 18, "completed")
+    campaign = str(row["id"])  # (which stand stored its campaign first is a race)
+    analysed = cli.invoke(app, ["analyze", campaign, "--json", "--db", db_url])
+    assert analysed.exit_code == 0, analysed.output
+    fit = json.loads(analysed.output)["fit"]
+    assert fit["converged"] and fit["trial_indices"] == [1, 2, 3]
+    out = tmp_path / "reports"
+    args = ["report", campaign, "--db", db_url, "--out", str(out), "--format", "json,html"]
+    reported = cli.invoke(app, args)
+    assert reported.exit_code == 0, reported.output
+    document = json.loads((out / f"campaign-{campaign}.json").read_text())
+    assert document["analysis"]["fit"]["estimates"] == fit["estimates"]
+    assert "SIMULATION" in (out / f"campaign-{campaign}.html").read_text()
