@@ -52,7 +52,7 @@ def checked_plan(
     and prepared as the run will use it (one-line errors). The bus options are written into the
     plan's text, which a new campaign stores."""
     from gyrostand.acquisition.runner import prepare
-    from gyrostand.plan.model import PlanError, parse_plan, revised
+    from gyrostand.plan.model import PlanError, revised
     from gyrostand.plan.overrides import with_keys
 
     bus: dict[str, object] = {}
@@ -82,9 +82,10 @@ def checked_plan(
         if seed is not None:
             bus["seed"] = seed
     try:
-        if bus:  # stored as it runs: a resume, a re-run and the report see these options
-            plan = parse_plan(with_keys(plan.text, {"bus": bus}))
-        plan = revised(plan, campaign={"database": db or plan.database})
+        # the text a new campaign stores gets the bus options: a resume, a re-run and the
+        # report see what ran
+        text = with_keys(plan.text, {"bus": bus}) if bus else plan.text
+        plan = revised(plan, text, bus=bus, campaign={"database": db or plan.database})
         prepare(plan)
     except PlanError as exc:
         fail("invalid plan: " + "; ".join(exc.problems))

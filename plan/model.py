@@ -796,13 +796,13 @@ def read_text(path: Path) -> str:
         raise PlanError([f"cannot read the file ({reason})"]) from None
 
 
-def revised(plan: Plan, **tables: Mapping[str, Any]) -> Plan:
+def revised(plan: Plan, text: str | None = None, **tables: Mapping[str, Any]) -> Plan:
     """The plan with some keys changed, per table (``revised(plan, bus={"seed": 2})``), and
-    validated as the file is; `text` stays the file's."""
+    validated as the file is; `text` stays the file's unless given (the text to store)."""
     document = plan.model_dump(exclude_unset=True)
     for table, changes in tables.items():
         document[table] = {**document.get(table, {}), **changes}
-    return _validate(Plan, document, plan.text)
+    return _validate(Plan, document, plan.text if text is None else text)
 
 
 def schema() -> dict[str, Any]:
