@@ -28,6 +28,7 @@ from gyrostand import (
     cmd_plan,
     cmd_report,
     cmd_simulate,
+    cmd_station,
 )
 from gyrostand.errors import unexpected, usage_error
 
@@ -162,6 +163,15 @@ def main(
     """Rolling-stand tests of marine gyrocompasses."""
 
 
-for module in (cmd_plan, cmd_simulate, cmd_campaign, cmd_analyze, cmd_report, cmd_data, cmd_demo):
+for module in (
+    cmd_plan,
+    cmd_simulate,
+    cmd_campaign,
+    cmd_analyze,
+    cmd_report,
+    cmd_data,
+    cmd_demo,
+    cmd_station,
+):
     module.register(app)
 use_help_layout(app)
