@@ -262,6 +262,7 @@ def create_app(
         exception_handlers={CrossSite: refused, HTTPException: not_found},
     )
     app.add_middleware(TokenMiddleware, access=access)
+    app.state.processes = station.processes  # for a host that ends them (the tests)
     return app
 
 

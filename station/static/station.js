@@ -47,6 +47,7 @@
 
   function render(s) {
     window.stationUpdates += 1;
+    window.stationAcquiring = s.acquiring;
     $("status").textContent = s.status;
     $("process-error").textContent = s.process_error || "";
     const c = s.current;
@@ -79,5 +80,8 @@
   if (!initial.acquiring) return;
   const source = new EventSource(location.pathname + "/stream");
   source.addEventListener("state", (ev) => render(JSON.parse(ev.data)));
-  source.addEventListener("end", () => source.close());
+  source.addEventListener("end", () => {
+    source.close();
+    window.stationAcquiring = false;
+  });
 })();
