@@ -122,7 +122,7 @@ def create_app(
                     )
                 )
 
-            cid = await station.processes.start(Path(path).resolve(), newest, plan.text)
+            cid = await station.processes.start(Path(path).resolve(), newest)
         except PlanError as exc:
             return station.page(
                 request,

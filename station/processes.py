@@ -75,9 +75,7 @@ class Processes:
         acquisition = self.acquisitions.get(campaign_id)
         return None if acquisition is None else acquisition.error()
 
-    async def start(
-        self, plan: Path, newest_campaign: Callable[[], int | None], plan_text: str
-    ) -> int:
+    async def start(self, plan: Path, newest_campaign: Callable[[], int | None]) -> int:
         """Run a new campaign of `plan`; its id once it is in the database (ProcessRefused with
         the command's error line when it ends first). `newest_campaign()`: the id of the newest
         campaign stored with this plan text (None: none)."""

@@ -143,7 +143,9 @@ class LiveState:
         return asdict(self)
 
 
-def decimate(points: list[tuple[float, float]], limit: int = TRACE_POINTS) -> list:
+def decimate(
+    points: list[tuple[float, float]], limit: int = TRACE_POINTS
+) -> list[tuple[float, float]]:
     """At most `limit` points: the lowest and highest value of each of limit/2 equal slices
     (in time order), so that spikes stay visible."""
     if len(points) <= limit:
