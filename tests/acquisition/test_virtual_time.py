@@ -54,14 +54,21 @@ def run_in(folder: Path, monkeypatch: pytest.MonkeyPatch, extra: str = "", **kw)
 
 
 def content(db: Path) -> dict[str, list[tuple]]:
-    """Every table, row by row, without the wall-clock columns."""
+    """Every table, row by row, without the wall-clock columns; the run's folder in stored text
+    (the absolute raw log path in its event) as "RUN"."""
+    folder = str(db.parent.resolve())
+
+    def same(row: tuple) -> tuple:
+        return tuple(c.replace(folder, "RUN") if isinstance(c, str) else c for c in row)
+
     with closing(sqlite3.connect(db)) as conn:
         tables = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")]
         out = {}
         for table in tables:
             columns = [r[1] for r in conn.execute(f"PRAGMA table_info({table})")]
             keep = ", ".join(f'"{c}"' for c in columns if c not in WALL_CLOCK_COLUMNS)
-            out[table] = conn.execute(f'SELECT {keep} FROM "{table}" ORDER BY 1').fetchall()
+            rows = conn.execute(f'SELECT {keep} FROM "{table}" ORDER BY 1').fetchall()
+            out[table] = [same(row) for row in rows]
     return out
 
 
