@@ -3,8 +3,12 @@
 
 from __future__ import annotations
 
+import json
+import os
 import statistics
 import time
+from dataclasses import asdict
+from pathlib import Path
 from types import TracebackType
 
 from rich.console import Console
@@ -14,6 +18,7 @@ from rich.table import Table
 from gyrostand.acquisition.engine import Phase, Snapshot
 
 HEARTBEAT_WALL_S = 60.0  # plain lines: the state again after this long without a line
+LIVE_FILE_WALL_S = 0.1  # the live file: rewritten at most this often
 
 
 def _duration(seconds: float) -> str:
@@ -174,3 +179,34 @@ class PlainProgress:
             emoji=False,
             soft_wrap=True,
         )
+
+
+class LiveFile:
+    """The engine's latest snapshot as JSON (the `Snapshot` fields, phase as text, and the
+    wall time), rewritten at most every `every_s` of wall time by replacing the file (a reader
+    never sees half of it), for the operator station to show a running campaign between the
+    database's writes; deleted when the run ends (the database then holds everything). A file
+    that cannot be written is given up on: the acquisition does not depend on it."""
+
+    def __init__(self, path: Path, every_s: float = LIVE_FILE_WALL_S) -> None:
+        self.path = path
+        self.every_s = every_s
+        self._last = 0.0
+        self._failed = False
+
+    def update(self, snap: Snapshot) -> None:
+        now = time.monotonic()
+        if self._failed or now - self._last < self.every_s:
+            return
+        self._last = now
+        record = {**asdict(snap), "phase": snap.phase.value, "wall_time": time.time()}
+        tmp = self.path.with_suffix(".tmp")
+        try:
+            tmp.write_text(json.dumps(record), encoding="utf-8")
+            os.replace(tmp, self.path)
+        except OSError:
+            self._failed = True
+
+    def close(self) -> None:
+        self.path.unlink(missing_ok=True)
+        self.path.with_suffix(".tmp").unlink(missing_ok=True)

@@ -8,6 +8,7 @@ import hashlib
 from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from pathlib import Path
 
 from sqlalchemy import ColumnElement, func, select
 from sqlalchemy.orm import Session, aliased, selectinload
@@ -373,3 +374,9 @@ def raw_log_segments(session: Session, campaign_id: int) -> list[RawLogSegment]:
             .order_by(RawLogSegment.seq)
         )
     )
+
+
+def live_file_of(raw_log: str | Path) -> Path:
+    """Where a running acquisition keeps its latest progress snapshot (JSON, deleted when the
+    run ends): beside the run's raw log, campaign-ID.live.json."""
+    return Path(raw_log).with_suffix(".live.json")

@@ -34,10 +34,17 @@ from gyrostand.plan.model import PlanError, load_plan
 from gyrostand.station.processes import Processes, ProcessRefused
 from gyrostand.station.security import Access, CrossSite, TokenMiddleware, action_form
 from gyrostand.station.signoff import SignOffRefused, sign_off, sign_offs
-from gyrostand.station.state import campaign_rows, live_state
+from gyrostand.station.state import (
+    campaign_rows,
+    fingerprint,
+    live_file,
+    live_state,
+    read_live,
+)
 
 TICK_S = 0.1
-"""The update stream reads the database this often and pushes what changed."""
+"""The update stream checks the database's fingerprint of the campaign this often and pushes
+the campaign's state when it changed."""
 REPORT_FORMATS = {"html": "html", "html+pdf": "html,pdf"}
 STATIC = Path(__file__).parent / "static"
 
@@ -59,6 +66,11 @@ class Station:
     def read(self, query: Any, *args: Any) -> Any:
         with self.sessions() as session:
             return query(session, *args)
+
+
+def compact(value: Any) -> str:
+    """JSON on one line (an SSE data line)."""
+    return json.dumps(value, separators=(",", ":"))
 
 
 def problems_by_field(problems: list[str]) -> list[tuple[str, str]]:
@@ -142,7 +154,22 @@ def create_app(
             state["status"] = "interrupted"
         state["acquiring"] = running or state["status"] == "running"
         state["process_error"] = None if running else station.processes.error(cid)
+        state["live"] = read_live(station.read(live_file, cid)) if state["acquiring"] else None
         return state
+
+    def live_change(path: Path | None, mtime: int | None) -> tuple[int | None, Any]:
+        """The live file's modification time, and its snapshot when that is not `mtime`."""
+        try:
+            now = None if path is None else path.stat().st_mtime_ns
+        except OSError:
+            now = None
+        return now, (read_live(path) if now is not None and now != mtime else None)
+
+    def changed(cid: int, last: tuple[Any, ...] | None) -> tuple[tuple[Any, ...], bool]:
+        """The campaign's fingerprint (with this server's process state) and whether it
+        differs from `last`."""
+        now = (*station.read(fingerprint, cid), station.processes.running(cid))
+        return now, now != last
 
     async def campaign(request: Request) -> Response:
         cid = campaign_id(request)
@@ -161,17 +188,24 @@ def create_app(
         cid = campaign_id(request)
 
         async def updates() -> AsyncIterator[str]:
+            """The whole state when the database changed; between, the running
+            acquisition's live snapshot whenever it has a new one."""
             yield "retry: 1000\n\n"
-            last = None
+            seen: tuple[Any, ...] | None = None
+            path = await run_in_threadpool(station.read, live_file, cid)
+            mtime: int | None = None
             while not await request.is_disconnected():
-                state = await run_in_threadpool(state_json, cid)
-                data = json.dumps(state, separators=(",", ":"))
-                if data != last:
-                    yield f"event: state\ndata: {data}\n\n"
-                    last = data
-                if not state["acquiring"]:
-                    yield "event: end\ndata: {}\n\n"
-                    return
+                seen, fresh = await run_in_threadpool(changed, cid, seen)
+                if fresh:
+                    state = await run_in_threadpool(state_json, cid)
+                    yield f"event: state\ndata: {compact(state)}\n\n"
+                    if not state["acquiring"]:
+                        yield "event: end\ndata: {}\n\n"
+                        return
+                    path = await run_in_threadpool(station.read, live_file, cid)  # a new run's
+                mtime, snapshot = await run_in_threadpool(live_change, path, mtime)
+                if snapshot is not None and not fresh:
+                    yield f"event: live\ndata: {compact(snapshot)}\n\n"
                 await asyncio.sleep(TICK_S)
 
         return StreamingResponse(

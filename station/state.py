@@ -3,16 +3,18 @@ campaign list and a campaign's live state (progress, current series, trace, even
 
 from __future__ import annotations
 
+import json
 import statistics
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
+from pathlib import Path
 from typing import Any
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from gyrostand.db.models import AnalysisRun, Campaign, Event, Instrument, Observation, Series, Trial
-from gyrostand.db.queries import campaign_summary, latest_attempt
+from gyrostand.db.queries import campaign_summary, latest_attempt, live_file_of, raw_log_segments
 
 TRACE_POINTS = 600
 """Points of the heading trace sent to the page: about what a screen's plot is wide."""
@@ -141,6 +143,47 @@ class LiveState:
 
     def as_json(self) -> dict[str, Any]:
         return asdict(self)
+
+
+def fingerprint(session: Session, campaign_id: int) -> tuple[Any, ...]:
+    """A few aggregates that change whenever the acquisition writes something the campaign
+    page shows (status, an event, an observation, a series' or trial's status): the update
+    stream builds the whole state only when they change."""
+    head = session.execute(
+        select(
+            select(Campaign.status).where(Campaign.id == campaign_id).scalar_subquery(),
+            select(func.max(Event.id)).where(Event.campaign_id == campaign_id).scalar_subquery(),
+            select(func.max(Observation.id))
+            .join(Series, Series.id == Observation.series_id)
+            .join(Trial, Trial.id == Series.trial_id)
+            .where(Trial.campaign_id == campaign_id)
+            .scalar_subquery(),
+        )
+    ).one()
+    steps = session.execute(
+        select(Trial.status, Series.status, func.count())
+        .join(Series, Series.trial_id == Trial.id, isouter=True)
+        .where(Trial.campaign_id == campaign_id)
+        .group_by(Trial.status, Series.status)
+        .order_by(Trial.status, Series.status)
+    ).all()
+    return (*head, *map(tuple, steps))
+
+
+def live_file(session: Session, campaign_id: int) -> Path | None:
+    """The live file of the campaign's latest run (it exists while that run acquires)."""
+    segments = raw_log_segments(session, campaign_id)
+    return live_file_of(segments[-1].path) if segments else None
+
+
+def read_live(path: Path | None) -> dict[str, Any] | None:
+    """The running acquisition's latest snapshot (`acquisition.progress.LiveFile`), or None."""
+    if path is None:
+        return None
+    try:
+        return dict(json.loads(path.read_text(encoding="utf-8")))
+    except (OSError, ValueError):
+        return None
 
 
 def decimate(

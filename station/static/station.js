@@ -45,6 +45,30 @@
     }
   }
 
+  const series = (j) => "j=" + j + (j === 1 ? " (before rocking)" : " (rocking)");
+  let pace = null;  // [stand ms, wall s] of the first live snapshot of this page
+
+  // The running acquisition's own snapshot (between the database's writes).
+  function live(l, counted) {
+    if (counted) window.stationUpdates += 1;
+    if (l.trial === 0) return;
+    $("trial").textContent = l.trial + "/" + l.n_trials;
+    $("series").textContent = series(l.j);
+    $("observation").textContent = l.k + "/" + l.n_obs;
+    $("phase").textContent = l.phase + (l.j === 2 && l.phase !== "done" ? ", rocking" : "");
+    const v = l.values_deg;
+    if (v.length) {
+      const mean = v.reduce((a, b) => a + b, 0) / v.length;
+      const sd = v.length > 1 ? Math.sqrt(v.reduce((a, b) => a + (b - mean) ** 2, 0) / (v.length - 1)) : null;
+      $("mean").textContent = num(mean, 4) + "°" + (sd === null ? "" : " (s = " + num(sd, 4) + "°)");
+    }
+    if (l.settle_spread_deg !== null) $("settle").textContent = "window means within ±" + num(l.settle_spread_deg, 4) + "°";
+    $("stand-time").textContent = hms(l.now_ms / 1000);
+    if (pace === null || l.now_ms < pace[0]) pace = [l.now_ms, l.wall_time];
+    const rate = (l.now_ms - pace[0]) / 1000 / (l.wall_time - pace[1]);
+    $("eta").textContent = "stand " + hms(l.remaining_ms / 1000) + ", wall " + (rate > 0 ? hms(l.remaining_ms / 1000 / rate) : "?");
+  }
+
   function render(s) {
     window.stationUpdates += 1;
     window.stationAcquiring = s.acquiring;
@@ -52,7 +76,7 @@
     $("process-error").textContent = s.process_error || "";
     const c = s.current;
     $("trial").textContent = c ? c.trial + "/" + s.n_trials + (c.attempt > 1 ? " (attempt " + c.attempt + ")" : "") : "-";
-    $("series").textContent = c ? "j=" + c.j + (c.j === 1 ? " (before rocking)" : " (rocking)") : "-";
+    $("series").textContent = c ? series(c.j) : "-";
     $("observation").textContent = c ? c.k + "/" + s.n_obs : "-";
     $("phase").textContent = c ? c.phase : "done";
     $("mean").textContent = c && c.mean_deg !== null ? num(c.mean_deg, 4) + "° (s = " + num(c.spread_deg, 4) + "°)" : "";
@@ -60,6 +84,7 @@
     $("stand-time").textContent = hms(s.stand_time_s);
     $("eta").textContent = "stand " + hms(s.eta_stand_s) + ", wall " + hms(s.eta_wall_s);
     $("observations").textContent = s.observations + "/" + s.observations_planned;
+    if (s.live) live(s.live, false);
     trace(s.trace);
     const trials = $("trials").tBodies[0];
     trials.replaceChildren();
@@ -80,6 +105,7 @@
   if (!initial.acquiring) return;
   const source = new EventSource(location.pathname + "/stream");
   source.addEventListener("state", (ev) => render(JSON.parse(ev.data)));
+  source.addEventListener("live", (ev) => live(JSON.parse(ev.data), true));
   source.addEventListener("end", () => {
     source.close();
     window.stationAcquiring = false;

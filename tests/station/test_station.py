@@ -9,7 +9,7 @@ import pytest
 from sqlalchemy import create_engine, text
 
 from gyrostand.station.security import TOKEN_COOKIE, is_loopback
-from gyrostand.station.state import decimate
+from gyrostand.station.state import decimate, read_live
 
 from .conftest import SERIAL, write_plan
 
@@ -146,3 +146,20 @@ def test_trace_decimation_keeps_extremes() -> None:
     kept = decimate(points, 600)
     assert len(kept) <= 600 and (5000.0, 99.0) in kept and kept == sorted(kept)
     assert decimate(points[:10], 600) == points[:10]
+
+
+def test_live_file_is_read_while_written_and_gone_after_the_run(station_db: Path, tmp_path: Path):
+    from gyrostand.acquisition.engine import Phase, Snapshot
+    from gyrostand.acquisition.progress import LiveFile
+    from gyrostand.db.queries import live_file_of
+
+    assert not list((station_db.parent / "raw").glob("*.live.json"))  # the run deleted it
+    path = live_file_of(tmp_path / "campaign-7.blf")
+    assert path.name == "campaign-7.live.json" and read_live(path) is None
+    live = LiveFile(path, every_s=0.0)
+    live.update(Snapshot(1, 2, 2, 3, 5, Phase.OBSERVE, 61_000, (0.5, 0.7), None, 9_000))
+    snapshot = read_live(path)
+    assert snapshot is not None and snapshot["phase"] == "observing"
+    assert snapshot["now_ms"] == 61_000 and snapshot["values_deg"] == [0.5, 0.7]
+    live.close()
+    assert not path.exists() and read_live(path) is None
