@@ -4,6 +4,7 @@ campaigns (`gyrostand.station`)."""
 from __future__ import annotations
 
 import os
+import socket
 from pathlib import Path
 from typing import Annotated
 
@@ -47,18 +48,15 @@ def register(app: typer.Typer) -> None:
             )
         sessions = open_db(db, must_exist=False)
         access = Access.for_host(host, os.environ.get(TOKEN_ENV) or None)
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        try:
+            listening = socket.create_server((host, port), family=family)
+        except OSError as exc:  # in use, not an address of this machine, a port below 1024
+            fail(f"cannot listen on {host}:{port}: {exc.strerror or exc}", code=EXIT_FAILED)
         address = f"http://{'[' + host + ']' if ':' in host else host}:{port}/"
         if access.token is not None:
             address += f"?token={access.token}"
         typer.echo(f"gyrostand station on {printable(db)}: open {address}", err=True)
         app = create_app(db, sessions, access, reports)
-        config = uvicorn.Config(
-            app, host=host, port=port, log_level="warning", timeout_graceful_shutdown=2
-        )
-        server = uvicorn.Server(config)
-        try:
-            server.run()
-        except OSError as exc:
-            fail(f"cannot listen on {host}:{port}: {exc.strerror or exc}", code=EXIT_FAILED)
-        if not server.started:
-            fail(f"cannot listen on {host}:{port}", code=EXIT_FAILED)
+        config = uvicorn.Config(app, log_level="warning", timeout_graceful_shutdown=2)
+        uvicorn.Server(config).run(sockets=[listening])

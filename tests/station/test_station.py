@@ -163,3 +163,21 @@ def test_live_file_is_read_while_written_and_gone_after_the_run(station_db: Path
     assert snapshot["now_ms"] == 61_000 and snapshot["values_deg"] == [0.5, 0.7]
     live.close()
     assert not path.exists() and read_live(path) is None
+
+
+def test_station_command_refuses_a_port_in_use_in_one_line(tmp_path: Path) -> None:
+    import socket
+
+    from typer.testing import CliRunner
+
+    from gyrostand.cli import app
+
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        port = str(taken.getsockname()[1])
+        result = CliRunner().invoke(
+            app, ["station", "--db", str(tmp_path / "s.db"), "--port", port]
+        )
+    assert result.exit_code == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "in use" in lines[0]
+    assert lines[0].startswith(f"gyrostand: error: cannot listen on 127.0.0.1:{port}: ")
