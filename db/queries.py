@@ -22,6 +22,7 @@ from gyrostand.db.models import (
     Observation,
     RawLogSegment,
     Series,
+    SignOff,
     Trial,
 )
 
@@ -380,3 +381,9 @@ def live_file_of(raw_log: str | Path) -> Path:
     """Where a running acquisition keeps its latest progress snapshot (JSON, deleted when the
     run ends): beside the run's raw log, campaign-ID.live.json."""
     return Path(raw_log).with_suffix(".live.json")
+
+
+def sign_offs(session: Session, campaign_id: int) -> dict[str, SignOff]:
+    """The campaign's signatures (entered at the operator station) by role."""
+    rows = session.scalars(select(SignOff).where(SignOff.campaign_id == campaign_id))
+    return {s.role: s for s in rows}

@@ -30,10 +30,11 @@ from starlette.templating import Jinja2Templates
 
 from gyrostand.db.lease import held_elsewhere
 from gyrostand.db.models import CAMPAIGN_STATUSES, Campaign
+from gyrostand.db.queries import sign_offs
 from gyrostand.plan.model import PlanError, load_plan
 from gyrostand.station.processes import Processes, ProcessRefused
 from gyrostand.station.security import Access, CrossSite, TokenMiddleware, action_form
-from gyrostand.station.signoff import SignOffRefused, sign_off, sign_offs
+from gyrostand.station.signoff import SignOffRefused, sign_off
 from gyrostand.station.state import (
     campaign_rows,
     fingerprint,

@@ -3,24 +3,16 @@ who tested it and who checked it."""
 
 from __future__ import annotations
 
-from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from gyrostand.db.models import SIGN_OFF_ROLES, Campaign, SignOff
+from gyrostand.db.queries import sign_offs
 
 ROLE_NAMES = {"tested_by": "tested by", "checked_by": "checked by"}
 
 
 class SignOffRefused(ValueError):
     """A sign-off that cannot be stored (one line why)."""
-
-
-def sign_offs(session: Session, campaign_id: int) -> dict[str, SignOff]:
-    """The campaign's signatures by role."""
-    return {
-        s.role: s
-        for s in session.scalars(select(SignOff).where(SignOff.campaign_id == campaign_id))
-    }
 
 
 def sign_off(session: Session, campaign_id: int, role: str, name: str) -> SignOff:

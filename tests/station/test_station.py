@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 from sqlalchemy import create_engine, text
 
+from gyrostand.cmd_report import write_campaign_report
 from gyrostand.station.security import TOKEN_COOKIE, is_loopback
 from gyrostand.station.state import decimate, read_live
 
@@ -102,7 +103,8 @@ def test_cross_site_actions_are_refused(client_for) -> None:
     assert ok.status_code == 303
 
 
-def test_sign_off_is_stored_tested_then_checked_by_someone_else(client_for) -> None:
+def test_sign_off_is_stored_tested_then_checked_by_someone_else(client_for, tmp_path: Path) -> None:
+    """... and the report names who signed off (the signatures themselves stay by hand)."""
     client = client_for()
 
     def sign(role: str, name: str) -> str:
@@ -116,6 +118,10 @@ def test_sign_off_is_stored_tested_then_checked_by_someone_else(client_for) -> N
     assert '<span class="signed">&lt;b&gt;A. Tester&lt;/b&gt;</span>' in page
     assert '<span class="signed">B. Checker</span>' in page
     assert "already signed" in sign("tested_by", "C")
+    report = write_campaign_report(str(tmp_path / "db.sqlite"), 1, tmp_path / "r", ("html",))
+    block = report["html"].read_text().split('<section id="signatures">')[1].split("</section>")[0]
+    assert "<td>&lt;b&gt;A. Tester&lt;/b&gt;</td><td></td><td>20" in block  # name, by hand, date
+    assert "<td>B. Checker</td>" in block
 
 
 def test_schema_0006_downgrade_refuses_while_signed(client_for, tmp_path: Path) -> None:
