@@ -192,6 +192,7 @@ def run_live(
                     raw = RawFrames.from_messages(position, msgs)
                     batch = decoder.decode(raw)
                     engine.feed(batch)
+                    live_file.headings(batch.headings)
                     if grants is not None:  # the log ends where the campaign did
                         keep = engine.consumed - position
                         times_s = stream_clock.times_s(batch, position)[:keep]

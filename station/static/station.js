@@ -24,10 +24,10 @@
     tbody.appendChild(tr);
   }
 
-  function trace(points) {
-    const svg = $("trace");
+  function trace(points, id = "trace") {
+    const svg = $(id);
     svg.replaceChildren();
-    $("trace-points").textContent = String(points.length);
+    $(id + "-points").textContent = String(points.length);
     if (!points.length) return;
     const ns = "http://www.w3.org/2000/svg", W = 600, H = 220, pad = 30;
     const xs = points.map((p) => p[0]), ys = points.map((p) => p[1]);
@@ -64,6 +64,8 @@
     }
     if (l.settle_spread_deg !== null) $("settle").textContent = "window means within ±" + num(l.settle_spread_deg, 4) + "°";
     $("stand-time").textContent = hms(l.now_ms / 1000);
+    $("heading-figure").hidden = false;
+    trace(l.heading_trace, "heading");
     if (pace === null || l.now_ms < pace[0]) pace = [l.now_ms, l.wall_time];
     const rate = (l.now_ms - pace[0]) / 1000 / (l.wall_time - pace[1]);
     $("eta").textContent = "stand " + hms(l.remaining_ms / 1000) + ", wall " + (rate > 0 ? hms(l.remaining_ms / 1000 / rate) : "?");
@@ -85,6 +87,7 @@
     $("eta").textContent = "stand " + hms(s.eta_stand_s) + ", wall " + hms(s.eta_wall_s);
     $("observations").textContent = s.observations + "/" + s.observations_planned;
     if (s.live) live(s.live, false);
+    else $("heading-figure").hidden = true;
     trace(s.trace);
     const trials = $("trials").tBodies[0];
     trials.replaceChildren();

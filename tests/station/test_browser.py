@@ -1,6 +1,6 @@
 """End to end in a real headless browser (Debian's chromium and chromium-driver, driven by
 Selenium): open the station, start the small simulated plan, watch the live trace grow, stop
-it, resume it, open the report. The campaign page's screenshot is written to
+it, resume it, open the report. The campaign page's screenshot while it runs is written to
 GYROSTAND_STATION_SCREENSHOT (default: the test's temporary folder) and its path printed."""
 
 import functools
@@ -108,6 +108,12 @@ def test_start_watch_stop_resume_report_in_a_browser(station: str, browser, tmp_
     browser.find_element(By.CSS_SELECTOR, "#start button").click()
     wait.until(lambda b: b.current_url.endswith("/campaigns/1"))
     wait.until(lambda b: trace_points() >= 1)  # pushed by the stream: the trace grows
+    assert int(text("heading-points")) > 0  # the acquisition's live heading trace
+    # the screenshot while it runs
+    screenshot = Path(os.environ.get("GYROSTAND_STATION_SCREENSHOT", tmp_path / "campaign.png"))
+    screenshot.parent.mkdir(parents=True, exist_ok=True)
+    assert browser.save_screenshot(str(screenshot))
+    print(f"campaign page screenshot: {screenshot}")
     first = trace_points()
     updates = browser.execute_script("return window.stationUpdates")
     browser.find_element(By.ID, "stop").click()
@@ -121,10 +127,6 @@ def test_start_watch_stop_resume_report_in_a_browser(station: str, browser, tmp_
     wait.until(lambda b: text("status") == "completed")
     assert trace_points() == 12 > stopped_at  # 2 trials x 2 series x N = 3
     assert text("observations") == "12/12"
-    screenshot = Path(os.environ.get("GYROSTAND_STATION_SCREENSHOT", tmp_path / "campaign.png"))
-    screenshot.parent.mkdir(parents=True, exist_ok=True)
-    assert browser.save_screenshot(str(screenshot))
-    print(f"campaign page screenshot: {screenshot}")
 
     browser.find_element(By.ID, "report").click()
     link = wait.until(lambda b: b.find_element(By.CSS_SELECTOR, "#reports a"))

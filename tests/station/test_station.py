@@ -171,6 +171,31 @@ def test_live_file_is_read_while_written_and_gone_after_the_run(station_db: Path
     assert not path.exists() and read_live(path) is None
 
 
+def test_live_heading_trace_keeps_extremes_of_the_last_20_minutes(tmp_path: Path) -> None:
+    import numpy as np
+
+    from gyrostand.acquisition.engine import Phase, Snapshot
+    from gyrostand.acquisition.progress import LiveFile
+    from gyrostand.frames.batch import Headings
+
+    def batch(t_ms: list[int], deg: list[float], valid: list[int]) -> Headings:
+        n = len(t_ms)
+        return Headings(np.arange(n), np.array(t_ms), np.array(deg), np.array(valid), np.zeros(n))
+
+    live = LiveFile(tmp_path / "live.json", every_s=0.0)
+    snap = Snapshot(1, 2, 1, 1, 5, Phase.SETTLE, 0, (), 0.1, 9_000)
+    live.headings(batch([1000, 0, 5000, 3000], [3.0, 1.0, 2.0, 99.0], [1, 1, 1, 0]))
+    live.update(snap)
+    assert read_live(tmp_path / "live.json")["heading_trace"] == [
+        [2.0, 1.0],
+        [2.0, 3.0],
+        [6.0, 2.0],
+    ]
+    live.headings(batch([2_000_000], [7.0], [1]))  # 20 min later: the early slices are gone
+    live.update(snap)
+    assert read_live(tmp_path / "live.json")["heading_trace"] == [[2002.0, 7.0]]
+
+
 def test_station_command_refuses_a_port_in_use_in_one_line(tmp_path: Path) -> None:
     import socket
 
