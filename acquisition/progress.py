@@ -3,17 +3,26 @@
 
 from __future__ import annotations
 
+import json
+import os
 import statistics
 import time
+from dataclasses import asdict
+from pathlib import Path
 from types import TracebackType
 
+import numpy as np
 from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
 from gyrostand.acquisition.engine import Phase, Snapshot
+from gyrostand.frames.batch import Headings
 
 HEARTBEAT_WALL_S = 60.0  # plain lines: the state again after this long without a line
+LIVE_FILE_WALL_S = 0.1  # the live file: rewritten at most this often
+LIVE_TRACE_SPAN_MS = 1_200_000  # the live file's heading trace: the last 20 min of stand time
+LIVE_TRACE_BUCKETS = 300  # ... as the lowest and highest valid reading of each of these slices
 
 
 def _duration(seconds: float) -> str:
@@ -174,3 +183,71 @@ class PlainProgress:
             emoji=False,
             soft_wrap=True,
         )
+
+
+class LiveFile:
+    """The engine's latest snapshot as JSON (the `Snapshot` fields, phase as text, the wall
+    time and `heading_trace`: [stand s, deg] of the valid headings of the last 20 minutes of
+    stand time, lowest and highest of each 4 s slice), rewritten at most every `every_s` of
+    wall time by replacing the file (a reader never sees half of it), for the operator station
+    to show a running campaign between the database's writes; deleted when the run ends (the
+    database then holds everything). A file that cannot be written is given up on: the
+    acquisition does not depend on it."""
+
+    def __init__(self, path: Path, every_s: float = LIVE_FILE_WALL_S) -> None:
+        self.path = path
+        self.every_s = every_s
+        self._last = 0.0
+        self._failed = False
+        self._slice_ms = LIVE_TRACE_SPAN_MS // LIVE_TRACE_BUCKETS
+        self._extremes: dict[int, tuple[float, float]] = {}  # slice -> lowest, highest
+
+    def headings(self, headings: Headings) -> None:
+        """Fold a batch's valid headings into the trace (vectorised: once per batch)."""
+        valid = headings.valid.astype(bool)
+        if self._failed or not valid.any():
+            return
+        order = np.argsort(headings.t_ms[valid], kind="stable")
+        slices = headings.t_ms[valid][order] // self._slice_ms
+        values = headings.heading_deg[valid][order]
+        keys, starts = np.unique(slices, return_index=True)
+        lows = np.minimum.reduceat(values, starts)
+        highs = np.maximum.reduceat(values, starts)
+        for key, low, high in zip(keys.tolist(), lows.tolist(), highs.tolist(), strict=True):
+            if key in self._extremes:
+                was = self._extremes[key]
+                low, high = min(low, was[0]), max(high, was[1])
+            self._extremes[key] = (low, high)
+        oldest = int(keys[-1]) - LIVE_TRACE_BUCKETS
+        for key in [k for k in self._extremes if k <= oldest]:
+            del self._extremes[key]
+
+    def _trace(self) -> list[tuple[float, float]]:
+        trace = []
+        for key in sorted(self._extremes):
+            t_s = (key + 0.5) * self._slice_ms / 1000
+            low, high = self._extremes[key]
+            trace += [(t_s, low), (t_s, high)] if high > low else [(t_s, low)]
+        return trace
+
+    def update(self, snap: Snapshot) -> None:
+        now = time.monotonic()
+        if self._failed or now - self._last < self.every_s:
+            return
+        self._last = now
+        record = {
+            **asdict(snap),
+            "phase": snap.phase.value,
+            "wall_time": time.time(),
+            "heading_trace": self._trace(),
+        }
+        tmp = self.path.with_suffix(".tmp")
+        try:
+            tmp.write_text(json.dumps(record), encoding="utf-8")
+            os.replace(tmp, self.path)
+        except OSError:
+            self._failed = True
+
+    def close(self) -> None:
+        self.path.unlink(missing_ok=True)
+        self.path.with_suffix(".tmp").unlink(missing_ok=True)

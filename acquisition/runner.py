@@ -22,11 +22,11 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand.acquisition.bus import LiveBus, sim_config
 from gyrostand.acquisition.engine import Command, CommandNotSent, Engine, Phase
-from gyrostand.acquisition.progress import ProgressDisplay
+from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.acquisition.virtual_time import Grants, StreamClock
 from gyrostand.db.models import Campaign, Observation, Series, Trial
-from gyrostand.db.queries import latest_attempt, raw_log_segments, stand_campaign
+from gyrostand.db.queries import latest_attempt, live_file_of, raw_log_segments, stand_campaign
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.plan.codec import codec_for
@@ -163,6 +163,7 @@ def run_live(
         )
     position, dropped, errors, log_failed = 0, 0, 0, False
     last_frame = time.monotonic()
+    live_file = LiveFile(live_file_of(raw_log))
     try:
         with _stop_on_signals(stop), ProgressDisplay(quiet=quiet) as display:
             while engine.phase is not Phase.DONE:
@@ -191,6 +192,7 @@ def run_live(
                     raw = RawFrames.from_messages(position, msgs)
                     batch = decoder.decode(raw)
                     engine.feed(batch)
+                    live_file.headings(batch.headings)
                     if grants is not None:  # the log ends where the campaign did
                         keep = engine.consumed - position
                         times_s = stream_clock.times_s(batch, position)[:keep]
@@ -206,8 +208,11 @@ def run_live(
                     if time.monotonic() - last_frame > silence_wall_s:
                         engine.fail(silence, kind="bus silence")
                         last_frame = time.monotonic()
-                display.update(engine.snapshot())
+                snapshot = engine.snapshot()
+                display.update(snapshot)
+                live_file.update(snapshot)
     finally:
+        live_file.close()
         live.close()
         sha = sha256_of(raw_log)
         store.close_segment(segment, live.recorder.logged, sha)

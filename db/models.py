@@ -399,3 +399,26 @@ class AnalysisRun(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
 
     campaign: Mapped[Campaign] = relationship(back_populates="analysis_runs")
+
+
+SIGN_OFF_ROLES = ("tested_by", "checked_by")
+
+
+class SignOff(Base):
+    """A signature on a campaign's report: who tested it, who checked it (ISO/IEC 17025, 7.8.2),
+    entered at the operator station. One per role; the checker is not the tester."""
+
+    __tablename__ = "sign_off"
+    __table_args__ = (
+        UniqueConstraint("campaign_id", "role"),
+        CheckConstraint(one_of("role", SIGN_OFF_ROLES), name="role"),
+        CheckConstraint("length(name) > 0", name="name"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(
+        ForeignKey("campaign.id", ondelete="CASCADE"), index=True
+    )
+    role: Mapped[str] = mapped_column(String(16))
+    name: Mapped[str] = mapped_column(String(200))
+    signed_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)

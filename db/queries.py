@@ -9,6 +9,7 @@ import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from pathlib import Path
 from typing import Any
 
 from sqlalchemy import ColumnElement, func, select
@@ -25,6 +26,7 @@ from gyrostand.db.models import (
     Observation,
     RawLogSegment,
     Series,
+    SignOff,
     Trial,
 )
 
@@ -554,3 +556,15 @@ def model_campaigns(session: Session, model: str, key: str) -> list[AnalysedCamp
         AnalysedCampaign(campaign_id, serial, value, _utc(started), results)
         for campaign_id, serial, value, started, results in rows
     ]
+
+
+def live_file_of(raw_log: str | Path) -> Path:
+    """Where a running acquisition keeps its latest progress snapshot (JSON, deleted when the
+    run ends): beside the run's raw log, campaign-ID.live.json."""
+    return Path(raw_log).with_suffix(".live.json")
+
+
+def sign_offs(session: Session, campaign_id: int) -> dict[str, SignOff]:
+    """The campaign's signatures (entered at the operator station) by role."""
+    rows = session.scalars(select(SignOff).where(SignOff.campaign_id == campaign_id))
+    return {s.role: s for s in rows}

@@ -29,6 +29,7 @@ from gyrostand import (
     cmd_plan,
     cmd_report,
     cmd_simulate,
+    cmd_station,
 )
 from gyrostand.errors import unexpected, usage_error
 
@@ -172,6 +173,7 @@ for module in (
     cmd_data,
     cmd_fleet,
     cmd_demo,
+    cmd_station,
 ):
     module.register(app)
 use_help_layout(app)

@@ -55,7 +55,8 @@ Schema ``gyrostand.report/3`` (plain JSON types; absent values are null). Versio
   ``rice`` {sigma_dot, upcrossings_upper, downcrossings_lower, mean_excursions, bandwidth,
   p_poisson, p_vanmarcke} or null), risk (an upper bound when is_bound),
   tolerance_for_max_risk_deg, verdict, detail} or null, acceptance_note;
-- ``signatures``: recorded_operator (the signature lines are filled in by hand).
+- ``signatures``: recorded_operator; tested_by, checked_by: [name, date] signed off at the
+  operator station, or null (the signatures themselves are by hand).
 """
 
 import json

@@ -204,10 +204,13 @@ class ExcursionCriterion:
 
 @dataclass(frozen=True)
 class Signatures:
-    """The signature block: lines to fill in by hand. ``recorded_operator`` is who ran the
-    campaign as the database records it (shown beside, never as a signature)."""
+    """The signature block: lines to sign by hand. ``recorded_operator`` is who ran the
+    campaign as the database records it (shown beside, never as a signature); ``tested_by``
+    and ``checked_by`` (name, UTC date) were signed off at the operator station (None: not)."""
 
     recorded_operator: str
+    tested_by: tuple[str, str] | None = None
+    checked_by: tuple[str, str] | None = None
 
 
 @dataclass(frozen=True)

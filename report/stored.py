@@ -42,7 +42,7 @@ from gyrostand.analysis.gyro_model import KnownConstants
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.trials import SeriesSummary, TrialInput, series_moments
 from gyrostand.db.models import AnalysisRun, Campaign, Series, Trial
-from gyrostand.db.queries import campaign_constants, current_trials, load_campaign
+from gyrostand.db.queries import campaign_constants, current_trials, load_campaign, sign_offs
 from gyrostand.frames.logfile import sha256_of
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import PartialPlan, Plan, PlanError, ReportPlan, parse_any_plan
@@ -629,11 +629,20 @@ def report_inputs(
         events=_events(campaign),
         records=records,
         raw_log_note=note,
-        signatures=Signatures(recorded_operator=campaign.operator),
+        signatures=_signatures(session, campaign),
         reading=reading,
         reading_note=reading_note,
         acceptance=acceptance,
     )
+
+
+def _signatures(session: Session, campaign: Campaign) -> Signatures:
+    """The signature block: the recorded operator and the station's sign-offs."""
+    signed = {
+        role: (s.name, s.signed_at.strftime("%Y-%m-%d"))
+        for role, s in sign_offs(session, campaign.id).items()
+    }
+    return Signatures(campaign.operator, signed.get("tested_by"), signed.get("checked_by"))
 
 
 def campaign_report(

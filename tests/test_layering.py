@@ -8,6 +8,8 @@ folders stay at the top of the repository; pyproject maps them to `gyrostand.<fo
 - `acquisition` (the write side) imports stand, db, analysis, plan, frames;
 - `report` (the read side: stored campaign -> analysis -> report/export) imports db, analysis,
   plan, frames, stand and never acquisition;
+- `station` (the operator station, a web page) reads db and checks plans with plan; it starts
+  the acquisition and the report as `gyrostand` processes, never importing acquisition or report;
 - the CLI modules in `gyrostand/` import everything. The package root (`from gyrostand import
   SOFTWARE_VERSION`) is importable from every layer.
 """
@@ -27,7 +29,8 @@ ALLOWED = {
     "frames": {"stand"},
     "acquisition": {"stand", "db", "analysis", "plan", "frames"},
     "report": {"db", "analysis", "plan", "frames", "stand"},
-    CLI: {"acquisition", "analysis", "stand", "db", "plan", "frames", "report"},
+    "station": {"db", "plan"},
+    CLI: {"acquisition", "analysis", "stand", "db", "plan", "frames", "report", "station"},
 }
 LAYERS = set(ALLOWED) - {CLI}
 

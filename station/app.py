@@ -1,0 +1,306 @@
+"""The station's web application (Starlette): pages, actions and the update stream.
+
+Routes: `/` campaigns (filter by status and text), `/campaigns/new` start form, POST
+`/campaigns` start, `/campaigns/{id}` campaign page, `/campaigns/{id}/stream` its updates as
+server-sent events, POST `/campaigns/{id}/stop|resume|retry|report|signoff`, and
+`/campaigns/{id}/files/{name}` its report files."""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import json
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlencode
+
+from jinja2 import Environment, PackageLoader, select_autoescape
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session, sessionmaker
+from starlette.applications import Starlette
+from starlette.concurrency import run_in_threadpool
+from starlette.exceptions import HTTPException
+from starlette.requests import Request
+from starlette.responses import FileResponse, RedirectResponse, Response, StreamingResponse
+from starlette.routing import Mount, Route
+from starlette.staticfiles import StaticFiles
+from starlette.templating import Jinja2Templates
+
+from gyrostand.db.lease import held_elsewhere
+from gyrostand.db.models import CAMPAIGN_STATUSES, Campaign
+from gyrostand.db.queries import sign_offs
+from gyrostand.plan.model import PlanError, load_plan
+from gyrostand.station.processes import Processes, ProcessRefused
+from gyrostand.station.security import Access, CrossSite, TokenMiddleware, action_form
+from gyrostand.station.signoff import SignOffRefused, sign_off
+from gyrostand.station.state import (
+    campaign_rows,
+    fingerprint,
+    live_file,
+    live_state,
+    read_live,
+)
+
+TICK_S = 0.1
+"""The update stream checks the database's fingerprint of the campaign this often and pushes
+the campaign's state when it changed."""
+REPORT_FORMATS = {"html": "html", "html+pdf": "html,pdf"}
+STATIC = Path(__file__).parent / "static"
+
+
+@dataclass(frozen=True)
+class Station:
+    """What the routes share: the database, the processes, the secrets, the report folder."""
+
+    sessions: sessionmaker[Session]
+    processes: Processes
+    access: Access
+    reports: Path
+    templates: Jinja2Templates
+
+    def page(self, request: Request, name: str, code: int = 200, **context: Any) -> Response:
+        context.update(csrf=self.access.csrf)
+        return self.templates.TemplateResponse(request, name, context, status_code=code)
+
+    def read(self, query: Any, *args: Any) -> Any:
+        with self.sessions() as session:
+            return query(session, *args)
+
+
+def compact(value: Any) -> str:
+    """JSON on one line (an SSE data line)."""
+    return json.dumps(value, separators=(",", ":"))
+
+
+def problems_by_field(problems: list[str]) -> list[tuple[str, str]]:
+    """PlanError's "[table] key: message" lines as (field, message)."""
+    pairs = []
+    for problem in problems:
+        where, sep, message = problem.partition(": ")
+        pairs.append((where, message) if sep and where.startswith("[") else ("", problem))
+    return pairs
+
+
+def create_app(
+    db: str, sessions: sessionmaker[Session], access: Access, reports: Path
+) -> Starlette:
+    """The station on database `db` (its session factory `sessions`), writing reports under
+    `reports`."""
+    env = Environment(
+        loader=PackageLoader("gyrostand.station", "templates"),
+        autoescape=select_autoescape(default=True, default_for_string=True),
+    )
+    station = Station(sessions, Processes(db), access, reports, Jinja2Templates(env=env))
+
+    def campaign_id(request: Request) -> int:
+        cid = int(request.path_params["campaign_id"])
+        with sessions() as session:
+            if session.get(Campaign, cid) is None:
+                raise HTTPException(404, f"no campaign {cid} in the database")
+        return cid
+
+    async def campaigns(request: Request) -> Response:
+        status = request.query_params.get("status", "")
+        text = request.query_params.get("q", "")
+        rows = await run_in_threadpool(
+            lambda: station.read(lambda s: campaign_rows(s, status=status, text=text))
+        )
+        return station.page(
+            request,
+            "campaigns.html.j2",
+            rows=rows,
+            status=status,
+            q=text,
+            statuses=CAMPAIGN_STATUSES,
+        )
+
+    async def new(request: Request) -> Response:
+        return station.page(request, "start.html.j2", plan="", problems=[])
+
+    async def start(request: Request) -> Response:
+        form = await action_form(request, access)
+        path = str(form.get("plan", "")).strip()
+        try:
+            if not path:
+                raise PlanError(["plan: give the path of a plan file on this machine"])
+            plan = load_plan(Path(path))
+            digest = hashlib.sha256(plan.text.encode()).hexdigest()
+
+            def newest() -> int | None:
+                return station.read(
+                    lambda s: s.scalar(
+                        select(func.max(Campaign.id)).where(Campaign.plan_hash == digest)
+                    )
+                )
+
+            cid = await station.processes.start(Path(path).resolve(), newest)
+        except PlanError as exc:
+            return station.page(
+                request,
+                "start.html.j2",
+                400,
+                plan=path,
+                problems=problems_by_field(exc.problems),
+            )
+        except ProcessRefused as exc:
+            return station.page(request, "start.html.j2", 400, plan=path, problems=[("", str(exc))])
+        return RedirectResponse(f"/campaigns/{cid}", status_code=303)
+
+    def state_json(cid: int) -> dict[str, Any]:
+        state = station.read(live_state, cid).as_json()
+        running = station.processes.running(cid)
+        if state["status"] == "running" and not running and not held_elsewhere(sessions, cid):
+            state["status"] = "interrupted"
+        state["acquiring"] = running or state["status"] == "running"
+        state["process_error"] = None if running else station.processes.error(cid)
+        state["live"] = read_live(station.read(live_file, cid)) if state["acquiring"] else None
+        return state
+
+    def live_change(path: Path | None, mtime: int | None) -> tuple[int | None, Any]:
+        """The live file's modification time, and its snapshot when that is not `mtime`."""
+        try:
+            now = None if path is None else path.stat().st_mtime_ns
+        except OSError:
+            now = None
+        return now, (read_live(path) if now is not None and now != mtime else None)
+
+    def changed(cid: int, last: tuple[Any, ...] | None) -> tuple[tuple[Any, ...], bool]:
+        """The campaign's fingerprint (with this server's process state) and whether it
+        differs from `last`."""
+        now = (*station.read(fingerprint, cid), station.processes.running(cid))
+        return now, now != last
+
+    async def campaign(request: Request) -> Response:
+        cid = campaign_id(request)
+        state = await run_in_threadpool(state_json, cid)
+        signed = await run_in_threadpool(station.read, sign_offs, cid)
+        return station.page(
+            request,
+            "campaign.html.j2",
+            state=state,
+            signed=signed,
+            reports=sorted(p.name for p in (station.reports / str(cid)).glob("campaign-*")),
+            message=request.query_params.get("message", ""),
+        )
+
+    async def stream(request: Request) -> Response:
+        cid = campaign_id(request)
+
+        async def updates() -> AsyncIterator[str]:
+            """The whole state when the database changed; between, the running
+            acquisition's live snapshot whenever it has a new one."""
+            yield "retry: 1000\n\n"
+            seen: tuple[Any, ...] | None = None
+            path = await run_in_threadpool(station.read, live_file, cid)
+            mtime: int | None = None
+            while not await request.is_disconnected():
+                seen, fresh = await run_in_threadpool(changed, cid, seen)
+                if fresh:
+                    state = await run_in_threadpool(state_json, cid)
+                    yield f"event: state\ndata: {compact(state)}\n\n"
+                    if not state["acquiring"]:
+                        yield "event: end\ndata: {}\n\n"
+                        return
+                    path = await run_in_threadpool(station.read, live_file, cid)  # a new run's
+                mtime, snapshot = await run_in_threadpool(live_change, path, mtime)
+                if snapshot is not None and not fresh:
+                    yield f"event: live\ndata: {compact(snapshot)}\n\n"
+                await asyncio.sleep(TICK_S)
+
+        return StreamingResponse(
+            updates(),
+            media_type="text/event-stream",
+            headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"},
+        )
+
+    def back(cid: int, message: str = "") -> Response:
+        suffix = f"?{urlencode({'message': message})}" if message else ""
+        return RedirectResponse(f"/campaigns/{cid}{suffix}", status_code=303)
+
+    async def stop(request: Request) -> Response:
+        cid = campaign_id(request)
+        await action_form(request, access)
+        try:
+            station.processes.stop(cid)
+        except ProcessRefused as exc:
+            return back(cid, str(exc))
+        return back(cid, "stop requested: the stand stops rocking, everything is committed")
+
+    async def resume(request: Request) -> Response:
+        cid = campaign_id(request)
+        form = await action_form(request, access)
+        retry: list[int] = []
+        if "trial" in form:
+            try:
+                retry = [int(str(form["trial"]))]
+            except ValueError:
+                return back(cid, f"trial: not a trial number: {form['trial']}")
+        try:
+            station.processes.resume(cid, retry)
+        except ProcessRefused as exc:
+            return back(cid, str(exc))
+        return back(cid)
+
+    async def report(request: Request) -> Response:
+        cid = campaign_id(request)
+        form = await action_form(request, access)
+        formats = REPORT_FORMATS.get(str(form.get("formats", "html")), "html")
+        try:
+            await station.processes.report(cid, station.reports / str(cid), formats)
+        except ProcessRefused as exc:
+            return back(cid, str(exc))
+        return back(cid, "report written")
+
+    async def signoff(request: Request) -> Response:
+        cid = campaign_id(request)
+        form = await action_form(request, access)
+        try:
+            await run_in_threadpool(
+                _write, sessions, cid, str(form.get("role", "")), str(form.get("name", ""))
+            )
+        except SignOffRefused as exc:
+            return back(cid, str(exc))
+        return back(cid, "signed")
+
+    async def files(request: Request) -> Response:
+        cid = campaign_id(request)
+        name = request.path_params["name"]
+        folder = (station.reports / str(cid)).resolve()
+        path = (folder / name).resolve()
+        if path.parent != folder or not name.startswith(f"campaign-{cid}") or not path.is_file():
+            raise HTTPException(404, f"no report file {name} for campaign {cid}")
+        return FileResponse(path)
+
+    async def refused(request: Request, exc: Exception) -> Response:
+        return Response(str(exc), status_code=403, media_type="text/plain")
+
+    async def not_found(request: Request, exc: Exception) -> Response:
+        assert isinstance(exc, HTTPException)
+        return Response(str(exc.detail), status_code=exc.status_code, media_type="text/plain")
+
+    app = Starlette(
+        routes=[
+            Route("/", campaigns),
+            Route("/campaigns/new", new),
+            Route("/campaigns", start, methods=["POST"]),
+            Route("/campaigns/{campaign_id:int}", campaign),
+            Route("/campaigns/{campaign_id:int}/stream", stream),
+            Route("/campaigns/{campaign_id:int}/stop", stop, methods=["POST"]),
+            Route("/campaigns/{campaign_id:int}/resume", resume, methods=["POST"]),
+            Route("/campaigns/{campaign_id:int}/report", report, methods=["POST"]),
+            Route("/campaigns/{campaign_id:int}/signoff", signoff, methods=["POST"]),
+            Route("/campaigns/{campaign_id:int}/files/{name}", files),
+            Mount("/static", StaticFiles(directory=STATIC), name="static"),
+        ],
+        exception_handlers={CrossSite: refused, HTTPException: not_found},
+    )
+    app.add_middleware(TokenMiddleware, access=access)
+    app.state.processes = station.processes  # for a host that ends them (the tests)
+    return app
+
+
+def _write(sessions: sessionmaker[Session], cid: int, role: str, name: str) -> None:
+    with sessions.begin() as session:
+        sign_off(session, cid, role, name)

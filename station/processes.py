@@ -1,0 +1,136 @@
+"""The processes the station starts: `gyrostand campaign run|resume|retry` (the acquisition,
+never inside the web server) and `gyrostand report`. A stop is SIGTERM, which the campaign
+commands handle as a safe stop (the stand told to stop rocking, everything committed)."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+GYROSTAND = (sys.executable, "-m", "gyrostand")
+START_WAIT_S = 60.0
+"""How long a new campaign may take to appear in the database (imports, bus, raw log folder)."""
+
+
+class ProcessRefused(RuntimeError):
+    """A command the station started ended with an error before doing its work (its one line)."""
+
+
+@dataclass
+class Acquisition:
+    """A `gyrostand campaign ...` process of this server, and its stderr."""
+
+    process: subprocess.Popen[bytes]
+    stderr: IO[bytes]
+    what: str
+
+    @property
+    def running(self) -> bool:
+        return self.process.poll() is None
+
+    def error(self) -> str | None:
+        """The process's last error line, once it has ended with a non-zero exit code."""
+        code = self.process.poll()
+        if code is None or code == 0:
+            return None
+        self.stderr.seek(0)
+        lines = self.stderr.read().decode(errors="replace").strip().splitlines()
+        errors = [line for line in lines if line.startswith("gyrostand: ")]
+        return (errors or lines or [f"{self.what} ended with exit code {code}"])[-1]
+
+
+@dataclass
+class Processes:
+    """The acquisitions this server started, by campaign id (at most one live per campaign:
+    the campaign's lease refuses a second one anyway)."""
+
+    db: str
+    command: Sequence[str] = GYROSTAND
+    acquisitions: dict[int, Acquisition] = field(default_factory=dict)
+
+    def _spawn(self, args: Sequence[str], what: str) -> Acquisition:
+        stderr = tempfile.TemporaryFile()  # noqa: SIM115 (kept with the process, read at its end)
+        process = subprocess.Popen(
+            [*self.command, *args, "--db", self.db, "--quiet"],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=stderr,
+            start_new_session=True,  # a Ctrl-C on the server is not a stop of the campaign
+        )
+        return Acquisition(process, stderr, what)
+
+    def running(self, campaign_id: int) -> bool:
+        acquisition = self.acquisitions.get(campaign_id)
+        return acquisition is not None and acquisition.running
+
+    def error(self, campaign_id: int) -> str | None:
+        acquisition = self.acquisitions.get(campaign_id)
+        return None if acquisition is None else acquisition.error()
+
+    async def start(self, plan: Path, newest_campaign: Callable[[], int | None]) -> int:
+        """Run a new campaign of `plan`; its id once it is in the database (ProcessRefused with
+        the command's error line when it ends first). `newest_campaign()`: the id of the newest
+        campaign stored with this plan text (None: none)."""
+        before = newest_campaign()
+        acquisition = self._spawn(["campaign", "run", str(plan)], "campaign run")
+        deadline = time.monotonic() + START_WAIT_S
+        while time.monotonic() < deadline:
+            campaign_id = newest_campaign()
+            if campaign_id is not None and campaign_id != before:
+                self.acquisitions[campaign_id] = acquisition
+                return campaign_id
+            if not acquisition.running:
+                raise ProcessRefused(acquisition.error() or "campaign run stored no campaign")
+            await asyncio.sleep(0.05)
+        acquisition.process.terminate()
+        raise ProcessRefused(f"no campaign stored after {START_WAIT_S:.0f} s: stopped the run")
+
+    def resume(self, campaign_id: int, retry: Sequence[int] = ()) -> None:
+        """`campaign resume ID`, or `campaign retry ID --trial I ...` when `retry` names trials."""
+        if self.running(campaign_id):
+            raise ProcessRefused(f"campaign {campaign_id} is being acquired by this station")
+        if retry:
+            trials = [a for index in retry for a in ("--trial", str(index))]
+            args = ["campaign", "retry", str(campaign_id), *trials]
+        else:
+            args = ["campaign", "resume", str(campaign_id)]
+        self.acquisitions[campaign_id] = self._spawn(args, args[1])
+
+    def stop(self, campaign_id: int) -> None:
+        """SIGTERM to the campaign's acquisition: the safe stop."""
+        if not self.running(campaign_id):
+            raise ProcessRefused(
+                f"campaign {campaign_id} is not being acquired by this station's processes "
+                "(stop it where it was started)"
+            )
+        self.acquisitions[campaign_id].process.send_signal(signal.SIGTERM)
+
+    async def report(self, campaign_id: int, out: Path, formats: str) -> None:
+        """`gyrostand report ID --out OUT --format FORMATS`, waited for without blocking the
+        server (ProcessRefused with its error line)."""
+        process = await asyncio.create_subprocess_exec(
+            *self.command,
+            "report",
+            str(campaign_id),
+            "--db",
+            self.db,
+            "--out",
+            str(out),
+            "--format",
+            formats,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+        )
+        _, err = await process.communicate()
+        if process.returncode:
+            lines = err.decode(errors="replace").strip().splitlines()
+            raise ProcessRefused(lines[-1] if lines else "gyrostand report failed")

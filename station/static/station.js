@@ -1,0 +1,116 @@
+// The campaign page: renders the state pushed by /campaigns/ID/stream (server-sent events).
+// Every stored string is set as text (textContent), never as markup.
+"use strict";
+(function () {
+  const initial = JSON.parse(document.getElementById("initial").textContent);
+  const $ = (id) => document.getElementById(id);
+  const num = (v, digits) => (v === null || v === undefined ? "" : v.toFixed(digits));
+  const hms = (s) => {
+    if (s === null || s === undefined) return "?";
+    s = Math.max(0, Math.round(s));
+    const h = Math.floor(s / 3600), m = Math.floor((s % 3600) / 60), r = s % 60;
+    return h + ":" + String(m).padStart(2, "0") + ":" + String(r).padStart(2, "0");
+  };
+  window.stationUpdates = 0;
+
+  function row(tbody, cells, cls) {
+    const tr = document.createElement("tr");
+    if (cls) tr.className = cls;
+    for (const c of cells) {
+      const td = document.createElement("td");
+      td.textContent = c === null || c === undefined ? "" : String(c);
+      tr.appendChild(td);
+    }
+    tbody.appendChild(tr);
+  }
+
+  function trace(points, id = "trace") {
+    const svg = $(id);
+    svg.replaceChildren();
+    $(id + "-points").textContent = String(points.length);
+    if (!points.length) return;
+    const ns = "http://www.w3.org/2000/svg", W = 600, H = 220, pad = 30;
+    const xs = points.map((p) => p[0]), ys = points.map((p) => p[1]);
+    const x0 = Math.min(...xs), x1 = Math.max(...xs), y0 = Math.min(...ys), y1 = Math.max(...ys);
+    const sx = (x) => pad + ((x - x0) / (x1 - x0 || 1)) * (W - 2 * pad);
+    const sy = (y) => H - pad - ((y - y0) / (y1 - y0 || 1)) * (H - 2 * pad);
+    const line = document.createElementNS(ns, "polyline");
+    line.setAttribute("points", points.map((p) => sx(p[0]).toFixed(1) + "," + sy(p[1]).toFixed(1)).join(" "));
+    svg.appendChild(line);
+    for (const [x, y, t] of [[2, 12, y1.toFixed(4) + "°"], [2, H - pad + 4, y0.toFixed(4) + "°"],
+                             [pad, H - 6, hms(x0)], [W - pad - 40, H - 6, hms(x1)]]) {
+      const label = document.createElementNS(ns, "text");
+      label.setAttribute("x", x); label.setAttribute("y", y); label.textContent = t;
+      svg.appendChild(label);
+    }
+  }
+
+  const series = (j) => "j=" + j + (j === 1 ? " (before rocking)" : " (rocking)");
+  let pace = null;  // [stand ms, wall s] of the first live snapshot of this page
+
+  // The running acquisition's own snapshot (between the database's writes).
+  function live(l, counted) {
+    if (counted) window.stationUpdates += 1;
+    if (l.trial === 0) return;
+    $("trial").textContent = l.trial + "/" + l.n_trials;
+    $("series").textContent = series(l.j);
+    $("observation").textContent = l.k + "/" + l.n_obs;
+    $("phase").textContent = l.phase + (l.j === 2 && l.phase !== "done" ? ", rocking" : "");
+    const v = l.values_deg;
+    if (v.length) {
+      const mean = v.reduce((a, b) => a + b, 0) / v.length;
+      const sd = v.length > 1 ? Math.sqrt(v.reduce((a, b) => a + (b - mean) ** 2, 0) / (v.length - 1)) : null;
+      $("mean").textContent = num(mean, 4) + "°" + (sd === null ? "" : " (s = " + num(sd, 4) + "°)");
+    }
+    if (l.settle_spread_deg !== null) $("settle").textContent = "window means within ±" + num(l.settle_spread_deg, 4) + "°";
+    $("stand-time").textContent = hms(l.now_ms / 1000);
+    $("heading-figure").hidden = false;
+    trace(l.heading_trace, "heading");
+    if (pace === null || l.now_ms < pace[0]) pace = [l.now_ms, l.wall_time];
+    const rate = (l.now_ms - pace[0]) / 1000 / (l.wall_time - pace[1]);
+    $("eta").textContent = "stand " + hms(l.remaining_ms / 1000) + ", wall " + (rate > 0 ? hms(l.remaining_ms / 1000 / rate) : "?");
+  }
+
+  function render(s) {
+    window.stationUpdates += 1;
+    window.stationAcquiring = s.acquiring;
+    $("status").textContent = s.status;
+    $("process-error").textContent = s.process_error || "";
+    const c = s.current;
+    $("trial").textContent = c ? c.trial + "/" + s.n_trials + (c.attempt > 1 ? " (attempt " + c.attempt + ")" : "") : "-";
+    $("series").textContent = c ? series(c.j) : "-";
+    $("observation").textContent = c ? c.k + "/" + s.n_obs : "-";
+    $("phase").textContent = c ? c.phase : "done";
+    $("mean").textContent = c && c.mean_deg !== null ? num(c.mean_deg, 4) + "° (s = " + num(c.spread_deg, 4) + "°)" : "";
+    $("settle").textContent = c && c.settle_estimate_deg !== null ? num(c.settle_estimate_deg, 4) + "°" : "";
+    $("stand-time").textContent = hms(s.stand_time_s);
+    $("eta").textContent = "stand " + hms(s.eta_stand_s) + ", wall " + hms(s.eta_wall_s);
+    $("observations").textContent = s.observations + "/" + s.observations_planned;
+    if (s.live) live(s.live, false);
+    else $("heading-figure").hidden = true;
+    trace(s.trace);
+    const trials = $("trials").tBodies[0];
+    trials.replaceChildren();
+    for (const t of s.trials) {
+      row(trials, [t.index + (t.attempt > 1 ? " #" + t.attempt : ""), t.role, t.status,
+        (t.observations["1"] || 0) + "/" + s.n_obs, (t.observations["2"] || 0) + "/" + s.n_obs,
+        t.commanded.map((v) => num(v, 1)).join(", "),
+        t.measured[0] === null ? "" : t.measured.map((v) => num(v, 2)).join(", "), t.failure_reason]);
+    }
+    const events = $("events").tBodies[0];
+    events.replaceChildren();
+    for (const e of s.events) {
+      row(events, [e.stand_time_s === null ? "" : hms(e.stand_time_s), e.wall_time, e.severity, e.kind, e.message], e.severity);
+    }
+  }
+
+  render(initial);
+  if (!initial.acquiring) return;
+  const source = new EventSource(location.pathname + "/stream");
+  source.addEventListener("state", (ev) => render(JSON.parse(ev.data)));
+  source.addEventListener("live", (ev) => live(JSON.parse(ev.data), true));
+  source.addEventListener("end", () => {
+    source.close();
+    window.stationAcquiring = false;
+  });
+})();
