@@ -20,6 +20,7 @@ import typer
 from rich.console import Console
 
 from gyrostand.errors import fail
+from gyrostand.stand.protocol import Codec, ProtocolError
 from gyrostand.stand.schedule import LOG_SUFFIXES, ScheduleError, Step, load_schedule, run_schedule
 from gyrostand.stand.simconfig import (
     CompassParams,
@@ -134,6 +135,24 @@ _RUN_PARAMETERS = [
         ),
     ),
     inspect.Parameter(
+        "dbc",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=Path | None,
+        default=typer.Option(
+            None, help="a lab's DBC file to speak instead of gyrostand's (with --signals)"
+        ),
+    ),
+    inspect.Parameter(
+        "signals",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=Path | None,
+        default=typer.Option(
+            None,
+            help="TOML file with the [signals] map of the DBC's messages (a plan file will do; "
+            "docs/protocol.md)",
+        ),
+    ),
+    inspect.Parameter(
         "start_epoch",
         inspect.Parameter.KEYWORD_ONLY,
         annotation=float | None,
@@ -160,19 +179,34 @@ def simulate(**options: Any) -> None:
     """Run the simulated gyrocompass + roll stand (options: see _HELP and the config fields)."""
     run = {name: options.pop(name) for name in _RUN_NAMES}
     config = _config(options)
+    codec = _codec(run["dbc"], run["signals"])
     standalone = run["schedule"] is not None or run["step"]
     if not standalone and run["interface"] is None:
         fail("give --interface/--channel to join a bus, or --schedule/--step to play a schedule")
     bus = _open_bus(run["interface"], run["channel"]) if run["interface"] else None
     try:
         if standalone:
-            _standalone(config, run, bus)
+            _standalone(config, run, bus, codec)
         else:
             assert bus is not None
-            _live(config, run, bus)
+            _live(config, run, bus, codec)
     finally:
         if bus is not None:
             bus.shutdown()
+
+
+def _codec(dbc: Path | None, signals: Path | None) -> Codec | None:
+    """The lab's DBC and signal map as the stand's codec, the one a plan with them uses
+    (`Codec.of`); None: gyrostand's own DBC."""
+    from gyrostand.simulated_stand import StandSetupError, read_signals
+
+    if dbc is None and signals is None:
+        return None
+    try:
+        table = read_signals(signals) if signals is not None else {}
+        return Codec.of(None if dbc is None else str(dbc), table)
+    except (StandSetupError, ProtocolError) as exc:
+        fail(str(exc))
 
 
 def _open_bus(interface: str, channel: str | None) -> can.BusABC:
@@ -182,7 +216,9 @@ def _open_bus(interface: str, channel: str | None) -> can.BusABC:
         fail(f"cannot open CAN bus (interface {interface!r}, channel {channel!r}): {exc}")
 
 
-def _standalone(config: SimConfig, run: dict[str, Any], bus: can.BusABC | None) -> None:
+def _standalone(
+    config: SimConfig, run: dict[str, Any], bus: can.BusABC | None, codec: Codec | None
+) -> None:
     log: Path | None = run["log"]
     if log is None or log.suffix.lower() not in LOG_SUFFIXES:
         fail(f"standalone mode needs --log FILE ending in {' or '.join(LOG_SUFFIXES)}")
@@ -191,7 +227,9 @@ def _standalone(config: SimConfig, run: dict[str, Any], bus: can.BusABC | None) 
         steps += [Step.parse(text) for text in run["step"] or []]
         if not log.parent.is_dir():
             raise ScheduleError(f"folder {log.parent} does not exist")
-        result = run_schedule(config, steps, log, start_epoch_s=run["start_epoch"], bus=bus)
+        result = run_schedule(
+            config, steps, log, start_epoch_s=run["start_epoch"], bus=bus, codec=codec
+        )
     except ScheduleError as exc:
         fail(str(exc))
     for ack in result.refusals:
@@ -202,12 +240,14 @@ def _standalone(config: SimConfig, run: dict[str, Any], bus: can.BusABC | None) 
     )
 
 
-def _live(config: SimConfig, run: dict[str, Any], bus: can.BusABC) -> None:
+def _live(config: SimConfig, run: dict[str, Any], bus: can.BusABC, codec: Codec | None) -> None:
     log: Path | None = run["log"]
     if log is not None and log.suffix.lower() not in LOG_SUFFIXES:
         fail(f"--log must end in {' or '.join(LOG_SUFFIXES)}")
     recorder = can.Logger(str(log)) if log is not None else None
-    simulator = Simulator(bus, config, recorder=recorder, start_epoch_s=run["start_epoch"])
+    simulator = Simulator(
+        bus, config, codec=codec, recorder=recorder, start_epoch_s=run["start_epoch"]
+    )
     pace = "in virtual time" if config.timing == "virtual" else f"at {config.speedup:g}x"
     _out.print(f"simulating on {run['interface']}:{run['channel']} {pace} (Ctrl-C to stop)")
     deadline = None if run["duration_s"] is None else time.monotonic() + run["duration_s"]

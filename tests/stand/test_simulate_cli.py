@@ -180,3 +180,24 @@ def test_live_mode_on_a_virtual_bus(tmp_path: Path) -> None:
     heading = [m for m in received if m.arbitration_id == 0x100]
     assert len(heading) > 50  # ~40 s of stand time at 10 Hz
     assert len(list(can.LogReader(str(log)))) == len(received)
+
+
+def test_a_labs_dbc_on_the_bus(tmp_path: Path) -> None:
+    """--dbc/--signals: the stand speaks the lab's messages (docs/examples/lab.dbc, its map), as
+    a plan with them would; the frames decode with that codec and none is gyrostand's."""
+    from gyrostand.simulated_stand import read_signals
+    from gyrostand.stand.protocol import Codec, HeadingFrame
+
+    examples = Path(__file__).resolve().parents[2] / "docs" / "examples"
+    dbc, signals = examples / "lab.dbc", examples / "lab-signals.toml"
+    log = tmp_path / "lab.asc"
+    lab = ["--dbc", str(dbc), "--signals", str(signals)]
+    result = invoke("--step", "still 10", "--log", str(log), "--start-epoch", "0", *lab)
+    assert result.exit_code == 0, result.output
+    codec = Codec.of(str(dbc), read_signals(signals))
+    frames = list(can.LogReader(str(log)))
+    headings = [f for f in map(codec.decode, frames) if isinstance(f, HeadingFrame)]
+    assert len(headings) == 101  # 10 s at 10 Hz, stand times 0 to 10 s
+    assert not any(m.arbitration_id == 0x100 for m in frames)  # gyrostand's heading message
+    bad = invoke("--step", "still 1", "--log", str(log), "--signals", str(tmp_path / "no.toml"))
+    assert bad.exit_code == 2 and "no.toml" in bad.output and "Traceback" not in bad.output
