@@ -148,7 +148,7 @@ _RUN_PARAMETERS = [
         annotation=Path | None,
         default=typer.Option(
             None,
-            help="TOML file with the [signals] map of the DBC's messages (a plan file will do; "
+            help="TOML file with the \\[signals] map of the DBC's messages (a plan file will do; "
             "docs/protocol.md)",
         ),
     ),
