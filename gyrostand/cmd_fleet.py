@@ -13,7 +13,7 @@ from gyrostand.errors import fail, printable_lines
 
 
 def register(app: typer.Typer) -> None:
-    """Add the fleet analyze/simulate commands to the CLI."""
+    """Add the fleet analyze command to the CLI."""
 
     fleet_app = typer.Typer(
         help="Fleet statistics across the units of one instrument model.", no_args_is_help=True
