@@ -593,7 +593,11 @@ def report_inputs(
     plan = _plan(campaign)
     check, logs = _raw_log_check(campaign)
     records, note = _records(campaign, plan, logs, check)
-    reading, reading_note, acceptance = _reading(plan, logs, check, records)
+    if stored is None:
+        reading, reading_note, acceptance = _reading(plan, logs, check, records)
+    else:  # the record the analysis's signal section was made from: not read again
+        reading, reading_note = stored.signal.record, stored.signal.record_note
+        acceptance = acceptance_of(plan)
     ident = Identification(
         campaign_id=campaign.id,
         instrument_model=campaign.instrument.model,
