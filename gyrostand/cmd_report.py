@@ -1,11 +1,13 @@
 """CLI: report -- the certification document of a stored campaign.
 
 `gyrostand report CAMPAIGN [--db URL_OR_PATH] [--out DIR] [--format html,pdf,json,csv]
-[--profile NAME_OR_FILE]` analyses the campaign (recording the analysis run), assembles the
-report from the database and the raw CAN log, and writes campaign-ID.html, .pdf, .json and
-campaign-ID-trials.csv. `write_campaign_report` does the same for other commands (the demo).
+[--profile NAME_OR_FILE] [--number N] [--draft]` analyses the campaign (recording the analysis
+run), assembles the report from the database and the raw CAN log, and writes campaign-ID.html,
+.pdf (PDF/A-3b), .json and campaign-ID-trials.csv. `write_campaign_report` does the same for
+other commands (the demo).
 """
 
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated
@@ -27,6 +29,7 @@ def write_campaign_report(
     formats: tuple[str, ...] = FORMATS,
     profile: str = SHIPPED,
     number: str | None = None,
+    draft: bool = False,
 ) -> dict[str, Path]:
     """Analyse and report one campaign; the files written by format (one-line CLI errors,
     every input checked before the analysis run is recorded). A line on stderr per stage: the
@@ -67,6 +70,7 @@ def write_campaign_report(
                 generated_at=generated,
                 report_number=number,
             )
+        report = replace(report, draft=draft)
         if report.analysis is None:
             typer.echo(
                 f"note: campaign {campaign_id} could not be analysed "
@@ -113,6 +117,10 @@ def register(app: typer.Typer) -> None:
             str | None,
             typer.Option("--number", help="Report number (default: the plan's \\[report] number)."),
         ] = None,
+        draft: Annotated[
+            bool,
+            typer.Option("--draft", help="Not for signature: DRAFT on every page and in the JSON."),
+        ] = False,
     ) -> None:
         """Write the stand report (HTML, PDF, JSON, trial-table CSV) of a campaign."""
         formats = tuple(f.strip().lower() for f in format.split(",") if f.strip())
@@ -122,6 +130,6 @@ def register(app: typer.Typer) -> None:
         if number is not None and not number.strip():
             fail("--number: the report number is empty")
         for kind, path in write_campaign_report(
-            db, campaign, out, formats, profile, number
+            db, campaign, out, formats, profile, number, draft
         ).items():
             typer.echo(f"wrote {kind}: {path}")

@@ -25,7 +25,7 @@ from gyrostand.report.compliance import (
 from gyrostand.report.model import ReportInputs
 from gyrostand.report.signal import SignalSection, signal_section
 
-SCHEMA = "gyrostand.report/3"
+SCHEMA = "gyrostand.report/4"
 COURSE_STEP_DEG = 5.0  # forecast grid
 TABLE_COURSE_STEP_DEG = 15.0  # forecast table
 
@@ -156,7 +156,7 @@ class Report:
     compliance: Compliance
     signal: SignalSection
     conformity: Conformity
-
+    draft: bool = False  # not for signature: DRAFT on every page
 
 def trial_rows(analysis: CampaignAnalysis) -> tuple[TrialRow, ...]:
     """The trial table: statistics from the analysis, alpha_i and v_i from the fit (fit trials)

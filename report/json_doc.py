@@ -1,12 +1,13 @@
 """The report as one JSON document: every number the report prints, for machines and for diffing
 two reports. Deterministic: the same database gives the same text except ``generated_at``.
 
-Schema ``gyrostand.report/3`` (plain JSON types; absent values are null). Version 2 added
+Schema ``gyrostand.report/4`` (plain JSON types; absent values are null). Version 2 added
 ``signal``; version 3 the laboratory items of ``identification`` (the plan's [report] table),
 ``plan.settle_criterion`` (text, in place of the band's three numbers), ``signatures``
-{recorded_operator}, the parameters' ``fit.confidence_intervals`` and ``conformity``.
+{recorded_operator}, the parameters' ``fit.confidence_intervals`` and ``conformity``; version 4
+``draft``.
 
-- ``schema``, ``generated_at`` (the only wall-clock field);
+- ``schema``, ``generated_at`` (the only wall-clock field), ``draft`` (true: not for signature);
 - ``conformity``: verdict, statement, reasons (`report.build.Conformity`);
 - ``identification``: the fields of `report.model.Identification`;
 - ``plan``: `PlanSummary` (n_obs, trials [index, role, direction_deg, amplitude_cm, period_s],
@@ -120,6 +121,7 @@ def report_document(report: Report) -> dict[str, Any]:
         {
             "schema": report.schema,
             "generated_at": report.generated_at,
+            "draft": report.draft,
             "conformity": asdict(report.conformity),
             "identification": asdict(inputs.identification),
             "plan": asdict(inputs.plan),

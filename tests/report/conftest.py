@@ -7,6 +7,7 @@
 """
 
 import hashlib
+import re
 import subprocess
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -98,6 +99,18 @@ def paper_files(paper_report: Report, tmp_path_factory: pytest.TempPathFactory) 
     ).stdout.decode()
     pages = int(next(line for line in info.splitlines() if line.startswith("Pages:")).split()[1])
     return Rendered(files, text, pages)
+
+
+def watermark_letters(pdf: Path) -> list[str]:
+    """Per page, the sorted letters of the text set far larger than any heading: the watermark
+    (pdftotext -bbox gives each rotated glyph as a word of its own)."""
+    xml = subprocess.run(["pdftotext", "-bbox", str(pdf), "-"], check=True, capture_output=True)
+    pages = xml.stdout.decode().split("<page ")[1:]
+    word = re.compile(r'yMin="([\d.]+)" xMax="[\d.]+" yMax="([\d.]+)">([^<]*)</word>')
+    return [
+        "".join(sorted("".join(t for y0, y1, t in word.findall(p) if float(y1) - float(y0) > 30)))
+        for p in pages
+    ]
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,9 @@ import io
 import json
 import math
 import re
+import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -19,7 +21,7 @@ from gyrostand.report.html import _contents
 from gyrostand.report.json_doc import report_json
 from gyrostand.report.writer import write_report
 
-from .conftest import GENERATED, OPERATOR, PAPER_CSV, Rendered, Stored
+from .conftest import GENERATED, OPERATOR, PAPER_CSV, Rendered, Stored, watermark_letters
 
 # seed 000 example, as the analysis issue states them
 REFERENCE = {"g_ex": 0.4936, "g_star": 0.5175, "C": 5.94e7, "T": 1.151, "F_p": 1.41}
@@ -114,7 +116,7 @@ def test_json_is_deterministic_and_the_run_is_recorded_once(paper: Stored) -> No
             select(func.count(AnalysisRun.id)).where(AnalysisRun.campaign_id == paper.campaign_id)
         )
     assert runs == 1
-    assert first["schema"] == "gyrostand.report/3"
+    assert first["schema"] == "gyrostand.report/4"
     assert first["analysis"]["cochran"]["g_ex"] == pytest.approx(REFERENCE["g_ex"], abs=1e-4)
     assert first["identification"]["analysis_run"] >= 1
 
@@ -180,3 +182,31 @@ def test_one_statement_of_conformity(paper_report: Report, paper_files: Rendered
         "NOT ASSESSED",
         "NOT ASSESSED: the campaign could not be analysed (every trial failed).",
     )
+
+
+def test_pdf_is_archival_pdf_a_3b(paper_files: Rendered) -> None:
+    pdf = str(paper_files.files["pdf"])
+    xmp = subprocess.run(["pdfinfo", "-meta", pdf], check=True, capture_output=True).stdout
+    assert 'pdfaid:part="3"' in xmp.decode() and 'pdfaid:conformance="B"' in xmp.decode()
+    info = subprocess.run(["pdfinfo", pdf], check=True, capture_output=True).stdout.decode()
+    assert re.search(r"PDF version:\s+1\.7", info)
+    fonts = subprocess.run(["pdffonts", pdf], check=True, capture_output=True).stdout.decode()
+    rows = fonts.splitlines()[2:]
+    assert rows and all(row.split()[-5] == "yes" for row in rows)  # every font embedded
+
+
+def test_draft_is_marked_on_every_page_and_in_the_json(
+    paper_report: Report, paper_files: Rendered, tmp_path: Path
+) -> None:
+    assert json.loads(paper_files.files["json"].read_text())["draft"] is False
+    assert "DRAFT" not in paper_files.pdf_text
+    files = write_report(replace(paper_report, draft=True), tmp_path, ("json", "pdf"))
+    assert json.loads(files["json"].read_text())["draft"] is True
+    assert (
+        "DRAFT: not for signature"
+        in subprocess.run(
+            ["pdftotext", "-l", "1", str(files["pdf"]), "-"], check=True, capture_output=True
+        ).stdout.decode()
+    )
+    assert set(watermark_letters(files["pdf"])) == {"ADFRT"}  # on every page
+    assert set(watermark_letters(paper_files.files["pdf"])) == {""}

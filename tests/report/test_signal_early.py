@@ -18,7 +18,7 @@ from gyrostand.report.json_doc import report_document
 from gyrostand.report.model import ExcursionCriterion
 from gyrostand.report.writer import write_report
 
-from .conftest import GENERATED, SIM_TRIALS, Rendered, Simulated, run_simulated
+from .conftest import GENERATED, SIM_TRIALS, Rendered, Simulated, run_simulated, watermark_letters
 
 CRITERION = ExcursionCriterion(tolerance_deg=0.03, duration_s=600.0, max_risk=0.01)
 EARLY = """[settle]
@@ -130,3 +130,8 @@ def test_the_time_saved_is_in_the_cli_text(early: Simulated, early_report: Repor
     )
     assert result.exit_code == 0, result.output
     assert f"stand time saved: {early_report.signal.time_saved_s:.1f} s" in result.stdout
+
+
+def test_simulation_is_marked_on_every_page(early_files: Rendered) -> None:
+    marks = watermark_letters(early_files.files["pdf"])
+    assert len(marks) > 5 and set(marks) == {"".join(sorted("SIMULATION"))}
