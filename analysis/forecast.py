@@ -10,14 +10,16 @@ The amplitude is the arc A = theta0 (rad) x h of the compass at distance h from 
 
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 from scipy import stats
 
 from gyrostand.analysis.errors import AnalysisError, NonFiniteError
 from gyrostand.analysis.gyro_model import Conditions, KnownConstants, RollingErrorModel
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 MOTIONS = ("roll", "pitch")
 SIGN_CONVENTION = (
@@ -174,8 +176,10 @@ class ForecastGrid:
     alpha_deg: np.ndarray
     half_width_deg: np.ndarray
 
-    def to_frame(self) -> pd.DataFrame:
+    def to_frame(self) -> "pd.DataFrame":
         """Long table: one row per grid point, with the interval bounds."""
+        import pandas as pd  # here: pandas costs every command that forecasts 0.3 s to import
+
         axes = np.meshgrid(
             self.course_deg, self.roll_deg, self.period_s, self.latitude_deg, indexing="ij"
         )

@@ -22,9 +22,11 @@ from typing import ParamSpec
 import matplotlib as mpl
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
+from PIL import Image
 
 from gyrostand.analysis.campaign import CampaignAnalysis
 from gyrostand.analysis.gyro_model import Conditions, RollingErrorModel
@@ -60,7 +62,13 @@ def _styled(plot: Callable[P, Figure]) -> Callable[P, str]:
         buffer = io.BytesIO()
         with mpl.rc_context(STYLE):
             figure = plot(*args, **kwargs)
-            figure.savefig(buffer, format="png", dpi=DPI, metadata={"Software": None})
+            figure.set_dpi(DPI)
+            canvas = FigureCanvasAgg(figure)
+            canvas.draw()
+        # RGB, no alpha channel: WeasyPrint would split an alpha channel into a soft mask,
+        # decoding and encoding the image once more
+        rgba = Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba())
+        rgba.convert("RGB").save(buffer, format="PNG")
         width_mm = figure.get_figwidth() * 25.4
         data = base64.b64encode(buffer.getvalue()).decode("ascii")
         return f'<img src="data:image/png;base64,{data}" style="width: {width_mm:.0f}mm" alt="">'

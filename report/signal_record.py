@@ -14,6 +14,7 @@ realisation. A log without a campaign gives its longest still stretch by the sta
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -26,7 +27,7 @@ from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import Plan
 from gyrostand.report.model import ExcursionCriterion, ReadingRecord, TrialRecord
 from gyrostand.report.signal import SignalSection, signal_section, uniform_record
-from gyrostand.stand.protocol import Codec
+from gyrostand.stand.protocol import Codec, SignalMap
 
 Span = tuple[float, float]  # stand ms, [start, end)
 
@@ -36,22 +37,33 @@ def headings_in(
 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Valid heading frames (stand ms, deg) inside each span of the logs read in order as one
     stream (a campaign's raw log segments), in stream order."""
-    decoder = BatchDecoder(codec)
-    parts: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {key: [] for key in spans}
-    for raw in read_segments(logs):
+    stamps = tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in logs)
+    t, h = _valid_headings(stamps, codec.dbc_path, codec.signal_map)
+    found = {}
+    for key, (start, end) in spans.items():
+        inside = (t >= start) & (t < end)
+        found[key] = (t[inside], h[inside])
+    return found
+
+
+@functools.lru_cache(maxsize=1)
+def _valid_headings(
+    stamps: tuple[tuple[str, int, int], ...], dbc_path: Path, signal_map: SignalMap
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every valid heading frame of the logs (path, size, mtime) read in order as one stream.
+    Kept for the next call with the same files: the analysis and the report's plots of one
+    campaign read its log once (a changed file has another size or mtime; the report verifies
+    each log's SHA-256 before reading it)."""
+    decoder = BatchDecoder(Codec(dbc_path, signal_map))
+    times, values = [np.empty(0)], [np.empty(0)]
+    for raw in read_segments([Path(path) for path, _, _ in stamps]):
         headings = decoder.decode(raw).headings
-        t, h = headings.t_ms[headings.valid], headings.heading_deg[headings.valid]
-        for key, (start, end) in spans.items():
-            inside = (t >= start) & (t < end)
-            if inside.any():
-                parts[key].append((t[inside], h[inside]))
-    return {
-        key: (
-            np.concatenate([p[0] for p in chunks]) if chunks else np.empty(0),
-            np.concatenate([p[1] for p in chunks]) if chunks else np.empty(0),
-        )
-        for key, chunks in parts.items()
-    }
+        times.append(headings.t_ms[headings.valid])
+        values.append(headings.heading_deg[headings.valid])
+    t, h = np.concatenate(times), np.concatenate(values)
+    t.setflags(write=False)
+    h.setflags(write=False)
+    return t, h
 
 
 def _still_spans(records: tuple[TrialRecord, ...]) -> dict[int, Span]:
