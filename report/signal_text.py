@@ -99,7 +99,12 @@ def render_signal_text(section: SignalSection) -> str:
                 f"{_num(row.offset_deg, '+.4f'):>10}{_num(row.band_s, '.1f'):>9}{saved:>13}"
             )
         if section.time_saved_s is not None:
-            out.append(f"  stand time saved: {section.time_saved_s:.1f} s")
+            saved = section.time_saved_s
+            out.append(
+                f"  stand time saved: {saved:.1f} s"
+                if saved >= 0
+                else f"  stand time lost: {-saved:.1f} s (later than the band criterion)"
+            )
         out.append(f"  {TIME_SAVED_NOTE}")
     else:
         out.append("  not recorded")

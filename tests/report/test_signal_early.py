@@ -14,8 +14,10 @@ from gyrostand.cli import app
 from gyrostand.db.models import Event, Series
 from gyrostand.report.build import Report, build_report
 from gyrostand.report.compliance import load_profile
+from gyrostand.report.html import render_html
 from gyrostand.report.json_doc import report_document
 from gyrostand.report.model import ExcursionCriterion
+from gyrostand.report.signal_text import render_signal_text
 from gyrostand.report.writer import write_report
 
 from .conftest import GENERATED, SIM_TRIALS, Rendered, Simulated, run_simulated, watermark_letters
@@ -135,3 +137,18 @@ def test_the_time_saved_is_in_the_cli_text(early: Simulated, early_report: Repor
 def test_simulation_is_marked_on_every_page(early_files: Rendered) -> None:
     marks = watermark_letters(early_files.files["pdf"])
     assert len(marks) > 5 and set(marks) == {"".join(sorted("SIMULATION"))}
+
+
+def test_stand_time_lost_is_said_so(early_report: Report) -> None:
+    """Series that settled later than the band criterion would have: time lost, not a
+    negative saving."""
+    rows = tuple(
+        replace(r, saved_s=-abs(r.saved_s or 0.0) - 1.0) for r in early_report.signal.settle
+    )
+    late = replace(early_report, signal=replace(early_report.signal, settle=rows))
+    lost = -late.signal.time_saved_s
+    assert lost > 0
+    assert f"Stand time lost: {lost:.1f} s" in render_html(late)
+    assert f"stand time lost: {lost:.1f} s (later than the band criterion)" in render_signal_text(
+        late.signal
+    )
