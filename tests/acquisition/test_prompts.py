@@ -81,7 +81,7 @@ def test_prompt_before_a_trial_holds_virtual_time_until_answered(tmp_path: Path)
     asked = "SELECT message FROM event WHERE kind = 'prompt'"
     until(lambda: rows(db, asked), "the prompt")
     assert rows(db, asked) == [("mounted: compass mounted and powered?",)]
-    trial_2 = "SELECT status FROM trial WHERE \"index\" = 2"
+    trial_2 = 'SELECT status FROM trial WHERE "index" = 2'
     held = observations(db)
     assert rows(db, trial_2) == [("pending",)] and {o[0] for o in held} == {1}
     assert len(held) == 6  # trial 1 complete, 2 series x N = 3
