@@ -96,7 +96,7 @@
     $("series").textContent = c ? series(c.j) : "-";
     $("observation").textContent = c ? c.k + "/" + s.n_obs : "-";
     $("phase").textContent = c ? c.phase : "done";
-    $("mean").textContent = c && c.mean_deg !== null ? num(c.mean_deg, 4) + "° (s = " + num(c.spread_deg, 4) + "°)" : "";
+    $("mean").textContent = c && c.mean_deg !== null ? num(c.mean_deg, 4) + "°" + (c.spread_deg === null ? "" : " (s = " + num(c.spread_deg, 4) + "°)") : "";
     $("settle").textContent = c && c.settle_estimate_deg !== null ? num(c.settle_estimate_deg, 4) + "°" : "";
     $("stand-time").textContent = hms(s.stand_time_s);
     $("eta").textContent = "stand " + hms(s.eta_stand_s) + ", wall " + hms(s.eta_wall_s);
