@@ -7,8 +7,6 @@ import re
 import sqlite3
 import subprocess
 import sys
-import time
-from collections.abc import Callable
 from contextlib import closing
 from pathlib import Path
 
@@ -17,10 +15,10 @@ from starlette.testclient import TestClient
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.station.app import create_app
 from gyrostand.station.security import Access
+from tests.acquisition.test_prompts import WAIT_S, rows, until
 
 from .conftest import write_plan
 
-WAIT_S = 120.0
 PROMPTS = """
 [[prompt]]
 id = "plate"
@@ -43,18 +41,6 @@ before = "campaign"
 
 def csrf(client) -> dict[str, str]:
     return {"csrf": client.access.csrf}
-
-
-def rows(db: Path, query: str) -> list[tuple]:
-    with closing(sqlite3.connect(db)) as conn:
-        return conn.execute(query).fetchall()
-
-
-def until(condition: Callable[[], object], what: str) -> None:
-    deadline = time.monotonic() + WAIT_S
-    while not condition():
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.05)
 
 
 def station(db: Path, reports: Path) -> TestClient:
