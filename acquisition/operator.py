@@ -52,11 +52,6 @@ def pending_prompt(session: Session, campaign_id: int) -> tuple[str, str] | None
     return next(((key, text) for key, text in asked.items() if key not in answered), None)
 
 
-def latest_event_id(session: Session, campaign_id: int) -> int:
-    latest = select(func.max(Event.id)).where(Event.campaign_id == campaign_id)
-    return session.scalar(latest) or 0
-
-
 def record_answers(
     store: CampaignStore, prompts: tuple[PromptPlan, ...], given: Mapping[str, str]
 ) -> None:
@@ -71,7 +66,7 @@ class OperatorLink:
     """The engine's `Operator` in a live run: answers come from `given` (the command line),
     the database (the station) or, with `terminal`, a line typed there; `waiting()` is called
     while it waits (the runner refreshes its display). Stop requests count after event
-    `since`."""
+    `since`: the run's "resume" event (0 for a new campaign: every request counts)."""
 
     store: CampaignStore
     plan: Plan
@@ -85,7 +80,14 @@ class OperatorLink:
 
     def __post_init__(self) -> None:
         with self.store.sessions() as session:
-            self.since = latest_event_id(session, self.store.campaign_id)
+            self.since = (
+                session.scalar(
+                    select(func.max(Event.id)).where(
+                        Event.campaign_id == self.store.campaign_id, Event.kind == "resume"
+                    )
+                )
+                or 0
+            )
 
     def stop_requested(self) -> str | None:
         """Why to stop now: a signal, or a stop request in the database (asked at most every

@@ -1,7 +1,8 @@
 """End to end in a real headless browser (Debian's chromium and chromium-driver, driven by
 Selenium): open the station, start the small simulated plan, answer its prompt before trial 1
-on the page, watch the live trace grow, stop it, resume it, open the report. The campaign page's screenshot while it runs is written to
-GYROSTAND_STATION_SCREENSHOT (default: the test's temporary folder) and its path printed."""
+on the page, watch the live trace grow, stop it, resume it, open the report. The campaign page's
+screenshot while it runs is written to GYROSTAND_STATION_SCREENSHOT (default: the test's
+temporary folder) and its path printed."""
 
 import functools
 import os
