@@ -1,8 +1,7 @@
-"""The operator's side of a live run, through the database's events, so that the station (any
-process, any host) and the terminal reach the acquisition alike: the plan's prompts before a
-trial ("prompt" event, then the engine waits for an "answer" event) and safe-stop requests
-("stop_request" events, polled at the acquisition loop's checkpoints). An event's message is
-``ID: TEXT`` for a prompt and ``ID: VALUE`` for its answer."""
+"""The operator's side of a live run, through the database's events (`plan.prompts`), so that
+the station (any process, any host) and the terminal reach the acquisition alike: the plan's
+prompts before a trial ("prompt" event, then the engine waits for an "answer" event) and
+safe-stop requests ("stop_request" events, polled at the acquisition loop's checkpoints)."""
 
 from __future__ import annotations
 
@@ -20,36 +19,21 @@ from sqlalchemy.orm import Session
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.models import Event
 from gyrostand.plan.model import Plan, PromptPlan
+from gyrostand.plan.prompts import ANSWER, PROMPT, STOP_REQUEST, keyed, message
 
 POLL_S = 0.2
 """How often the database is asked for an answer or a stop request (wall time)."""
-PROMPT, ANSWER, STOP_REQUEST = "prompt", "answer", "stop_request"
 
 
-def _keyed(session: Session, campaign_id: int, kind: str) -> dict[str, str]:
-    """The campaign's events of `kind` by the ID their message starts with (the first one)."""
-    messages = session.scalars(
-        select(Event.message)
-        .where(Event.campaign_id == campaign_id, Event.kind == kind)
-        .order_by(Event.id)
-    )
-    found: dict[str, str] = {}
-    for message in messages:
-        key, _, value = message.partition(": ")
-        found.setdefault(key, value)
-    return found
+def messages(session: Session, campaign_id: int, kind: str) -> list[str]:
+    """The campaign's event messages of `kind`, oldest first."""
+    where = (Event.campaign_id == campaign_id, Event.kind == kind)
+    return list(session.scalars(select(Event.message).where(*where).order_by(Event.id)))
 
 
 def answers(session: Session, campaign_id: int) -> dict[str, str]:
     """The stored answers by prompt ID."""
-    return _keyed(session, campaign_id, ANSWER)
-
-
-def pending_prompt(session: Session, campaign_id: int) -> tuple[str, str] | None:
-    """The prompt (ID, text) the acquisition waits for an answer to, if any."""
-    answered = answers(session, campaign_id)
-    asked = _keyed(session, campaign_id, PROMPT)
-    return next(((key, text) for key, text in asked.items() if key not in answered), None)
+    return keyed(messages(session, campaign_id, ANSWER))
 
 
 def record_answers(
@@ -57,8 +41,8 @@ def record_answers(
 ) -> None:
     """The prompts and their answers (already checked) as events."""
     for prompt in prompts:
-        store.run_event(PROMPT, "info", f"{prompt.id}: {prompt.text}")
-        store.run_event(ANSWER, "info", f"{prompt.id}: {given[prompt.id]}")
+        store.run_event(PROMPT, "info", message(prompt.id, prompt.text))
+        store.run_event(ANSWER, "info", message(prompt.id, given[prompt.id]))
 
 
 @dataclass
@@ -113,7 +97,7 @@ class OperatorLink:
             with self.store.sessions() as session:
                 if prompt.id in answers(session, self.store.campaign_id):
                     continue  # answered in an earlier run of the campaign
-            self.store.run_event(PROMPT, "info", f"{prompt.id}: {prompt.text}")
+            self.store.run_event(PROMPT, "info", message(prompt.id, prompt.text))
             stopped = self._wait(prompt)
             if stopped is not None:
                 return stopped
@@ -122,7 +106,7 @@ class OperatorLink:
     def _wait(self, prompt: PromptPlan) -> str | None:
         """Until `prompt` is answered (None) or the campaign is to stop (why)."""
         if prompt.id in self.given:
-            self.store.run_event(ANSWER, "info", f"{prompt.id}: {self.given[prompt.id]}")
+            self.store.run_event(ANSWER, "info", message(prompt.id, self.given[prompt.id]))
             return None
         self._say(f"before the next trial: {prompt.text} ({self._how(prompt)})")
         while True:
@@ -140,7 +124,7 @@ class OperatorLink:
             except ValueError as exc:
                 self._say(str(exc))
                 continue
-            self.store.run_event(ANSWER, "info", f"{prompt.id}: {value}")
+            self.store.run_event(ANSWER, "info", message(prompt.id, value))
             return None
 
     def _how(self, prompt: PromptPlan) -> str:

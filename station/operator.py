@@ -8,15 +8,26 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from gyrostand.acquisition.operator import ANSWER, STOP_REQUEST, pending_prompt
 from gyrostand.db.models import Event
 from gyrostand.db.queries import stand_campaign
 from gyrostand.plan.model import Plan, PromptPlan, parse_plan
+from gyrostand.plan.prompts import ANSWER, PROMPT, STOP_REQUEST, message, pending
 
 FIELD = "answer-"
 """The start form's field of a prompt's answer: answer-ID."""
+
+
+def pending_prompt(session: Session, campaign_id: int) -> tuple[str, str] | None:
+    """The prompt (ID, text) the acquisition waits for an answer to, if any."""
+    rows = session.execute(
+        select(Event.kind, Event.message)
+        .where(Event.campaign_id == campaign_id, Event.kind.in_((PROMPT, ANSWER)))
+        .order_by(Event.id)
+    ).all()
+    return pending((m for k, m in rows if k == PROMPT), (m for k, m in rows if k == ANSWER))
 
 
 class ActionRefused(ValueError):
@@ -50,7 +61,7 @@ def answer(session: Session, campaign_id: int, prompt_id: str, value: str) -> st
     except ValueError as exc:
         raise ActionRefused(str(exc)) from None
     session.add(Event(campaign_id=campaign_id, kind=ANSWER, severity="info",
-                      message=f"{prompt_id}: {stored}"))  # fmt: skip
+                      message=message(prompt_id, stored)))  # fmt: skip
     return stored
 
 

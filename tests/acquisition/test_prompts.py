@@ -11,12 +11,12 @@ from collections.abc import Callable
 from contextlib import closing
 from pathlib import Path
 
-from gyrostand.acquisition.operator import ANSWER, STOP_REQUEST
 from gyrostand.acquisition.runner import RunResult, run_live
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.models import Event
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.plan.model import parse_plan
+from gyrostand.plan.prompts import ANSWER, STOP_REQUEST
 
 from .harness import plan_text
 
