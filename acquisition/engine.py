@@ -130,6 +130,13 @@ class Commander(Protocol):
     def issue(self, command: Command, now_ms: int) -> None: ...
 
 
+class Operator(Protocol):
+    def before_trial(self, trial: int) -> str | None:
+        """Block until the operator has answered the plan's prompts before `trial`: None, or
+        why the campaign stops instead."""
+        ...
+
+
 class Sink(Protocol):
     def trial_started(self, trial: int) -> None: ...
     def series_settling(self, trial: int, j: int, t_ms: int) -> None: ...
@@ -166,6 +173,7 @@ class Phase(Enum):
     STILL = "confirming the stand is still"
     TRACKING = "confirming the stand rocks as commanded"
     SETTLE = "settling"
+    PROMPT = "waiting for the operator"
     OBSERVE = "observing"
     DONE = "done"
 
@@ -285,8 +293,10 @@ class Engine:
         sink: Sink,
         commander: Commander,
         progress: dict[int, TrialState] | None = None,
+        operator: Operator | None = None,
     ) -> None:
         self.plan = plan
+        self.operator = operator  # live runs: prompts before a trial (replay: none)
         self.sink = sink
         self.commander = commander
         self.progress = progress or {}
@@ -348,6 +358,23 @@ class Engine:
                 self.outcome = "completed"
             return
         self._trial = self.todo.pop(0)
+        if self.operator is not None and self.plan.prompts_before(self._trial.index):
+            self.phase = Phase.PROMPT  # asked by `feed`, at this point of the stream
+            return
+        self._start_trial()
+
+    def _ask(self) -> None:
+        """The prompts before the next trial: the engine (and, in virtual time, the stand clock:
+        nothing is granted meanwhile) waits for the answers at this point of the stream."""
+        assert self.operator is not None and self._trial is not None
+        stopped = self.operator.before_trial(self._trial.index)
+        if stopped is None:
+            self._start_trial()
+        else:
+            self.interrupt(stopped)
+
+    def _start_trial(self) -> None:
+        assert self._trial is not None
         self._quiet_reset()
         done = self.progress.get(self._trial.index, _NONE)
         self._ref = done.reference_deg
@@ -419,14 +446,20 @@ class Engine:
             return
         self._batch_no += 1
         self._batch_started()
-        while self.phase is not Phase.DONE and (
-            self._hi < len(self._h) or self._si < len(self._s) or self._oi < len(self._o)
-        ):
-            if self.phase in (Phase.SETTLE, Phase.OBSERVE):
+        while self.phase is not Phase.DONE:
+            if self.phase is Phase.PROMPT:
+                self._ask()
+            elif not self._left():
+                break
+            elif self.phase in (Phase.SETTLE, Phase.OBSERVE):
                 self._bulk()
             else:
                 self._step()
         self._batch_ended()
+
+    def _left(self) -> bool:
+        """Frames of the batch not taken in yet."""
+        return self._hi < len(self._h) or self._si < len(self._s) or self._oi < len(self._o)
 
     def _batch_started(self) -> None:
         """Index the batch's unusable frames; start the stand-time count at the first frame

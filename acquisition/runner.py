@@ -9,11 +9,12 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from itertools import count
 from pathlib import Path
+from typing import IO
 
 import can
 import numpy as np
@@ -22,6 +23,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand.acquisition.bus import LiveBus, sim_config
 from gyrostand.acquisition.engine import Command, CommandNotSent, Engine, Phase
+from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.acquisition.virtual_time import Grants, StreamClock
@@ -124,12 +126,16 @@ def run_live(
     start: str = "new",
     quiet: bool = False,
     stop: threading.Event | None = None,
+    answers: Mapping[str, str] | None = None,
+    terminal: IO[str] | None = None,
 ) -> RunResult:
     """Acquire the trials the database does not hold yet, on the plan's bus. `start` (a raw log
     segment's start, `resume_start`): "new" for a new campaign; "restarted" continues at the
     first incomplete series; "continued" re-runs a simulation in virtual time from its start,
     skipping what the database holds (`CampaignStore.re_run`), and logs only the frames after
-    the earlier segments' ones, so that the segments read in order are one stream."""
+    the earlier segments' ones, so that the segments read in order are one stream. The plan's
+    prompts before a trial are answered from `answers`, the station or `terminal`
+    (`OperatorLink`), which also sees the station's stop requests."""
     stop = stop or threading.Event()
     codec = codec_for(plan)
     with store.sessions() as session:
@@ -150,7 +156,9 @@ def run_live(
     live = LiveBus(plan, codec, raw_log)
     grants = Grants(live.bus) if live.virtual else None
     stream_clock = StreamClock()
-    engine = Engine(plan, store, LiveCommander(live.controller, grants), progress)
+    display = ProgressDisplay(quiet=quiet)
+    operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)
+    engine = Engine(plan, store, LiveCommander(live.controller, grants), progress, operator)
     decoder = BatchDecoder(codec)
     if grants is None:
         silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
@@ -165,10 +173,11 @@ def run_live(
     last_frame = time.monotonic()
     live_file = LiveFile(live_file_of(raw_log))
     try:
-        with _stop_on_signals(stop), ProgressDisplay(quiet=quiet) as display:
+        with _stop_on_signals(stop), display:
+            operator.waiting = lambda: _show(engine, display, live_file)
             while engine.phase is not Phase.DONE:
-                if stop.is_set():
-                    engine.interrupt("stopped by signal: stand told to stop rocking")
+                if (why := operator.stop_requested()) is not None:
+                    engine.interrupt(why)
                     break
                 msgs = live.recorder.drain(BATCH_FRAMES, 0.05)
                 if live.recorder.dropped > dropped:
@@ -208,9 +217,7 @@ def run_live(
                     if time.monotonic() - last_frame > silence_wall_s:
                         engine.fail(silence, kind="bus silence")
                         last_frame = time.monotonic()
-                snapshot = engine.snapshot()
-                display.update(snapshot)
-                live_file.update(snapshot)
+                _show(engine, display, live_file)
     finally:
         live_file.close()
         live.close()
@@ -220,6 +227,12 @@ def run_live(
         outcome = engine.outcome if engine.outcome != "running" else "stopped"
         store.set_status(outcome)
     return result(store, outcome, raw_log, sha)
+
+
+def _show(engine: Engine, display: ProgressDisplay, live_file: LiveFile) -> None:
+    snapshot = engine.snapshot()
+    display.update(snapshot)
+    live_file.update(snapshot)
 
 
 def _granted(engine: Engine, send: Callable[..., None], *args: int) -> None:

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import sys
 import threading
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
@@ -94,6 +95,41 @@ def checked_plan(
     return plan
 
 
+def interactive() -> bool:
+    """Whether the operator can answer prompts here (standard input is a terminal)."""
+    return sys.stdin is not None and sys.stdin.isatty()
+
+
+def checked_answers(plan: Plan, given: Sequence[str]) -> dict[str, str]:
+    """`--answer ID=VALUE` checked against the plan's prompts; a prompt before the campaign
+    left out is asked on the terminal, or is one error line when there is none."""
+    prompts = {p.id: p for p in plan.prompt}
+    answers: dict[str, str] = {}
+    for item in given:
+        key, sep, value = item.partition("=")
+        if not sep:
+            fail(f"--answer {item!r}: give ID=VALUE")
+        if key not in prompts:
+            known = ", ".join(prompts) or "none"
+            fail(f"--answer {key}: the plan has no such prompt (its prompts: {known})")
+        try:
+            answers[key] = prompts[key].answer(value)
+        except ValueError as exc:
+            fail(f"--answer {exc}")
+    for prompt in plan.prompts_before("campaign"):
+        while prompt.id not in answers:
+            if not interactive():
+                fail(
+                    f"the plan asks before the campaign: {prompt.text} "
+                    f"(give --answer {prompt.id}=...)"
+                )
+            try:
+                answers[prompt.id] = prompt.answer(typer.prompt(prompt.text, err=True))
+            except ValueError as exc:
+                typer.echo(str(exc), err=True)
+    return answers
+
+
 def preflight(plan: Plan) -> None:
     """Before anything is written (a campaign row, an event): the raw log folder takes a file
     and a real bus opens (one-line errors, exit code 1: the environment refuses)."""
@@ -170,6 +206,7 @@ def run_campaign(
     stop: threading.Event,
     db: str,
     start: str = "new",
+    answers: Mapping[str, str] | None = None,
 ) -> RunResult:
     """Acquire into a stored campaign (`start`: see `run_live`); one outcome whatever happens:
     the result (completed, paused, stopped), or one line naming the failure with the campaign
@@ -193,7 +230,10 @@ def run_campaign(
         if stop.is_set():  # a signal while the campaign was being stored: nothing acquired
             mark("interrupted", "warning", "stopped by signal before acquiring", "stopped")
             return result(store, "stopped", None, None)
-        return run_live(plan, store, start=start, quiet=quiet, stop=stop)
+        terminal = sys.stdin if interactive() else None
+        return run_live(
+            plan, store, start=start, quiet=quiet, stop=stop, answers=answers, terminal=terminal
+        )
     except ReRunMismatch as exc:
         mark("resume", "error", str(exc), "stopped")
         fail(f"campaign {store.campaign_id}: {exc}", code=EXIT_FAILED)
@@ -243,21 +283,26 @@ def new_campaign(
     bus: BusOptions,
     quiet: bool,
     labels: Mapping[str, str] | None = None,
+    answers: Sequence[str] = (),
 ) -> tuple[RunResult, str]:
     """`campaign run PLAN`: a new campaign of the plan file (or parsed plan) with the command
-    line's options and `labels`, acquired (`run_campaign`); its outcome and the database it
-    went to.
+    line's options and `labels`, acquired (`run_campaign`) with the operator's `answers`
+    (ID=VALUE) to the plan's prompts; its outcome and the database it went to.
     Everything is checked before anything is written (one-line errors: `_load`, `checked_plan`,
     `preflight`)."""
+    from gyrostand.acquisition.operator import record_answers
     from gyrostand.acquisition.store import CampaignStore
 
     with signals_deferred() as stop:
         checked = bus.checked(_load(plan) if isinstance(plan, Path) else plan, db)
+        given = checked_answers(checked, answers)
         preflight(checked)
         sessions = open_db(checked.database, must_exist=False)
         not_interrupted(stop, "the campaign was stored")
         store = CampaignStore.create(sessions, checked, labels=labels)
-        return run_campaign(checked, store, quiet, stop, checked.database), checked.database
+        record_answers(store, checked.prompts_before("campaign"), given)
+        database = checked.database
+        return run_campaign(checked, store, quiet, stop, database, answers=given), database
 
 
 def continue_campaign(
@@ -385,11 +430,22 @@ def register(app: typer.Typer) -> None:
         seed: Seed = None,
         timing: Timing = None,
         tag: TagOption = None,
+        answer: Annotated[
+            list[str] | None,
+            typer.Option(
+                "--answer",
+                help="ID=VALUE: the answer to the plan's prompt ID (repeatable; yes to confirm). "
+                "Prompts before the campaign not answered are asked on a terminal; prompts "
+                "before a trial there or at the station.",
+            ),
+        ] = None,
         quiet: Quiet = False,
     ) -> None:
         """Run a campaign plan on the stand (the simulated stand when the plan says so)."""
         bus = BusOptions(interface, channel, speedup, seed, timing)
-        outcome, database = new_campaign(plan, db, bus, quiet, parse_tags(tag))
+        outcome, database = new_campaign(
+            plan, db, bus, quiet, parse_tags(tag), answers=answer or ()
+        )
         print_outcome(outcome, database)
 
     @campaign_app.command("resume")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -242,6 +243,52 @@ class TrialPlan(_Table):
     def index(self) -> int:
         """The trial's number in the plan, from 1."""
         return self._index
+
+
+PROMPT_ANSWER_CHARS = 200
+"""Longest answer to a text prompt (one line, whitespace collapsed)."""
+CONFIRMED = "yes"
+
+
+def _prompt_id(value: str) -> str:
+    if not re.fullmatch(r"[a-z][a-z0-9_]{0,39}", value):
+        raise ValueError("must be lowercase letters, digits and _ (at most 40), from a letter")
+    return value
+
+
+def _before(value: Any) -> str | int:
+    trial = isinstance(value, int) and not isinstance(value, bool) and value > 0
+    if value == "campaign" or trial:
+        return value
+    raise ValueError('must be "campaign" or a trial number (1 = the first [[trials]])')
+
+
+class PromptPlan(_Table):
+    """[[prompt]]: a question to the operator, answered before the campaign starts or before a
+    trial begins (at the station, on the terminal or with `--answer`); the question and its
+    answer are stored as events."""
+
+    id: Annotated[str, AfterValidator(_prompt_id)]
+    """Its name: lowercase letters, digits and _, starting with a letter (`--answer id=...`)."""
+    text: Text
+    """The question, as the operator reads it."""
+    kind: Literal["confirm", "text"] = "confirm"
+    """"confirm": answered yes (or the campaign is stopped); "text": a line of text."""
+    before: Annotated[str | int, PlainValidator(_before, json_schema_input_type=str | int)]
+    """"campaign", or the number of the trial it comes before."""
+
+    def answer(self, value: str) -> str:
+        """The answer to store for `value` (ValueError saying what is wrong with it)."""
+        value = " ".join(value.split())
+        if self.kind == "confirm":
+            if value.casefold() not in ("y", CONFIRMED):
+                raise ValueError(f"{self.id}: answer yes to confirm ({self.text})")
+            return CONFIRMED
+        if not value:
+            raise ValueError(f"{self.id}: the answer is empty ({self.text})")
+        if len(value) > PROMPT_ANSWER_CHARS:
+            raise ValueError(f"{self.id}: longer than {PROMPT_ANSWER_CHARS} characters")
+        return value
 
 
 class ObservationPlan(_Table):
@@ -588,6 +635,8 @@ class Plan(_Table):
     """The lab's DBC signals, "MESSAGE.SIGNAL" per quantity (docs/protocol.md)."""
     acceptance: AcceptancePlan | None = None
     report: ReportPlan = Field(default_factory=ReportPlan)
+    prompt: tuple[PromptPlan, ...] = Field((), strict=False)
+    """Questions to the operator before the campaign or a trial ([[prompt]])."""
     _text: str = PrivateAttr("")
 
     @field_validator("trials")
@@ -611,7 +660,9 @@ class Plan(_Table):
         (or an acquisition-only campaign), every trial within the stand's limits, every series
         within the stand time allowed. (A ValidationError, which pydantic passes on as it is,
         to name each problem's table and key.)"""
-        errors = self._unanalysable() + self._beyond_stand() + self._too_long()
+        errors = (
+            self._unanalysable() + self._beyond_stand() + self._too_long() + self._bad_prompts()
+        )
         if errors:
             raise ValidationError.from_exception_data(type(self).__name__, errors)
         return self
@@ -689,6 +740,21 @@ class Plan(_Table):
             f"time in the longest series; a series may take at most {MAX_SERIES_STAND_DAYS} days"
         )
         return [_error("stand_time", ("campaign", "n_obs"), message)]
+
+    def _bad_prompts(self) -> list[InitErrorDetails]:
+        errors, seen = [], set()
+        for row, prompt in enumerate(self.prompt):
+            if prompt.id in seen:
+                errors.append(_error("prompt", ("prompt", row, "id"), f"{prompt.id!r} twice"))
+            seen.add(prompt.id)
+            if isinstance(prompt.before, int) and prompt.before > len(self.trials):
+                message = f"trial {prompt.before}, but the plan has {len(self.trials)} trials"
+                errors.append(_error("prompt", ("prompt", row, "before"), message))
+        return errors
+
+    def prompts_before(self, before: str | int) -> tuple[PromptPlan, ...]:
+        """The prompts asked before the campaign ("campaign") or before trial `before`."""
+        return tuple(p for p in self.prompt if p.before == before)
 
     @property
     def text(self) -> str:

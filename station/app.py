@@ -2,7 +2,7 @@
 
 Routes: `/` campaigns (filter by status and text), `/campaigns/new` start form, POST
 `/campaigns` start, `/campaigns/{id}` campaign page, `/campaigns/{id}/stream` its updates as
-server-sent events, POST `/campaigns/{id}/stop|resume|retry|report|signoff`, and
+server-sent events, POST `/campaigns/{id}/stop|resume|answer|report|signoff`, and
 `/campaigns/{id}/files/{name}` its report files."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import asyncio
 import hashlib
 import json
 from collections.abc import AsyncIterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlencode
@@ -21,6 +21,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
+from starlette.datastructures import UploadFile
 from starlette.exceptions import HTTPException
 from starlette.requests import Request
 from starlette.responses import FileResponse, RedirectResponse, Response, StreamingResponse
@@ -31,7 +32,15 @@ from starlette.templating import Jinja2Templates
 from gyrostand.db.lease import held_elsewhere
 from gyrostand.db.models import CAMPAIGN_STATUSES, Campaign
 from gyrostand.db.queries import sign_offs
-from gyrostand.plan.model import PlanError, load_plan
+from gyrostand.plan.model import Plan, PlanError, load_plan, parse_plan
+from gyrostand.station.operator import (
+    FIELD,
+    ActionRefused,
+    answer,
+    request_stop,
+    start_answers,
+    waiting_for,
+)
 from gyrostand.station.processes import Processes, ProcessRefused
 from gyrostand.station.security import Access, CrossSite, TokenMiddleware, action_form
 from gyrostand.station.signoff import SignOffRefused, sign_off
@@ -46,6 +55,8 @@ from gyrostand.station.state import (
 TICK_S = 0.1
 """The update stream checks the database's fingerprint of the campaign this often and pushes
 the campaign's state when it changed."""
+IDLE_TICK_S = 1.0
+"""... and this often while nothing acquires (a run started elsewhere is seen within it)."""
 REPORT_FORMATS = {"html": "html", "html+pdf": "html,pdf"}
 STATIC = Path(__file__).parent / "static"
 
@@ -67,6 +78,14 @@ class Station:
     def read(self, query: Any, *args: Any) -> Any:
         with self.sessions() as session:
             return query(session, *args)
+
+    def write(self, action: Any, *args: Any) -> Any:
+        with self.sessions.begin() as session:
+            return action(session, *args)
+
+    def acquiring(self, campaign_id: int) -> bool:
+        """A process acquires into the campaign now: one of ours, or whoever holds its lease."""
+        return self.processes.running(campaign_id) or held_elsewhere(self.sessions, campaign_id)
 
 
 def compact(value: Any) -> str:
@@ -105,7 +124,12 @@ def create_app(
         status = request.query_params.get("status", "")
         text = request.query_params.get("q", "")
         rows = await run_in_threadpool(
-            lambda: station.read(lambda s: campaign_rows(s, status=status, text=text))
+            lambda: [
+                replace(r, status="interrupted")
+                if r.status == "running" and not station.acquiring(r.campaign_id)
+                else r
+                for r in station.read(lambda s: campaign_rows(s, status=status, text=text))
+            ]
         )
         return station.page(
             request,
@@ -117,15 +141,39 @@ def create_app(
         )
 
     async def new(request: Request) -> Response:
-        return station.page(request, "start.html.j2", plan="", problems=[])
+        return station.page(request, "start.html.j2", plan="", problems=[], prompts=(), form={})
+
+    def uploaded(text: str) -> Path:
+        """An uploaded plan (valid) as a file the campaign command reads, named by its hash."""
+        folder = station.reports / "plans"
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"plan-{hashlib.sha256(text.encode()).hexdigest()[:16]}.toml"
+        path.write_text(text, encoding="utf-8")
+        return path.resolve()
+
+    async def read_plan(path: str, upload: object) -> tuple[Plan, str]:
+        """The plan of the start form (an upload, else a path) and the path to run it from."""
+        if isinstance(upload, UploadFile) and upload.filename:
+            try:
+                text = (await upload.read()).decode("utf-8")
+            except UnicodeDecodeError:
+                raise PlanError([f"upload: {upload.filename} is not UTF-8 text"]) from None
+            plan = parse_plan(text)
+            return plan, str(await run_in_threadpool(uploaded, text))
+        if not path:
+            raise PlanError(["plan: give the path of a plan file on this machine, or upload one"])
+        return load_plan(Path(path)), str(Path(path).resolve())
 
     async def start(request: Request) -> Response:
         form = await action_form(request, access)
         path = str(form.get("plan", "")).strip()
+        prompts: tuple[Any, ...] = ()
         try:
-            if not path:
-                raise PlanError(["plan: give the path of a plan file on this machine"])
-            plan = load_plan(Path(path))
+            plan, path = await read_plan(path, form.get("upload"))
+            prompts = plan.prompts_before("campaign")
+            answers, problems = start_answers(plan, form)
+            if problems:
+                raise PlanError(problems)
             digest = hashlib.sha256(plan.text.encode()).hexdigest()
 
             def newest() -> int | None:
@@ -135,27 +183,30 @@ def create_app(
                     )
                 )
 
-            cid = await station.processes.start(Path(path).resolve(), newest)
-        except PlanError as exc:
+            cid = await station.processes.start(Path(path), newest, answers)
+        except (PlanError, ProcessRefused) as exc:
+            problems = exc.problems if isinstance(exc, PlanError) else [str(exc)]
             return station.page(
                 request,
                 "start.html.j2",
                 400,
                 plan=path,
-                problems=problems_by_field(exc.problems),
+                problems=problems_by_field(problems),
+                prompts=prompts,
+                form={k: v for k, v in form.items() if k.startswith(FIELD)},
             )
-        except ProcessRefused as exc:
-            return station.page(request, "start.html.j2", 400, plan=path, problems=[("", str(exc))])
         return RedirectResponse(f"/campaigns/{cid}", status_code=303)
 
     def state_json(cid: int) -> dict[str, Any]:
         state = station.read(live_state, cid).as_json()
         running = station.processes.running(cid)
-        if state["status"] == "running" and not running and not held_elsewhere(sessions, cid):
-            state["status"] = "interrupted"
-        state["acquiring"] = running or state["status"] == "running"
+        acquiring = station.acquiring(cid)
+        if state["status"] == "running" and not acquiring:
+            state["status"] = "interrupted"  # its process is gone (killed): resume continues it
+        state["acquiring"] = acquiring
         state["process_error"] = None if running else station.processes.error(cid)
-        state["live"] = read_live(station.read(live_file, cid)) if state["acquiring"] else None
+        state["live"] = read_live(station.read(live_file, cid)) if acquiring else None
+        state["prompt"] = station.read(waiting_for, cid) if acquiring else None
         return state
 
     def live_change(path: Path | None, mtime: int | None) -> tuple[int | None, Any]:
@@ -167,9 +218,9 @@ def create_app(
         return now, (read_live(path) if now is not None and now != mtime else None)
 
     def changed(cid: int, last: tuple[Any, ...] | None) -> tuple[tuple[Any, ...], bool]:
-        """The campaign's fingerprint (with this server's process state) and whether it
+        """The campaign's fingerprint (with whether a process acquires into it) and whether it
         differs from `last`."""
-        now = (*station.read(fingerprint, cid), station.processes.running(cid))
+        now = (*station.read(fingerprint, cid), station.acquiring(cid))
         return now, now != last
 
     async def campaign(request: Request) -> Response:
@@ -190,24 +241,26 @@ def create_app(
 
         async def updates() -> AsyncIterator[str]:
             """The whole state when the database changed; between, the running
-            acquisition's live snapshot whenever it has a new one."""
+            acquisition's live snapshot whenever it has a new one. When nothing acquires it
+            says "end" and keeps watching, slower: a resume (here or elsewhere) streams on."""
             yield "retry: 1000\n\n"
             seen: tuple[Any, ...] | None = None
             path = await run_in_threadpool(station.read, live_file, cid)
             mtime: int | None = None
+            acquiring = True
             while not await request.is_disconnected():
                 seen, fresh = await run_in_threadpool(changed, cid, seen)
                 if fresh:
                     state = await run_in_threadpool(state_json, cid)
                     yield f"event: state\ndata: {compact(state)}\n\n"
-                    if not state["acquiring"]:
+                    if acquiring and not state["acquiring"]:
                         yield "event: end\ndata: {}\n\n"
-                        return
+                    acquiring = state["acquiring"]
                     path = await run_in_threadpool(station.read, live_file, cid)  # a new run's
                 mtime, snapshot = await run_in_threadpool(live_change, path, mtime)
                 if snapshot is not None and not fresh:
                     yield f"event: live\ndata: {compact(snapshot)}\n\n"
-                await asyncio.sleep(TICK_S)
+                await asyncio.sleep(TICK_S if acquiring else IDLE_TICK_S)
 
         return StreamingResponse(
             updates(),
@@ -222,11 +275,20 @@ def create_app(
     async def stop(request: Request) -> Response:
         cid = campaign_id(request)
         await action_form(request, access)
-        try:
-            station.processes.stop(cid)
-        except ProcessRefused as exc:
-            return back(cid, str(exc))
+        if not await run_in_threadpool(station.acquiring, cid):
+            return back(cid, f"campaign {cid} is not being acquired: nothing to stop")
+        await run_in_threadpool(station.write, request_stop, cid)
         return back(cid, "stop requested: the stand stops rocking, everything is committed")
+
+    async def answered(request: Request) -> Response:
+        cid = campaign_id(request)
+        form = await action_form(request, access)
+        prompt, value = str(form.get("prompt", "")), str(form.get("answer", ""))
+        try:
+            await run_in_threadpool(station.write, answer, cid, prompt, value)
+        except ActionRefused as exc:
+            return back(cid, str(exc))
+        return back(cid, f"answered {prompt}")
 
     async def resume(request: Request) -> Response:
         cid = campaign_id(request)
@@ -289,6 +351,7 @@ def create_app(
             Route("/campaigns/{campaign_id:int}/stream", stream),
             Route("/campaigns/{campaign_id:int}/stop", stop, methods=["POST"]),
             Route("/campaigns/{campaign_id:int}/resume", resume, methods=["POST"]),
+            Route("/campaigns/{campaign_id:int}/answer", answered, methods=["POST"]),
             Route("/campaigns/{campaign_id:int}/report", report, methods=["POST"]),
             Route("/campaigns/{campaign_id:int}/signoff", signoff, methods=["POST"]),
             Route("/campaigns/{campaign_id:int}/files/{name}", files),

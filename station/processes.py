@@ -1,16 +1,15 @@
 """The processes the station starts: `gyrostand campaign run|resume|retry` (the acquisition,
-never inside the web server) and `gyrostand report`. A stop is SIGTERM, which the campaign
-commands handle as a safe stop (the stand told to stop rocking, everything committed)."""
+never inside the web server) and `gyrostand report`. A stop goes through the database
+(`station.operator.request_stop`), whoever started the acquisition."""
 
 from __future__ import annotations
 
 import asyncio
-import signal
 import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
@@ -75,12 +74,16 @@ class Processes:
         acquisition = self.acquisitions.get(campaign_id)
         return None if acquisition is None else acquisition.error()
 
-    async def start(self, plan: Path, newest_campaign: Callable[[], int | None]) -> int:
-        """Run a new campaign of `plan`; its id once it is in the database (ProcessRefused with
-        the command's error line when it ends first). `newest_campaign()`: the id of the newest
-        campaign stored with this plan text (None: none)."""
+    async def start(
+        self, plan: Path, newest_campaign: Callable[[], int | None], answers: Mapping[str, str]
+    ) -> int:
+        """Run a new campaign of `plan` with the `answers` to its prompts; its id once it is in
+        the database (ProcessRefused with the command's error line when it ends first).
+        `newest_campaign()`: the id of the newest campaign stored with this plan text (None:
+        none)."""
         before = newest_campaign()
-        acquisition = self._spawn(["campaign", "run", str(plan)], "campaign run")
+        given = [a for key, value in answers.items() for a in ("--answer", f"{key}={value}")]
+        acquisition = self._spawn(["campaign", "run", str(plan), *given], "campaign run")
         deadline = time.monotonic() + START_WAIT_S
         while time.monotonic() < deadline:
             campaign_id = newest_campaign()
@@ -103,15 +106,6 @@ class Processes:
         else:
             args = ["campaign", "resume", str(campaign_id)]
         self.acquisitions[campaign_id] = self._spawn(args, args[1])
-
-    def stop(self, campaign_id: int) -> None:
-        """SIGTERM to the campaign's acquisition: the safe stop."""
-        if not self.running(campaign_id):
-            raise ProcessRefused(
-                f"campaign {campaign_id} is not being acquired by this station's processes "
-                "(stop it where it was started)"
-            )
-        self.acquisitions[campaign_id].process.send_signal(signal.SIGTERM)
 
     async def report(self, campaign_id: int, out: Path, formats: str) -> None:
         """`gyrostand report ID --out OUT --format FORMATS`, waited for without blocking the

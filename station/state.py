@@ -13,7 +13,16 @@ from typing import Any
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-from gyrostand.db.models import AnalysisRun, Campaign, Event, Instrument, Observation, Series, Trial
+from gyrostand.db.models import (
+    AnalysisRun,
+    Campaign,
+    Event,
+    Instrument,
+    Observation,
+    RawLogSegment,
+    Series,
+    Trial,
+)
 from gyrostand.db.queries import campaign_summary, latest_attempt, live_file_of, raw_log_segments
 
 TRACE_POINTS = 600
@@ -147,12 +156,15 @@ class LiveState:
 
 def fingerprint(session: Session, campaign_id: int) -> tuple[Any, ...]:
     """A few aggregates that change whenever the acquisition writes something the campaign
-    page shows (status, an event, an observation, a series' or trial's status): the update
+    page shows (status, an event, a run, an observation, a series' or trial's status): the update
     stream builds the whole state only when they change."""
     head = session.execute(
         select(
             select(Campaign.status).where(Campaign.id == campaign_id).scalar_subquery(),
             select(func.max(Event.id)).where(Event.campaign_id == campaign_id).scalar_subquery(),
+            select(func.max(RawLogSegment.seq))  # a new run: a new live file
+            .where(RawLogSegment.campaign_id == campaign_id)
+            .scalar_subquery(),
             select(func.max(Observation.id))
             .join(Series, Series.id == Observation.series_id)
             .join(Trial, Trial.id == Series.trial_id)

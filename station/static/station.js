@@ -71,17 +71,32 @@
     $("eta").textContent = "stand " + hms(l.remaining_ms / 1000) + ", wall " + (rate > 0 ? hms(l.remaining_ms / 1000 / rate) : "?");
   }
 
+  // The question the acquisition waits for: a text field, or "yes" to confirm.
+  function prompt(p) {
+    $("prompt").hidden = !p;
+    if (!p || $("prompt-id").value === p.id) return;
+    $("prompt-id").value = p.id;
+    $("prompt-text").textContent = p.text;
+    const confirm = p.kind === "confirm";
+    $("prompt-answer").type = confirm ? "hidden" : "text";
+    $("prompt-answer").value = confirm ? "yes" : "";
+    $("answer").textContent = confirm ? "yes, confirm" : "answer";
+  }
+
   function render(s) {
     window.stationUpdates += 1;
     window.stationAcquiring = s.acquiring;
     $("status").textContent = s.status;
+    $("stop").hidden = !s.acquiring;
+    $("resume").hidden = s.acquiring || s.status === "completed";
+    prompt(s.prompt);
     $("process-error").textContent = s.process_error || "";
     const c = s.current;
     $("trial").textContent = c ? c.trial + "/" + s.n_trials + (c.attempt > 1 ? " (attempt " + c.attempt + ")" : "") : "-";
     $("series").textContent = c ? series(c.j) : "-";
     $("observation").textContent = c ? c.k + "/" + s.n_obs : "-";
     $("phase").textContent = c ? c.phase : "done";
-    $("mean").textContent = c && c.mean_deg !== null ? num(c.mean_deg, 4) + "° (s = " + num(c.spread_deg, 4) + "°)" : "";
+    $("mean").textContent = c && c.mean_deg !== null ? num(c.mean_deg, 4) + "°" + (c.spread_deg === null ? "" : " (s = " + num(c.spread_deg, 4) + "°)") : "";
     $("settle").textContent = c && c.settle_estimate_deg !== null ? num(c.settle_estimate_deg, 4) + "°" : "";
     $("stand-time").textContent = hms(s.stand_time_s);
     $("eta").textContent = "stand " + hms(s.eta_stand_s) + ", wall " + hms(s.eta_wall_s);
@@ -105,12 +120,11 @@
   }
 
   render(initial);
-  if (!initial.acquiring) return;
+  // open while the page is: a run resumed here or elsewhere streams on
   const source = new EventSource(location.pathname + "/stream");
   source.addEventListener("state", (ev) => render(JSON.parse(ev.data)));
   source.addEventListener("live", (ev) => live(JSON.parse(ev.data), true));
   source.addEventListener("end", () => {
-    source.close();
     window.stationAcquiring = false;
   });
 })();

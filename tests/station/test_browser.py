@@ -1,7 +1,8 @@
 """End to end in a real headless browser (Debian's chromium and chromium-driver, driven by
-Selenium): open the station, start the small simulated plan, watch the live trace grow, stop
-it, resume it, open the report. The campaign page's screenshot while it runs is written to
-GYROSTAND_STATION_SCREENSHOT (default: the test's temporary folder) and its path printed."""
+Selenium): open the station, start the small simulated plan, answer its prompt before trial 1
+on the page, watch the live trace grow, stop it, resume it, open the report. The campaign page's
+screenshot while it runs is written to GYROSTAND_STATION_SCREENSHOT (default: the test's
+temporary folder) and its path printed."""
 
 import functools
 import os
@@ -23,6 +24,13 @@ CHROMIUM = shutil.which("chromium")
 DRIVER = shutil.which("chromedriver")
 WAIT_S = 60.0
 PACED = 'timing = "realtime"\nspeedup = 250.0'  # ~5 s of wall time: time to press stop
+PROMPT = """
+[[prompt]]
+id = "plate"
+text = "serial number on the plate?"
+kind = "text"
+before = 1
+"""
 LOADED = {"ack_s = 2.0": "ack_s = 20.0", "bus_silence_s = 5.0": "bus_silence_s = 5000.0"}
 """Paced by the wall clock, a busy machine must not look like a stand that does not answer:
 timeouts of 20 s of wall time (ack_s is in wall seconds, bus silence in stand seconds)."""
@@ -101,12 +109,18 @@ def test_start_watch_stop_resume_report_in_a_browser(station: str, browser, tmp_
 
     plan = write_plan(tmp_path, bus_extra=PACED)
     plan.write_text(
-        functools.reduce(lambda s, kv: s.replace(*kv), LOADED.items(), plan.read_text())
+        functools.reduce(lambda s, kv: s.replace(*kv), LOADED.items(), plan.read_text()) + PROMPT
     )
     browser.get(station + "/campaigns/new")
     browser.find_element(By.NAME, "plan").send_keys(str(plan))
     browser.find_element(By.CSS_SELECTOR, "#start button").click()
     wait.until(lambda b: b.current_url.endswith("/campaigns/1"))
+    wait.until(lambda b: b.find_element(By.ID, "prompt").is_displayed())  # pushed: trial 1 waits
+    assert text("prompt-text") == "serial number on the plate?"
+    assert text("phase") in ("waiting for the operator", "-")
+    browser.find_element(By.ID, "prompt-answer").send_keys("<script>GY-7</script>")
+    browser.find_element(By.ID, "answer").click()
+    wait.until(lambda b: "plate: <script>GY-7</script>" in text("events"))  # shown inert
     wait.until(lambda b: trace_points() >= 1)  # pushed by the stream: the trace grows
     assert int(text("heading-points")) > 0  # the acquisition's live heading trace
     # the screenshot while it runs
@@ -124,6 +138,7 @@ def test_start_watch_stop_resume_report_in_a_browser(station: str, browser, tmp_
     assert "stop" in text("events") and "interrupted" in text("events")
 
     browser.find_element(By.ID, "resume").click()
+    wait.until(lambda b: trace_points() > stopped_at)  # the resumed run's trace streams on
     wait.until(lambda b: text("status") == "completed")
     assert trace_points() == 12 > stopped_at  # 2 trials x 2 series x N = 3
     assert text("observations") == "12/12"
