@@ -77,6 +77,13 @@ def unknown_key(table: tuple[str, ...]) -> Case:
             "[[trials]] 1 bogus_key: unknown key",
             ("[[trials]]\n", "[[trials]]\n" + BOGUS),
         )
+    if table == ("prompt",):  # an array of tables the base plan does not have
+        prompt = '\n[[prompt]]\nid = "mounted"\ntext = "Compass mounted?"\n'
+        return plan_case(
+            "unknown key in [[prompt]]",
+            "[[prompt]] 1 bogus_key: unknown key",
+            append=prompt + BOGUS,
+        )
     dotted = ".".join(table)
     args = ("campaign", "run", "{file}", "--db", "{db}", "--quiet")
     message = f"[{dotted}] bogus_key: unknown key"
