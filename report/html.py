@@ -4,6 +4,7 @@ text and every stored string come out inert), CSS inline, plots inline as PNG da
 The template only formats: every number is a field of the `Report` or of its `CampaignAnalysis`.
 """
 
+import re
 from importlib.resources import files
 
 from jinja2 import Environment, StrictUndefined
@@ -72,6 +73,28 @@ def verdict(value: bool | str | None, yes: str = "yes", no: str = "NO") -> Marku
     return Markup(f'<span class="badge {kind}">{escape(text)}</span>')
 
 
+GREEK = {"alpha": "\u03b1", "delta": "\u03b4", "sigma": "\u03c3", "tau": "\u03c4", "nu": "\u03bd"}
+NOTATION = (
+    (re.compile(r"&lt;=|<="), "\u2264"),
+    (re.compile(r"&gt;=|>="), "\u2265"),
+    (re.compile(r"\b(" + "|".join(GREEK) + r")(?=_|\b)"), lambda m: GREEK[m[1]]),
+    (re.compile(r"&lt;(\u03b4_i)&gt;"), "\u27e8\\1\u27e9"),  # <delta_i>: the trial's mean
+    # S_e, G_ex, alpha_p: a capital or Greek letter; not plan keys (n_obs, max_wait_s)
+    (re.compile(r"(?<!\w)([A-Z\u03b1-\u03c9])_(\w{1,3})\b"), r"\1<sub>\2</sub>"),
+    (re.compile(r"\^(-?\d+)"), r"<sup>\1</sup>"),  # m/s^2, A p^2
+)
+"""The plain-text notation of the analysis's and the profiles' messages, typeset."""
+
+
+def notation(text: str) -> Markup:
+    """A message written in plain-text notation (S_e, <delta_i>, A p^2 <= 1 m/s^2) as HTML
+    with subscripts, superscripts and symbols; the text is escaped first."""
+    html = str(escape(text))
+    for pattern, replacement in NOTATION:
+        html = pattern.sub(replacement, html)
+    return Markup(html)
+
+
 def _environment() -> Environment:
     env = Environment(
         autoescape=True,
@@ -80,7 +103,7 @@ def _environment() -> Environment:
         lstrip_blocks=True,
         keep_trailing_newline=True,
     )
-    env.filters.update(fmt=fmt, sci=sci, verdict=verdict, level=level)
+    env.filters.update(fmt=fmt, sci=sci, verdict=verdict, level=level, notation=notation)
     return env
 
 

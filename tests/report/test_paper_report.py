@@ -17,7 +17,7 @@ from sqlalchemy import func, select
 from gyrostand.db.models import AnalysisRun
 from gyrostand.report.build import Report
 from gyrostand.report.errors import ReportError
-from gyrostand.report.html import _contents
+from gyrostand.report.html import _contents, notation
 from gyrostand.report.json_doc import report_json
 from gyrostand.report.writer import write_report
 
@@ -210,3 +210,24 @@ def test_draft_is_marked_on_every_page_and_in_the_json(
     )
     assert set(watermark_letters(files["pdf"])) == {"ADFRT"}  # on every page
     assert set(watermark_letters(paper_files.files["pdf"])) == {""}
+
+
+@pytest.mark.parametrize(
+    ("text", "html"),
+    [
+        ("F_p = 0.789 on the S_e basis", "F<sub>p</sub> = 0.789 on the S<sub>e</sub> basis"),
+        ("A p^2 <= 1 m/s^2", "A p<sup>2</sup> \u2264 1 m/s<sup>2</sup>"),
+        ("largest |<delta_i>|", "largest |\u27e8\u03b4<sub>i</sub>\u27e9|"),
+        ("alpha_p = -6.464", "\u03b1<sub>p</sub> = -6.464"),
+        ("G_ex = 0.4428 < G* = 0.5175", "G<sub>ex</sub> = 0.4428 &lt; G* = 0.5175"),
+        ("n_obs and max_wait_s", "n_obs and max_wait_s"),  # plan keys stay as written
+        ("<script>x</script>", "&lt;script&gt;x&lt;/script&gt;"),
+    ],
+)
+def test_plain_text_notation_is_typeset(text: str, html: str) -> None:
+    assert notation(text) == html
+
+
+def test_no_plain_text_notation_reaches_the_pdf(paper_files: Rendered) -> None:
+    body = paper_files.pdf_text.split("Appendix B: the plan as submitted")[-2]  # not the plan
+    assert not re.findall(r"\b[A-Z]_[a-z]+\b|<=|>=|\^\d|<delta", body)
