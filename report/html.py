@@ -82,6 +82,8 @@ NOTATION = (
     # S_e, G_ex, alpha_p: a capital or Greek letter; not plan keys (n_obs, max_wait_s)
     (re.compile(r"(?<!\w)([A-Z\u03b1-\u03c9])_(\w{1,3})\b"), r"\1<sub>\2</sub>"),
     (re.compile(r"\^(-?\d+)"), r"<sup>\1</sup>"),  # m/s^2, A p^2
+    (re.compile(r"\+/-"), "\u00b1"),
+    (re.compile(r"(?<=deg) x (?=sec)"), " \u00d7 "),  # 0.75 deg x sec(latitude)
 )
 """The plain-text notation of the analysis's and the profiles' messages, typeset."""
 

@@ -220,6 +220,7 @@ def test_draft_is_marked_on_every_page_and_in_the_json(
         ("largest |<delta_i>|", "largest |\u27e8\u03b4<sub>i</sub>\u27e9|"),
         ("alpha_p = -6.464", "\u03b1<sub>p</sub> = -6.464"),
         ("G_ex = 0.4428 < G* = 0.5175", "G<sub>ex</sub> = 0.4428 &lt; G* = 0.5175"),
+        ("+/-0.75 deg x sec(latitude)", "\u00b10.75 deg \u00d7 sec(latitude)"),
         ("n_obs and max_wait_s", "n_obs and max_wait_s"),  # plan keys stay as written
         ("<script>x</script>", "&lt;script&gt;x&lt;/script&gt;"),
     ],
@@ -230,4 +231,4 @@ def test_plain_text_notation_is_typeset(text: str, html: str) -> None:
 
 def test_no_plain_text_notation_reaches_the_pdf(paper_files: Rendered) -> None:
     body = paper_files.pdf_text.split("Appendix B: the plan as submitted")[-2]  # not the plan
-    assert not re.findall(r"\b[A-Z]_[a-z]+\b|<=|>=|\^\d|<delta", body)
+    assert not re.findall(r"\b[A-Z]_[a-z]+\b|<=|>=|\^\d|<delta|\+/-|deg x sec", body)
