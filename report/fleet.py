@@ -230,5 +230,6 @@ def write_fleet_report(report: FleetReport, path: Path) -> Path:
 
             write_pdf(render_fleet_html(report), path)
     except OSError as error:
-        raise ReportError(f"cannot write {path}: {error.strerror or error}") from None
+        why = f"{path.parent} is a file" if path.parent.is_file() else error.strerror or error
+        raise ReportError(f"cannot write {path}: {why}") from None
     return path
