@@ -200,7 +200,7 @@ def render_fleet_html(report: FleetReport) -> str:
         inputs=report.inputs,
         a=report.analysis,
         charts={
-            p.symbol: Markup(fleet_plots.control_chart(p, order))
+            p.symbol: Markup(fleet_plots.control_chart(p, order, report.analysis.factor))
             for p in report.analysis.parameters
         },
         css=Markup((TEMPLATES / "report.css").read_text(encoding="utf-8")),

@@ -15,10 +15,10 @@ OUTSIDE = "#d62728"
 
 
 @_styled
-def control_chart(p: ParameterAnalysis, order: Sequence[str]) -> Figure:
-    """Each unit's estimate (± its SE, coloured by group) in `order` of serials, with the fleet
-    mean and the type's prediction interval the unit was judged against; units outside it
-    ringed and named."""
+def control_chart(p: ParameterAnalysis, order: Sequence[str], factor: str) -> Figure:
+    """Each unit's estimate (± its SE, coloured by its group of `factor`) in `order` of serials,
+    with the fleet mean and the type's prediction interval the unit was judged against; units
+    outside it ringed."""
     scale, label = SCALE[p.symbol]
     units = {u.serial: u for u in p.units}
     chosen = [units[s] for s in order]
@@ -46,7 +46,7 @@ def control_chart(p: ParameterAnalysis, order: Sequence[str]) -> Figure:
             ms=4,
             capsize=2,
             color=colours[g.group],
-            label=f"{g.group}{' (differs)' if g.differs else ''}",
+            label=f"{factor} {g.group}{' (differs)' if g.differs else ''}",
         )
     outside = [(i, u) for i, u in zip(x, chosen, strict=True) if u.outside]
     if outside:
