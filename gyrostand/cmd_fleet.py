@@ -99,8 +99,9 @@ def register(app: typer.Typer) -> None:
         ] = False,
         db: DbOption = DEFAULT_DB,
     ) -> None:
-        """Write the fleet report (HTML, PDF or JSON) of a model's units grouped by a label:
-        which groups differ (analysis of variance, Smirnov's tests, Sveshnikov section 8.2),
+        """Write the fleet report (HTML, PDF or JSON) of a model's units grouped by a label.
+
+        Which groups differ (analysis of variance, Smirnov's tests, Sveshnikov section 8.2),
         the units outside the type's prediction interval, control charts of C and T."""
         from gyrostand import SOFTWARE_VERSION
         from gyrostand.cmd_report import DEFAULT_OUT, stage
@@ -125,7 +126,7 @@ def register(app: typer.Typer) -> None:
             analysis=analysis,
             generated_at=datetime.now(UTC).isoformat(sep=" ", timespec="seconds"),
             database=db,
-            software=f"gyrostand {SOFTWARE_VERSION}",
+            software=SOFTWARE_VERSION,
             simulated=simulated,
             draft=draft,
         )
@@ -174,10 +175,12 @@ def register(app: typer.Typer) -> None:
             ),
         ] = None,
     ) -> None:
-        """Build a simulated fleet for the fleet statistics: units of one model in factories
-        A, B, ..., each unit's true C and T drawn from the type's distribution (C: 6.0e7
-        g·cm²·s⁻², SD 3 %; T: 1.1 s, SD 0.03 s), the shifted factory's C moved by --shift;
-        one campaign per unit on the simulated stand, labelled factory=..., and analysed."""
+        """Build a simulated fleet, one factory's C shifted, to try the fleet statistics on.
+
+        Units of one model in factories A, B, ..., each unit's true C and T drawn from the
+        type's distribution (C: 6.0e7 g·cm²·s⁻², SD 3 %; T: 1.1 s, SD 0.03 s), the shifted
+        factory's C moved by --shift; one campaign per unit on the simulated stand, labelled
+        factory=..., and analysed."""
         from gyrostand.cmd_campaign import _load
         from gyrostand.cmd_demo import DEMO_PLAN
         from gyrostand.plan.model import PlanError
