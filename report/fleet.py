@@ -1,14 +1,25 @@
 """Fleet statistics of stored campaigns: the analysed campaigns of one instrument model as units
-of a fleet (`analysis.fleet`), grouped by one of their labels, and the fleet's text."""
+of a fleet (`analysis.fleet`), grouped by one of their labels; the fleet's text, and the fleet
+report (HTML, PDF, JSON) with the stand report's machinery (`report.html`, `report.pdf`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
 
 from sqlalchemy.orm import Session
 
 from gyrostand.analysis.fleet import FleetAnalysis, FleetUnit
+from gyrostand.db.models import Campaign
 from gyrostand.db.queries import model_campaigns
+from gyrostand.report.errors import ReportError
+
+SCHEMA = "gyrostand.fleet-report/1"
+FORMATS = {".html": "html", ".pdf": "pdf", ".json": "json"}
+"""The fleet report's formats, by the output file's suffix."""
 
 
 @dataclass(frozen=True)
@@ -67,6 +78,17 @@ def fleet_inputs(session: Session, model: str, factor: str) -> FleetInputs:
     return FleetInputs(model, factor, tuple(ordered), tuple(reversed(left_out)))
 
 
+def simulated_campaigns(session: Session, units: Sequence[FleetUnit]) -> tuple[int, ...]:
+    """The units' campaigns that ran on the simulated stand, as the stand report decides."""
+    from gyrostand.report.stored import _lab_items  # the report's imports: analyze stays light
+
+    return tuple(
+        u.campaign_id
+        for u in units
+        if _lab_items(session.get_one(Campaign, u.campaign_id), None)["simulated"]
+    )
+
+
 GROUP_HEADER = "  group      n  mean          sd            rms SE        t vs rest"
 
 
@@ -116,3 +138,98 @@ def fleet_text(inputs: FleetInputs, analysis: FleetAnalysis) -> str:
     for c in inputs.left_out:
         lines.append(f"left out: campaign {c.campaign_id} (serial {c.serial}): {c.reason}")
     return "\n".join(lines)
+
+
+def fleet_document(inputs: FleetInputs, analysis: FleetAnalysis) -> dict[str, Any]:
+    """The fleet analysis as plain JSON types: model, the analysis (`FleetAnalysis.to_dict`),
+    the units and the campaigns left out."""
+    return {
+        "model": inputs.model,
+        **analysis.to_dict(),
+        "units": [asdict(u) for u in inputs.units],
+        "left_out": [asdict(c) for c in inputs.left_out],
+    }
+
+
+@dataclass(frozen=True)
+class FleetReport:
+    """The fleet report: what it rests on (`inputs`), the analysis, and its identification."""
+
+    inputs: FleetInputs
+    analysis: FleetAnalysis
+    generated_at: str
+    database: str
+    software: str
+    simulated: tuple[int, ...]
+    """The units' campaigns that ran on the simulated stand (`simulated_campaigns`)."""
+    draft: bool = False
+
+    @property
+    def ordered_units(self) -> tuple[FleetUnit, ...]:
+        """The units in the control charts' order: by campaign start, then serial."""
+        return tuple(sorted(self.inputs.units, key=lambda u: (u.when or "", u.serial)))
+
+
+def fleet_json(report: FleetReport) -> str:
+    """The fleet report as one JSON document (schema gyrostand.fleet-report/1): identification,
+    then `fleet_document`."""
+    document = {
+        "schema": SCHEMA,
+        "generated_at": report.generated_at,
+        "software": report.software,
+        "database": report.database,
+        "draft": report.draft,
+        "simulated_campaigns": list(report.simulated),
+        **fleet_document(report.inputs, report.analysis),
+    }
+    return json.dumps(document, indent=2, ensure_ascii=False, allow_nan=False) + "\n"
+
+
+def render_fleet_html(report: FleetReport) -> str:
+    """The fleet report as one self-contained HTML document (the stand report's style sheet and
+    filters; the control charts inline)."""
+    from markupsafe import Markup
+
+    from gyrostand.report import fleet_plots
+    from gyrostand.report.html import TEMPLATES, _environment
+
+    template = _environment().from_string((TEMPLATES / "fleet.html.j2").read_text(encoding="utf-8"))
+    order = [u.serial for u in report.ordered_units]
+    return template.render(
+        r=report,
+        inputs=report.inputs,
+        a=report.analysis,
+        charts={
+            p.symbol: Markup(fleet_plots.control_chart(p, order, report.analysis.factor))
+            for p in report.analysis.parameters
+        },
+        css=Markup((TEMPLATES / "report.css").read_text(encoding="utf-8")),
+    )
+
+
+def fleet_format(path: Path) -> str:
+    """The format an output file's suffix names (ReportError for any other)."""
+    try:
+        return FORMATS[path.suffix.lower()]
+    except KeyError:
+        known = ", ".join(FORMATS)
+        raise ReportError(f"{path}: the suffix names no fleet report format ({known})") from None
+
+
+def write_fleet_report(report: FleetReport, path: Path) -> Path:
+    """Write the report in the format the suffix of `path` names (ReportError when it cannot)."""
+    kind = fleet_format(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if kind == "json":
+            path.write_text(fleet_json(report), encoding="utf-8")
+        elif kind == "html":
+            path.write_text(render_fleet_html(report), encoding="utf-8")
+        else:
+            from gyrostand.report.pdf import write_pdf
+
+            write_pdf(render_fleet_html(report), path)
+    except OSError as error:
+        why = f"{path.parent} is a file" if path.parent.is_file() else error.strerror or error
+        raise ReportError(f"cannot write {path}: {why}") from None
+    return path
