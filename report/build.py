@@ -158,6 +158,7 @@ class Report:
     conformity: Conformity
     draft: bool = False  # not for signature: DRAFT on every page
 
+
 def trial_rows(analysis: CampaignAnalysis) -> tuple[TrialRow, ...]:
     """The trial table: statistics from the analysis, alpha_i and v_i from the fit (fit trials)
     or the control judgement (control trials)."""

@@ -80,12 +80,10 @@ def fleet_inputs(session: Session, model: str, factor: str) -> FleetInputs:
 
 def simulated_campaigns(session: Session, units: Sequence[FleetUnit]) -> tuple[int, ...]:
     """The units' campaigns that ran on the simulated stand, as the stand report decides."""
-    from gyrostand.report.stored import _lab_items  # the report's imports: analyze stays light
+    from gyrostand.report.stored import is_simulated  # the report's imports: analyze stays light
 
     return tuple(
-        u.campaign_id
-        for u in units
-        if _lab_items(session.get_one(Campaign, u.campaign_id), None)["simulated"]
+        u.campaign_id for u in units if is_simulated(session.get_one(Campaign, u.campaign_id))
     )
 
 
@@ -191,9 +189,9 @@ def render_fleet_html(report: FleetReport) -> str:
     from markupsafe import Markup
 
     from gyrostand.report import fleet_plots
-    from gyrostand.report.html import TEMPLATES, _environment
+    from gyrostand.report.html import TEMPLATES, environment
 
-    template = _environment().from_string((TEMPLATES / "fleet.html.j2").read_text(encoding="utf-8"))
+    template = environment().from_string((TEMPLATES / "fleet.html.j2").read_text(encoding="utf-8"))
     order = [u.serial for u in report.ordered_units]
     return template.render(
         r=report,

@@ -97,7 +97,8 @@ def notation(text: str) -> Markup:
     return Markup(html)
 
 
-def _environment() -> Environment:
+def environment() -> Environment:
+    """The Jinja2 environment of the reports: autoescape, strict, the formatting filters."""
     env = Environment(
         autoescape=True,
         undefined=StrictUndefined,
@@ -173,9 +174,7 @@ def _contents(report: Report) -> list[tuple[str, str]]:
 
 def render_html(report: Report) -> str:
     """The whole report as HTML text."""
-    template = _environment().from_string(
-        (TEMPLATES / "report.html.j2").read_text(encoding="utf-8")
-    )
+    template = environment().from_string((TEMPLATES / "report.html.j2").read_text(encoding="utf-8"))
     css = (TEMPLATES / "report.css").read_text(encoding="utf-8")
     return template.render(
         r=report,

@@ -294,6 +294,14 @@ def _raw_log_check(campaign: Campaign) -> tuple[str, list[Path]]:
 NOT_STATED = "not stated"
 
 
+def is_simulated(campaign: Campaign, plan: Plan | PartialPlan | None = None) -> bool:
+    """The campaign ran on the simulated stand (its stored plan, parsed unless given, says so;
+    an import never did)."""
+    if plan is None:
+        plan = _plan(campaign)
+    return campaign.source != "import" and isinstance(plan, Plan) and plan.bus.simulated
+
+
 def _lab_items(campaign: Campaign, number: str | None) -> dict[str, Any]:
     """The identification items of the stored plan's [report] table, whole or partial
     (`Identification`); for a simulated stand, what does not apply says so."""
@@ -302,7 +310,7 @@ def _lab_items(campaign: Campaign, number: str | None) -> dict[str, Any]:
     except PlanError:
         plan = None
     items = ReportPlan() if plan is None else plan.report
-    simulated = campaign.source != "import" and isinstance(plan, Plan) and plan.bus.simulated
+    simulated = is_simulated(campaign, plan)
     na = "not applicable: simulated instrument and stand" if simulated else NOT_STATED
     return {
         "simulated": simulated,

@@ -125,7 +125,7 @@ def test_the_odd_unit_and_the_identification(report: FleetReport, html: str) -> 
     assert "<tr><td>A-004</td><td>A</td>" in outside
     assert "C: every unit lies within the type's prediction interval" in html
     assert "SIMULATION: the instruments and the stand were simulated" in html
-    assert 'class="draft-mark">DRAFT<' in html
+    assert 'class="watermark" aria-hidden="true">DRAFT<br>SIMULATION<' in html
     assert "a later campaign of serial A-001 counts (1)" in html
     assert "1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12: each unit" in html
     assert html.count('<img src="data:image/png;base64,') == 2  # the control charts of C, T
