@@ -106,7 +106,7 @@ def fleet_text(inputs: FleetInputs, analysis: FleetAnalysis) -> str:
         lines += [
             "",
             f"{p.symbol} ({p.unit})",
-            "  group      n  mean          sd            rms SE",
+            GROUP_HEADER,
         ]
         for g in p.groups:
             sd = "-" if g.sd is None else _number(g.sd, p.symbol)
