@@ -288,7 +288,7 @@ def create_app(
             await run_in_threadpool(station.write, answer, cid, prompt, value)
         except ActionRefused as exc:
             return back(cid, str(exc))
-        return back(cid, f"answered {prompt}")
+        return back(cid, f"prompt {prompt}: answer recorded ({value})")
 
     async def resume(request: Request) -> Response:
         cid = campaign_id(request)

@@ -92,7 +92,7 @@ def test_prompt_answered_and_stop_requested_for_a_run_started_elsewhere(tmp_path
                                                           **csrf(client)})  # fmt: skip
         assert "plate: the answer is empty" in empty.text
         data = {"prompt": "plate", "answer": "<b>GY-7</b>", **csrf(client)}
-        assert "answered plate" in client.post("/campaigns/1/answer", data=data).text
+        assert "prompt plate: answer recorded" in client.post("/campaigns/1/answer", data=data).text
         until(lambda: len(prompts_of(db)) == 2, "the second prompt")
         assert rows(db, "SELECT message FROM event WHERE kind = 'answer'") == [
             ("plate: <b>GY-7</b>",)
