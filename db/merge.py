@@ -18,12 +18,11 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import Table, delete, func, insert, select, text
+from sqlalchemy import Row, RowMapping, Table, delete, func, insert, select, text
 from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand import SOFTWARE_VERSION
@@ -54,7 +53,7 @@ MATCHED = (Instrument,)  # the lab's own row of the same model, serial and const
 PER_DATABASE = (DatabaseIdentity, CampaignOrigin)  # never copied
 MERGE_LOCK = 0x67796D7267  # PostgreSQL advisory lock key of merges ("gymrg")
 
-Row = dict[str, Any]
+Values = dict[str, Any]  # a row: column -> value
 
 
 class MergeRefused(ValueError):
@@ -66,11 +65,11 @@ class CampaignRows:
     """A campaign's rows, table by table (the campaign's first, parents before children), each
     by id, with wall times as aware UTC; and its instrument."""
 
-    instrument: Row
-    tables: dict[str, list[Row]]
+    instrument: Values
+    tables: dict[str, list[Values]]
 
     @property
-    def campaign(self) -> Row:
+    def campaign(self) -> Values:
         return self.tables["campaign"][0]
 
 
@@ -80,13 +79,13 @@ def _tables() -> list[Table]:
     return [t for t in Base.metadata.sorted_tables if t.name in names]
 
 
-def _plain(row: Mapping[str, Any]) -> Row:
+def _plain(row: RowMapping) -> Values:
     return {k: as_utc(v) if isinstance(v, datetime) else v for k, v in row.items()}
 
 
 def campaign_rows(session: Session, campaign_id: int) -> CampaignRows:
     """Every row of the campaign in the `COPIED` tables (and its instrument)."""
-    tables: dict[str, list[Row]] = {}
+    tables: dict[str, list[Values]] = {}
     for table in _tables():
         if table.name == "campaign":
             where = table.c.id == campaign_id
@@ -212,9 +211,8 @@ def merge_database(
         if identity == database_uuid(target):
             raise MergeRefused(f"{merged_from} is the lab database itself (or a copy of it)")
         merger = _Merger(stand, source, target, identity, merged_from)
-        done = tuple(
-            merger.merge(i) for i in source.scalars(select(Campaign.id).order_by(Campaign.id))
-        )
+        ids = source.scalars(select(Campaign.id).order_by(Campaign.id)).all()
+        done = tuple(merger.merge(i) for i in ids)
         if dry_run:
             target.rollback()
         else:
@@ -236,7 +234,9 @@ class _Merger:
                 CampaignLabel.campaign_id == campaign_id, CampaignLabel.key == "stand"
             )
         )
-        status = self.source.scalar(select(Campaign.status).where(Campaign.id == campaign_id))
+        status = self.source.execute(
+            select(Campaign.status).where(Campaign.id == campaign_id)
+        ).scalar_one()
         why = _busy(self.stand, campaign_id, status)
         if why:
             return CampaignMerge(campaign_id, "skipped", None, label, why)
@@ -286,7 +286,7 @@ class _Merger:
         ).first()
         return (own[0], own[1]) if own is not None else (self.identity, campaign_id)
 
-    def _check_replaceable(self, campaign_id: int, rows: CampaignRows, earlier: Any) -> None:
+    def _check_replaceable(self, campaign_id: int, rows: CampaignRows, earlier: Row[Any]) -> None:
         """MergeRefused unless the lab's earlier copy may be replaced (see the module doc)."""
         lab_id = earlier.campaign_id
         copy = campaign_rows(self.target, lab_id)

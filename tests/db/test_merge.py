@@ -288,15 +288,22 @@ def test_merged_campaign_keeps_its_first_origin(stands: Stands, db_url: str, tmp
     assert "already merged (identical)" in merge(stands.s1, db_url).output
 
 
-def test_database_identity_survives_copies_and_upgrades(tmp_path: Path) -> None:
-    """An old (schema 0007) stand file and its copy, upgraded apart, name the same database;
-    new databases get identities of their own."""
-    old = tmp_path / "old.sqlite"
-    engine = create_engine(sqlite_url(old))
+def database_at(path: Path, revision: str) -> Path:
+    """A new SQLite gyrostand database of an older schema `revision`."""
+    engine = create_engine(sqlite_url(path))
     config = alembic_config()
     with engine.begin() as connection:
         config.attributes["connection"] = connection
-        command.upgrade(config, "0007")
+        command.upgrade(config, revision)
+    engine.dispose()
+    return path
+
+
+def test_database_identity_survives_copies_and_upgrades(tmp_path: Path) -> None:
+    """An old (schema 0007) stand file and its copy, upgraded apart, name the same database;
+    new databases get identities of their own."""
+    old = database_at(tmp_path / "old.sqlite", "0007")
+    engine = create_engine(sqlite_url(old))
     with Session(engine) as session, session.begin():
         make_campaign(session)
     engine.dispose()
