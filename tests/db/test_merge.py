@@ -13,7 +13,7 @@ import shutil
 import sqlite3
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,7 +33,7 @@ from gyrostand.db.merge import (
     content_sha256,
     database_uuid,
 )
-from gyrostand.db.models import Base, Campaign, SignOff
+from gyrostand.db.models import AnalysisRun, Base, Campaign, SignOff
 from gyrostand.db.session import alembic_config, open_database, sqlite_url
 from tests.acquisition.harness import FAST_SIM, plan_text
 from tests.db.conftest import make_campaign
@@ -219,8 +219,22 @@ def test_incomplete_copy_is_replaced_by_the_finished_campaign(
     assert row_counts(db_url)["campaign"] == 2
 
 
-def test_incomplete_copy_changed_in_the_lab_is_not_replaced(
-    stands: Stands, db_url: str, tmp_path: Path
+def edit(session: Session) -> None:
+    session.get(Campaign, 1).operator = "lab"  # type: ignore[union-attr]
+
+
+def analyse(session: Session) -> None:
+    session.add(
+        AnalysisRun(campaign_id=1, inputs_hash="0" * 64, results_json={}, software_version="x")
+    )
+
+
+@pytest.mark.parametrize(
+    ("work", "problem"),
+    [(edit, "and so has the lab's copy"), (analyse, "and the lab has analysed its copy")],
+)
+def test_incomplete_copy_worked_on_in_the_lab_is_not_replaced(
+    stands: Stands, db_url: str, tmp_path: Path, work: Callable[[Session], None], problem: str
 ) -> None:
     early = stands.copy(stands.s1, tmp_path, "early.sqlite")
     with sqlite3.connect(early) as connection:
@@ -228,12 +242,12 @@ def test_incomplete_copy_changed_in_the_lab_is_not_replaced(
         connection.execute("DELETE FROM observation WHERE k = 3")
     assert merge(early, db_url).exit_code == 0
     sessions = open_database(db_url)
-    with sessions.begin() as session:  # someone in the lab edited the copy
-        session.get(Campaign, 1).operator = "lab"  # type: ignore[union-attr]
+    with sessions.begin() as session:
+        work(session)
     sessions.kw["bind"].dispose()
     refused = merge(stands.s1, db_url)
     assert refused.exit_code == 1
-    assert "has changed since it was merged, and so has the lab's copy" in refused.stderr
+    assert f"has changed since it was merged, {problem}; nothing merged" in refused.stderr
 
 
 @pytest.fixture
