@@ -2,8 +2,8 @@
 
 A campaign is copied whole, table by table (`COPIED`, parents first, every foreign key mapped to
 the new ids), onto the lab's instrument of the same model, serial and constants
-(`queries.instrument_for`), and gets a `CampaignOrigin`: the database it was recorded in (its
-`DatabaseIdentity`; a campaign that was itself merged keeps its first origin), its id there and
+(`queries.instrument_for`), and gets a `CampaignOrigin`: the database it was recorded in
+(`database_identity`; a campaign that was itself merged keeps its first origin), its id there and
 the SHA-256 of its content (`content_sha256`: every copied row without its ids, the analysis runs
 aside: they are derived, and the lab may add its own).
 
@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import uuid
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
@@ -33,7 +34,6 @@ from gyrostand.db.models import (
     Campaign,
     CampaignLabel,
     CampaignOrigin,
-    DatabaseIdentity,
     Event,
     Instrument,
     Observation,
@@ -50,8 +50,9 @@ COPIED = (CampaignLabel, Trial, Series, Observation, Event, RawLogSegment, SignO
 key to the campaign or to another of them."""
 DERIVED = (AnalysisRun,)  # copied, but no part of the content
 MATCHED = (Instrument,)  # the lab's own row of the same model, serial and constants
-PER_DATABASE = (DatabaseIdentity, CampaignOrigin)  # never copied
+PER_DATABASE = (CampaignOrigin,)  # never copied
 MERGE_LOCK = 0x67796D7267  # PostgreSQL advisory lock key of merges ("gymrg")
+IDENTITIES = uuid.UUID("5a0c8f1e-9b7d-4c1e-8f2a-67796d657267")  # namespace of database_identity
 
 Values = dict[str, Any]  # a row: column -> value
 
@@ -77,6 +78,11 @@ def _tables() -> list[Table]:
     """The campaign's tables, parents before children."""
     names = {"campaign"} | {model.__tablename__ for model in COPIED}
     return [t for t in Base.metadata.sorted_tables if t.name in names]
+
+
+def _references(table: Table) -> dict[str, str]:
+    """The table's foreign key columns and the tables they refer to."""
+    return {fk.parent.name: fk.column.table.name for fk in table.foreign_keys}
 
 
 def _plain(row: RowMapping) -> Values:
@@ -125,7 +131,7 @@ def content_sha256(rows: CampaignRows) -> str:
     for table in _tables():
         if table.name in derived:
             continue
-        keys = {fk.parent.name: fk.column.table.name for fk in table.foreign_keys}
+        keys = _references(table)
         document[table.name] = [
             {
                 name: value if name not in keys or value is None else position[keys[name]][value]
@@ -153,7 +159,7 @@ def copy_campaign(session: Session, rows: CampaignRows, campaign_id: int | None 
         old = rows.tables[table.name]
         if not old:
             continue
-        keys = {fk.parent.name: fk.column.table.name for fk in table.foreign_keys}
+        keys = _references(table)
         values = [
             {
                 name: new_ids[keys[name]][value] if name in keys and value is not None else value
@@ -171,9 +177,20 @@ def copy_campaign(session: Session, rows: CampaignRows, campaign_id: int | None 
     return new_ids["campaign"][rows.campaign["id"]]
 
 
-def database_uuid(session: Session) -> str:
-    """The database's identity (schema 0008 gives every database one)."""
-    return session.execute(select(DatabaseIdentity.uuid)).scalar_one()
+def database_identity(session: Session) -> str | None:
+    """The identity of the database (None: it recorded no campaign of its own): a UUID derived
+    from the first campaign recorded in it (not merged into it), from its creation time and plan
+    hash. Copies of the file keep it; nothing random is stored, so two runs of one seed still
+    make equal databases (tests/acquisition/test_virtual_time.py)."""
+    first = session.execute(
+        select(Campaign.created_at, Campaign.plan_hash)
+        .where(~select(CampaignOrigin.id).where(CampaignOrigin.campaign_id == Campaign.id).exists())
+        .order_by(Campaign.id)
+        .limit(1)
+    ).first()
+    if first is None:
+        return None
+    return str(uuid.uuid5(IDENTITIES, f"{as_utc(first.created_at).isoformat()} {first.plan_hash}"))
 
 
 @dataclass(frozen=True)
@@ -192,7 +209,7 @@ class CampaignMerge:
 class MergeResult:
     """The stand database's identity and what became of each of its campaigns."""
 
-    source_database: str
+    source_database: str | None
     campaigns: tuple[CampaignMerge, ...]
 
     def count(self, outcome: str) -> int:
@@ -207,8 +224,8 @@ def merge_database(
     with stand() as source, writer(lab)() as target:
         if target.get_bind().dialect.name == "postgresql":  # one merge at a time
             target.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": MERGE_LOCK})
-        identity = database_uuid(source)
-        if identity == database_uuid(target):
+        identity = database_identity(source)
+        if identity is not None and identity == database_identity(target):
             raise MergeRefused(f"{merged_from} is the lab database itself (or a copy of it)")
         merger = _Merger(stand, source, target, identity, merged_from)
         ids = source.scalars(select(Campaign.id).order_by(Campaign.id)).all()
@@ -225,7 +242,7 @@ class _Merger:
     stand: sessionmaker[Session]
     source: Session
     target: Session
-    identity: str
+    identity: str | None
     merged_from: str
 
     def merge(self, campaign_id: int) -> CampaignMerge:
@@ -284,7 +301,10 @@ class _Merger:
                 CampaignOrigin.campaign_id == campaign_id
             )
         ).first()
-        return (own[0], own[1]) if own is not None else (self.identity, campaign_id)
+        if own is not None:
+            return own[0], own[1]
+        assert self.identity is not None  # a campaign of its own gives the database one
+        return self.identity, campaign_id
 
     def _check_replaceable(self, campaign_id: int, rows: CampaignRows, earlier: Row[Any]) -> None:
         """MergeRefused unless the lab's earlier copy may be replaced (see the module doc)."""

@@ -424,20 +424,9 @@ class SignOff(Base):
     signed_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
 
 
-class DatabaseIdentity(Base):
-    """The one row naming this database: a UUID given when schema 0008 was applied to it, kept by
-    copies of the file. A lab database tells the stand databases it merged apart by it."""
-
-    __tablename__ = "database_identity"
-    __table_args__ = (CheckConstraint("length(uuid) = 36", name="uuid"),)
-
-    uuid: Mapped[str] = mapped_column(String(36), primary_key=True)
-    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
-
-
 class CampaignOrigin(Base):
     """Where a merged campaign comes from (`gyrostand db merge`): the database it was recorded
-    in (its `DatabaseIdentity`), its id there, the SHA-256 of its content when merged
+    in (`db.merge.database_identity`), its id there, the SHA-256 of its content when merged
     (`db.merge.content_sha256`), from which file or URL, when and by which software."""
 
     __tablename__ = "campaign_origin"

@@ -8,10 +8,11 @@ import sqlite3
 from pathlib import Path
 
 import pytest
+from alembic import command
+from sqlalchemy import create_engine
 
-from gyrostand.db.session import schema_heads
+from gyrostand.db.session import alembic_config, schema_heads, sqlite_url
 
-from ..db.test_merge import database_at
 from .cases import Case, check, folder, ids, invoke, text_file
 from .conftest import Stand
 
@@ -28,8 +29,15 @@ def foreign_sqlite(_stand: Stand, tmp: Path) -> Path:
 
 
 def schema_0007(_stand: Stand, tmp: Path) -> Path:
-    """A gyrostand database of schema 0007 (before the merge's tables)."""
-    return database_at(tmp / "old.sqlite", "0007")
+    """A gyrostand database of schema 0007 (before the merge's table)."""
+    path = tmp / "old.sqlite"
+    engine = create_engine(sqlite_url(path))
+    config = alembic_config()
+    with engine.begin() as connection:
+        config.attributes["connection"] = connection
+        command.upgrade(config, "0007")
+    engine.dispose()
+    return path
 
 
 CASES = [

@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from alembic import command
 from sqlalchemy import create_engine, func, select, text
 from sqlalchemy.orm import Session
 from typer.testing import CliRunner
@@ -31,10 +30,10 @@ from gyrostand.db.merge import (
     PER_DATABASE,
     campaign_rows,
     content_sha256,
-    database_uuid,
+    database_identity,
 )
 from gyrostand.db.models import AnalysisRun, Base, Campaign, SignOff
-from gyrostand.db.session import alembic_config, open_database, sqlite_url
+from gyrostand.db.session import open_database, sqlite_url
 from tests.acquisition.harness import FAST_SIM, plan_text
 from tests.db.conftest import make_campaign
 from tests.db.test_concurrency import TRIALS  # three fit trials: enough for a fit
@@ -302,31 +301,27 @@ def test_merged_campaign_keeps_its_first_origin(stands: Stands, db_url: str, tmp
     assert "already merged (identical)" in merge(stands.s1, db_url).output
 
 
-def database_at(path: Path, revision: str) -> Path:
-    """A new SQLite gyrostand database of an older schema `revision`."""
-    engine = create_engine(sqlite_url(path))
-    config = alembic_config()
-    with engine.begin() as connection:
-        config.attributes["connection"] = connection
-        command.upgrade(config, revision)
-    engine.dispose()
-    return path
+def identity_of(path: Path) -> str | None:
+    sessions = open_database(sqlite_url(path))
+    with sessions() as session:
+        identity = database_identity(session)
+    sessions.kw["bind"].dispose()
+    return identity
 
 
-def test_database_identity_survives_copies_and_upgrades(tmp_path: Path) -> None:
-    """An old (schema 0007) stand file and its copy, upgraded apart, name the same database;
-    new databases get identities of their own."""
-    old = database_at(tmp_path / "old.sqlite", "0007")
-    engine = create_engine(sqlite_url(old))
-    with Session(engine) as session, session.begin():
+def test_database_identity_survives_copies_and_merges(stands: Stands, tmp_path: Path) -> None:
+    """A copy of a stand's file names the same database, also after campaigns were merged into
+    it; another stand's, another; a database without a campaign of its own, none."""
+    s1 = identity_of(stands.s1)
+    copy = stands.copy(stands.s1, tmp_path, "copy.sqlite")
+    assert merge(stands.s2, str(copy)).exit_code == 0
+    assert identity_of(copy) == s1
+    assert identity_of(stands.s2) not in (s1, None)
+    lab = tmp_path / "lab.sqlite"
+    assert merge(stands.s2, str(lab)).exit_code == 0
+    assert identity_of(lab) is None
+    sessions = open_database(sqlite_url(lab))
+    with sessions.begin() as session:  # a campaign run into the lab gives it an identity
         make_campaign(session)
-    engine.dispose()
-    copy = Path(shutil.copyfile(old, tmp_path / "copy.sqlite"))
-    identities = []
-    for path in (old, copy, tmp_path / "new-1.sqlite", tmp_path / "new-2.sqlite"):
-        sessions = open_database(sqlite_url(path))
-        with sessions() as session:
-            identities.append(database_uuid(session))
-        sessions.kw["bind"].dispose()
-    assert identities[0] == identities[1]
-    assert len(set(identities)) == 3
+    sessions.kw["bind"].dispose()
+    assert identity_of(lab) not in (s1, identity_of(stands.s2), None)
