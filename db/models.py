@@ -422,3 +422,27 @@ class SignOff(Base):
     role: Mapped[str] = mapped_column(String(16))
     name: Mapped[str] = mapped_column(String(200))
     signed_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
+
+
+class CampaignOrigin(Base):
+    """Where a merged campaign comes from (`gyrostand db merge`): the database it was recorded
+    in (`db.merge.database_identity`), its id there, the SHA-256 of its content when merged
+    (`db.merge.content_sha256`), from which file or URL, when and by which software."""
+
+    __tablename__ = "campaign_origin"
+    __table_args__ = (
+        UniqueConstraint("source_database", "source_campaign_id"),
+        CheckConstraint("length(content_sha256) = 64", name="content_sha256"),
+        CheckConstraint("source_campaign_id >= 1", name="source_campaign_id"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(
+        ForeignKey("campaign.id", ondelete="CASCADE"), unique=True
+    )
+    source_database: Mapped[str] = mapped_column(String(36))
+    source_campaign_id: Mapped[int] = mapped_column(Integer)
+    content_sha256: Mapped[str] = mapped_column(String(64))
+    merged_from: Mapped[str] = mapped_column(Text)
+    merged_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
+    software_version: Mapped[str] = mapped_column(String(64))

@@ -501,8 +501,8 @@ def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
             status=status,
             source=source,
             operator=operator,
-            started_at=_utc(started_at),
-            finished_at=None if finished_at is None else _utc(finished_at),
+            started_at=as_utc(started_at),
+            finished_at=None if finished_at is None else as_utc(finished_at),
             labels=labels[i],
             observations=counts.get(i, 0),
         )
@@ -510,7 +510,7 @@ def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
     ]
 
 
-def _utc(value: datetime) -> datetime:
+def as_utc(value: datetime) -> datetime:
     """A stored wall time as aware UTC (SQLite gives it back naive)."""
     return value if value.tzinfo is not None else value.replace(tzinfo=UTC)
 
@@ -553,7 +553,7 @@ def model_campaigns(session: Session, model: str, key: str) -> list[AnalysedCamp
         .order_by(Campaign.id)
     ).all()
     return [
-        AnalysedCampaign(campaign_id, serial, value, _utc(started), results)
+        AnalysedCampaign(campaign_id, serial, value, as_utc(started), results)
         for campaign_id, serial, value, started, results in rows
     ]
 

@@ -38,6 +38,15 @@ class DatabaseVersionError(Exception):
     """The database's schema is not the one this code uses and cannot (or may not) be upgraded."""
 
 
+class DatabaseBehind(DatabaseVersionError):
+    """The database is empty or its schema older than the code's, and was not to be upgraded.
+    `current`: its schema revisions (none: empty)."""
+
+    def __init__(self, message: str, current: tuple[str, ...]) -> None:
+        super().__init__(message)
+        self.current = current
+
+
 class DatabaseUnusable(Exception):
     """The database cannot be opened or written. `bad_input`: what was given is no database
     gyrostand can use (a folder, a file that is not SQLite or is damaged, a URL that does not
@@ -178,11 +187,16 @@ def _enable_wal(engine: Engine) -> None:
         raw.close()
 
 
+def schema_heads(script_location: Path = MIGRATIONS_DIR) -> set[str]:
+    """The schema revisions the code writes (one: the latest migration)."""
+    return set(ScriptDirectory.from_config(alembic_config(script_location)).get_heads())
+
+
 def migrate(engine: Engine, *, upgrade: bool, script_location: Path = MIGRATIONS_DIR) -> None:
     """Bring the schema to the head revision of `script_location`, or refuse (see open_database)."""
     config = alembic_config(script_location)
     script = ScriptDirectory.from_config(config)
-    heads = set(script.get_heads())
+    heads = schema_heads(script_location)
     with engine.begin() as connection:  # the common case, a current schema: read only
         if set(MigrationContext.configure(connection).get_current_heads()) == heads:
             return
@@ -215,9 +229,10 @@ def migrate(engine: Engine, *, upgrade: bool, script_location: Path = MIGRATIONS
                 ) from None
         if not upgrade:
             state = "is empty" if not current else f"has old schema {', '.join(sorted(current))}"
-            raise DatabaseVersionError(
+            raise DatabaseBehind(
                 f"{where} {state}; schema {', '.join(sorted(heads))} is needed (open it with "
-                "upgrade allowed to migrate it)"
+                "upgrade allowed to migrate it)",
+                tuple(sorted(current)),
             )
         config.attributes["connection"] = connection
         command.upgrade(config, "heads")

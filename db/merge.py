@@ -1,0 +1,340 @@
+"""Merging a stand's database into the lab database (`gyrostand db merge`).
+
+A campaign is copied whole, table by table (`COPIED`, parents first, every foreign key mapped to
+the new ids), onto the lab's instrument of the same model, serial and constants
+(`queries.instrument_for`), and gets a `CampaignOrigin`: the database it was recorded in
+(`database_identity`; a campaign that was itself merged keeps its first origin), its id there and
+the SHA-256 of its content (`content_sha256`: every copied row without its ids, the analysis runs
+aside: they are derived, and the lab may add its own).
+
+Merging is idempotent: a campaign whose origin is in the lab with the same content is "already
+merged". With other content, the lab's copy is replaced (keeping its id) only while it is not
+completed and nothing was done to it in the lab (its content is still the merged one, no analysis
+run since); otherwise that is a conflict, and nothing at all is merged. Campaigns being acquired
+(lease held) or left running are skipped. All of it is one transaction of the lab database.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import uuid
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import Row, RowMapping, Table, delete, func, insert, select, text
+from sqlalchemy.orm import Session, sessionmaker
+
+from gyrostand import SOFTWARE_VERSION
+from gyrostand.db.lease import held_elsewhere
+from gyrostand.db.models import (
+    AnalysisRun,
+    Base,
+    Campaign,
+    CampaignLabel,
+    CampaignOrigin,
+    Event,
+    Instrument,
+    Observation,
+    RawLogSegment,
+    Series,
+    SignOff,
+    Trial,
+)
+from gyrostand.db.queries import as_utc, instrument_for
+from gyrostand.db.session import writer
+
+COPIED = (CampaignLabel, Trial, Series, Observation, Event, RawLogSegment, SignOff, AnalysisRun)
+"""The tables of a campaign's rows, besides the campaign row: each has one non-nullable foreign
+key to the campaign or to another of them."""
+DERIVED = (AnalysisRun,)  # copied, but no part of the content
+MATCHED = (Instrument,)  # the lab's own row of the same model, serial and constants
+PER_DATABASE = (CampaignOrigin,)  # never copied
+MERGE_LOCK = 0x67796D7267  # PostgreSQL advisory lock key of merges ("gymrg")
+IDENTITIES = uuid.UUID("5a0c8f1e-9b7d-4c1e-8f2a-67796d657267")  # namespace of database_identity
+
+Values = dict[str, Any]  # a row: column -> value
+
+
+class MergeRefused(ValueError):
+    """Nothing was merged: a conflict, or a source that is the lab itself (one line)."""
+
+
+@dataclass(frozen=True)
+class CampaignRows:
+    """A campaign's rows, table by table (the campaign's first, parents before children), each
+    by id, with wall times as aware UTC; and its instrument."""
+
+    instrument: Values
+    tables: dict[str, list[Values]]
+
+    @property
+    def campaign(self) -> Values:
+        return self.tables["campaign"][0]
+
+
+def _tables() -> list[Table]:
+    """The campaign's tables, parents before children."""
+    names = {"campaign"} | {model.__tablename__ for model in COPIED}
+    return [t for t in Base.metadata.sorted_tables if t.name in names]
+
+
+def _references(table: Table) -> dict[str, str]:
+    """The table's foreign key columns and the tables they refer to."""
+    return {fk.parent.name: fk.column.table.name for fk in table.foreign_keys}
+
+
+def _plain(row: RowMapping) -> Values:
+    return {k: as_utc(v) if isinstance(v, datetime) else v for k, v in row.items()}
+
+
+def campaign_rows(session: Session, campaign_id: int) -> CampaignRows:
+    """Every row of the campaign in the `COPIED` tables (and its instrument)."""
+    tables: dict[str, list[Values]] = {}
+    for table in _tables():
+        if table.name == "campaign":
+            where = table.c.id == campaign_id
+        else:
+            (key,) = (
+                fk
+                for fk in table.foreign_keys
+                if not fk.parent.nullable and fk.column.table.name in tables
+            )
+            where = key.parent.in_([row["id"] for row in tables[key.column.table.name]])
+        rows = session.execute(select(table).where(where).order_by(table.c.id)).mappings()
+        tables[table.name] = [_plain(row) for row in rows]
+    instrument = Instrument.__table__
+    found = session.execute(
+        select(instrument).where(instrument.c.id == tables["campaign"][0]["instrument_id"])
+    )
+    return CampaignRows(_plain(found.mappings().one()), tables)
+
+
+def _json(value: Any) -> str:
+    if isinstance(value, datetime):
+        return value.isoformat()
+    raise TypeError(f"{type(value).__name__} is not JSON")
+
+
+def content_sha256(rows: CampaignRows) -> str:
+    """SHA-256 of the campaign's content: its instrument and rows as canonical JSON, ids left out
+    (a foreign key as the position of its row among the campaign's rows of that table), the
+    `DERIVED` tables left out. A copy has the same content as its original."""
+    position = {
+        name: {row["id"]: i for i, row in enumerate(rs)} for name, rs in rows.tables.items()
+    }
+    document: dict[str, Any] = {
+        "instrument": {k: v for k, v in rows.instrument.items() if k != "id"}
+    }
+    derived = {model.__tablename__ for model in DERIVED}
+    for table in _tables():
+        if table.name in derived:
+            continue
+        keys = _references(table)
+        document[table.name] = [
+            {
+                name: value if name not in keys or value is None else position[keys[name]][value]
+                for name, value in row.items()
+                if name != "id" and (name not in keys or keys[name] in position)
+            }
+            for row in rows.tables[table.name]
+        ]
+    text_ = json.dumps(document, sort_keys=True, separators=(",", ":"), default=_json)
+    return hashlib.sha256(text_.encode()).hexdigest()
+
+
+def copy_campaign(session: Session, rows: CampaignRows, campaign_id: int | None = None) -> int:
+    """Insert the campaign's rows (as `campaign_id`, or with new ids) on the matching
+    instrument; the campaign's id."""
+    instrument = instrument_for(
+        session,
+        rows.instrument["model"],
+        rows.instrument["serial"],
+        rows.instrument["constants_json"],
+    )
+    session.flush()
+    new_ids: dict[str, dict[int, int]] = {"instrument": {rows.instrument["id"]: instrument.id}}
+    for table in _tables():
+        old = rows.tables[table.name]
+        if not old:
+            continue
+        keys = _references(table)
+        values = [
+            {
+                name: new_ids[keys[name]][value] if name in keys and value is not None else value
+                for name, value in row.items()
+                if name != "id"
+            }
+            for row in old
+        ]
+        if table.name == "campaign" and campaign_id is not None:
+            values[0]["id"] = campaign_id
+        inserted = session.execute(
+            insert(table).returning(table.c.id, sort_by_parameter_order=True), values
+        ).scalars()
+        new_ids[table.name] = dict(zip((row["id"] for row in old), inserted, strict=True))
+    return new_ids["campaign"][rows.campaign["id"]]
+
+
+def database_identity(session: Session) -> str | None:
+    """The identity of the database (None: it recorded no campaign of its own): a UUID derived
+    from the first campaign recorded in it (not merged into it), from its creation time and plan
+    hash. Copies of the file keep it; nothing random is stored, so two runs of one seed still
+    make equal databases (tests/acquisition/test_virtual_time.py)."""
+    first = session.execute(
+        select(Campaign.created_at, Campaign.plan_hash)
+        .where(~select(CampaignOrigin.id).where(CampaignOrigin.campaign_id == Campaign.id).exists())
+        .order_by(Campaign.id)
+        .limit(1)
+    ).first()
+    if first is None:
+        return None
+    return str(uuid.uuid5(IDENTITIES, f"{as_utc(first.created_at).isoformat()} {first.plan_hash}"))
+
+
+@dataclass(frozen=True)
+class CampaignMerge:
+    """What the merge did (or, dry, would do) with one campaign of the stand: `outcome` merged,
+    replaced (an earlier, incomplete copy), identical (already merged) or skipped (`reason`)."""
+
+    source_id: int
+    outcome: str
+    lab_id: int | None
+    stand: str | None  # the campaign's label stand, if any
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class MergeResult:
+    """The stand database's identity and what became of each of its campaigns."""
+
+    source_database: str | None
+    campaigns: tuple[CampaignMerge, ...]
+
+    def count(self, outcome: str) -> int:
+        return sum(c.outcome == outcome for c in self.campaigns)
+
+
+def merge_database(
+    stand: sessionmaker[Session], lab: sessionmaker[Session], merged_from: str, *, dry_run: bool
+) -> MergeResult:
+    """Merge every campaign of the `stand` database into the `lab` database in one transaction
+    (rolled back when `dry_run`); MergeRefused (nothing merged) on a conflict."""
+    with stand() as source, writer(lab)() as target:
+        if target.get_bind().dialect.name == "postgresql":  # one merge at a time
+            target.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": MERGE_LOCK})
+        identity = database_identity(source)
+        if identity is not None and identity == database_identity(target):
+            raise MergeRefused(f"{merged_from} is the lab database itself (or a copy of it)")
+        merger = _Merger(stand, source, target, identity, merged_from)
+        ids = source.scalars(select(Campaign.id).order_by(Campaign.id)).all()
+        done = tuple(merger.merge(i) for i in ids)
+        if dry_run:
+            target.rollback()
+        else:
+            target.commit()
+    return MergeResult(identity, done)
+
+
+@dataclass(frozen=True)
+class _Merger:
+    stand: sessionmaker[Session]
+    source: Session
+    target: Session
+    identity: str | None
+    merged_from: str
+
+    def merge(self, campaign_id: int) -> CampaignMerge:
+        label = self.source.scalar(
+            select(CampaignLabel.value).where(
+                CampaignLabel.campaign_id == campaign_id, CampaignLabel.key == "stand"
+            )
+        )
+        status = self.source.execute(
+            select(Campaign.status).where(Campaign.id == campaign_id)
+        ).scalar_one()
+        why = _busy(self.stand, campaign_id, status)
+        if why:
+            return CampaignMerge(campaign_id, "skipped", None, label, why)
+        rows = campaign_rows(self.source, campaign_id)
+        digest = content_sha256(rows)
+        origin = self._origin(campaign_id)
+        earlier = self.target.execute(
+            select(
+                CampaignOrigin.campaign_id, CampaignOrigin.content_sha256, CampaignOrigin.merged_at
+            ).where(
+                CampaignOrigin.source_database == origin[0],
+                CampaignOrigin.source_campaign_id == origin[1],
+            )
+        ).first()
+        if earlier is None:
+            lab_id = copy_campaign(self.target, rows)
+            outcome = "merged"
+        elif earlier.content_sha256 == digest:
+            return CampaignMerge(campaign_id, "identical", earlier.campaign_id, label)
+        else:
+            self._check_replaceable(campaign_id, rows, earlier)
+            self.target.execute(
+                delete(Campaign.__table__).where(Campaign.id == earlier.campaign_id)
+            )
+            lab_id = copy_campaign(self.target, rows, earlier.campaign_id)
+            outcome = "replaced"
+        self.target.add(
+            CampaignOrigin(
+                campaign_id=lab_id,
+                source_database=origin[0],
+                source_campaign_id=origin[1],
+                content_sha256=digest,
+                merged_from=self.merged_from,
+                software_version=SOFTWARE_VERSION,
+            )
+        )
+        self.target.flush()
+        return CampaignMerge(campaign_id, outcome, lab_id, label)
+
+    def _origin(self, campaign_id: int) -> tuple[str, int]:
+        """Where the campaign was recorded: its own origin if it was merged into the stand
+        database, else that database."""
+        own = self.source.execute(
+            select(CampaignOrigin.source_database, CampaignOrigin.source_campaign_id).where(
+                CampaignOrigin.campaign_id == campaign_id
+            )
+        ).first()
+        if own is not None:
+            return own[0], own[1]
+        assert self.identity is not None  # a campaign of its own gives the database one
+        return self.identity, campaign_id
+
+    def _check_replaceable(self, campaign_id: int, rows: CampaignRows, earlier: Row[Any]) -> None:
+        """MergeRefused unless the lab's earlier copy may be replaced (see the module doc)."""
+        lab_id = earlier.campaign_id
+        copy = campaign_rows(self.target, lab_id)
+        what = f"campaign {campaign_id} of {self.merged_from} (merged as lab campaign {lab_id})"
+        if copy.campaign["created_at"] != rows.campaign["created_at"]:
+            problem = (
+                "is another campaign than the one merged with its origin: the stand databases "
+                "share one identity (was one copied from the other before use?)"
+            )
+        elif copy.campaign["status"] == "completed":
+            problem = "has changed since it was merged, and the lab's copy is completed"
+        elif content_sha256(copy) != earlier.content_sha256:
+            problem = "has changed since it was merged, and so has the lab's copy"
+        elif self.target.scalar(
+            select(func.count())
+            .select_from(AnalysisRun)
+            .where(AnalysisRun.campaign_id == lab_id, AnalysisRun.created_at >= earlier.merged_at)
+        ):
+            problem = "has changed since it was merged, and the lab has analysed its copy"
+        else:
+            return
+        raise MergeRefused(f"conflict: {what} {problem}; nothing merged")
+
+
+def _busy(stand: sessionmaker[Session], campaign_id: int, status: str) -> str:
+    """Why the campaign cannot be merged now ('' when it can)."""
+    if held_elsewhere(stand, campaign_id):
+        return "being acquired (a live process holds its lease)"
+    if status == "running":
+        return "left running by a process that is gone: resume or stop it on the stand first"
+    return ""
