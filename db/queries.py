@@ -21,6 +21,7 @@ from gyrostand.db.models import (
     AnalysisRun,
     Campaign,
     CampaignLabel,
+    CampaignOrigin,
     Event,
     Instrument,
     Observation,
@@ -443,6 +444,8 @@ class CampaignRow:
     finished_at: datetime | None
     labels: dict[str, str]
     observations: int
+    origin: tuple[str, int] | None = None
+    """A merged campaign's origin: the file or URL it was merged from and its id there."""
 
 
 def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
@@ -493,6 +496,16 @@ def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
             .group_by(Trial.campaign_id)
         ).all()
     )
+    origins = {
+        campaign_id: (merged_from, source_id)
+        for campaign_id, merged_from, source_id in session.execute(
+            select(
+                CampaignOrigin.campaign_id,
+                CampaignOrigin.merged_from,
+                CampaignOrigin.source_campaign_id,
+            ).where(CampaignOrigin.campaign_id.in_(ids))
+        )
+    }
     return [
         CampaignRow(
             campaign_id=i,
@@ -505,6 +518,7 @@ def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
             finished_at=None if finished_at is None else as_utc(finished_at),
             labels=labels[i],
             observations=counts.get(i, 0),
+            origin=origins.get(i),
         )
         for i, model, serial, status, source, operator, started_at, finished_at in rows
     ]

@@ -407,6 +407,7 @@ def list_item(row: CampaignRow) -> dict[str, object]:
         "finished_at": finished,
         "labels": row.labels,
         "observations": row.observations,
+        "merged_from": None if row.origin is None else {"from": row.origin[0], "id": row.origin[1]},
     }
 
 
@@ -616,7 +617,9 @@ def register(app: typer.Typer) -> None:
                 printable(r.model),
                 printable(r.serial),
                 r.status,
-                r.source,
+                r.source
+                if r.origin is None
+                else f"{r.source}, merged from {r.origin[0]} #{r.origin[1]}",
                 r.started_at.strftime("%Y-%m-%d %H:%M"),
                 str(r.observations),
                 printable(" ".join(f"{k}={v}" for k, v in r.labels.items())),

@@ -169,6 +169,12 @@ def test_two_stands_merge_whole_and_once(stands: Stands, db_url: str, tmp_path: 
     ]
     assert row_counts(db_url) == lab_counts
 
+    listed = CliRunner().invoke(app, ["campaign", "list", "--json", "--db", db_url])
+    origins = [c["merged_from"] for c in json.loads(listed.output)["campaigns"]]
+    assert origins == [{"from": sqlite_url(s), "id": 1} for s in (s1, stands.s2)]
+    text = CliRunner().invoke(app, ["campaign", "list", "--db", db_url]).output
+    assert f"merged from {sqlite_url(stands.s2)} #1" in text.splitlines()[2]
+
     assert fit_of(["analyze", "1", "--json", "--db", db_url]) == stand_fit
     out = tmp_path / "reports"
     reported = CliRunner().invoke(
