@@ -1,6 +1,7 @@
 """`gyrostand fleet simulate` and `fleet report` end to end: a simulated fleet of three factories
 (two units each, on the quick test plan), factory B's C 40 % larger; the analysis and the report
-set B apart and no other; each campaign stores the plan it ran; the one-line refusals."""
+set B apart and no other (`fleet analyze`, text and JSON); each campaign stores the plan it ran;
+the one-line refusals of analyze, report and simulate."""
 
 import json
 import shlex
@@ -103,6 +104,8 @@ def test_the_shifted_factory_is_set_apart_in_c_and_no_factory_in_t(fleet: Fleet)
     assert c["anova"]["groups_differ"] and not t["anova"]["groups_differ"]
     assert [g["group"] for g in c["groups"] if g["differs"]] == ["B"]
     assert not [g["group"] for g in t["groups"] if g["differs"]]
+    text = gyrostand("fleet", "analyze", "--model", MODEL, "--by", "factory", "--db", fleet.db)
+    assert "Sveshnikov, section 8.2" in text and "the groups differ" in text
 
 
 def test_the_report_in_html_and_json(fleet: Fleet) -> None:
@@ -140,6 +143,12 @@ def test_the_quick_plan_is_the_papers_trials_on_a_quicker_compass() -> None:
         (("report", "--model", MODEL, "--by", "Lot!"), "--by 'Lot!' is no label key"),
         (
             ("report", "--model", MODEL, "--by", "lot"),
+            f"model {MODEL}: the fleet has 0 groups by lot: at least 2 are needed",
+        ),
+        (("analyze", "--model", "nope", "--by", "factory"), "no completed campaign of model"),
+        (("analyze", "--model", MODEL, "--by", "Lot!"), "--by 'Lot!' is no label key"),
+        (
+            ("analyze", "--model", MODEL, "--by", "lot"),
             f"model {MODEL}: the fleet has 0 groups by lot: at least 2 are needed",
         ),
         (("simulate", "--shift-group", "D"), "--shift-group 'D' is not among the groups A, B, C"),
