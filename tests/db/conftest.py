@@ -1,5 +1,9 @@
-"""Fixtures for the database tests: a fresh SQLite file per test, and a minimal valid campaign."""
+"""Fixtures for the database tests: a fresh SQLite file per test, a minimal valid campaign, and
+stands running campaigns at once."""
 
+import subprocess
+import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
@@ -7,6 +11,10 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand.db.models import Campaign, Instrument, Series, Trial
 from gyrostand.db.session import open_database, sqlite_url
+from tests.acquisition.harness import FAST_SIM, plan_text
+
+TRIALS = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "fit"), (30.0, 20.0, 6.0, "fit")]
+"""Three fit trials: enough for a fit, quick on the simulated stand (N = 3)."""
 
 
 @pytest.fixture
@@ -40,3 +48,31 @@ def make_campaign(session: Session, n_trials: int = 1) -> Campaign:
     session.add(campaign)
     session.flush()
     return campaign
+
+
+def run_stands_at_once(folder: Path, databases: Sequence[str]) -> list[str]:
+    """`gyrostand campaign run` of the quick plan into each database, all at once, each in a
+    process of its own (stand n: label stand=Sn, seed n); returns their stderr, each run having
+    succeeded."""
+    runs = []
+    for n, database in enumerate(databases, 1):
+        plan = folder / f"s{n}.toml"
+        plan.write_text(
+            plan_text(TRIALS, database=database, raw_dir=str(folder / f"raw{n}"), seed=n) + FAST_SIM
+        )
+        runs.append(
+            subprocess.Popen(
+                [sys.executable, "-m", "gyrostand", "campaign", "run", str(plan), "--quiet"]
+                + ["--tag", f"stand=S{n}"],
+                cwd=folder,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+        )
+    errors = []
+    for run in runs:
+        _, err = run.communicate(timeout=600)
+        assert run.returncode == 0, err
+        errors.append(err)
+    return errors

@@ -3,41 +3,18 @@ processes at once both complete, nothing lost or duplicated, nothing "database i
 the lab's read side on the same database: `campaign list` by stand, `analyze` and `report`."""
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 from sqlalchemy import create_engine, text
 from typer.testing import CliRunner
 
 from gyrostand.cli import app
-from tests.acquisition.harness import FAST_SIM, plan_text
-
-TRIALS = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "fit"), (30.0, 20.0, 6.0, "fit")]
+from tests.db.conftest import run_stands_at_once
 
 
 def test_two_campaigns_into_one_database_at_once(tmp_path: Path, db_url: str) -> None:
-    runs = []
-    for stand in (1, 2):
-        plan = tmp_path / f"stand{stand}.toml"
-        plan.write_text(
-            plan_text(TRIALS, database=db_url, raw_dir=str(tmp_path / f"raw{stand}"), seed=stand)
-            + FAST_SIM
-        )
-        runs.append(
-            subprocess.Popen(
-                [sys.executable, "-m", "gyrostand", "campaign", "run", str(plan), "--quiet"]
-                + ["--tag", f"stand=S{stand}"],
-                cwd=tmp_path,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                text=True,
-            )
-        )
-    for run in runs:
-        out, err = run.communicate(timeout=600)
-        assert run.returncode == 0, err
-        assert "locked" not in err
+    errors = run_stands_at_once(tmp_path, [db_url, db_url])
+    assert not [err for err in errors if "locked" in err]
     engine = create_engine(db_url)
     with engine.connect() as conn:
         campaigns = conn.execute(text("SELECT id, status FROM campaign ORDER BY id")).all()

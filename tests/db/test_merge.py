@@ -11,8 +11,6 @@ import json
 import os
 import shutil
 import sqlite3
-import subprocess
-import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,9 +32,7 @@ from gyrostand.db.merge import (
 )
 from gyrostand.db.models import AnalysisRun, Base, Campaign, SignOff
 from gyrostand.db.session import open_database, sqlite_url
-from tests.acquisition.harness import FAST_SIM, plan_text
-from tests.db.conftest import make_campaign
-from tests.db.test_concurrency import TRIALS  # three fit trials: enough for a fit
+from tests.db.conftest import make_campaign, run_stands_at_once
 
 
 @dataclass(frozen=True)
@@ -54,24 +50,7 @@ class Stands:
 @pytest.fixture(scope="module")
 def stands(tmp_path_factory: pytest.TempPathFactory) -> Stands:
     folder = tmp_path_factory.mktemp("stands")
-    runs = []
-    for n in (1, 2):  # both at once, each in a process of its own (its exit closes the file)
-        plan = folder / f"s{n}.toml"
-        db, raw = folder / f"s{n}.sqlite", folder / f"raw{n}"
-        plan.write_text(plan_text(TRIALS, database=str(db), raw_dir=str(raw), seed=n) + FAST_SIM)
-        runs.append(
-            subprocess.Popen(
-                [sys.executable, "-m", "gyrostand", "campaign", "run", str(plan), "--quiet"]
-                + ["--tag", f"stand=S{n}"],
-                cwd=folder,
-                stderr=subprocess.PIPE,
-                stdout=subprocess.DEVNULL,
-                text=True,
-            )
-        )
-    for run in runs:
-        _, err = run.communicate(timeout=300)
-        assert run.returncode == 0, err
+    run_stands_at_once(folder, [str(folder / "s1.sqlite"), str(folder / "s2.sqlite")])
     return Stands(folder / "s1.sqlite", folder / "s2.sqlite")
 
 
