@@ -79,7 +79,7 @@ def write_campaign_report(
                 err=True,
             )
         stage(f"writing {', '.join(dict.fromkeys(formats))} to {out}")
-        return write_report(report, out, formats)
+        return write_report(report, out, formats, stage)
     except (AnalysisError, CampaignNotFound) as error:
         fail(str(error))
     except LogFileError as error:

@@ -1,6 +1,6 @@
 """Write a report's files: HTML, PDF, JSON and the trial-table CSV, named after the campaign."""
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from gyrostand.report import FORMATS
@@ -24,10 +24,13 @@ def report_paths(out_dir: Path, campaign_id: int) -> dict[str, Path]:
 
 
 def write_report(
-    report: Report, out_dir: Path, formats: Iterable[str] = FORMATS
+    report: Report,
+    out_dir: Path,
+    formats: Iterable[str] = FORMATS,
+    stage: Callable[[str], None] = lambda what: None,
 ) -> dict[str, Path]:
     """Write the asked formats (the PDF last, so a missing PDF engine leaves the others written);
-    returns the paths written, by format."""
+    returns the paths written, by format. `stage` hears what takes seconds before it starts."""
     wanted = list(dict.fromkeys(formats))
     unknown = [f for f in wanted if f not in FORMATS]
     if unknown:
@@ -43,11 +46,13 @@ def write_report(
             paths["csv"].write_text(trial_table_csv(report.trials), encoding="utf-8")
             written["csv"] = paths["csv"]
         if "html" in wanted or "pdf" in wanted:
+            stage("drawing the figures")
             html = render_html(report)
             if "html" in wanted:
                 paths["html"].write_text(html, encoding="utf-8")
                 written["html"] = paths["html"]
             if "pdf" in wanted:
+                stage("laying out the PDF")
                 try:
                     written["pdf"] = write_pdf(html, paths["pdf"])
                 except ReportError as exc:

@@ -32,6 +32,10 @@ def test_report_writes_the_asked_formats(stored: Stored, tmp_path: Path) -> None
     assert doc["analysis"]["adequacy"]["f_p"] == pytest.approx(1.409, abs=1e-3)
     assert doc["identification"]["database"] == stored.url
     assert len(csv_path.read_text().splitlines()) == 7
+    assert "report: drawing the figures" not in result.stderr  # no HTML asked: no figures
+    html = runner.invoke(app, [*args, "--format", "html"])
+    stages = [line for line in html.stderr.splitlines() if line.startswith("report: ")]
+    assert stages[1:] == [f"report: writing html to {out}", "report: drawing the figures"]
 
 
 @pytest.mark.parametrize(
