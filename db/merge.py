@@ -7,6 +7,11 @@ the new ids), onto the lab's instrument of the same model, serial and constants
 the SHA-256 of its content (`content_sha256`: every copied row without its ids, the analysis runs
 aside: they are derived, and the lab may add its own).
 
+Raw CAN logs are files, not rows: with `raw_logs` (the CLI's `--raw-dir`) each verified segment
+(its SHA-256 recorded) is copied into the lab's folder under a content-addressed name, and the
+lab's record names the copy; the copying comes last, before the commit, and a copy that fails
+merges nothing. A file's path is where it is kept, not what it holds: no part of the content.
+
 Merging is idempotent: a campaign whose origin is in the lab with the same content is "already
 merged". With other content, the lab's copy is replaced (keeping its id) only while it is not
 completed and nothing was done to it in the lab (its content is still the merged one, no analysis
@@ -19,9 +24,10 @@ from __future__ import annotations
 import hashlib
 import json
 import uuid
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from datetime import datetime
-from typing import Any
+from typing import Any, Protocol
 
 from sqlalchemy import Row, RowMapping, Table, delete, func, insert, select, text
 from sqlalchemy.orm import Session, sessionmaker
@@ -52,6 +58,7 @@ DERIVED = (AnalysisRun,)  # copied, but no part of the content
 MATCHED = (Instrument,)  # the lab's own row of the same model, serial and constants
 PER_DATABASE = (CampaignOrigin,)  # never copied
 MERGE_LOCK = 0x67796D7267  # PostgreSQL advisory lock key of merges ("gymrg")
+LOCATION = {"raw_log_segment": "path"}  # where a file is kept: no part of the content
 IDENTITIES = uuid.UUID("5a0c8f1e-9b7d-4c1e-8f2a-67796d657267")  # namespace of database_identity
 
 Values = dict[str, Any]  # a row: column -> value
@@ -59,6 +66,22 @@ Values = dict[str, Any]  # a row: column -> value
 
 class MergeRefused(ValueError):
     """Nothing was merged: a conflict, or a source that is the lab itself (one line)."""
+
+
+RawLogCopy = tuple[str, str, str]  # the stand's path, the lab's path, the SHA-256 recorded
+
+
+class RawLogs(Protocol):
+    """Where the lab keeps merged raw logs, and the copying (files are the caller's business)."""
+
+    def lab_path(self, origin: str, path: str, sha256: str) -> str:
+        """The lab's path of the stand's verified raw log `path` of a campaign from `origin`."""
+        ...
+
+    def copy(self, files: Sequence[RawLogCopy]) -> None:
+        """Copy the files, each checked against its SHA-256; MergeRefused (and none left
+        copied) when one cannot be."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -120,7 +143,8 @@ def _json(value: Any) -> str:
 def content_sha256(rows: CampaignRows) -> str:
     """SHA-256 of the campaign's content: its instrument and rows as canonical JSON, ids left out
     (a foreign key as the position of its row among the campaign's rows of that table), the
-    `DERIVED` tables left out. A copy has the same content as its original."""
+    `DERIVED` tables and the files' `LOCATION` left out. A copy has the same content as its
+    original, wherever its raw logs are kept."""
     position = {
         name: {row["id"]: i for i, row in enumerate(rs)} for name, rs in rows.tables.items()
     }
@@ -136,7 +160,8 @@ def content_sha256(rows: CampaignRows) -> str:
             {
                 name: value if name not in keys or value is None else position[keys[name]][value]
                 for name, value in row.items()
-                if name != "id" and (name not in keys or keys[name] in position)
+                if name not in ("id", LOCATION.get(table.name))
+                and (name not in keys or keys[name] in position)
             }
             for row in rows.tables[table.name]
         ]
@@ -203,6 +228,7 @@ class CampaignMerge:
     lab_id: int | None
     stand: str | None  # the campaign's label stand, if any
     reason: str = ""
+    raw_logs: int = 0  # raw log files copied to the lab (or, dry, to be copied)
 
 
 @dataclass(frozen=True)
@@ -217,22 +243,30 @@ class MergeResult:
 
 
 def merge_database(
-    stand: sessionmaker[Session], lab: sessionmaker[Session], merged_from: str, *, dry_run: bool
+    stand: sessionmaker[Session],
+    lab: sessionmaker[Session],
+    merged_from: str,
+    *,
+    dry_run: bool,
+    raw_logs: RawLogs | None = None,
 ) -> MergeResult:
     """Merge every campaign of the `stand` database into the `lab` database in one transaction
-    (rolled back when `dry_run`); MergeRefused (nothing merged) on a conflict."""
+    (rolled back when `dry_run`), their raw logs copied by `raw_logs` if given; MergeRefused
+    (nothing merged) on a conflict."""
     with stand() as source, writer(lab)() as target:
         if target.get_bind().dialect.name == "postgresql":  # one merge at a time
             target.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": MERGE_LOCK})
         identity = database_identity(source)
         if identity is not None and identity == database_identity(target):
             raise MergeRefused(f"{merged_from} is the lab database itself (or a copy of it)")
-        merger = _Merger(stand, source, target, identity, merged_from)
+        merger = _Merger(stand, source, target, identity, merged_from, raw_logs)
         ids = source.scalars(select(Campaign.id).order_by(Campaign.id)).all()
         done = tuple(merger.merge(i) for i in ids)
         if dry_run:
             target.rollback()
         else:
+            if raw_logs is not None and merger.files:
+                raw_logs.copy(merger.files)
             target.commit()
     return MergeResult(identity, done)
 
@@ -244,6 +278,8 @@ class _Merger:
     target: Session
     identity: str | None
     merged_from: str
+    raw_logs: RawLogs | None
+    files: list[RawLogCopy] = field(default_factory=list)  # to copy before the commit
 
     def merge(self, campaign_id: int) -> CampaignMerge:
         label = self.source.scalar(
@@ -268,13 +304,16 @@ class _Merger:
                 CampaignOrigin.source_campaign_id == origin[1],
             )
         ).first()
+        if earlier is not None and earlier.content_sha256 == digest:
+            return CampaignMerge(campaign_id, "identical", earlier.campaign_id, label)
+        if earlier is not None:
+            self._check_replaceable(campaign_id, rows, earlier)
+        copied = len(self.files)
+        rows = self._relocated(rows, origin[0])
         if earlier is None:
             lab_id = copy_campaign(self.target, rows)
             outcome = "merged"
-        elif earlier.content_sha256 == digest:
-            return CampaignMerge(campaign_id, "identical", earlier.campaign_id, label)
         else:
-            self._check_replaceable(campaign_id, rows, earlier)
             self.target.execute(
                 delete(Campaign.__table__).where(Campaign.id == earlier.campaign_id)
             )
@@ -291,7 +330,20 @@ class _Merger:
             )
         )
         self.target.flush()
-        return CampaignMerge(campaign_id, outcome, lab_id, label)
+        return CampaignMerge(campaign_id, outcome, lab_id, label, raw_logs=len(self.files) - copied)
+
+    def _relocated(self, rows: CampaignRows, origin: str) -> CampaignRows:
+        """The rows with each verified raw log at its lab path (noted in `files` to copy)."""
+        if self.raw_logs is None:
+            return rows
+        segments = []
+        for row in rows.tables["raw_log_segment"]:
+            if row["sha256"] is not None:
+                path = self.raw_logs.lab_path(origin, row["path"], row["sha256"])
+                self.files.append((row["path"], path, row["sha256"]))
+                row = {**row, "path": path}
+            segments.append(row)
+        return replace(rows, tables={**rows.tables, "raw_log_segment": segments})
 
     def _origin(self, campaign_id: int) -> tuple[str, int]:
         """Where the campaign was recorded: its own origin if it was merged into the stand

@@ -4,6 +4,11 @@ database to this gyrostand's schema (`db upgrade`)."""
 from __future__ import annotations
 
 import json
+import os
+import shutil
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
@@ -15,6 +20,62 @@ if TYPE_CHECKING:
     from sqlalchemy.orm import Session, sessionmaker
 
     from gyrostand.db.merge import CampaignMerge, MergeResult
+
+
+@dataclass(frozen=True)
+class RawLogFolder:
+    """The lab's folder of merged raw logs (`db.merge.RawLogs`): each stand database's logs in a
+    folder named by its identity, each file named with the start of its SHA-256, so a copy is
+    never overwritten by other content and merging again finds it in place."""
+
+    folder: Path
+    copied: list[Path] = field(default_factory=list)
+
+    def lab_path(self, origin: str, path: str, sha256: str) -> str:
+        name = Path(path)
+        return str(self.folder.resolve() / origin / f"{name.stem}-{sha256[:12]}{name.suffix}")
+
+    def copy(self, files: Sequence[tuple[str, str, str]]) -> None:
+        from gyrostand.db.merge import MergeRefused
+
+        try:
+            for source, target, sha256 in files:
+                self._copy(Path(source), Path(target), sha256)
+        except OSError as error:
+            self.remove_copies()
+            raise MergeRefused(
+                f"cannot copy raw log {error.filename}: {error.strerror}; nothing merged"
+            ) from None
+        except MergeRefused:
+            self.remove_copies()
+            raise
+
+    def _copy(self, source: Path, lab: Path, sha256: str) -> None:
+        """One file, by way of a .part file checked against its SHA-256 (none left behind)."""
+        from gyrostand.db.merge import MergeRefused
+        from gyrostand.frames.logfile import sha256_of
+
+        if lab.is_file() and sha256_of(lab) == sha256:
+            return  # merged before
+        part = lab.with_name(lab.name + ".part")
+        lab.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            shutil.copyfile(source, part)
+            if sha256_of(part) != sha256:
+                raise MergeRefused(
+                    f"raw log {source} is not the file its campaign recorded (its SHA-256 "
+                    "differs); nothing merged"
+                )
+            os.replace(part, lab)
+        finally:
+            part.unlink(missing_ok=True)
+        self.copied.append(lab)
+
+    def remove_copies(self) -> None:
+        """Take back the files this merge copied (the database is rolled back as well)."""
+        for path in self.copied:
+            path.unlink(missing_ok=True)
+
 
 DONE = {
     "merged": "merged as lab campaign {lab_id}",
@@ -59,7 +120,11 @@ def campaign_line(done: CampaignMerge, dry_run: bool) -> str:
     """One campaign's line of the merge's output."""
     stand = f" (stand {done.stand})" if done.stand is not None else ""
     form = (DRY if dry_run else {}).get(done.outcome, DONE[done.outcome])
-    return printable(f"campaign {done.source_id}{stand}: " + form.format(**vars(done)))
+    logs = ""
+    if done.raw_logs:
+        logs = f"; {done.raw_logs} raw log{'s' if done.raw_logs > 1 else ''} "
+        logs += "to copy" if dry_run else "in the lab's raw folder"
+    return printable(f"campaign {done.source_id}{stand}: " + form.format(**vars(done)) + logs)
 
 
 def totals_line(result: MergeResult, dry_run: bool) -> str:
@@ -93,6 +158,14 @@ def register(app: typer.Typer) -> None:
         dry_run: Annotated[
             bool, typer.Option("--dry-run", help="Say what would be merged; change nothing.")
         ] = False,
+        raw_dir: Annotated[
+            Path | None,
+            typer.Option(
+                "--raw-dir",
+                help="Copy the campaigns' verified raw CAN logs into this folder of the lab "
+                "(default: the lab's records name the files where the stand wrote them).",
+            ),
+        ] = None,
         as_json: Annotated[bool, typer.Option("--json", help="Print one JSON document.")] = False,
     ) -> None:
         """Copy a stand's campaigns into the lab database with their origin (the stand
@@ -108,10 +181,15 @@ def register(app: typer.Typer) -> None:
         source = open_stand(stand)
         lab = open_db(into)
         merged_from = make_url(database_url(stand)).render_as_string(hide_password=True)
+        raw_logs = None if raw_dir is None else RawLogFolder(raw_dir)
         try:
-            result = merge_database(source, lab, merged_from, dry_run=dry_run)
+            result = merge_database(source, lab, merged_from, dry_run=dry_run, raw_logs=raw_logs)
         except MergeRefused as error:
             fail(str(error), EXIT_FAILED)
+        except Exception:  # the commit failed after the copies: take them back
+            if raw_logs is not None:
+                raw_logs.remove_copies()
+            raise
         if as_json:
             document = {
                 "source_database": result.source_database,

@@ -7,6 +7,7 @@ being acquired, changes nothing."""
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import json
 import os
 import shutil
@@ -310,3 +311,59 @@ def test_database_identity_survives_copies_and_merges(stands: Stands, tmp_path: 
         make_campaign(session)
     sessions.kw["bind"].dispose()
     assert identity_of(lab) not in (s1, identity_of(stands.s2), None)
+
+
+def lab_raw_logs(url: str) -> list[tuple[str, str]]:
+    engine = create_engine(url)
+    with engine.connect() as connection:
+        rows = connection.execute(text("SELECT path, sha256 FROM raw_log_segment ORDER BY id"))
+        found = [tuple(row) for row in rows]
+    engine.dispose()
+    return found
+
+
+def test_raw_logs_copied_into_the_lab_folder(stands: Stands, db_url: str, tmp_path: Path) -> None:
+    folder = tmp_path / "lab-raw"
+    first = merge(stands.s2, db_url, "--raw-dir", str(folder))
+    assert first.exit_code == 0, first.output
+    assert first.output.splitlines()[0] == (
+        "campaign 1 (stand S2): merged as lab campaign 1; 1 raw log in the lab's raw folder"
+    )
+    ((path, sha256),) = lab_raw_logs(db_url)
+    copy = Path(path)
+    assert copy.parent.parent == folder.resolve() and sha256[:12] in copy.name
+    assert hashlib.sha256(copy.read_bytes()).hexdigest() == sha256
+    (stand_log,) = lab_raw_logs(sqlite_url(stands.s2))
+    assert stand_log == (stand_log[0], sha256) and Path(stand_log[0]) != copy
+    # the lab's report reads the copy: the record names only it, and it verifies
+    out = tmp_path / "reports"
+    args = ["report", "1", "--db", db_url, "--out", str(out), "--format", "json"]
+    assert CliRunner().invoke(app, args).exit_code == 0
+    document = json.loads((out / "campaign-1.json").read_text())
+    assert document["acquisition"]["raw_log_note"].startswith("Heading from the raw CAN log")
+    # where a file is kept is no part of the content: merging again, either way, adds nothing
+    for extra in ((), ("--raw-dir", str(folder))):
+        again = merge(stands.s2, db_url, *extra)
+        assert "already merged (identical)" in again.output, again.output
+    assert [p.name for p in folder.rglob("*") if p.is_file()] == [copy.name]
+
+
+def test_a_raw_log_not_as_recorded_merges_nothing(
+    stands: Stands, db_url: str, tmp_path: Path
+) -> None:
+    stand = stands.copy(stands.s2, tmp_path, "s2.sqlite")
+    ((path, _),) = lab_raw_logs(sqlite_url(stand))
+    changed = tmp_path / "changed.blf"
+    changed.write_bytes(Path(path).read_bytes() + b"\0")
+    with sqlite3.connect(stand) as connection:
+        connection.execute("UPDATE raw_log_segment SET path = ?", (str(changed),))
+    before = row_counts(db_url)
+    folder = tmp_path / "lab-raw"
+    refused = merge(stand, db_url, "--raw-dir", str(folder))
+    assert refused.exit_code == 1
+    assert refused.stderr.strip() == (
+        f"gyrostand: error: raw log {changed} is not the file its campaign recorded (its "
+        "SHA-256 differs); nothing merged"
+    )
+    assert row_counts(db_url) == before
+    assert not [p for p in folder.rglob("*") if p.is_file()]
