@@ -100,9 +100,10 @@ def interactive() -> bool:
     return sys.stdin is not None and sys.stdin.isatty()
 
 
-def checked_answers(plan: Plan, given: Sequence[str]) -> dict[str, str]:
-    """`--answer ID=VALUE` checked against the plan's prompts; a prompt before the campaign
-    left out is asked on the terminal, or is one error line when there is none."""
+def checked_answers(plan: Plan, given: Sequence[str], new: bool = True) -> dict[str, str]:
+    """`--answer ID=VALUE` checked against the plan's prompts; for a `new` campaign, a prompt
+    before the campaign left out is asked on the terminal, or is one error line when there is
+    none (a resumed campaign's were answered when it started)."""
     prompts = {p.id: p for p in plan.prompt}
     answers: dict[str, str] = {}
     for item in given:
@@ -116,7 +117,7 @@ def checked_answers(plan: Plan, given: Sequence[str]) -> dict[str, str]:
             answers[key] = prompts[key].answer(value)
         except ValueError as exc:
             fail(f"--answer {exc}")
-    for prompt in plan.prompts_before("campaign"):
+    for prompt in plan.prompts_before("campaign") if new else ():
         while prompt.id not in answers:
             if not interactive():
                 fail(
@@ -312,6 +313,7 @@ def continue_campaign(
     quiet: bool,
     *,
     retry: tuple[int, ...] | Literal["failed"] | None,
+    answers: Sequence[str] = (),
 ) -> None:
     """Resume a stand campaign, first retrying the trials `retry` names ("failed": every
     failed one): everything is checked before anything is written; then the new attempts are
@@ -338,6 +340,7 @@ def continue_campaign(
         except PlanError as exc:
             fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
         checked = bus.checked(stored, db)
+        given = checked_answers(checked, answers, new=False)
         preflight(checked)
         not_interrupted(stop, f"campaign {campaign_id} was taken over")
         try:
@@ -365,7 +368,7 @@ def continue_campaign(
             store.set_status("completed")
             _out.print(f"campaign {campaign_id}: nothing left to acquire")
             return
-        outcome = run_campaign(checked, store, quiet, stop, db, start)
+        outcome = run_campaign(checked, store, quiet, stop, db, start, answers=given)
     print_outcome(outcome, db)
 
 
@@ -391,6 +394,15 @@ Timing = Annotated[
     ),
 ]
 Quiet = Annotated[bool, typer.Option("--quiet", help="No live progress display.")]
+Answers = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--answer",
+        help="ID=VALUE: the answer to the plan's prompt ID (repeatable; yes to confirm). "
+        "Prompts before the campaign not answered are asked on a terminal; prompts before a "
+        "trial there or at the station.",
+    ),
+]
 
 
 def list_item(row: CampaignRow) -> dict[str, object]:
@@ -431,15 +443,7 @@ def register(app: typer.Typer) -> None:
         seed: Seed = None,
         timing: Timing = None,
         tag: TagOption = None,
-        answer: Annotated[
-            list[str] | None,
-            typer.Option(
-                "--answer",
-                help="ID=VALUE: the answer to the plan's prompt ID (repeatable; yes to confirm). "
-                "Prompts before the campaign not answered are asked on a terminal; prompts "
-                "before a trial there or at the station.",
-            ),
-        ] = None,
+        answer: Answers = None,
         quiet: Quiet = False,
     ) -> None:
         """Run a campaign plan on the stand (the simulated stand when the plan says so)."""
@@ -464,13 +468,15 @@ def register(app: typer.Typer) -> None:
                 "--retry-failed", help="First retry every failed trial (see campaign retry)."
             ),
         ] = False,
+        answer: Answers = None,
         quiet: Quiet = False,
     ) -> None:
         """Continue a campaign from its first incomplete series (re-settling first). A
         simulated campaign in virtual time that was killed is re-run from its start instead,
         skipping what the database holds: it ends as the uninterrupted run would have."""
         bus = BusOptions(interface, channel, speedup, seed, timing)
-        continue_campaign(campaign_id, db, bus, quiet, retry="failed" if retry_failed else None)
+        retry = "failed" if retry_failed else None
+        continue_campaign(campaign_id, db, bus, quiet, retry=retry, answers=answer or ())
 
     @campaign_app.command("retry")
     def campaign_retry(
@@ -485,11 +491,12 @@ def register(app: typer.Typer) -> None:
         speedup: Speedup = None,
         seed: Seed = None,
         timing: Timing = None,
+        answer: Answers = None,
         quiet: Quiet = False,
     ) -> None:
         """Re-run failed trials as new attempts (the failed ones are kept), then resume."""
         bus = BusOptions(interface, channel, speedup, seed, timing)
-        continue_campaign(campaign_id, db, bus, quiet, retry=tuple(trial))
+        continue_campaign(campaign_id, db, bus, quiet, retry=tuple(trial), answers=answer or ())
 
     @campaign_app.command("status")
     def campaign_status(

@@ -11,7 +11,9 @@ from contextlib import closing
 from pathlib import Path
 
 from starlette.testclient import TestClient
+from typer.testing import CliRunner
 
+from gyrostand.cli import app
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.station.app import create_app
 from gyrostand.station.security import Access
@@ -115,6 +117,18 @@ def test_prompt_answered_and_stop_requested_for_a_run_started_elsewhere(tmp_path
     assert '<span id="status">stopped</span>' in page and initial(page)["prompt"] is None
     late = client.post("/campaigns/1/stop", data=csrf(client))
     assert "is not being acquired: nothing to stop" in late.text
+    # resumed from a terminal without one, the trial's prompt answered on the command line
+    resume = ["campaign", "resume", "1", "--db", str(db), "--quiet"]
+    bad = CliRunner().invoke(app, [*resume, "--answer", "mounted=no"])
+    assert bad.exit_code == 2 and "answer yes to confirm" in bad.stderr
+    resumed = CliRunner().invoke(app, [*resume, "--answer", "mounted=yes"])
+    assert resumed.exit_code == 0, resumed.output
+    assert rows(db, "SELECT status FROM campaign") == [("completed",)]
+    assert rows(db, "SELECT count(*) FROM observation") == [(12,)]
+    assert rows(db, "SELECT message FROM event WHERE kind = 'answer' ORDER BY id") == [
+        ("plate: <b>GY-7</b>",),
+        ("mounted: yes",),
+    ]
 
 
 def test_a_campaign_whose_process_died_shows_interrupted(client_for) -> None:
