@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from gyrostand.analysis.errors import AnalysisError
-from gyrostand.cmd_data import DEFAULT_DB, MAX_CAMPAIGN_ID, DbOption, open_db
+from gyrostand.cmd_data import DEFAULT_DB, MAX_CAMPAIGN_ID, DbOption, JsonOption, open_db
 from gyrostand.errors import fail, printable, printable_lines
 
 if TYPE_CHECKING:
@@ -103,7 +103,7 @@ def register(app: typer.Typer) -> None:
                 "and \\[acceptance] (with --signal --log).",
             ),
         ] = None,
-        as_json: Annotated[bool, typer.Option("--json", help="Print one JSON document.")] = False,
+        as_json: JsonOption = False,
         signal: Annotated[
             bool,
             typer.Option(

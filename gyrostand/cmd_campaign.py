@@ -16,7 +16,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from gyrostand.cmd_data import DEFAULT_DB, CampaignId, TagOption, open_db, parse_tags
+from gyrostand.cmd_data import DEFAULT_DB, CampaignId, JsonOption, TagOption, open_db, parse_tags
 from gyrostand.errors import EXIT_FAILED, fail, printable
 from gyrostand.stand.simconfig import TIMINGS
 
@@ -585,7 +585,7 @@ def register(app: typer.Typer) -> None:
             list[str] | None,
             typer.Option("--tag", help="Only campaigns with this label, key=value (repeatable)."),
         ] = None,
-        as_json: Annotated[bool, typer.Option("--json", help="Print one JSON document.")] = False,
+        as_json: JsonOption = False,
         db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
     ) -> None:
         """List the campaigns of a database, with filters."""

@@ -19,6 +19,7 @@ DEFAULT_DB = "runs/gyrostand.sqlite"
 DbOption = Annotated[
     str, typer.Option("--db", help="Database: a SQLite file path or any SQLAlchemy URL.")
 ]
+JsonOption = Annotated[bool, typer.Option("--json", help="Print one JSON document.")]
 MAX_CAMPAIGN_ID = 2**31 - 1
 """Largest campaign id: ids are Integer columns of the database (32-bit signed in PostgreSQL
 and MySQL; a larger number is no campaign anywhere)."""

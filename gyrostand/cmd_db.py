@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from gyrostand.cmd_data import open_db
+from gyrostand.cmd_data import JsonOption, open_db
 from gyrostand.errors import EXIT_BAD_INPUT, EXIT_FAILED, fail, printable
 
 if TYPE_CHECKING:
@@ -166,7 +166,7 @@ def register(app: typer.Typer) -> None:
                 "(default: the lab's records name the files where the stand wrote them).",
             ),
         ] = None,
-        as_json: Annotated[bool, typer.Option("--json", help="Print one JSON document.")] = False,
+        as_json: JsonOption = False,
     ) -> None:
         """Copy a stand's campaigns into the lab database with their origin (the stand
         database's identity, their ids there, the SHA-256 of their content). Merging again adds

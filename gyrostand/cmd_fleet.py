@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
+from gyrostand.cmd_data import DEFAULT_DB, DbOption, JsonOption, open_db
 from gyrostand.errors import fail, printable_lines
 
 if TYPE_CHECKING:
@@ -62,7 +62,7 @@ def register(app: typer.Typer) -> None:
         model: Annotated[str, typer.Option(help="Instrument model.")],
         by: ByOption,
         q: QOption = 0.05,
-        as_json: Annotated[bool, typer.Option("--json", help="Print one JSON document.")] = False,
+        as_json: JsonOption = False,
         db: DbOption = DEFAULT_DB,
     ) -> None:
         """Compare the groups of a model's units (Fisher's analysis of variance and Smirnov's

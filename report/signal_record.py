@@ -37,7 +37,8 @@ def headings_in(
 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Valid heading frames (stand ms, deg) inside each span of the logs read in order as one
     stream (a campaign's raw log segments), in stream order."""
-    stamps = tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in logs)
+    stats = [(str(p), p.stat()) for p in logs]
+    stamps = tuple((path, stat.st_size, stat.st_mtime_ns) for path, stat in stats)
     t, h = _valid_headings(stamps, codec.dbc_path, codec.signal_map)
     found = {}
     for key, (start, end) in spans.items():
