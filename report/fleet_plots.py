@@ -23,8 +23,9 @@ def control_chart(p: ParameterAnalysis, order: Sequence[str], factor: str) -> Fi
     units = {u.serial: u for u in p.units}
     chosen = [units[s] for s in order]
     colours = dict(zip((g.group for g in p.groups), _palette(len(p.groups)), strict=True))
-    fig = _figure(3.0)
-    ax = fig.add_subplot()
+    rotation = 90 if len(chosen) > 12 else 45
+    fig = _figure(3.0, right_in=2.0, below_in=0.5 if rotation == 90 else 0.3)
+    ax = fig.axes[0]
     x = range(len(chosen))
     ax.vlines(
         x,
@@ -60,13 +61,13 @@ def control_chart(p: ParameterAnalysis, order: Sequence[str], factor: str) -> Fi
             mew=1.3,
             label="outside the interval",
         )
-    ax.set_xticks(list(x), [u.serial for u in chosen], rotation=90 if len(chosen) > 12 else 45)
+    ax.set_xticks(list(x), [u.serial for u in chosen], rotation=rotation)
     ax.tick_params(axis="x", labelsize=6.5)
     ax.set_xlim(-0.7, len(chosen) - 0.3)
     ax.set_xlabel("unit (serial), in the order of the campaigns' start")
     ax.set_ylabel(label)
     ax.set_title(f"{p.symbol} per unit (bars: ± SE of the unit's fit)", loc="left")
-    fig.legend(loc="outside right upper", fontsize=6.5)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=6.5)
     return fig
 
 

@@ -73,12 +73,24 @@ class ProtocolError(ValueError):
     """A value that cannot be encoded, or a DBC / signal map that does not fit the protocol."""
 
 
+def load_dbc(path: Path = DBC_PATH) -> cantools.database.can.Database:
+    """A DBC file parsed by cantools, parsed again only when the file changes (its size or
+    modification time): a report builds a codec per raw log and trial. Callers only read it."""
+    stat = path.stat()
+    return _parsed_dbc(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=16)
+def _parsed_dbc(path: str, mtime_ns: int, size: int) -> cantools.database.can.Database:
+    return cantools.database.load_file(path)
+
+
 @functools.cache
 def shipped_range(ref: str) -> tuple[float, float]:
     """[minimum, maximum] of a signal "MESSAGE.SIGNAL" of the shipped DBC (what the simulated
     stand can put in a frame)."""
     message, signal = ref.split(".")
-    found = cantools.database.load_file(str(DBC_PATH)).get_message_by_name(message)
+    found = load_dbc().get_message_by_name(message)
     found_signal = found.get_signal_by_name(signal)
     return float(found_signal.minimum), float(found_signal.maximum)
 
@@ -410,7 +422,7 @@ class Codec:
 
     def __init__(self, dbc_path: Path = DBC_PATH, signal_map: SignalMap | None = None) -> None:
         try:
-            self._db = cantools.database.load_file(str(dbc_path))
+            self._db = load_dbc(dbc_path)
         except (OSError, ValueError, cantools.database.UnsupportedDatabaseFormatError) as exc:
             # ValueError: a file name cantools cannot tell the format of, a text it cannot decode
             raise ProtocolError(f"cannot load DBC {dbc_path}: {exc}") from None

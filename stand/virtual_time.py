@@ -30,7 +30,7 @@ import numpy as np
 from cantools.database.can import Message as DbcMessage
 
 from gyrostand.stand.packing import BatchEncoder
-from gyrostand.stand.protocol import DBC_PATH, ProtocolError
+from gyrostand.stand.protocol import ProtocolError, load_dbc
 
 CLOCK_INTERVAL_MS = 1000  # SIM_CLOCK period in stand time
 DEFAULT_LEAD_MS = 60_000  # how far the stand may run ahead of the controller (= command latency)
@@ -49,7 +49,7 @@ class SyncFrame:
 
 @cache
 def _messages() -> tuple[DbcMessage, DbcMessage]:
-    db = cantools.database.load_file(str(DBC_PATH))
+    db = load_dbc()
     return db.get_message_by_name("SIM_SYNC"), db.get_message_by_name("SIM_CLOCK")
 
 
