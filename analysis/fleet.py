@@ -22,8 +22,9 @@ For each parameter:
   (S²_within - mean SE², floored at 0) the type's scatter, both reported;
 - which groups differ, step down: while the F test of the groups still in (their means against
   the fleet's within-group mean square, N - k degrees of freedom) rejects at q, the group whose
-  mean lies farthest from the others' (Student t of the contrast) is set apart; each group's t
-  against the rest of the fleet is reported too;
+  mean lies farthest from the others' (Student t of the contrast) is set apart; when the last
+  two differ, both are (two groups that differ from each other do not tell which one is odd);
+  each group's t against the rest of the fleet is reported too;
 - Smirnov's two-sample test (Kolmogorov-Smirnov, `scipy.stats.ks_2samp`) of each group against
   the rest of the fleet, at level q / k (Bonferroni over the k groups);
 - each unit against the type's prediction interval formed from the other units (leave-one-out:
@@ -238,7 +239,7 @@ def set_apart(
 ) -> tuple[str, ...]:
     """The groups that differ, step down: while the groups still in differ by the F test (their
     between-group mean square against the fleet's S²_within), the one with the largest |t|
-    against the others is set apart."""
+    against the others is set apart; two that differ are both set apart (their |t| are equal)."""
     remaining, apart = list(values), []
     while len(remaining) >= 2:
         data = [values[g] for g in remaining]
@@ -246,6 +247,9 @@ def set_apart(
         s2_between = sum(d.size * (d.mean() - grand) ** 2 for d in data) / (len(data) - 1)  # S1²
         f_critical = float(stats.f.ppf(1 - q, len(data) - 1, dof_within))
         if s2_within > 0 and s2_between / s2_within <= f_critical:
+            break
+        if len(remaining) == 2:
+            apart.extend(remaining)
             break
         farthest = max(remaining, key=lambda g: abs(_contrast(values, g, remaining, s2_within)))
         apart.append(farthest)

@@ -110,3 +110,18 @@ def test_each_group_against_the_rest_names_the_shifted_one() -> None:
     grand = np.concatenate([a, b]).mean()
     f = (4 * (a.mean() - grand) ** 2 + 3 * (b.mean() - grand) ** 2) / s2_within
     assert f < stats.f.ppf(0.95, 1, 7)
+
+
+def test_two_groups_that_differ_are_both_set_apart() -> None:
+    """Two groups that differ from each other do not tell which one is odd: both are named,
+    whichever is listed first (the F test of the two is the square of their t)."""
+    t_by_group = {"A": T_BY_GROUP["A"], "C": T_BY_GROUP["C"]}
+    for order in (t_by_group, dict(reversed(t_by_group.items()))):
+        t = analyze_fleet(fleet(order), factor="factory").parameters[1]
+        assert t.anova.groups_differ
+        assert sorted(g.group for g in t.groups if g.differs) == ["A", "C"]
+        a, c = (g.t_vs_rest for g in sorted(t.groups, key=lambda g: g.group))
+        assert a == pytest.approx(-c)
+        assert t.anova.f == pytest.approx(a**2)
+    same = {"A": T_BY_GROUP["A"], "B": T_BY_GROUP["B"]}
+    assert not any(g.differs for g in analyze_fleet(fleet(same), factor="f").parameters[1].groups)
