@@ -13,10 +13,12 @@ lab's record names the copy; the copying comes last, before the commit, and a co
 merges nothing. A file's path is where it is kept, not what it holds: no part of the content.
 
 Merging is idempotent: a campaign whose origin is in the lab with the same content is "already
-merged". With other content, the lab's copy is replaced (keeping its id) only while it is not
-completed and nothing was done to it in the lab (its content is still the merged one, no analysis
-run since); otherwise that is a conflict, and nothing at all is merged. Campaigns being acquired
-(lease held) or left running are skipped. All of it is one transaction of the lab database.
+merged"; so is one of the lab's own campaigns coming back through another database, which is
+skipped when its content differs there (the lab keeps its own). With other content, the lab's
+copy is replaced (keeping its id) only while it is not completed and nothing was done to it in
+the lab (its content is still the merged one, no analysis run since); otherwise that is a
+conflict, and nothing at all is merged. Campaigns being acquired (lease held) or left running
+are skipped. All of it is one transaction of the lab database.
 """
 
 from __future__ import annotations
@@ -256,10 +258,10 @@ def merge_database(
     with stand() as source, writer(lab)() as target:
         if target.get_bind().dialect.name == "postgresql":  # one merge at a time
             target.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": MERGE_LOCK})
-        identity = database_identity(source)
-        if identity is not None and identity == database_identity(target):
+        identity, lab_identity = database_identity(source), database_identity(target)
+        if identity is not None and identity == lab_identity:
             raise MergeRefused(f"{merged_from} is the lab database itself (or a copy of it)")
-        merger = _Merger(stand, source, target, identity, merged_from, raw_logs)
+        merger = _Merger(stand, source, target, identity, lab_identity, merged_from, raw_logs)
         ids = source.scalars(select(Campaign.id).order_by(Campaign.id)).all()
         done = tuple(merger.merge(i) for i in ids)
         if dry_run:
@@ -277,6 +279,7 @@ class _Merger:
     source: Session
     target: Session
     identity: str | None
+    lab_identity: str | None
     merged_from: str
     raw_logs: RawLogs | None
     files: list[RawLogCopy] = field(default_factory=list)  # to copy before the commit
@@ -296,6 +299,8 @@ class _Merger:
         rows = campaign_rows(self.source, campaign_id)
         digest = content_sha256(rows)
         origin = self._origin(campaign_id)
+        if origin[0] == self.lab_identity and self.target.get(Campaign, origin[1]) is not None:
+            return self._own(campaign_id, label, digest, origin[1])
         earlier = self.target.execute(
             select(
                 CampaignOrigin.campaign_id, CampaignOrigin.content_sha256, CampaignOrigin.merged_at
@@ -331,6 +336,13 @@ class _Merger:
         )
         self.target.flush()
         return CampaignMerge(campaign_id, outcome, lab_id, label, raw_logs=len(self.files) - copied)
+
+    def _own(self, campaign_id: int, label: str | None, digest: str, lab_id: int) -> CampaignMerge:
+        """The lab's own campaign `lab_id`, back through another database: nothing to copy."""
+        if content_sha256(campaign_rows(self.target, lab_id)) == digest:
+            return CampaignMerge(campaign_id, "identical", lab_id, label)
+        why = f"lab campaign {lab_id} itself, changed since it left the lab (the lab keeps its own)"
+        return CampaignMerge(campaign_id, "skipped", lab_id, label, why)
 
     def _relocated(self, rows: CampaignRows, origin: str) -> CampaignRows:
         """The rows with each verified raw log at its lab path (noted in `files` to copy)."""

@@ -287,6 +287,28 @@ def test_merged_campaign_keeps_its_first_origin(stands: Stands, db_url: str, tmp
     assert "already merged (identical)" in merge(stands.s1, db_url).output
 
 
+def test_the_labs_own_campaign_coming_back_is_not_copied(stands: Stands, tmp_path: Path) -> None:
+    """A lab that records campaigns itself (a copy of stand S1) merged into another database,
+    which is merged back: its campaign is its own, "already merged", no row added; changed
+    there, it is skipped with the reason, and the lab keeps its own."""
+    lab = stands.copy(stands.s1, tmp_path, "lab.sqlite")
+    other = tmp_path / "other.sqlite"
+    assert merge(lab, str(other)).exit_code == 0
+    before = row_counts(sqlite_url(lab))
+    back = merge(other, str(lab))
+    assert back.exit_code == 0, back.output
+    assert "already merged (identical), lab campaign 1" in back.output
+    assert row_counts(sqlite_url(lab)) == before
+    with sqlite3.connect(other) as connection:  # labelled there: its content differs now
+        connection.execute(
+            "INSERT INTO campaign_label (campaign_id, key, value) VALUES (1, 'site', 'B')"
+        )
+    back = merge(other, str(lab))
+    assert back.exit_code == 0, back.output
+    assert "skipped: lab campaign 1 itself, changed since it left the lab" in back.output
+    assert row_counts(sqlite_url(lab)) == before
+
+
 def identity_of(path: Path) -> str | None:
     sessions = open_database(sqlite_url(path))
     with sessions() as session:
