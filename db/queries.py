@@ -1,6 +1,6 @@
-"""Queries shared by the acquisition runner, the CLI and the report: a campaign's ORM graph,
-which attempt of each trial counts, where to resume it, how far it has got, and the known
-constants B of its model."""
+"""Queries shared by the acquisition runner, the CLI, the report and the station: a campaign's
+ORM graph, which attempt of each trial counts, where to resume it, how far it has got, the known
+constants B of its model, and the campaign list."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import ColumnElement, func, select
+from sqlalchemy import ColumnElement, Subquery, func, select
 from sqlalchemy.orm import Session, aliased, selectinload
 
 from gyrostand.db.models import (
@@ -419,7 +419,8 @@ def raw_log_segments(session: Session, campaign_id: int) -> list[RawLogSegment]:
 class CampaignFilter:
     """Which campaigns `campaign_list` returns (None: any). `labels`: every key = value must be
     among the campaign's labels (the stand is the label `stand`); `since`/`until`: when the
-    campaign started (imports: when they were stored), `until` exclusive."""
+    campaign started (imports: when they were stored), `until` exclusive; `text`: in the
+    operator, instrument model or serial, in any case (a substring, no wildcards)."""
 
     model: str | None = None
     serial: str | None = None
@@ -427,11 +428,27 @@ class CampaignFilter:
     labels: tuple[tuple[str, str], ...] = ()
     since: datetime | None = None
     until: datetime | None = None
+    text: str | None = None
+
+
+def verdict(results: dict[str, Any] | None) -> str:
+    """An analysis run's results in a few words: Cochran's homogeneity and Fisher's adequacy."""
+    if results is None:
+        return "not analysed"
+    cochran = results.get("cochran") or {}
+    adequacy = results.get("adequacy") or {}
+
+    def word(value: object) -> str:
+        return "?" if value is None else ("yes" if value else "no")
+
+    return (
+        f"homogeneous {word(cochran.get('homogeneous'))}, adequate {word(adequacy.get('adequate'))}"
+    )
 
 
 @dataclass(frozen=True)
 class CampaignRow:
-    """One line of `gyrostand campaign list`."""
+    """One campaign of `gyrostand campaign list` and of the station's campaigns page."""
 
     campaign_id: int
     model: str
@@ -444,12 +461,24 @@ class CampaignRow:
     finished_at: datetime | None
     labels: dict[str, str]
     observations: int
+    verdict: str
+    """Its latest analysis run's `verdict`."""
     origin: tuple[str, int] | None = None
     """A merged campaign's origin: the file or URL it was merged from and its id there."""
 
 
+def latest_runs() -> Subquery:
+    """Each analysed campaign's latest analysis run: columns campaign_id, run_id."""
+    return (
+        select(AnalysisRun.campaign_id, func.max(AnalysisRun.id).label("run_id"))
+        .group_by(AnalysisRun.campaign_id)
+        .subquery()
+    )
+
+
 def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
-    """The campaigns that pass `where`, by id, with their labels and observation counts."""
+    """The campaigns that pass `where`, by id, with their labels, observation counts and latest
+    analysis's verdict."""
     started = func.coalesce(Campaign.started_at, Campaign.created_at)
     query = (
         select(Campaign.id, Instrument.model, Instrument.serial, Campaign.status)
@@ -464,6 +493,12 @@ def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
     ):
         if value is not None:
             query = query.where(column == value)
+    if where.text is not None:
+        query = query.where(
+            Campaign.operator.icontains(where.text, autoescape=True)
+            | Instrument.model.icontains(where.text, autoescape=True)
+            | Instrument.serial.icontains(where.text, autoescape=True)
+        )
     if where.since is not None:
         query = query.where(started >= where.since)
     if where.until is not None:
@@ -496,6 +531,14 @@ def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
             .group_by(Trial.campaign_id)
         ).all()
     )
+    latest = latest_runs()
+    results = dict(
+        session.execute(
+            select(latest.c.campaign_id, AnalysisRun.results_json)
+            .join(AnalysisRun, AnalysisRun.id == latest.c.run_id)
+            .where(latest.c.campaign_id.in_(ids))
+        ).all()
+    )
     origins = {
         campaign_id: (merged_from, source_id)
         for campaign_id, merged_from, source_id in session.execute(
@@ -518,6 +561,7 @@ def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
             finished_at=None if finished_at is None else as_utc(finished_at),
             labels=labels[i],
             observations=counts.get(i, 0),
+            verdict=verdict(results.get(i)),
             origin=origins.get(i),
         )
         for i, model, serial, status, source, operator, started_at, finished_at in rows
@@ -545,11 +589,7 @@ class AnalysedCampaign:
 def model_campaigns(session: Session, model: str, key: str) -> list[AnalysedCampaign]:
     """The completed campaigns of instrument `model`, by id, with their label `key` and latest
     analysis run."""
-    latest = (
-        select(AnalysisRun.campaign_id, func.max(AnalysisRun.id).label("run_id"))
-        .group_by(AnalysisRun.campaign_id)
-        .subquery()
-    )
+    latest = latest_runs()
     label = aliased(CampaignLabel)
     rows = session.execute(
         select(

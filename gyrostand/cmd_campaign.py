@@ -419,6 +419,7 @@ def list_item(row: CampaignRow) -> dict[str, object]:
         "finished_at": finished,
         "labels": row.labels,
         "observations": row.observations,
+        "verdict": row.verdict,
         "merged_from": None if row.origin is None else {"from": row.origin[0], "id": row.origin[1]},
     }
 
@@ -585,6 +586,12 @@ def register(app: typer.Typer) -> None:
             list[str] | None,
             typer.Option("--tag", help="Only campaigns with this label, key=value (repeatable)."),
         ] = None,
+        text: Annotated[
+            str | None,
+            typer.Option(
+                help="Only campaigns whose operator, model or serial contains this (any case)."
+            ),
+        ] = None,
         as_json: JsonOption = False,
         db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
     ) -> None:
@@ -609,6 +616,7 @@ def register(app: typer.Typer) -> None:
             labels=tuple(sorted(labels.items())),
             since=None if since is None else since.replace(tzinfo=UTC),
             until=None if until is None else until.replace(tzinfo=UTC) + day,
+            text=text,
         )
         if where.since is not None and where.until is not None and where.until <= where.since:
             fail("--until is before --since")
@@ -617,7 +625,19 @@ def register(app: typer.Typer) -> None:
         if as_json:
             typer.echo(json.dumps({"campaigns": [list_item(r) for r in rows]}, indent=2))
             return
-        lines = [("id", "model", "serial", "status", "source", "started (UTC)", "obs", "labels")]
+        lines = [
+            (
+                "id",
+                "model",
+                "serial",
+                "status",
+                "source",
+                "started (UTC)",
+                "obs",
+                "verdict",
+                "labels",
+            )
+        ]
         lines += [
             (
                 str(r.campaign_id),
@@ -629,6 +649,7 @@ def register(app: typer.Typer) -> None:
                 else f"{r.source}, merged from {r.origin[0]} #{r.origin[1]}",
                 r.started_at.strftime("%Y-%m-%d %H:%M"),
                 str(r.observations),
+                r.verdict,
                 printable(" ".join(f"{k}={v}" for k, v in r.labels.items())),
             )
             for r in rows

@@ -31,7 +31,7 @@ from starlette.templating import Jinja2Templates
 
 from gyrostand.db.lease import held_elsewhere
 from gyrostand.db.models import CAMPAIGN_STATUSES, Campaign
-from gyrostand.db.queries import sign_offs
+from gyrostand.db.queries import CampaignFilter, campaign_list, sign_offs
 from gyrostand.plan.model import Plan, PlanError, load_plan, parse_plan
 from gyrostand.station.operator import (
     FIELD,
@@ -44,13 +44,7 @@ from gyrostand.station.operator import (
 from gyrostand.station.processes import Processes, ProcessRefused
 from gyrostand.station.security import Access, CrossSite, TokenMiddleware, action_form
 from gyrostand.station.signoff import SignOffRefused, sign_off
-from gyrostand.station.state import (
-    campaign_rows,
-    fingerprint,
-    live_file,
-    live_state,
-    read_live,
-)
+from gyrostand.station.state import fingerprint, live_file, live_state, read_live
 
 TICK_S = 0.1
 """The update stream checks the database's fingerprint of the campaign this often and pushes
@@ -123,12 +117,13 @@ def create_app(
     async def campaigns(request: Request) -> Response:
         status = request.query_params.get("status", "")
         text = request.query_params.get("q", "")
+        where = CampaignFilter(status=status or None, text=text or None)
         rows = await run_in_threadpool(
-            lambda: [
+            lambda: [  # newest first
                 replace(r, status="interrupted")
                 if r.status == "running" and not station.acquiring(r.campaign_id)
                 else r
-                for r in station.read(lambda s: campaign_rows(s, status=status, text=text))
+                for r in reversed(station.read(campaign_list, where))
             ]
         )
         return station.page(

@@ -1,5 +1,6 @@
-"""What the station shows, read from the database that the acquisition process writes: the
-campaign list and a campaign's live state (progress, current series, trace, events)."""
+"""What the station shows of a campaign, read from the database that the acquisition process
+writes: its live state (progress, current series, trace, events). The campaign list is
+`db.queries.campaign_list`."""
 
 from __future__ import annotations
 
@@ -14,10 +15,8 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from gyrostand.db.models import (
-    AnalysisRun,
     Campaign,
     Event,
-    Instrument,
     Observation,
     RawLogSegment,
     Series,
@@ -28,74 +27,6 @@ from gyrostand.db.queries import campaign_summary, latest_attempt, live_file_of,
 TRACE_POINTS = 600
 """Points of the heading trace sent to the page: about what a screen's plot is wide."""
 EVENTS_SHOWN = 50
-
-
-@dataclass(frozen=True)
-class CampaignRow:
-    """One line of the campaigns page."""
-
-    campaign_id: int
-    status: str
-    source: str
-    instrument: str
-    operator: str
-    started_at: datetime | None
-    finished_at: datetime | None
-    verdict: str
-
-
-def verdict(results: dict[str, Any] | None) -> str:
-    """The latest analysis in a few words: Cochran's homogeneity and Fisher's adequacy."""
-    if results is None:
-        return "not analysed"
-    cochran = results.get("cochran") or {}
-    adequacy = results.get("adequacy") or {}
-
-    def word(value: object) -> str:
-        return "?" if value is None else ("yes" if value else "no")
-
-    return (
-        f"homogeneous {word(cochran.get('homogeneous'))}, adequate {word(adequacy.get('adequate'))}"
-    )
-
-
-def campaign_rows(session: Session, *, status: str = "", text: str = "") -> list[CampaignRow]:
-    """Every campaign, newest first, with the verdict of its latest analysis run; `status`
-    keeps one status, `text` the campaigns whose instrument or operator contains it."""
-    latest = (
-        select(AnalysisRun.campaign_id, func.max(AnalysisRun.id).label("run_id"))
-        .group_by(AnalysisRun.campaign_id)
-        .subquery()
-    )
-    query = (
-        select(Campaign, Instrument, AnalysisRun.results_json)
-        .join(Instrument, Instrument.id == Campaign.instrument_id)
-        .outerjoin(latest, latest.c.campaign_id == Campaign.id)
-        .outerjoin(AnalysisRun, AnalysisRun.id == latest.c.run_id)
-        .order_by(Campaign.id.desc())
-    )
-    if status:
-        query = query.where(Campaign.status == status)
-    if text:
-        like = f"%{text}%"
-        query = query.where(
-            Campaign.operator.ilike(like)
-            | Instrument.model.ilike(like)
-            | Instrument.serial.ilike(like)
-        )
-    return [
-        CampaignRow(
-            campaign_id=c.id,
-            status=c.status,
-            source=c.source,
-            instrument=f"{i.model} #{i.serial}",
-            operator=c.operator,
-            started_at=c.started_at,
-            finished_at=c.finished_at,
-            verdict=verdict(results),
-        )
-        for c, i, results in session.execute(query)
-    ]
 
 
 @dataclass(frozen=True)
