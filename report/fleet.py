@@ -32,19 +32,44 @@ class LeftOut:
 
 
 @dataclass(frozen=True)
+class FailedCheck:
+    """A unit whose own campaign failed a test of the method: it stays in the fleet, but its fit
+    (and the standard errors the measurement share rests on) is questionable."""
+
+    campaign_id: int
+    serial: str
+    checks: str
+
+
+@dataclass(frozen=True)
 class FleetInputs:
     model: str
     factor: str
     units: tuple[FleetUnit, ...]
     left_out: tuple[LeftOut, ...]
+    failed_checks: tuple[FailedCheck, ...] = ()
+
+
+def failed_checks(results: dict[str, Any]) -> str:
+    """What an analysis run failed of Cochran's test (eq 2.5) and Fisher's adequacy test (eq 2.8),
+    in words; empty when it failed neither."""
+    cochran = (results.get("cochran") or {}).get("homogeneous")
+    adequate = (results.get("adequacy") or {}).get("adequate")
+    failed = []
+    if cochran is False:
+        failed.append("Cochran's test: the trials' variances are not homogeneous")
+    if adequate is False:
+        failed.append("Fisher's test: the model is not adequate")
+    return "; ".join(failed)
 
 
 def fleet_inputs(session: Session, model: str, factor: str) -> FleetInputs:
     """Each unit (serial) of `model` once: its latest completed, analysed campaign labelled
     `factor`, with the fit's C, T and standard errors from that campaign's latest analysis run;
-    the model's other completed campaigns are left out with the reason."""
+    the model's other completed campaigns are left out with the reason, and the units whose run
+    failed Cochran's or Fisher's test are named."""
     units: dict[str, FleetUnit] = {}
-    left_out = []
+    left_out, failed = [], []
     for c in reversed(model_campaigns(session, model, factor)):  # latest first
         fit = (c.results or {}).get("fit") or {}
         estimates, errors = fit.get("estimates") or {}, fit.get("std_errors") or {}
@@ -72,10 +97,18 @@ def fleet_inputs(session: Session, model: str, factor: str) -> FleetInputs:
                 t_se=float(errors["T_s"]),
                 when=c.started_at.isoformat(),
             )
+            if checks := failed_checks(c.results):
+                failed.append(FailedCheck(c.campaign_id, c.serial, checks))
             continue
         left_out.append(LeftOut(c.campaign_id, c.serial, reason))
     ordered = sorted(units.values(), key=lambda u: u.campaign_id)
-    return FleetInputs(model, factor, tuple(ordered), tuple(reversed(left_out)))
+    return FleetInputs(
+        model,
+        factor,
+        tuple(ordered),
+        tuple(reversed(left_out)),
+        tuple(sorted(failed, key=lambda f: f.campaign_id)),
+    )
 
 
 def simulated_campaigns(session: Session, units: Sequence[FleetUnit]) -> tuple[int, ...]:
@@ -133,6 +166,11 @@ def fleet_text(inputs: FleetInputs, analysis: FleetAnalysis) -> str:
             for u in p.outliers
         ]
         lines.append("  outside the type's prediction interval: " + ("; ".join(outside) or "none"))
+    for f in inputs.failed_checks:
+        lines.append(
+            f"in the fleet, its own analysis failed: campaign {f.campaign_id} "
+            f"(serial {f.serial}): {f.checks}"
+        )
     for c in inputs.left_out:
         lines.append(f"left out: campaign {c.campaign_id} (serial {c.serial}): {c.reason}")
     return "\n".join(lines)
@@ -140,12 +178,13 @@ def fleet_text(inputs: FleetInputs, analysis: FleetAnalysis) -> str:
 
 def fleet_document(inputs: FleetInputs, analysis: FleetAnalysis) -> dict[str, Any]:
     """The fleet analysis as plain JSON types: model, the analysis (`FleetAnalysis.to_dict`),
-    the units and the campaigns left out."""
+    the units, the campaigns left out and the units whose own analysis failed a test."""
     return {
         "model": inputs.model,
         **analysis.to_dict(),
         "units": [asdict(u) for u in inputs.units],
         "left_out": [asdict(c) for c in inputs.left_out],
+        "failed_checks": [asdict(f) for f in inputs.failed_checks],
     }
 
 

@@ -5,6 +5,7 @@ the one-line refusals of analyze, report and simulate."""
 
 import json
 import shlex
+import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -174,3 +175,70 @@ def test_an_unwritable_report_is_one_line(fleet: Fleet) -> None:
     *stages, error = result.stderr.splitlines()  # the stage line, then the error
     assert error == f"gyrostand: error: cannot write {out}: {out.parent} is a file"
     assert not [line for line in stages if "error" in line]
+
+
+def stored_failures(db: Path) -> list[tuple[int, bool | None, bool | None]]:
+    """Each campaign's latest analysis run as stored: (campaign, homogeneous, adequate)."""
+    with sqlite3.connect(db) as connection:
+        rows = connection.execute(
+            "SELECT campaign_id, results_json FROM analysis_run WHERE id IN"
+            " (SELECT max(id) FROM analysis_run GROUP BY campaign_id) ORDER BY campaign_id"
+        ).fetchall()
+    return [
+        (c, r["cochran"]["homogeneous"], r["adequacy"]["adequate"])
+        for c, r in ((c, json.loads(text)) for c, text in rows)
+    ]
+
+
+COCHRAN = "Cochran's test: the trials' variances are not homogeneous"
+FISHER = "Fisher's test: the model is not adequate"
+
+
+def failed(db: Path) -> list[tuple[int, str]]:
+    """The failed tests of each campaign's latest run as stored, in words (a test not made,
+    None: Fisher's after Cochran's failed, is not failed)."""
+    return [
+        (c, "; ".join(w for w, ok in ((COCHRAN, homogeneous), (FISHER, adequate)) if ok is False))
+        for c, homogeneous, adequate in stored_failures(db)
+        if False in (homogeneous, adequate)
+    ]
+
+
+def test_a_unit_whose_own_analysis_failed_a_test_is_named(fleet: Fleet, tmp_path: Path) -> None:
+    """The units whose latest run failed Cochran's or Fisher's test stay in the fleet and are
+    named, in the text and the JSON, as their stored runs say; a run made to fail Fisher's test
+    is added."""
+    copy = tmp_path / "lab.sqlite"
+    with sqlite3.connect(fleet.folder / "lab.sqlite") as source, sqlite3.connect(copy) as target:
+        source.backup(target)  # with what is still in the write-ahead log
+    args = ("fleet", "analyze", "--model", MODEL, "--by", "factory", "--db", f"sqlite:///{copy}")
+
+    def named() -> list[tuple[int, str]]:
+        document = json.loads(gyrostand(*args, "--json"))
+        assert document["n_units"] == 6
+        return [(f["campaign_id"], f["checks"]) for f in document["failed_checks"]]
+
+    assert named() == failed(copy)
+    passing = next(
+        c for c, homogeneous, adequate in stored_failures(copy) if homogeneous and adequate
+    )
+    with sqlite3.connect(copy) as connection:
+        run, text = connection.execute(
+            "SELECT id, results_json FROM analysis_run WHERE campaign_id = ? ORDER BY id DESC",
+            (passing,),
+        ).fetchone()
+        results = json.loads(text)
+        results["adequacy"]["adequate"] = False
+        connection.execute(
+            "UPDATE analysis_run SET results_json = ? WHERE id = ?", (json.dumps(results), run)
+        )
+        (serial,) = connection.execute(
+            "SELECT serial FROM instrument JOIN campaign ON campaign.instrument_id = instrument.id"
+            " WHERE campaign.id = ?",
+            (passing,),
+        ).fetchone()
+    assert (passing, FISHER) in failed(copy)
+    assert named() == failed(copy)
+    assert f"its own analysis failed: campaign {passing} (serial {serial}): {FISHER}" in (
+        gyrostand(*args)
+    )
