@@ -431,19 +431,23 @@ class CampaignFilter:
     text: str | None = None
 
 
+def method_checks(results: dict[str, Any]) -> tuple[bool | None, bool | None]:
+    """An analysis run's Cochran homogeneity and Fisher adequacy (None: the test was not made,
+    e.g. Fisher's after Cochran's failed)."""
+    return (
+        (results.get("cochran") or {}).get("homogeneous"),
+        (results.get("adequacy") or {}).get("adequate"),
+    )
+
+
 def verdict(results: dict[str, Any] | None) -> str:
     """An analysis run's results in a few words: Cochran's homogeneity and Fisher's adequacy."""
     if results is None:
         return "not analysed"
-    cochran = results.get("cochran") or {}
-    adequacy = results.get("adequacy") or {}
-
-    def word(value: object) -> str:
-        return "?" if value is None else ("yes" if value else "no")
-
-    return (
-        f"homogeneous {word(cochran.get('homogeneous'))}, adequate {word(adequacy.get('adequate'))}"
+    homogeneous, adequate = (
+        "?" if value is None else ("yes" if value else "no") for value in method_checks(results)
     )
+    return f"homogeneous {homogeneous}, adequate {adequate}"
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from sqlalchemy.orm import Session
 
 from gyrostand.analysis.fleet import FleetAnalysis, FleetUnit
 from gyrostand.db.models import Campaign
-from gyrostand.db.queries import model_campaigns
+from gyrostand.db.queries import method_checks, model_campaigns
 from gyrostand.report.errors import ReportError
 
 SCHEMA = "gyrostand.fleet-report/1"
@@ -53,10 +53,9 @@ class FleetInputs:
 def failed_checks(results: dict[str, Any]) -> str:
     """What an analysis run failed of Cochran's test (eq 2.5) and Fisher's adequacy test (eq 2.8),
     in words; empty when it failed neither."""
-    cochran = (results.get("cochran") or {}).get("homogeneous")
-    adequate = (results.get("adequacy") or {}).get("adequate")
+    homogeneous, adequate = method_checks(results)
     failed = []
-    if cochran is False:
+    if homogeneous is False:
         failed.append("Cochran's test: the trials' variances are not homogeneous")
     if adequate is False:
         failed.append("Fisher's test: the model is not adequate")
