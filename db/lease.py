@@ -1,11 +1,14 @@
 """Campaign leases: one process at a time acquires into a campaign, and a campaign left "running"
 by a process that is gone can be told from a live one. The lease is a lock that the operating
 system or the database server drops when its holder dies, so a kill -9 never leaves it behind:
-on a SQLite file an exclusive flock on `<file>.campaign-<id>.lock` beside it; on PostgreSQL a
-session advisory lock on a connection the lease keeps open."""
+on a SQLite file an exclusive flock on `<file>.campaign-<id>.lock` beside it (removed by its
+holder on release: a taker checks that the path still names the file it locked, else it opens
+the new one); on PostgreSQL a session advisory lock on a connection the lease keeps open."""
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import fcntl
 import os
 from pathlib import Path
@@ -24,12 +27,20 @@ class CampaignBusy(RuntimeError):
 class Lease:
     """This process's right to acquire into one campaign (see the module doc)."""
 
-    def __init__(self, key: tuple[str, int], fd: int | None, connection: Connection | None):
-        self._key, self._fd, self._connection = key, fd, connection
+    def __init__(
+        self,
+        key: tuple[str, int],
+        fd: int | None,
+        connection: Connection | None,
+        path: Path | None = None,
+    ):
+        self._key, self._fd, self._connection, self._path = key, fd, connection, path
+        self._pid = os.getpid()  # a forked child inherits the lease, not the right to remove it
 
     def release(self) -> None:
         _HELD.pop(self._key, None)
         if self._fd is not None:
+            self.remove_file()
             os.close(self._fd)  # closing the file drops the flock
             self._fd = None
         if self._connection is not None:
@@ -37,6 +48,23 @@ class Lease:
             # returned to the pool (where its session, and the lock, would live on)
             self._connection.invalidate()
             self._connection = None
+
+    def remove_file(self) -> None:
+        """Remove the lock file while it is locked (a taker that opened it then sees that the
+        path names another file), so that no lock file is left behind; a read-only folder
+        keeps it."""
+        if self._path is not None and self._fd is not None and self._pid == os.getpid():
+            with contextlib.suppress(OSError):
+                self._path.unlink()
+
+
+@atexit.register
+def _remove_files_at_exit() -> None:
+    """A process that ends holding leases (a command's normal exit) leaves no lock file: the
+    operating system drops the locks just after. A killed process leaves its file unlocked;
+    the next holder takes it over and removes it."""
+    for lease in _HELD.values():
+        lease.remove_file()
 
 
 def _key(sessions: sessionmaker[Session], campaign_id: int) -> tuple[str, int]:
@@ -61,15 +89,28 @@ def _try(sessions: sessionmaker[Session], campaign_id: int) -> Lease | None:
     if engine.dialect.name != "sqlite" or database in (None, "", ":memory:"):
         return Lease(key, None, None)  # a private database: nobody else can reach it
     path = Path(f"{database}.campaign-{campaign_id}.lock")
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        return None
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            return None
+        if _names(path, fd):
+            break
+        os.close(fd)  # its holder removed the file we opened on release: take the path's new one
     os.ftruncate(fd, 0)
     os.write(fd, f"{os.getpid()}\n".encode())  # for people: who holds it
-    return Lease(key, fd, None)
+    return Lease(key, fd, None, path)
+
+
+def _names(path: Path, fd: int) -> bool:
+    """Whether `path` still names the file open as `fd`."""
+    try:
+        named, opened = os.stat(path), os.fstat(fd)
+    except FileNotFoundError:
+        return False
+    return (named.st_dev, named.st_ino) == (opened.st_dev, opened.st_ino)
 
 
 def take_lease(sessions: sessionmaker[Session], campaign_id: int) -> Lease:
