@@ -253,15 +253,18 @@ def merge_database(
     raw_logs: RawLogs | None = None,
 ) -> MergeResult:
     """Merge every campaign of the `stand` database into the `lab` database in one transaction
-    (rolled back when `dry_run`), their raw logs copied by `raw_logs` if given; MergeRefused
-    (nothing merged) on a conflict."""
+    (a `dry_run` reads only: an insert would draw ids from PostgreSQL's sequences, which no
+    rollback gives back), their raw logs copied by `raw_logs` if given; MergeRefused (nothing
+    merged) on a conflict."""
     with stand() as source, writer(lab)() as target:
         if target.get_bind().dialect.name == "postgresql":  # one merge at a time
             target.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": MERGE_LOCK})
         identity, lab_identity = database_identity(source), database_identity(target)
         if identity is not None and identity == lab_identity:
             raise MergeRefused(f"{merged_from} is the lab database itself (or a copy of it)")
-        merger = _Merger(stand, source, target, identity, lab_identity, merged_from, raw_logs)
+        merger = _Merger(
+            stand, source, target, identity, lab_identity, merged_from, raw_logs, dry_run
+        )
         ids = source.scalars(select(Campaign.id).order_by(Campaign.id)).all()
         done = tuple(merger.merge(i) for i in ids)
         if dry_run:
@@ -282,6 +285,7 @@ class _Merger:
     lab_identity: str | None
     merged_from: str
     raw_logs: RawLogs | None
+    dry_run: bool
     files: list[RawLogCopy] = field(default_factory=list)  # to copy before the commit
 
     def merge(self, campaign_id: int) -> CampaignMerge:
@@ -315,6 +319,12 @@ class _Merger:
             self._check_replaceable(campaign_id, rows, earlier)
         copied = len(self.files)
         rows = self._relocated(rows, origin[0])
+        if self.dry_run:  # what the merge would do, known now: nothing is written
+            lab_id = None if earlier is None else earlier.campaign_id
+            outcome = "merged" if earlier is None else "replaced"
+            return CampaignMerge(
+                campaign_id, outcome, lab_id, label, raw_logs=len(self.files) - copied
+            )
         if earlier is None:
             lab_id = copy_campaign(self.target, rows)
             outcome = "merged"

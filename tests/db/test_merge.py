@@ -267,8 +267,30 @@ def test_campaigns_running_are_skipped(
     assert row_counts(db_url)["campaign"] == 0
 
 
+def sequences(url: str) -> list[tuple[Any, ...]]:
+    """Where the database's id sequences stand (PostgreSQL's sequences, SQLite's
+    sqlite_sequence if it has one): what the next inserted ids will be."""
+    engine = create_engine(url)
+    with engine.connect() as connection:
+        if engine.dialect.name == "postgresql":
+            query = "SELECT sequencename, last_value FROM pg_sequences ORDER BY 1"
+        elif connection.scalar(
+            text("SELECT count(*) FROM sqlite_master WHERE name = 'sqlite_sequence'")
+        ):
+            query = "SELECT name, seq FROM sqlite_sequence ORDER BY 1"
+        else:
+            query = "SELECT 'rowid', max(id) FROM campaign"
+        found = [tuple(row) for row in connection.execute(text(query))]
+    engine.dispose()
+    return found
+
+
 def test_dry_run_changes_nothing(stands: Stands, db_url: str) -> None:
-    before = row_counts(db_url)
+    """... not even the sequences ids are drawn from (PostgreSQL's are not transactional): the
+    campaign merged after the dry runs gets the next id."""
+    assert "merged as lab campaign 1" in merge(stands.s2, db_url).output
+    before, ids = row_counts(db_url), sequences(db_url)
+    assert ids  # something to compare
     dry = merge(stands.s1, db_url, "--dry-run", "--json")
     assert dry.exit_code == 0, dry.output
     assert json.loads(dry.output)["campaigns"][0]["outcome"] == "merged"
@@ -277,6 +299,8 @@ def test_dry_run_changes_nothing(stands: Stands, db_url: str) -> None:
         "dry run, nothing changed: 1 merged, 0 replaced, 0 already merged, 0 skipped",
     ]
     assert row_counts(db_url) == before
+    assert sequences(db_url) == ids
+    assert "merged as lab campaign 2" in merge(stands.s1, db_url).output
 
 
 def test_merged_campaign_keeps_its_first_origin(stands: Stands, db_url: str, tmp_path: Path):
