@@ -32,6 +32,22 @@ def register(app: typer.Typer) -> None:
         reports: Annotated[
             Path, typer.Option(help="Folder for the reports generated at the station.")
         ] = DEFAULT_OUT,
+        allow_host: Annotated[
+            list[str] | None,
+            typer.Option(
+                "--allow-host",
+                help="Another name the browser may use for this machine (a DNS name, an "
+                "address); repeatable. Loopback's names, and the bound address's, are allowed; "
+                "any other Host is refused (400).",
+            ),
+        ] = None,
+        tls_cert: Annotated[
+            Path | None,
+            typer.Option(help="Serve HTTPS with this certificate (PEM; with --tls-key)."),
+        ] = None,
+        tls_key: Annotated[
+            Path | None, typer.Option(help="The certificate's private key (PEM).")
+        ] = None,
     ) -> None:
         """Serve the operator station: campaigns, live progress, start/stop/resume, reports
         and sign-off in the browser. Acquisitions run as `gyrostand campaign` processes of
@@ -40,23 +56,55 @@ def register(app: typer.Typer) -> None:
             import uvicorn
 
             from gyrostand.station.app import create_app
-            from gyrostand.station.security import TOKEN_ENV, Access
+            from gyrostand.station.security import TOKEN_ENV, Access, is_loopback
         except ImportError as exc:
             fail(
                 f"the station needs {exc.name}: pip install 'gyrostand[station]'",
                 code=EXIT_FAILED,
             )
+        if (tls_cert is None) != (tls_key is None):
+            fail("--tls-cert and --tls-key go together: give both, or neither")
+        if tls_cert is not None and tls_key is not None:
+            tls_problem(tls_cert, tls_key)
         sessions = open_db(db, must_exist=False)
-        access = Access.for_host(host, os.environ.get(TOKEN_ENV) or None)
+        access = Access.for_host(host, os.environ.get(TOKEN_ENV) or None, allow_host or ())
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         try:
             listening = socket.create_server((host, port), family=family)
         except OSError as exc:  # in use, not an address of this machine, a port below 1024
             fail(f"cannot listen on {host}:{port}: {exc.strerror or exc}", code=EXIT_FAILED)
-        address = f"http://{'[' + host + ']' if ':' in host else host}:{port}/"
+        scheme = "http" if tls_cert is None else "https"
+        address = f"{scheme}://{'[' + host + ']' if ':' in host else host}:{port}/"
         if access.token is not None:
             address += f"?token={access.token}"
         typer.echo(f"gyrostand station on {printable(db)}: open {address}", err=True)
+        if tls_cert is None and not is_loopback(host):
+            typer.echo(
+                "warning: plain HTTP beyond loopback: the token and every page cross the "
+                "network in clear; serve it with --tls-cert and --tls-key",
+                err=True,
+            )
         app = create_app(db, sessions, access, reports)
-        config = uvicorn.Config(app, log_level="warning", timeout_graceful_shutdown=2)
+        config = uvicorn.Config(
+            app,
+            log_level="warning",
+            timeout_graceful_shutdown=2,
+            ssl_certfile=tls_cert,
+            ssl_keyfile=tls_key,
+        )
         uvicorn.Server(config).run(sockets=[listening])
+
+
+def tls_problem(cert: Path, key: Path) -> None:
+    """A certificate and key that cannot serve TLS: one line (exit code 2)."""
+    import ssl
+
+    try:
+        ssl.create_default_context(ssl.Purpose.CLIENT_AUTH).load_cert_chain(cert, key)
+    except ssl.SSLError as exc:  # (an OSError too)
+        fail(
+            f"--tls-cert {cert} with --tls-key {key}: not a PEM certificate and its key "
+            f"({exc.reason or exc})"
+        )
+    except OSError as exc:
+        fail(f"--tls-cert/--tls-key: cannot read {exc.filename or cert}: {exc.strerror or exc}")

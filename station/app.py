@@ -42,7 +42,13 @@ from gyrostand.station.operator import (
     waiting_for,
 )
 from gyrostand.station.processes import Processes, ProcessRefused
-from gyrostand.station.security import Access, CrossSite, TokenMiddleware, action_form
+from gyrostand.station.security import (
+    Access,
+    CrossSite,
+    HostMiddleware,
+    TokenMiddleware,
+    action_form,
+)
 from gyrostand.station.signoff import SignOffRefused, sign_off
 from gyrostand.station.state import fingerprint, live_file, live_state, read_live
 
@@ -53,6 +59,7 @@ IDLE_TICK_S = 1.0
 """... and this often while nothing acquires (a run started elsewhere is seen within it)."""
 REPORT_FORMATS = {"html": "html", "html+pdf": "html,pdf"}
 STATIC = Path(__file__).parent / "static"
+ID_MAX = 2**63 - 1  # the largest id a database stores (SQLite INTEGER, PostgreSQL BIGINT)
 
 
 @dataclass(frozen=True)
@@ -110,7 +117,7 @@ def create_app(
     def campaign_id(request: Request) -> int:
         cid = int(request.path_params["campaign_id"])
         with sessions() as session:
-            if session.get(Campaign, cid) is None:
+            if cid > ID_MAX or session.get(Campaign, cid) is None:
                 raise HTTPException(404, f"no campaign {cid} in the database")
         return cid
 
@@ -325,9 +332,13 @@ def create_app(
         cid = campaign_id(request)
         name = request.path_params["name"]
         folder = (station.reports / str(cid)).resolve()
-        path = (folder / name).resolve()
-        if path.parent != folder or not name.startswith(f"campaign-{cid}") or not path.is_file():
-            raise HTTPException(404, f"no report file {name} for campaign {cid}")
+        try:
+            path = (folder / name).resolve()
+            found = path.parent == folder and name.startswith(f"campaign-{cid}") and path.is_file()
+        except (OSError, ValueError):  # a NUL in the name, a name too long for a file
+            found = False
+        if not found:
+            raise HTTPException(404, f"no report file {name!r} for campaign {cid}")
         return FileResponse(path)
 
     async def refused(request: Request, exc: Exception) -> Response:
@@ -355,6 +366,7 @@ def create_app(
         exception_handlers={CrossSite: refused, HTTPException: not_found},
     )
     app.add_middleware(TokenMiddleware, access=access)
+    app.add_middleware(HostMiddleware, access=access)  # the outermost: before any token
     app.state.processes = station.processes  # for a host that ends them (the tests)
     return app
 

@@ -90,7 +90,12 @@ def test_text_and_latest_verdict_alike_in_json_and_station(db_url: str, tmp_path
     gyrostand("analyze", "1", "--db", db_url)  # the paper: Cochran and Fisher both pass
     sessions = open_database(db_url)
     client = TestClient(
-        create_app(db_url, sessions, Access.for_host("127.0.0.1", None), tmp_path / "reports")
+        create_app(
+            db_url,
+            sessions,
+            Access.for_host("127.0.0.1", None, ["testserver"]),
+            tmp_path / "reports",
+        )
     )
     first = (1, "homogeneous yes, adequate yes")
     never = (2, "not analysed")

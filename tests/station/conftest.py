@@ -47,7 +47,7 @@ def client_for(station_db: Path, tmp_path: Path) -> Callable[..., TestClient]:
         with sqlite3.connect(station_db) as src, sqlite3.connect(db) as dst:
             src.backup(dst)  # with what is still in the WAL
         sessions = open_database(sqlite_url(db))
-        access = Access.for_host(host, token)
+        access = Access.for_host(host, token, ["testserver"])  # TestClient's Host
         client = TestClient(create_app(str(db), sessions, access, tmp_path / "reports"))
         client.access = access  # type: ignore[attr-defined]
         return client

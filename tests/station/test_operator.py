@@ -46,7 +46,7 @@ def csrf(client) -> dict[str, str]:
 
 
 def station(db: Path, reports: Path) -> TestClient:
-    access = Access.for_host("127.0.0.1", None)
+    access = Access.for_host("127.0.0.1", None, ["testserver"])
     client = TestClient(create_app(str(db), open_database(sqlite_url(db)), access, reports))
     client.access = access  # type: ignore[attr-defined]
     return client

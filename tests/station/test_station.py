@@ -92,6 +92,20 @@ def test_beyond_loopback_the_token_is_required(client_for) -> None:
     assert client.cookies.get(TOKEN_COOKIE) == "s3cret"
     assert client.get("/campaigns/1").status_code == 200
     assert client_for("0.0.0.0").access.token  # none given: a new one (printed at start)
+    evil = {"Host": "evil.example", "Authorization": "Bearer s3cret"}
+    assert client.get("/", headers=evil).status_code == 400  # the Host first, then the token
+
+
+def test_over_tls_the_token_cookie_is_secure(client_for) -> None:
+    client = client_for("0.0.0.0", token="s3cret")
+    client.base_url = client.base_url.copy_with(scheme="https")
+    first = client.get("/campaigns/1?token=s3cret", follow_redirects=False)
+    assert first.status_code == 303 and "secure" in first.headers["set-cookie"].lower()
+    plain = client_for("0.0.0.0", token="s3cret")
+    assert (
+        "secure"
+        not in plain.get("/?token=s3cret", follow_redirects=False).headers["set-cookie"].lower()
+    )
 
 
 def test_cross_site_actions_are_refused(client_for) -> None:
