@@ -20,6 +20,8 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
 from sqlalchemy.orm import Session, sessionmaker
 
+from gyrostand.db.url import shown_url
+
 MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
 BUSY_TIMEOUT_MS = 10_000
 IMMEDIATE = "gyrostand_begin_immediate"  # execution option: SQLite write transactions
@@ -105,11 +107,12 @@ def open_database(url: str, *, upgrade: bool = True, create: bool = True) -> ses
     SQLite, an unknown dialect, a server that does not answer) is DatabaseUnusable."""
     try:
         parsed = make_url(url)
-    except ArgumentError:
+    except (ArgumentError, ValueError):  # (ValueError: a port that is no number)
         raise DatabaseUnusable(
-            f"{url!r} is neither a file path nor a database URL (dialect://...)", bad_input=True
+            f"{shown_url(url)!r} is neither a file path nor a database URL (dialect://...)",
+            bad_input=True,
         ) from None
-    where = parsed.render_as_string(hide_password=True)
+    where = shown_url(url)
     sqlite_file = parsed.get_backend_name() == "sqlite" and parsed.database not in (None, "")
     if sqlite_file and parsed.database != ":memory:" and "mode=memory" not in str(parsed.query):
         path = Path(parsed.database)
@@ -211,7 +214,7 @@ def migrate(engine: Engine, *, upgrade: bool, script_location: Path = MIGRATIONS
         current = set(MigrationContext.configure(connection).get_current_heads())
         if current == heads:  # another process migrated while this one waited for the lock
             return
-        where = engine.url.render_as_string(hide_password=True)
+        where = shown_url(engine.url)
         if not current:
             tables = set(inspect(connection).get_table_names()) - {"alembic_version"}
             if tables:

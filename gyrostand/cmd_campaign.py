@@ -17,6 +17,7 @@ from rich.table import Table
 from rich.text import Text
 
 from gyrostand.cmd_data import DEFAULT_DB, CampaignId, JsonOption, TagOption, open_db, parse_tags
+from gyrostand.db.url import shown_url
 from gyrostand.errors import EXIT_FAILED, fail, printable
 from gyrostand.stand.simconfig import TIMINGS
 
@@ -179,23 +180,23 @@ def not_interrupted(stop: threading.Event, before: str) -> None:
 def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None:
     """The outcome on stdout; exit code 1 unless the campaign completed (with how to continue
     it and to retry its failed trials when it can be continued)."""
+    shown = printable(shown_url(db))
     _out.print(
         f"campaign {result.campaign_id} {result.outcome}: {result.trials_completed} trials "
         f"completed, {result.trials_failed} failed, {result.observations} observations in "
-        f"{printable(db)}"
+        f"{shown}"
     )
     if result.raw_log is not None:
         _out.print(f"raw frames: {printable(result.raw_log)} (sha256 {result.raw_log_sha256})")
     if result.trials_failed and resumable:
         _out.print(
             f"retry the failed trials with: gyrostand campaign resume {result.campaign_id} "
-            f"--retry-failed --db {printable(db)}"
+            f"--retry-failed --db {shown}"
         )
     if result.outcome != "completed":
         if resumable:
             _out.print(
-                f"continue with: gyrostand campaign resume {result.campaign_id} "
-                f"--db {printable(db)}"
+                f"continue with: gyrostand campaign resume {result.campaign_id} --db {shown}"
             )
         raise typer.Exit(EXIT_FAILED)
 
@@ -245,12 +246,12 @@ def run_campaign(
         mark("bus error", "error", f"could not use the bus: {exc}", "paused")
         fail(f"campaign {store.campaign_id} could not use the bus: {exc}", code=EXIT_FAILED)
     except OperationalError as exc:
-        problem = unusable(exc, db)
+        problem = unusable(exc, shown_url(db))
         mark("database", "error", f"the database refused a write: {exc.orig}", "stopped")
         fail(
             f"campaign {store.campaign_id} stopped: {problem}; what was committed is kept: "
-            f"resume it (gyrostand campaign resume {store.campaign_id} --db {db}) once the "
-            "database takes writes",
+            f"resume it (gyrostand campaign resume {store.campaign_id} --db {shown_url(db)}) "
+            "once the database takes writes",
             code=EXIT_FAILED,
         )
 

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from gyrostand.cmd_data import JsonOption, open_db
+from gyrostand.db.url import shown_url
 from gyrostand.errors import EXIT_BAD_INPUT, EXIT_FAILED, fail, printable
 
 if TYPE_CHECKING:
@@ -100,15 +101,16 @@ def open_stand(stand: str) -> sessionmaker[Session]:
         schema_heads,
     )
 
+    shown = shown_url(stand)
     try:
         return open_database(database_url(stand), upgrade=False, create=False)
     except DatabaseBehind as error:
         if not error.current:
-            fail(f"{stand} is an empty database, not a stand's gyrostand database")
+            fail(f"{shown} is an empty database, not a stand's gyrostand database")
         fail(
-            f"{stand} has schema {', '.join(error.current)}, the lab "
+            f"{shown} has schema {', '.join(error.current)}, the lab "
             f"{', '.join(sorted(schema_heads()))}: upgrade it first with "
-            f"`gyrostand db upgrade {stand}`, then merge"
+            f"`gyrostand db upgrade {shown}`, then merge"
         )
     except DatabaseVersionError as error:
         fail(str(error))
@@ -173,14 +175,12 @@ def register(app: typer.Typer) -> None:
         nothing; a campaign that changed since is a conflict (nothing merged), unless the lab's
         copy is incomplete and untouched, which is then replaced. Campaigns being acquired or
         left running are skipped."""
-        from sqlalchemy.engine import make_url
-
         from gyrostand.db.merge import MergeRefused, merge_database
         from gyrostand.db.session import database_url
 
         source = open_stand(stand)
         lab = open_db(into)
-        merged_from = make_url(database_url(stand)).render_as_string(hide_password=True)
+        merged_from = shown_url(database_url(stand))
         raw_logs = None if raw_dir is None else RawLogFolder(raw_dir)
         try:
             result = merge_database(source, lab, merged_from, dry_run=dry_run, raw_logs=raw_logs)
@@ -211,4 +211,4 @@ def register(app: typer.Typer) -> None:
         from gyrostand.db.session import schema_heads
 
         open_db(database, must_exist=True)
-        typer.echo(printable(f"{database}: schema {', '.join(sorted(schema_heads()))}"))
+        typer.echo(printable(f"{shown_url(database)}: schema {', '.join(sorted(schema_heads()))}"))

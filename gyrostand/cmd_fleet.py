@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, JsonOption, open_db
+from gyrostand.db.url import shown_url
 from gyrostand.errors import fail, printable_lines
 
 if TYPE_CHECKING:
@@ -125,7 +126,7 @@ def register(app: typer.Typer) -> None:
             inputs=inputs,
             analysis=analysis,
             generated_at=datetime.now(UTC).isoformat(sep=" ", timespec="seconds"),
-            database=db,
+            database=shown_url(db),
             software=SOFTWARE_VERSION,
             simulated=simulated,
             draft=draft,
@@ -216,9 +217,10 @@ def register(app: typer.Typer) -> None:
             t_shift_s=0.0,
             seed=seed,
         )
+        shown = shown_url(db)
         typer.echo(
             f"fleet of {base.instrument.model}: {groups} factories x {units_per_group} units, "
-            f"factory {shift_group}'s C shifted by {shift:+.0%}; one campaign a unit into {db}"
+            f"factory {shift_group}'s C shifted by {shift:+.0%}; one campaign a unit into {shown}"
         )
         started = time.monotonic()
 
@@ -229,7 +231,8 @@ def register(app: typer.Typer) -> None:
             )
 
         simulate_fleet(base, db, design, "factory", done)
-        where = f"--model {shlex.quote(base.instrument.model)} --by factory --db {shlex.quote(db)}"
+        where = f"--model {shlex.quote(base.instrument.model)} --by factory"
+        where += f" --db {shlex.quote(shown)}"
         typer.echo(
             f"{groups * units_per_group} units in {time.monotonic() - started:.0f} s. Next:\n"
             f"  gyrostand fleet analyze {where}\n"

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
+from gyrostand.db.url import shown_url
 from gyrostand.errors import EXIT_FAILED, fail
 
 if TYPE_CHECKING:
@@ -31,7 +32,7 @@ def summary(plan: Plan) -> str:
     acceptance = ", acceptance by excursions" if plan.acceptance is not None else ""
     return (
         f"{design}, N = {plan.n_obs}, settle by {plan.settle.method}{acceptance}, {where}, "
-        f"database {plan.database}"
+        f"database {shown_url(plan.database)}"
     )
 
 

@@ -15,6 +15,7 @@ from typing import Annotated
 import typer
 
 from gyrostand.cmd_data import DEFAULT_DB, CampaignId, DbOption, open_db
+from gyrostand.db.url import shown_url
 from gyrostand.errors import fail, printable
 from gyrostand.report import FORMATS
 from gyrostand.report.compliance import SHIPPED, SHIPPED_PROFILES
@@ -51,7 +52,7 @@ def write_campaign_report(
     except OSError as error:
         fail(f"cannot write the report in {out}: {error.strerror or error}")
 
-    stage(f"campaign {campaign_id} in {db}: analysing it (the analysis run is recorded)")
+    stage(f"campaign {campaign_id} in {shown_url(db)}: analysing it (the analysis run is recorded)")
     from sqlalchemy.exc import OperationalError
 
     from gyrostand.db.queries import CampaignNotFound
@@ -65,7 +66,7 @@ def write_campaign_report(
             report = campaign_report(
                 session,
                 campaign_id,
-                database=db,
+                database=shown_url(db),
                 profile=limits,
                 generated_at=generated,
                 report_number=number,

@@ -12,6 +12,7 @@ import typer
 
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
 from gyrostand.cmd_report import DEFAULT_OUT
+from gyrostand.db.url import shown_url
 from gyrostand.errors import EXIT_FAILED, fail, printable
 
 
@@ -77,7 +78,7 @@ def register(app: typer.Typer) -> None:
         address = f"{scheme}://{'[' + host + ']' if ':' in host else host}:{port}/"
         if access.token is not None:
             address += f"?token={access.token}"
-        typer.echo(f"gyrostand station on {printable(db)}: open {address}", err=True)
+        typer.echo(f"gyrostand station on {printable(shown_url(db))}: open {address}", err=True)
         if tls_cert is None and not is_loopback(host):
             typer.echo(
                 "warning: plain HTTP beyond loopback: the token and every page cross the "

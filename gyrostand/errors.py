@@ -15,6 +15,8 @@ from typing import NoReturn
 import typer
 from rich.console import Console
 
+from gyrostand.db.url import shown_url
+
 _err = Console(stderr=True, highlight=False, soft_wrap=True, markup=False, emoji=False)
 
 EXIT_BAD_INPUT = 2
@@ -72,7 +74,7 @@ def internal_error(exc: BaseException, argv: list[str]) -> NoReturn:
     try:
         fd, path = tempfile.mkstemp(prefix="gyrostand-traceback-", suffix=".txt")
         with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(f"gyrostand {' '.join(argv)}\n")
+            f.write(f"gyrostand {' '.join(shown_url(arg) for arg in argv)}\n")
             f.write(f"at {datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds')}")
             f.write(f" with Python {sys.version.split()[0]}\n\n")
             f.write("".join(traceback.format_exception(exc)))
