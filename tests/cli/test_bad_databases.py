@@ -1,5 +1,6 @@
 """Databases that cannot be used, given to every command that opens one: a file that is not
-SQLite, a truncated SQLite file, a folder, a URL of an unknown dialect (bad input: exit code 2);
+SQLite, a truncated SQLite file, a folder, a URL of an unknown dialect or whose port is no
+number (bad input: exit code 2; its password not shown);
 a URL naming a SQLite file that does not exist, to the commands that only read (no database is
 made); a database in a read-only folder, and a disk that fills up during a campaign (the
 environment: exit code 1). Each gets one line on stderr and leaves the database as it was."""
@@ -47,6 +48,12 @@ KINDS: list[tuple[str, Make | None, str, str]] = [  # what, made by, --db, messa
     ),
     ("folder", folder("db.sqlite"), "{file}", "is a folder, not a database file"),
     ("bogus dialect", None, "nosuchdialect://host/db", "unknown database dialect 'nosuchdialect'"),
+    (
+        "url port no number",
+        None,
+        "postgresql+psycopg://lab:s3cretpw@db.lab:port/gyro",
+        "'postgresql+psycopg://lab:***@db.lab:port/gyro' is neither a file path nor a database URL",
+    ),
 ]
 COMMANDS: list[tuple[str, ...]] = [
     ("campaign", "run", "{plan}", "--quiet"),
