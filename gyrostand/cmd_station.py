@@ -25,7 +25,8 @@ def register(app: typer.Typer) -> None:
             str,
             typer.Option(
                 help="Address to listen on. Anything but loopback requires the token "
-                "(GYROSTAND_STATION_TOKEN, or a new one printed at start)."
+                "(GYROSTAND_STATION_TOKEN, or a new one printed at start) and, so that it "
+                "does not cross the network in clear, --tls-cert and --tls-key."
             ),
         ] = "127.0.0.1",
         port: Annotated[int, typer.Option(help="TCP port.", min=1, max=65535)] = 8000,
@@ -37,6 +38,7 @@ def register(app: typer.Typer) -> None:
             list[str] | None,
             typer.Option(
                 "--allow-host",
+                metavar="NAME",
                 help="Another name the browser may use for this machine (a DNS name, an "
                 "address); repeatable. Loopback's names, and the bound address's, are allowed; "
                 "any other Host is refused (400).",
@@ -44,10 +46,12 @@ def register(app: typer.Typer) -> None:
         ] = None,
         tls_cert: Annotated[
             Path | None,
-            typer.Option(help="Serve HTTPS with this certificate (PEM; with --tls-key)."),
+            typer.Option(
+                metavar="FILE", help="Serve HTTPS with this certificate (PEM; with --tls-key)."
+            ),
         ] = None,
         tls_key: Annotated[
-            Path | None, typer.Option(help="The certificate's private key (PEM).")
+            Path | None, typer.Option(metavar="FILE", help="The certificate's private key (PEM).")
         ] = None,
     ) -> None:
         """Serve the operator station: campaigns, live progress, start/stop/resume, reports

@@ -5,7 +5,6 @@ from the station's own page: a same-origin request carrying the page's CSRF toke
 
 from __future__ import annotations
 
-import contextlib
 import hmac
 import ipaddress
 import secrets
@@ -14,6 +13,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
+import ifaddr
 from starlette.datastructures import FormData
 from starlette.requests import HTTPConnection, Request
 from starlette.responses import PlainTextResponse, RedirectResponse, Response
@@ -38,12 +38,16 @@ def is_loopback(host: str) -> bool:
 def host_names(host: str, allowed: Iterable[str] = ()) -> frozenset[str]:
     """The names a browser may use for a station bound to `host` (the Host header's name,
     lower case, without port or brackets): loopback's; beyond it the bound address, and for
-    every address (0.0.0.0, ::) this machine's names and theirs; plus `allowed`."""
+    every address (0.0.0.0, ::) this machine's names and its interfaces' addresses; plus
+    `allowed`."""
     names = set(LOOPBACK_NAMES) if is_loopback(host) else {host, *LOOPBACK_NAMES}
-    if host in ("0.0.0.0", "::", ""):
+    if host in ("0.0.0.0", "::", ""):  # every interface's addresses (ifaddr: IPv6 as tuples)
         names |= {socket.gethostname(), socket.getfqdn()}
-        with contextlib.suppress(OSError):  # a name that does not resolve: the names suffice
-            names |= {str(a[4][0]) for a in socket.getaddrinfo(socket.gethostname(), None)}
+        names |= {
+            ip.ip if isinstance(ip.ip, str) else ip.ip[0]
+            for adapter in ifaddr.get_adapters()
+            for ip in adapter.ips
+        }
     return frozenset(n.strip("[]").lower() for n in (*names, *allowed))
 
 

@@ -18,7 +18,7 @@ import pytest
 from typer.testing import CliRunner
 
 from gyrostand.cli import app as cli
-from gyrostand.station.security import host_name
+from gyrostand.station.security import host_name, host_names
 
 from .test_browser import free_port
 
@@ -116,6 +116,23 @@ def page_csrf(port: int, tls: Path | None = None) -> str:
     found = re.search(r'name="csrf" value="([^"]+)"', page)
     assert found is not None
     return found.group(1)
+
+
+def test_the_names_a_station_answers_to() -> None:
+    import socket
+
+    loopback = {"localhost", "127.0.0.1", "::1"}
+    assert host_names("127.0.0.1") == loopback
+    assert host_names("::1", ["Gyro.Lab", "[fd00::7]"]) == loopback | {"gyro.lab", "fd00::7"}
+    assert host_names("192.0.2.9") == loopback | {"192.0.2.9"}
+    everywhere = host_names("0.0.0.0")
+    assert loopback | {socket.gethostname().lower()} <= everywhere
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:  # the routed address
+        try:
+            probe.connect(("192.0.2.1", 9))  # (UDP: nothing is sent)
+        except OSError:
+            return  # no route off this machine: no other address to see
+        assert probe.getsockname()[0] in everywhere
 
 
 def test_host_names_are_parsed_strictly() -> None:
