@@ -16,6 +16,8 @@ from pathlib import Path
 from sqlalchemy import Connection, text
 from sqlalchemy.orm import Session, sessionmaker
 
+from gyrostand.db.url import shown_url
+
 _ADVISORY_NAMESPACE = 0x6779  # "gy": first key of PostgreSQL's two-key advisory locks
 _HELD: dict[tuple[str, int], Lease] = {}  # the leases this process holds
 
@@ -68,7 +70,7 @@ def _remove_files_at_exit() -> None:
 
 
 def _key(sessions: sessionmaker[Session], campaign_id: int) -> tuple[str, int]:
-    return sessions.kw["bind"].url.render_as_string(hide_password=True), campaign_id
+    return shown_url(sessions.kw["bind"].url), campaign_id
 
 
 def _try(sessions: sessionmaker[Session], campaign_id: int) -> Lease | None:

@@ -70,7 +70,7 @@ def register(app: typer.Typer) -> None:
         if (tls_cert is None) != (tls_key is None):
             fail("--tls-cert and --tls-key go together: give both, or neither")
         if tls_cert is not None and tls_key is not None:
-            tls_problem(tls_cert, tls_key)
+            check_tls(tls_cert, tls_key)
         sessions = open_db(db, must_exist=False)
         access = Access.for_host(host, os.environ.get(TOKEN_ENV) or None, allow_host or ())
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -100,7 +100,7 @@ def register(app: typer.Typer) -> None:
         uvicorn.Server(config).run(sockets=[listening])
 
 
-def tls_problem(cert: Path, key: Path) -> None:
+def check_tls(cert: Path, key: Path) -> None:
     """A certificate and key that cannot serve TLS: one line (exit code 2)."""
     import ssl
 
