@@ -26,6 +26,7 @@ TEMPLATE = files("gyrostand.report") / "templates" / "report.typ"
 LONG_RUN = re.compile(r"\S{24,}")
 """A run of characters with no break opportunity: a hash, a path, or hostile text."""
 CHUNK = 12
+LINE = 120  # characters: the longest line of the header and the footer
 ZWSP = "\u200b"  # a break opportunity that prints nothing
 VOID = frozenset({"br", "img", "col", "meta", "link", "hr", "input"})
 SKIPPED = frozenset({"head", "style", "script", "title"})
@@ -214,6 +215,13 @@ def _table(table: Element) -> Json:
     }
 
 
+def _line(text: str, most: int = LINE) -> str:
+    """One line of the page's furniture (title, running header and footer): cut at `most`
+    characters, so that hostile text cannot fill a page's margins."""
+    line = " ".join(text.split())
+    return line if len(line) <= most else line[: most - 1] + "\u2026"
+
+
 def document(html: str) -> Json:
     """The report's HTML as the Typst template's input: ``meta`` (title, the identification
     line of the footer, the simulation banner of the header, the watermark's lines) and
@@ -227,9 +235,9 @@ def document(html: str) -> Json:
     mark, doc_id, sim = (body.find(c) for c in ("watermark", "doc-id", "sim-banner"))
     return {
         "meta": {
-            "title": " ".join(tree.title.split()),
-            "doc_id": "" if doc_id is None else " ".join(doc_id.text().split()),
-            "banner": "" if sim is None else " ".join(sim.text().split()),
+            "title": _line(tree.title),
+            "doc_id": "" if doc_id is None else _line(doc_id.text()),
+            "banner": "" if sim is None else _line(sim.text()),
             "watermark": [] if mark is None else mark.text().split("\n"),
         },
         "body": [_json(k) for k in _trim(body.kids)],

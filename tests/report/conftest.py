@@ -94,7 +94,7 @@ def pdf_text(pdf: Path, *options: str) -> str:
     out = subprocess.run(
         ["pdftotext", *(options or ("-layout",)), str(pdf), "-"], check=True, capture_output=True
     ).stdout.decode()
-    return out.replace("\u200b", "").replace("\u2060", "")
+    return out.replace("\u200b\n", "").replace("\u200b", "").replace("\u2060", "")
 
 
 @pytest.fixture(scope="session")

@@ -1,0 +1,203 @@
+"""The PDF laid out by Typst: PDF/A-3 with the report's data inside (extracted and compared with
+`gyrostand analyze --json`), the same numbers and verdicts as the HTML, hostile strings."""
+
+import json
+import re
+import subprocess
+import time
+from collections import Counter
+from dataclasses import replace
+from html.parser import HTMLParser
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from gyrostand.cli import app
+from gyrostand.db.models import Campaign
+from gyrostand.report.build import Report
+from gyrostand.report.csv_table import trial_table_csv
+from gyrostand.report.html import fmt
+from gyrostand.report.pdf import breakable, document
+from gyrostand.report.writer import write_report
+
+from .conftest import Rendered, import_paper, pdf_text
+
+runner = CliRunner()
+
+
+def test_the_pdf_carries_the_report_json_the_trial_csv_and_the_plan(tmp_path: Path) -> None:
+    stored = import_paper(tmp_path)  # its own database: `analyze` records a run
+    files = write_report(stored.report(), tmp_path / "out", ("pdf",))
+    detached = tmp_path / "detached"
+    detached.mkdir()
+    subprocess.run(["pdfdetach", "-saveall", "-o", str(detached), str(files["pdf"])], check=True)
+    assert sorted(p.name for p in detached.iterdir()) == [
+        "campaign-1-plan.toml",
+        "campaign-1-trials.csv",
+        "campaign-1.json",
+    ]
+    carried = json.loads((detached / "campaign-1.json").read_text(encoding="utf-8"))
+    analysed = runner.invoke(app, ["analyze", "1", "--db", stored.url, "--json"])
+    assert analysed.exit_code == 0, analysed.output
+    assert carried["analysis"] == json.loads(analysed.stdout)
+    rows = [r.split(",") for r in (detached / "campaign-1-trials.csv").read_text().splitlines()]
+    assert [float(r[rows[0].index("delta_deg")]) for r in rows[1:]] == [
+        t["delta_deg"] for t in carried["analysis"]["trials"]
+    ]
+    with stored.sessions() as session:
+        plan = session.get(Campaign, 1).plan_toml
+    assert (detached / "campaign-1-plan.toml").read_text(encoding="utf-8") == plan
+    raw = files["pdf"].read_bytes()  # PDF/A-3: each an associated file of the document
+    assert raw.count(b"/AFRelationship/Data") == 3
+    assert re.search(rb"/AF\[\d+ 0 R \d+ 0 R \d+ 0 R\]", raw)
+
+
+def test_the_attached_csv_is_the_trial_table(paper_report: Report, paper_files: Rendered) -> None:
+    csv = paper_files.files["csv"].read_text(encoding="utf-8")
+    assert csv == trial_table_csv(paper_report.trials)
+    assert (
+        csv.encode() in paper_files.files["pdf"].read_bytes()
+        or _detach(paper_files.files["pdf"], "campaign-1-trials.csv") == csv
+    )
+
+
+def _detach(pdf: Path, name: str) -> str:
+    listing = subprocess.run(["pdfdetach", "-list", str(pdf)], capture_output=True, text=True)
+    number = next(line.split(":")[0] for line in listing.stdout.splitlines() if name in line)
+    out = subprocess.run(
+        ["pdfdetach", "-save", number, "-o", "/dev/stdout", str(pdf)], capture_output=True
+    )
+    return out.stdout.decode()
+
+
+class _Visible(HTMLParser):
+    """The text a browser shows (no <title>, style or script); badges apart."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.text: list[str] = []
+        self.badges: list[str] = []
+        self.hidden = 0
+        self.badge = False
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        self.hidden += tag in ("title", "style", "script")
+        self.badge = "badge" in (dict(attrs).get("class") or "").split()
+
+    def handle_endtag(self, tag: str) -> None:
+        self.hidden -= tag in ("title", "style", "script")
+        self.text.append(" ")
+
+    def handle_data(self, data: str) -> None:
+        if not self.hidden:
+            self.text.append(data)
+            if self.badge:
+                self.badges.append(data)
+                self.badge = False
+
+
+NUMBER = re.compile(r"[+-]?\d+(?:\.\d+)?")
+
+
+def test_every_number_and_verdict_of_the_html_is_in_the_pdf(
+    paper_report: Report, paper_files: Rendered
+) -> None:
+    seen = _Visible()
+    seen.feed(paper_files.files["html"].read_text(encoding="utf-8"))
+    html = "".join(seen.text)
+    pdf = pdf_text(paper_files.files["pdf"], "-raw")
+    html_numbers, pdf_numbers = Counter(NUMBER.findall(html)), Counter(NUMBER.findall(pdf))
+    missing = {n: k for n, k in html_numbers.items() if pdf_numbers[n] < k}
+    assert missing == {}
+    assert sum(html_numbers.values()) > 900  # the whole document, not a page of it
+    for t in paper_report.trials:  # the document object's numbers, as the trial table prints them
+        printed = [fmt(t.delta_deg, "+.4f"), fmt(t.alpha_deg, "+.4f"), fmt(t.residual_deg, "+.4f")]
+        assert [n for n in printed if n not in html_numbers or n not in pdf_numbers] == []
+    verdicts = Counter(seen.badges)
+    assert {v: pdf.count(v) >= k for v, k in verdicts.items()} == dict.fromkeys(verdicts, True)
+    # the document object's own verdicts, in both
+    stated = [
+        paper_report.conformity.verdict,
+        paper_report.compliance.verdict,
+        *(item.verdict for item in paper_report.compliance.items),
+    ]
+    assert [v for v in stated if v not in html or v not in pdf] == []
+    assert paper_report.conformity.verdict in verdicts
+
+
+def test_user_text_is_data_never_typst_markup(paper_report: Report, tmp_path: Path) -> None:
+    hostile = '#set page(fill: red) $x$ #pagebreak() <label> @ref *b* ] ) } "'
+    ident = replace(paper_report.inputs.identification, operator=hostile)
+    report = replace(paper_report, inputs=replace(paper_report.inputs, identification=ident))
+    text = pdf_text(write_report(report, tmp_path, ("pdf",))["pdf"], "-raw")
+    assert f"operator recorded: {hostile}" in " ".join(text.split())
+
+
+def test_long_unbroken_strings_wrap_in_bounded_time(paper_report: Report, tmp_path: Path) -> None:
+    """Issue 30, point 10: 20 kB of unbroken `<script>` in operator, model and serial (the
+    model and serial are in every page's footer) took minutes in the old PDF layout."""
+    long = "<script>" + "x" * 20_000 + "</script>"
+    ident = replace(
+        paper_report.inputs.identification,
+        operator=long,
+        instrument_model=long,
+        instrument_serial=long,
+    )
+    report = replace(paper_report, inputs=replace(paper_report.inputs, identification=ident))
+    start = time.process_time()
+    files = write_report(report, tmp_path, ("html", "pdf"))
+    assert time.process_time() - start < 60  # a guard against pathological layout: ~4 s here
+    pages = [p for p in pdf_text(files["pdf"]).split("\f") if p.strip()]
+    assert len(pages) < 40
+    seen = _Visible()
+    seen.feed(files["html"].read_text(encoding="utf-8"))
+    shown = "".join(seen.text).count("x" * 20_000)
+    assert shown >= 3
+    assert "".join(pages).count("x") >= shown * 20_000  # all of it, wrapped, not cut
+    lines = subprocess.run(["pdftotext", str(files["pdf"]), "-"], capture_output=True).stdout
+    wrapped = [line for line in lines.decode().splitlines() if "x" * 12 in line]
+    assert max(map(len, wrapped)) < 200  # a line of the page, not 20 000 characters
+    assert [len(re.findall(r"page \d+ of \d+", p)) for p in pages] == [1] * len(pages)
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("a" * 23, "a" * 23),
+        ("a" * 24, "a" * 12 + "\u200b" + "a" * 12),
+        (
+            "sha " + "f" * 30 + " end",
+            "sha " + "f" * 12 + "\u200b" + "f" * 12 + "\u200b" + "f" * 6 + " end",
+        ),
+    ],
+)
+def test_long_runs_get_break_opportunities(text: str, expected: str) -> None:
+    assert breakable(text) == expected
+
+
+def test_the_html_becomes_plain_data() -> None:
+    html = (
+        "<html><head><title>T  1</title></head><body><header class='doc'><div class='doc-id'>"
+        "id &amp; no.</div></header><div class='watermark'>DRAFT<br>SIMULATION</div>"
+        "<section id='s'><h2>Head</h2><table><caption>Cap</caption><thead><tr><th colspan='2'>"
+        "x</th></tr></thead><tr><td class='n'>1</td><td><b>#bold</b> text</td></tr></table>"
+        "</section></body></html>"
+    )
+    doc = document(html)
+    assert doc["meta"] == {
+        "title": "T 1",
+        "doc_id": "id & no.",
+        "banner": "",
+        "watermark": ["DRAFT", "SIMULATION"],
+    }
+    section = doc["body"][2]
+    assert section["k"][0] == {"t": "h2", "c": "", "id": "s", "k": ["Head"]}
+    table = section["k"][1]
+    assert (table["columns"], table["caption"], len(table["head"]), len(table["body"])) == (
+        2,
+        ["Cap"],
+        1,
+        1,
+    )
+    assert table["body"][0]["k"][1]["k"] == [{"t": "b", "c": "", "k": ["#bold"]}, " text"]
