@@ -16,59 +16,42 @@ from typer.testing import CliRunner
 from gyrostand.cli import app
 from gyrostand.db.models import Campaign
 from gyrostand.report.build import Report
-from gyrostand.report.csv_table import trial_table_csv
 from gyrostand.report.html import fmt
 from gyrostand.report.pdf import breakable, document
 from gyrostand.report.writer import write_report
 
-from .conftest import Rendered, import_paper, pdf_text
+from .conftest import Rendered, Stored, pdf_text
 
 runner = CliRunner()
 
 
-def test_the_pdf_carries_the_report_json_the_trial_csv_and_the_plan(tmp_path: Path) -> None:
-    stored = import_paper(tmp_path)  # its own database: `analyze` records a run
-    files = write_report(stored.report(), tmp_path / "out", ("pdf",))
-    detached = tmp_path / "detached"
-    detached.mkdir()
-    subprocess.run(["pdfdetach", "-saveall", "-o", str(detached), str(files["pdf"])], check=True)
-    assert sorted(p.name for p in detached.iterdir()) == [
+def test_the_pdf_carries_the_report_json_the_trial_csv_and_the_plan(
+    paper: Stored, paper_files: Rendered, tmp_path: Path
+) -> None:
+    pdf = paper_files.files["pdf"]
+    subprocess.run(["pdfdetach", "-saveall", "-o", str(tmp_path), str(pdf)], check=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
         "campaign-1-plan.toml",
         "campaign-1-trials.csv",
         "campaign-1.json",
     ]
-    carried = json.loads((detached / "campaign-1.json").read_text(encoding="utf-8"))
-    analysed = runner.invoke(app, ["analyze", "1", "--db", stored.url, "--json"])
+    carried = json.loads((tmp_path / "campaign-1.json").read_text(encoding="utf-8"))
+    # the same analysis again: the database keeps its one run (same inputs, same results)
+    analysed = runner.invoke(app, ["analyze", "1", "--db", paper.url, "--json"])
     assert analysed.exit_code == 0, analysed.output
     assert carried["analysis"] == json.loads(analysed.stdout)
-    rows = [r.split(",") for r in (detached / "campaign-1-trials.csv").read_text().splitlines()]
+    csv = (tmp_path / "campaign-1-trials.csv").read_text(encoding="utf-8")
+    assert csv == paper_files.files["csv"].read_text(encoding="utf-8")
+    rows = [r.split(",") for r in csv.splitlines()]
     assert [float(r[rows[0].index("delta_deg")]) for r in rows[1:]] == [
         t["delta_deg"] for t in carried["analysis"]["trials"]
     ]
-    with stored.sessions() as session:
-        plan = session.get(Campaign, 1).plan_toml
-    assert (detached / "campaign-1-plan.toml").read_text(encoding="utf-8") == plan
-    raw = files["pdf"].read_bytes()  # PDF/A-3: each an associated file of the document
+    with paper.sessions() as session:
+        plan = session.get(Campaign, paper.campaign_id).plan_toml
+    assert (tmp_path / "campaign-1-plan.toml").read_text(encoding="utf-8") == plan
+    raw = pdf.read_bytes()  # PDF/A-3: each an associated file of the document
     assert raw.count(b"/AFRelationship/Data") == 3
     assert re.search(rb"/AF\[\d+ 0 R \d+ 0 R \d+ 0 R\]", raw)
-
-
-def test_the_attached_csv_is_the_trial_table(paper_report: Report, paper_files: Rendered) -> None:
-    csv = paper_files.files["csv"].read_text(encoding="utf-8")
-    assert csv == trial_table_csv(paper_report.trials)
-    assert (
-        csv.encode() in paper_files.files["pdf"].read_bytes()
-        or _detach(paper_files.files["pdf"], "campaign-1-trials.csv") == csv
-    )
-
-
-def _detach(pdf: Path, name: str) -> str:
-    listing = subprocess.run(["pdfdetach", "-list", str(pdf)], capture_output=True, text=True)
-    number = next(line.split(":")[0] for line in listing.stdout.splitlines() if name in line)
-    out = subprocess.run(
-        ["pdfdetach", "-save", number, "-o", "/dev/stdout", str(pdf)], capture_output=True
-    )
-    return out.stdout.decode()
 
 
 class _Visible(HTMLParser):
@@ -126,21 +109,14 @@ def test_every_number_and_verdict_of_the_html_is_in_the_pdf(
     assert paper_report.conformity.verdict in verdicts
 
 
-def test_user_text_is_data_never_typst_markup(paper_report: Report, tmp_path: Path) -> None:
-    hostile = '#set page(fill: red) $x$ #pagebreak() <label> @ref *b* ] ) } "'
-    ident = replace(paper_report.inputs.identification, operator=hostile)
-    report = replace(paper_report, inputs=replace(paper_report.inputs, identification=ident))
-    text = pdf_text(write_report(report, tmp_path, ("pdf",))["pdf"], "-raw")
-    assert f"operator recorded: {hostile}" in " ".join(text.split())
-
-
 def test_long_unbroken_strings_wrap_in_bounded_time(paper_report: Report, tmp_path: Path) -> None:
-    """Issue 30, point 10: 20 kB of unbroken `<script>` in operator, model and serial (the
-    model and serial are in every page's footer) took minutes in the old PDF layout."""
+    """Issue 30, point 10: 20 kB of unbroken `<script>` in model and serial (in every page's
+    footer too) took minutes in the old PDF layout. The operator's Typst markup is text."""
     long = "<script>" + "x" * 20_000 + "</script>"
+    markup = '#set page(fill: red) $x$ #pagebreak() <label> @ref *b* ] ) } "'
     ident = replace(
         paper_report.inputs.identification,
-        operator=long,
+        operator=markup,
         instrument_model=long,
         instrument_serial=long,
     )
@@ -153,12 +129,13 @@ def test_long_unbroken_strings_wrap_in_bounded_time(paper_report: Report, tmp_pa
     seen = _Visible()
     seen.feed(files["html"].read_text(encoding="utf-8"))
     shown = "".join(seen.text).count("x" * 20_000)
-    assert shown >= 3
+    assert shown >= 2
     assert "".join(pages).count("x") >= shown * 20_000  # all of it, wrapped, not cut
     lines = subprocess.run(["pdftotext", str(files["pdf"]), "-"], capture_output=True).stdout
     wrapped = [line for line in lines.decode().splitlines() if "x" * 12 in line]
     assert max(map(len, wrapped)) < 200  # a line of the page, not 20 000 characters
     assert [len(re.findall(r"page \d+ of \d+", p)) for p in pages] == [1] * len(pages)
+    assert f"operator recorded: {markup}" in " ".join(pdf_text(files["pdf"], "-raw").split())
 
 
 @pytest.mark.parametrize(
