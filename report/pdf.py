@@ -18,10 +18,11 @@ from html.parser import HTMLParser
 from importlib.resources import files
 from importlib.util import find_spec
 from pathlib import Path
+from typing import Final
 
 from gyrostand.report.errors import ReportError
 
-PDF_STANDARD = "a-3a"  # ISO 19005-3, level A: tagged (Typst writes the structure tree)
+PDF_STANDARD: Final = "a-3a"  # ISO 19005-3, level A: tagged (Typst writes the structure tree)
 TEMPLATE = files("gyrostand.report") / "templates" / "report.typ"
 LONG_RUN = re.compile(r"\S{24,}")
 """A run of characters with no break opportunity: a hash, a path, or hostile text."""
@@ -161,8 +162,8 @@ def _trim(kids: list[Element | str]) -> list[Element | str]:
     """A block's children without the spaces at its start, its end and after a <br>."""
     kids = list(kids)
     for i, kid in enumerate(kids):
-        after_break = i > 0 and isinstance(kids[i - 1], Element) and kids[i - 1].tag == "br"
-        if isinstance(kid, str) and (i == 0 or after_break):
+        before = kids[i - 1] if i else None
+        if isinstance(kid, str) and (i == 0 or isinstance(before, Element) and before.tag == "br"):
             kids[i] = kid.lstrip()
     if kids and isinstance(kids[-1], str):
         kids[-1] = kids[-1].rstrip()
@@ -254,10 +255,11 @@ class Attachment:
     description: str
 
 
-def _fonts() -> list[str]:
-    """DejaVu Sans as the figures have it (matplotlib's copy: no system fonts needed)."""
+def _fonts() -> str:
+    """The folder of DejaVu Sans as the figures have it (matplotlib's copy: no system fonts)."""
     spec = find_spec("matplotlib")
-    return [str(Path(spec.origin).parent / "mpl-data" / "fonts" / "ttf")]  # type: ignore[union-attr, arg-type]
+    assert spec is not None and spec.origin is not None  # a dependency of the project
+    return str(Path(spec.origin).parent / "mpl-data" / "fonts" / "ttf")
 
 
 def _timestamp(generated_at: str | None) -> datetime | None:
@@ -293,7 +295,7 @@ def write_pdf(
         pdf = typst.compile(
             TEMPLATE.read_bytes(),
             format="pdf",
-            font_paths=_fonts(),
+            font_paths=typst.Fonts(include_system_fonts=False, font_paths=[_fonts()]),
             ignore_system_fonts=True,
             sys_inputs=inputs,
             pdf_standards=[PDF_STANDARD],
