@@ -3,8 +3,12 @@ virtual time): CPU and wall seconds per stage of `gyrostand report` in a fresh p
 the analysis with the reading's signal analysis, JSON and CSV, the figures with the HTML, the
 PDF laid out by Typst), then the command itself and the PDF's pages.
 
-Target (issue 33): <= 3 s of CPU for all formats. Three runs (the machine's noise is large when
-other jobs share it), then the median per stage.
+Target (issue 33): <= 3 s of CPU for all formats. Not reached: on a machine shared with other
+jobs the stages took imports 3.4, analysis 1.8, figures + HTML 2.5 and figures + PDF 3.4 s of
+CPU (the PDF's own layout by Typst is about 0.6 s; WeasyPrint's took about 7 s for 21 pages).
+What is left is the recomputed analysis (scipy.stats and scipy.signal alone are about 1.5 s to
+import), the plan's pydantic models (about 0.6 s to import) and 13 matplotlib figures. Three
+runs (the machine's noise is large when other jobs share it), then the median per stage.
 
 Run: .venv/bin/python bench/bench_report.py"""
 
