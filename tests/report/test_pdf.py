@@ -17,7 +17,7 @@ from gyrostand.cli import app
 from gyrostand.db.models import Campaign
 from gyrostand.report.build import Report
 from gyrostand.report.html import fmt
-from gyrostand.report.pdf import breakable, document
+from gyrostand.report.pdf import breakable, document, write_pdf
 from gyrostand.report.writer import write_report
 
 from .conftest import Rendered, Stored, pdf_text
@@ -178,3 +178,19 @@ def test_the_html_becomes_plain_data() -> None:
         1,
     )
     assert table["body"][0]["k"][1]["k"] == [{"t": "b", "c": "", "k": ["#bold"]}, " text"]
+
+
+def test_table_headers_repeat_and_every_page_is_numbered(tmp_path: Path) -> None:
+    rows = "".join(f"<tr><td class='n'>{i}</td><td>row {i}</td></tr>" for i in range(250))
+    html = (
+        "<html><head><title>t</title></head><body><header class='doc'><h1>T</h1>"
+        "<div class='doc-id'>doc 7</div></header><section id='a'><h2>A</h2><table>"
+        "<caption>Long</caption><thead><tr><th>index</th><th>name of the row</th></tr></thead>"
+        f"{rows}</table></section></body></html>"
+    )
+    pdf = write_pdf(html, tmp_path / "t.pdf")
+    pages = [p for p in pdf_text(pdf).split("\f") if p.strip()]
+    assert len(pages) >= 3
+    assert [p.count("name of the row") for p in pages] == [1] * len(pages)
+    assert [f"page {i} of {len(pages)}" in p for i, p in enumerate(pages, 1)] == [True] * len(pages)
+    assert all("doc 7" in p for p in pages)  # the running footer
