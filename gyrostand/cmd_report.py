@@ -3,8 +3,8 @@
 `gyrostand report CAMPAIGN [--db URL_OR_PATH] [--out DIR] [--format html,pdf,json,csv]
 [--profile NAME_OR_FILE] [--number N] [--draft]` analyses the campaign (recording the analysis
 run), assembles the report from the database and the raw CAN log, and writes campaign-ID.html,
-.pdf (PDF/A-3b), .json and campaign-ID-trials.csv. `write_campaign_report` does the same for
-other commands (the demo).
+.pdf (PDF/A-3a, carrying the JSON, the trial CSV and the plan), .json and
+campaign-ID-trials.csv. `write_campaign_report` does the same for other commands (the demo).
 """
 
 from dataclasses import replace

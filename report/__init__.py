@@ -9,7 +9,8 @@ inputs, the CLI (`gyrostand report`) composes.
   iso-22090-1, each limit with its clause, source and verified flag), `assess` and the overall
   `Compliance.verdict`;
 - `build`: `build_report(inputs, analysis, profile, generated_at=...) -> Report`;
-- `plots`: the figures as inline SVG; `html`: `render_html(report)`; `pdf`: `write_pdf`;
+- `plots`: the figures as inline SVG; `html`: `render_html(report)`; `pdf`: `write_pdf` (the
+  HTML laid out by Typst, templates/report.typ: PDF/A-3a carrying the JSON, CSV and plan);
   `json_doc`: `report_document` / `report_json` (schema gyrostand.report/1); `csv_table`;
 - `writer`: `write_report(report, out_dir, formats) -> {format: path}`.
 """

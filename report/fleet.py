@@ -262,9 +262,15 @@ def write_fleet_report(report: FleetReport, path: Path) -> Path:
         elif kind == "html":
             path.write_text(render_fleet_html(report), encoding="utf-8")
         else:
-            from gyrostand.report.pdf import write_pdf
+            from gyrostand.report.pdf import Attachment, write_pdf
 
-            write_pdf(render_fleet_html(report), path)
+            data = Attachment(
+                path.with_suffix(".json").name,
+                fleet_json(report),
+                "application/json",
+                "the fleet report as data",
+            )
+            write_pdf(render_fleet_html(report), path, (data,), report.generated_at)
     except OSError as error:
         why = f"{path.parent} is a file" if path.parent.is_file() else error.strerror or error
         raise ReportError(f"cannot write {path}: {why}") from None

@@ -1,4 +1,4 @@
-"""The fleet report's figures (`report.plots`'s style and inline PNG): the control chart of one
+"""The fleet report's figures (`report.plots`'s style and inline SVG): the control chart of one
 parameter over the fleet's units."""
 
 from collections.abc import Sequence

@@ -1,5 +1,5 @@
 """The report as one self-contained HTML document: Jinja2 template with autoescape on (operator
-text and every stored string come out inert), CSS inline, plots inline as PNG data URIs.
+text and every stored string come out inert), CSS inline, plots inline as SVG data URIs.
 
 The template only formats: every number is a field of the `Report` or of its `CampaignAnalysis`.
 """

@@ -9,7 +9,7 @@ from gyrostand.report.csv_table import trial_table_csv
 from gyrostand.report.errors import ReportError
 from gyrostand.report.html import render_html
 from gyrostand.report.json_doc import report_json
-from gyrostand.report.pdf import write_pdf
+from gyrostand.report.pdf import Attachment, write_pdf
 
 
 def report_paths(out_dir: Path, campaign_id: int) -> dict[str, Path]:
@@ -21,6 +21,23 @@ def report_paths(out_dir: Path, campaign_id: int) -> dict[str, Path]:
         "json": out_dir / f"{stem}.json",
         "csv": out_dir / f"{stem}-trials.csv",
     }
+
+
+def attachments(
+    report: Report, document: str, table: str, paths: dict[str, Path]
+) -> tuple[Attachment, ...]:
+    """The files the PDF carries: the report's JSON, the trial table and the plan as stored."""
+    campaign = report.inputs.identification.campaign_id
+    return (
+        Attachment(paths["json"].name, document, "application/json", "the report as data"),
+        Attachment(paths["csv"].name, table, "text/csv", "the trial table"),
+        Attachment(
+            f"campaign-{campaign}-plan.toml",
+            report.inputs.plan.plan_toml,
+            "application/toml",
+            "the test plan as stored with the campaign",
+        ),
+    )
 
 
 def write_report(
@@ -39,11 +56,13 @@ def write_report(
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         written: dict[str, Path] = {}
+        document = report_json(report) if {"json", "pdf"} & set(wanted) else ""
+        table = trial_table_csv(report.trials) if {"csv", "pdf"} & set(wanted) else ""
         if "json" in wanted:
-            paths["json"].write_text(report_json(report), encoding="utf-8")
+            paths["json"].write_text(document, encoding="utf-8")
             written["json"] = paths["json"]
         if "csv" in wanted:
-            paths["csv"].write_text(trial_table_csv(report.trials), encoding="utf-8")
+            paths["csv"].write_text(table, encoding="utf-8")
             written["csv"] = paths["csv"]
         if "html" in wanted or "pdf" in wanted:
             stage("drawing the figures")
@@ -54,7 +73,12 @@ def write_report(
             if "pdf" in wanted:
                 stage("laying out the PDF")
                 try:
-                    written["pdf"] = write_pdf(html, paths["pdf"])
+                    written["pdf"] = write_pdf(
+                        html,
+                        paths["pdf"],
+                        attachments(report, document, table, paths),
+                        report.generated_at,
+                    )
                 except ReportError as exc:
                     done = ", ".join(str(p) for p in written.values()) or "nothing"
                     raise ReportError(f"{exc} (written: {done})") from None

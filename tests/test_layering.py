@@ -99,7 +99,7 @@ def test_every_layer_is_installed_under_the_namespace() -> None:
 
 def test_analysis_is_pure_computation() -> None:
     """analysis/ renders nothing: no template, plotting or PDF library is imported there."""
-    rendering = {"jinja2", "matplotlib", "weasyprint"}
+    rendering = {"jinja2", "matplotlib", "typst"}
     found = {
         f"{path.relative_to(ROOT)} imports {alias.name.split('.')[0]}"
         for path in sorted((ROOT / "analysis").rglob("*.py"))

@@ -88,12 +88,19 @@ class Rendered:
     pdf_pages: int
 
 
+def pdf_text(pdf: Path, *options: str) -> str:
+    """The PDF's text by pdftotext (-layout unless told), without the invisible characters that
+    mark where a long word may break (U+200B) or may not (U+2060, before a page number)."""
+    out = subprocess.run(
+        ["pdftotext", *(options or ("-layout",)), str(pdf), "-"], check=True, capture_output=True
+    ).stdout.decode()
+    return out.replace("\u200b\n", "").replace("\u200b", "").replace("\u2060", "")
+
+
 @pytest.fixture(scope="session")
 def paper_files(paper_report: Report, tmp_path_factory: pytest.TempPathFactory) -> Rendered:
     files = write_report(paper_report, tmp_path_factory.mktemp("paper-report"))
-    text = subprocess.run(
-        ["pdftotext", "-layout", str(files["pdf"]), "-"], check=True, capture_output=True
-    ).stdout.decode()
+    text = pdf_text(files["pdf"])
     info = subprocess.run(
         ["pdfinfo", str(files["pdf"])], check=True, capture_output=True
     ).stdout.decode()

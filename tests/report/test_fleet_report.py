@@ -5,7 +5,6 @@ flagged; the JSON document; the PDF's text (one render per module)."""
 
 import json
 import re
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +23,8 @@ from gyrostand.report.fleet import (
     write_fleet_report,
 )
 from gyrostand.report.html import sci
+
+from .conftest import pdf_text as read_pdf
 
 C_1E7 = {
     "A": [6.00, 6.10, 5.90, 6.05],
@@ -83,10 +84,7 @@ def html(report: FleetReport) -> str:
 
 @pytest.fixture(scope="module")
 def pdf_text(report: FleetReport, tmp_path_factory: pytest.TempPathFactory) -> str:
-    path = write_fleet_report(report, tmp_path_factory.mktemp("fleet") / "fleet.pdf")
-    return subprocess.run(
-        ["pdftotext", "-layout", str(path), "-"], check=True, capture_output=True
-    ).stdout.decode()
+    return read_pdf(write_fleet_report(report, tmp_path_factory.mktemp("fleet") / "fleet.pdf"))
 
 
 def test_the_anova_figures_are_scipys(report: FleetReport, html: str) -> None:
@@ -128,7 +126,7 @@ def test_the_odd_unit_and_the_identification(report: FleetReport, html: str) -> 
     assert 'class="watermark" aria-hidden="true">DRAFT<br>SIMULATION<' in html
     assert "a later campaign of serial A-001 counts (1)" in html
     assert "1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12: each unit" in html
-    assert html.count('<img src="data:image/png;base64,') == 2  # the control charts of C, T
+    assert html.count('<img src="data:image/svg+xml;base64,') == 2  # the control charts of C, T
     assert "Sveshnikov" in html and ".py" not in html
 
 

@@ -4,7 +4,6 @@ as the series rows and the "early settle" events record them; a campaign that wa
 criterion saved nothing."""
 
 import re
-import subprocess
 from dataclasses import replace
 
 import pytest
@@ -20,7 +19,15 @@ from gyrostand.report.model import ExcursionCriterion
 from gyrostand.report.signal_text import render_signal_text
 from gyrostand.report.writer import write_report
 
-from .conftest import GENERATED, SIM_TRIALS, Rendered, Simulated, run_simulated, watermark_letters
+from .conftest import (
+    GENERATED,
+    SIM_TRIALS,
+    Rendered,
+    Simulated,
+    pdf_text,
+    run_simulated,
+    watermark_letters,
+)
 
 CRITERION = ExcursionCriterion(tolerance_deg=0.03, duration_s=600.0, max_risk=0.01)
 EARLY = """[settle]
@@ -56,10 +63,7 @@ def early_report(early: Simulated) -> Report:
 @pytest.fixture(scope="module")
 def early_files(early_report: Report, tmp_path_factory: pytest.TempPathFactory) -> Rendered:
     files = write_report(early_report, tmp_path_factory.mktemp("early-report"), ("html", "pdf"))
-    text = subprocess.run(
-        ["pdftotext", "-layout", str(files["pdf"]), "-"], check=True, capture_output=True
-    ).stdout.decode()
-    return Rendered(files, text, 0)
+    return Rendered(files, pdf_text(files["pdf"]), 0)
 
 
 def test_every_series_settled_early_as_recorded(early: Simulated, early_report: Report) -> None:

@@ -83,7 +83,7 @@ def test_html_has_a_heading_plot_per_trial(simulated_report: Report) -> None:
     html = render_html(simulated_report)
     for index in range(1, len(SIM_TRIALS) + 1):
         assert f"Trial {index} (" in html
-    figures = html.count('<img src="data:image/png;base64,')
+    figures = html.count('<img src="data:image/svg+xml;base64,')
     assert figures == len(SIM_TRIALS) + 4 + 3  # + the noise plots
     doc = json.loads(report_json(simulated_report))
     assert [r["trace"]["bins"] for r in doc["acquisition"]["records"]] == [
