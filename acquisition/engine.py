@@ -130,6 +130,13 @@ class Commander(Protocol):
     def issue(self, command: Command, now_ms: int) -> None: ...
 
 
+class DroppedFrames(Protocol):
+    """Frames the acquisition dropped in a row, its queue full (counted until it takes frames
+    again)."""
+
+    frames: int
+
+
 class Operator(Protocol):
     def before_trial(self, trial: int) -> str | None:
         """Block until the operator has answered the plan's prompts before `trial`: None, or
@@ -325,6 +332,7 @@ class Engine:
         self._inv_carry = 0  # unusable frames after the last heading frame, earlier batches
         self._carry_from: int | None = None  # the last heading frame before this batch
         self._gap_events: list[tuple[int, str, int]] = []  # (position, message, stand ms)
+        self._drops: list[tuple[int, DroppedFrames]] = []  # since the last valid heading frame
         self._stopped = False  # the stand acknowledged a stop since the last start
         self._trial: TrialPlan | None = None
         self._ref: float | None = None
@@ -497,6 +505,15 @@ class Engine:
         kept = self._inv_carry if self._last_pos == self._carry_from else 0
         self._inv_carry = kept + len(after)
         self._gap_events = []
+        if self._drops:  # those before a valid heading frame made no silence
+            since = self._valid_pos_before(consumed)
+            self._drops = [d for d in self._drops if d[0] > since]
+
+    def frames_dropped(self, pos: int, dropped: DroppedFrames) -> None:
+        """The acquisition dropped frames, its queue full, just before stream position `pos`
+        (told before the batch holding `pos` is fed): a silence they make fails the trial as
+        the queue overflow it is, not as bus silence."""
+        self._drops.append((pos, dropped))
 
     @property
     def consumed(self) -> int:
@@ -652,6 +669,12 @@ class Engine:
         i = int(np.searchsorted(quiet, self.consumed))
         return int(quiet[i]) if i < len(quiet) else self._end
 
+    def _valid_pos_before(self, pos: int) -> int:
+        """Stream position of this batch's last valid heading frame before `pos` (-1: none)."""
+        self._quiet_index()
+        k = int(np.searchsorted(self._vpos, pos))
+        return int(self._vpos[k - 1]) if k else -1
+
     def _is_quiet(self, pos: int) -> bool:
         quiet = self._quiet_index()
         i = int(np.searchsorted(quiet, pos))
@@ -688,6 +711,15 @@ class Engine:
         since = self._valid_before(pos)
         _, counts = self._quiet_counts(pos + 1)
         waited = f"{(t_ms - since) / 1000:g} s of stand time"
+        after = self._valid_pos_before(pos)
+        dropped = sum(d.frames for p, d in self._drops if after < p <= pos)
+        if dropped:
+            self.fail(
+                f"the acquisition's queue overflowed: {dropped} frames dropped (no valid heading "
+                f"frame for {waited})",
+                kind="queue overflow",
+            )
+            return
         if not counts:
             self.fail(f"bus silence: no heading frame for {waited}", kind="bus silence")
             return

@@ -183,7 +183,13 @@ def run_live(
                 if live.recorder.dropped > dropped:
                     lost = live.recorder.dropped - dropped
                     dropped = live.recorder.dropped
-                    store.run_event("queue full", "error", f"{lost} frames dropped: queue full")
+                    store.run_event(
+                        "queue overflow",
+                        "error",
+                        f"the acquisition's queue overflowed: {lost} frames dropped",
+                    )
+                for before, overflow in live.recorder.overflows:
+                    engine.frames_dropped(position + before, overflow)
                 if live.recorder.log_error is not None and not log_failed:
                     log_failed = True
                     store.run_event(

@@ -14,7 +14,8 @@ import can
 import numpy as np
 import pytest
 
-from gyrostand.acquisition.engine import Command, Engine
+from gyrostand.acquisition.bus import Recorder as FrameQueue
+from gyrostand.acquisition.engine import Command, Engine, Phase
 from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.plan.model import parse_plan
@@ -270,3 +271,76 @@ def test_the_new_rules_do_not_depend_on_batching(tamper: Tamper | None, faults: 
             chunk = sim.stream[start : start + size]
             engine.feed(decoder.decode(RawFrames.from_messages(start, chunk)))
         assert sink.calls == live.calls, size
+
+
+# ---------------------------------------------------------------------------- queue overflow
+class Congested(Lockstep):
+    """The lockstep stand's frames pass through the acquisition's bounded queue
+    (`acquisition.bus.Recorder`), which the campaign does not drain during the steps that end
+    in `stalls` (stand time s, as a campaign thread held up would not): the queue fills and
+    drops what comes, as live. `sent`: frames the stand put in the queue, per step end, and
+    `stream` all of them."""
+
+    def __init__(self, maxsize: int, stalls: set[float], **faults: object) -> None:
+        super().__init__(quick_config(**faults))
+        self.queue, self.stalls = FrameQueue(maxsize, None), stalls
+        self.sent: dict[float, int] = {}
+
+    def run(self, engine: Engine, max_stand_s: float = 1_000.0) -> None:
+        decoder = BatchDecoder(Codec())
+        position, t = 0, 0.0
+        while engine.phase is not Phase.DONE and t < max_stand_s:
+            t += self.step_s
+            frames, self._pending = self._pending + self.stand.advance_to(t), []
+            self.sent[t] = len(frames)
+            self.stream += frames
+            for msg in frames:
+                self.queue.on_message_received(msg)
+            if t in self.stalls:
+                continue
+            msgs = self.queue.drain(1_000_000, 0.0)
+            for before, overflow in self.queue.overflows:
+                engine.frames_dropped(position + before, overflow)
+            engine.feed(decoder.decode(RawFrames.from_messages(position, msgs)))
+            position += len(msgs)
+
+
+def congested(maxsize: int, stalls: set[float], **faults: object) -> tuple[Recorder, Congested]:
+    sink, sim = Recorder(), Congested(maxsize, stalls, **faults)
+    engine = Engine(small_plan(), sink, sim)
+    sim.run(engine)
+    assert engine.outcome == "completed"
+    return sink, sim
+
+
+def test_a_queue_overflow_fails_the_trial_as_an_overflow_not_as_bus_silence() -> None:
+    """The campaign held up from 100 s to 130 s of stand time (inside trial 1's second still
+    window): the queue of 200 frames fills and every later frame is dropped until it is
+    drained. Before: "bus silence: no heading frame for 25.6 s of stand time"."""
+    stalls = {100.0, 105.0, 110.0, 115.0, 120.0, 125.0}
+    sink, sim = congested(200, stalls)
+    dropped = sum(sim.sent[t] for t in (*stalls, 130.0)) - 200  # the last step's too
+    assert dropped > 300 and sim.queue.dropped == dropped
+    (trial, j, reason), *_ = failures(sink)
+    assert (trial, j) == (1, 1)
+    assert reason.startswith(
+        f"the acquisition's queue overflowed: {dropped} frames dropped (no valid heading frame for "
+    )
+    assert [(e[0], e[1]) for e in events(sink, "queue overflow")] == [("error", reason)]
+    assert not events(sink, "bus silence")
+
+
+def test_an_overflow_shorter_than_the_timeout_is_lost_frames_and_no_later_silence_s_cause() -> None:
+    """Frames dropped for a few seconds are lost frames of the window they fall in; the stand's
+    silence of 30 s later on is still told as bus silence."""
+    sink, sim = congested(120, {65.0}, silence_at_s=150.0, silence_for_s=30.0)
+    # the queue, empty after the step ending at 60 s, keeps the first 120 frames of the next two
+    before = sum(n for t, n in sim.sent.items() if t <= 60.0)
+    lost = sim.stream[before + 120 : before + sim.sent[65.0] + sim.sent[70.0]]
+    assert sim.queue.dropped == len(lost) == 40  # 2.5 s, less than the 5 s timeout
+    first = sink.observations[0]
+    assert (first.trial, first.j, first.k) == (1, 1, 1)
+    assert first.flags == f"lost={sum(m.arbitration_id == HEADING_ID for m in lost)}"
+    (trial, _, reason), *_ = failures(sink)
+    assert trial == 1 and reason.startswith("bus silence: no heading frame for ")
+    assert not events(sink, "queue overflow")
