@@ -20,18 +20,11 @@ from can.interfaces.virtual import VirtualBus
 
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import BatchBLFWriter, raw_log_writer
-from gyrostand.plan.codec import codec_for
+from gyrostand.plan.codec import codec_for, sim_config
 from gyrostand.plan.model import BusPlan, Plan
 from gyrostand.stand.controller import StandController
 from gyrostand.stand.protocol import Codec
-from gyrostand.stand.simconfig import simulator_config
-from gyrostand.stand.simulator import SimConfig, Simulator
-
-
-def sim_config(bus: BusPlan) -> SimConfig:
-    """The simulated stand for a plan: its `[bus.simulator]` overrides (validated with the plan)
-    on the defaults, with the plan's speedup, seed and timing."""
-    return simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
+from gyrostand.stand.simulator import Simulator
 
 
 def open_bus(bus: BusPlan) -> can.BusABC:
