@@ -8,6 +8,7 @@ the stream times out."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import can
@@ -224,6 +225,64 @@ def test_a_clean_run_has_no_stuck_flag() -> None:
     sink, _, _ = run()
     assert all(o.flags == "" for o in sink.observations)
     assert len(sink.observations) == 12
+
+
+def settled_at(sink: Recorder) -> dict[tuple[int, int], int]:
+    """(trial, j) -> stand time (ms) each series settled."""
+    return {(a[0], a[1]): a[2] for a in sink.of("series_settled")}
+
+
+def test_a_stuck_run_inside_a_settle_hold_is_flagged_and_not_settled_on() -> None:
+    """The sensor stuck from 30 s to 55 s, inside the hold (two 30 s blocks) that settles
+    series 1 of trial 1 at 60.1 s in the clean run: the block 30.1-60.1 s is flagged and the
+    series settles on the next two blocks instead, at 120.1 s. Before: settled at 60.1 s on
+    the stuck readings, without a word."""
+    clean, _, _ = run()
+    assert settled_at(clean)[1, 1] == 60_100
+    sink, _, engine = run(stuck_at_s=30.0, stuck_for_s=25.0)
+    assert engine.outcome == "completed" and not failures(sink)
+    assert settled_at(sink)[1, 1] == 60_100 + 60_000
+    run_length = round((55.0 - 30.1) / 0.1)  # heading frames 30.1 .. 54.9 s of that block
+    assert events(sink, "stuck sensor") == [
+        (
+            "warning",
+            f"settle block 30.1-60.1 s: {run_length} identical heading readings in a row "
+            f"({run_length / 300:.0%} of its 300 frames; flagged above 30); the series does not "
+            "settle on it",
+            1,
+            1,
+            60_100,
+        )
+    ]
+    assert all(o.flags == "" for o in sink.observations)
+
+
+def test_a_sensor_stuck_through_the_settle_times_it_out_with_the_reason() -> None:
+    """Before: the series settled on the stuck readings and the trial failed in its first
+    observation window ("stuck sensor: 300 identical readings in observation window 1")."""
+    text = plan_text().replace("max_wait_s = 3600.0", "max_wait_s = 300.0")
+    sink, sim = Recorder(), Tampered(stuck_at_s=30.0, stuck_for_s=2_000.0)
+    engine = Engine(parse_plan(text), sink, sim)
+    sim.run(engine, 1_000.0)
+    reason = "not settled within 300 s (stuck sensor in the last 2 settle blocks)"
+    assert failures(sink)[0] == (1, 1, reason)
+    assert not [o for o in sink.observations if o.trial == 1]
+
+
+def test_a_still_compass_on_a_coarse_sensor_is_not_flagged() -> None:
+    """An angle sensor in 0.05 deg steps, coarser than the compass's noise: a still compass
+    repeats its reading for whole windows. Told once that runs are not judged; nothing flagged,
+    nothing failed. Before: trial 2 failed "stuck sensor: 300 identical readings in
+    observation window 2"."""
+    sink, sim = Recorder(), Tampered()
+    noise = dataclasses.replace(sim.stand.config.noise, quantum_deg=0.05)
+    sim.stand = type(sim.stand)(dataclasses.replace(sim.stand.config, noise=noise), Codec())
+    engine = Engine(small_plan(), sink, sim)
+    sim.run(engine, 3_000.0)
+    assert engine.outcome == "completed" and not failures(sink)
+    assert len(sink.observations) == 12 and all(o.flags == "" for o in sink.observations)
+    (told,) = events(sink, "stuck sensor")
+    assert told[0] == "info" and told[1].startswith("runs of identical heading readings are not")
 
 
 # ------------------------------------------------------------------------- command not seen
