@@ -20,18 +20,11 @@ from can.interfaces.virtual import VirtualBus
 
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import BatchBLFWriter, raw_log_writer
-from gyrostand.plan.codec import codec_for
+from gyrostand.plan.codec import codec_for, sim_config
 from gyrostand.plan.model import BusPlan, Plan
 from gyrostand.stand.controller import StandController
 from gyrostand.stand.protocol import Codec
-from gyrostand.stand.simconfig import simulator_config
-from gyrostand.stand.simulator import SimConfig, Simulator
-
-
-def sim_config(bus: BusPlan) -> SimConfig:
-    """The simulated stand for a plan: its `[bus.simulator]` overrides (validated with the plan)
-    on the defaults, with the plan's speedup, seed and timing."""
-    return simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
+from gyrostand.stand.simulator import Simulator
 
 
 def open_bus(bus: BusPlan) -> can.BusABC:
@@ -75,6 +68,16 @@ class SimulatorBus(VirtualBus):
             ) from None
 
 
+class Overflow:
+    """A place in the stream where the full queue dropped frames (`frames` of them in a row):
+    a marker queued after the last frame kept, so the campaign knows where they are missing."""
+
+    __slots__ = ("frames",)
+
+    def __init__(self) -> None:
+        self.frames = 0
+
+
 class Recorder(can.Listener):
     """The one path of every frame: received frames (notifier thread) and the commands we send
     (campaign thread) enter one bounded FIFO; the campaign thread drains it and writes what it
@@ -87,10 +90,12 @@ class Recorder(can.Listener):
     def __init__(self, maxsize: int, log_path: Path | None, *, log_rest: bool = True) -> None:
         self.maxsize = maxsize
         self.log_rest = log_rest  # on stop, log frames never drained (not in virtual time)
-        self._frames: deque[can.Message] = deque()
+        self._frames: deque[can.Message | Overflow] = deque()
         self._ready = threading.Event()
         self.writer = raw_log_writer(log_path) if log_path is not None else None
         self.dropped = 0
+        self._overflow: Overflow | None = None  # the overflow going on (its marker is queued)
+        self.overflows: list[tuple[int, Overflow]] = []  # the last drain's: (frames before, o)
         self.errors: list[Exception] = []  # from the bus, through the notifier
         self.log_error: Exception | None = None  # the raw log stopped being written
         self.logged = 0  # frames written to the raw log
@@ -99,7 +104,12 @@ class Recorder(can.Listener):
     def on_message_received(self, msg: can.Message) -> None:
         if len(self._frames) >= self.maxsize:
             self.dropped += 1
+            if self._overflow is None:  # one marker (beyond the bound) where frames go missing
+                self._overflow = Overflow()
+                self._frames.append(self._overflow)
+            self._overflow.frames += 1
             return
+        self._overflow = None
         self._frames.append(msg)  # atomic; the only producer-side operation
         if not self._ready.is_set():
             self._ready.set()
@@ -109,13 +119,28 @@ class Recorder(can.Listener):
 
     def drain(self, limit: int, timeout_s: float) -> list[can.Message]:
         """Up to `limit` frames in arrival order (waits up to `timeout_s` for the first one).
-        The caller logs them (`log`) before using them."""
+        The caller logs them (`log`) before using them. Where the full queue dropped frames
+        among them: `overflows` (how many of the frames come before each overflow)."""
         if not self._frames:
             self._ready.clear()
             if not self._frames:
                 self._ready.wait(timeout_s)
         pop = self._frames.popleft
-        return [pop() for _ in range(min(len(self._frames), limit))]
+        drained = [pop() for _ in range(min(len(self._frames), limit))]
+        self.overflows = []
+        if not self.dropped:  # (no marker was ever queued)
+            return drained
+        return self._unmark(drained)
+
+    def _unmark(self, items: list[Any]) -> list[can.Message]:
+        """The frames of `items`, the overflow markers among them noted in `overflows`."""
+        frames: list[can.Message] = []
+        for item in items:
+            if isinstance(item, Overflow):
+                self.overflows.append((len(frames), item))
+            else:
+                frames.append(item)
+        return frames
 
     def log(self, raw: RawFrames, msgs: list[can.Message]) -> None:
         """Write drained frames to the raw log (BLF: the whole batch at once)."""
@@ -137,7 +162,7 @@ class Recorder(can.Listener):
         if self._stopped:
             return
         if self.log_rest:
-            rest = list(self._frames)
+            rest = self._unmark(list(self._frames))
             self.log(RawFrames.from_messages(0, rest), rest)
         if self.writer is not None:
             self.writer.stop()

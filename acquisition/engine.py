@@ -63,11 +63,21 @@ from gyrostand.stand.protocol import (
 NANO = 1_000_000_000  # deviations are summed as integer nano-degrees
 COUNTER_MODULO = 16  # the heading frame's 4-bit rolling counter
 INTERVAL_SAMPLE = 20  # heading-frame spacings whose median is the expected frame interval
-# Stuck: a run of identical consecutive readings longer than STUCK_MIN_RUN frames and than
-# STUCK_FRACTION of the window's valid frames (a real heading at 0.001 deg under noise changes
-# within ~13 frames: longest run in 800 000 still frames of the simulated 16-bit sensor).
+# Stuck: a run of identical consecutive readings, in an observation window or a settle block,
+# longer than STUCK_MIN_RUN frames, than STUCK_FRACTION of its valid frames (a real heading at
+# 0.001 deg under noise changes within ~13 frames: longest run in 800 000 still frames of the
+# simulated 16-bit sensor) and than the sensor's resolution makes likely: readings that repeat
+# at the rate p seen so far (still and rocking apart) give a run of L among n frames about
+# n p^(L-1) times (geometric run lengths); a run whose expected count is below STUCK_CHANCE is
+# stuck. A sensor coarser than the compass's noise repeats most readings (p > STUCK_RESOLVED)
+# and its runs are far longer than geometric (the noise is correlated: runs of 500 frames at
+# p = 0.84 on the simulated compass, 0.03 deg steps): a run is then no sign, and none is
+# judged (told once). Nor before STUCK_LEARN pairs of readings have been seen.
 STUCK_MIN_RUN = 20
 STUCK_FRACTION = 0.1
+STUCK_CHANCE = 1e-4
+STUCK_RESOLVED = 0.5
+STUCK_LEARN = 200
 CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the error frame's identifier
 COMPASS_FAULTS = ("rotor", "fluid temperature", "angle sensor", "follow-up")  # DBC FAULT_BITS
 
@@ -130,6 +140,13 @@ class Commander(Protocol):
     def issue(self, command: Command, now_ms: int) -> None: ...
 
 
+class DroppedFrames(Protocol):
+    """Frames the acquisition dropped in a row, its queue full (counted until it takes frames
+    again)."""
+
+    frames: int
+
+
 class Operator(Protocol):
     def before_trial(self, trial: int) -> str | None:
         """Block until the operator has answered the plan's prompts before `trial`: None, or
@@ -190,10 +207,10 @@ class _Window:
     low: int | None = None
     high: int | None = None
     anomalies: Counter[str] = field(default_factory=Counter)
-    runs: bool = False  # track runs of identical readings (observation windows)
     run_value: int | None = None  # the last reading (ndeg) and how many times in a row
     run_length: int = 0
     longest_run: int = 0
+    repeats: int = 0  # consecutive readings equal to the one before
 
     def add(self, dev: np.ndarray, lost: int, invalid: int, jumps: int = 0) -> None:
         self.lost += lost
@@ -207,15 +224,16 @@ class _Window:
             lo, hi = int(dev.min()), int(dev.max())
             self.low = lo if self.low is None else min(self.low, lo)
             self.high = hi if self.high is None else max(self.high, hi)
-            if self.runs:
-                self._add_runs(dev)
+            self._add_runs(dev)
 
     def _add_runs(self, dev: np.ndarray) -> None:
         """Longest run of identical consecutive readings, carried over the batches."""
         change = np.flatnonzero(dev[1:] != dev[:-1])  # run i ends at change[i]
         first = int(change[0]) + 1 if len(change) else len(dev)
+        self.repeats += len(dev) - 1 - len(change)
         if int(dev[0]) == self.run_value:
             first += self.run_length
+            self.repeats += 1
         longest = max(self.longest_run, first)
         if len(change):
             ends = np.append(change, len(dev) - 1)
@@ -226,10 +244,6 @@ class _Window:
             self.run_length = first
         self.longest_run = longest
         self.run_value = int(dev[-1])
-
-    def stuck_limit(self) -> int:
-        """A run of identical readings longer than this is flagged "stuck"."""
-        return max(STUCK_MIN_RUN, int(self.used * STUCK_FRACTION))
 
     def mean_ndeg(self) -> float:
         return self.total_ndeg / self.used if self.used else math.nan
@@ -325,6 +339,7 @@ class Engine:
         self._inv_carry = 0  # unusable frames after the last heading frame, earlier batches
         self._carry_from: int | None = None  # the last heading frame before this batch
         self._gap_events: list[tuple[int, str, int]] = []  # (position, message, stand ms)
+        self._drops: list[tuple[int, DroppedFrames]] = []  # since the last valid heading frame
         self._stopped = False  # the stand acknowledged a stop since the last start
         self._trial: TrialPlan | None = None
         self._ref: float | None = None
@@ -339,6 +354,9 @@ class Engine:
         self._phase_start_ms = 0
         self._window: _Window | None = None
         self._blocks: list[tuple[int, int, float]] = []  # (start ms, end ms, mean dev ndeg)
+        self._stuck_blocks: set[int] = set()  # start ms of the series' stuck settle blocks
+        self._repeat_rate = {1: [0, 0], 2: [0, 0]}  # per j: [readings repeated, pairs seen]
+        self._coarse_told = False
         self._settle_start: int | None = None
         self._early: EarlySettle | None = None  # settle.method = "estimate" / "compensated"
         self._record = TransientRecord()  # window means and equilibrium steps of this run
@@ -423,6 +441,7 @@ class Engine:
         if phase is Phase.SETTLE:
             self._settle_start = None
             self._blocks = []
+            self._stuck_blocks = set()
             self._window = None
             self._series_errors = 0
             self._early = None
@@ -497,6 +516,15 @@ class Engine:
         kept = self._inv_carry if self._last_pos == self._carry_from else 0
         self._inv_carry = kept + len(after)
         self._gap_events = []
+        if self._drops:  # those before a valid heading frame made no silence
+            since = self._valid_pos_before(consumed)
+            self._drops = [d for d in self._drops if d[0] > since]
+
+    def frames_dropped(self, pos: int, dropped: DroppedFrames) -> None:
+        """The acquisition dropped frames, its queue full, just before stream position `pos`
+        (told before the batch holding `pos` is fed): a silence they make fails the trial as
+        the queue overflow it is, not as bus silence."""
+        self._drops.append((pos, dropped))
 
     @property
     def consumed(self) -> int:
@@ -652,6 +680,12 @@ class Engine:
         i = int(np.searchsorted(quiet, self.consumed))
         return int(quiet[i]) if i < len(quiet) else self._end
 
+    def _valid_pos_before(self, pos: int) -> int:
+        """Stream position of this batch's last valid heading frame before `pos` (-1: none)."""
+        self._quiet_index()
+        k = int(np.searchsorted(self._vpos, pos))
+        return int(self._vpos[k - 1]) if k else -1
+
     def _is_quiet(self, pos: int) -> bool:
         quiet = self._quiet_index()
         i = int(np.searchsorted(quiet, pos))
@@ -688,6 +722,15 @@ class Engine:
         since = self._valid_before(pos)
         _, counts = self._quiet_counts(pos + 1)
         waited = f"{(t_ms - since) / 1000:g} s of stand time"
+        after = self._valid_pos_before(pos)
+        dropped = sum(d.frames for p, d in self._drops if after < p <= pos)
+        if dropped:
+            self.fail(
+                f"the acquisition's queue overflowed: {dropped} frames dropped (no valid heading "
+                f"frame for {waited})",
+                kind="queue overflow",
+            )
+            return
         if not counts:
             self.fail(f"bus silence: no heading frame for {waited}", kind="bus silence")
             return
@@ -1108,12 +1151,19 @@ class Engine:
         width = w.end_ms - w.start_ms
         settle = self.plan.settle
         need = hold_blocks(settle, width / 1000)
+        limit = self._stuck_limit(w)
+        if limit is not None:
+            self._stuck_blocks.add(w.start_ms)
+            where = f"settle block {w.start_ms / 1000:g}-{w.end_ms / 1000:g} s"
+            self._tell_stuck(w, where, limit, "; the series does not settle on it")
+        # a hold with a stuck block is no sign of settling: the series waits for one without
+        trusted = not any(start in self._stuck_blocks for start, _, _ in self._blocks[-need:])
         recent = [m / NANO for _, _, m in self._blocks[-need:]]
-        band = len(recent) == need and not any(math.isnan(m) for m in recent)
+        band = len(recent) == need and not any(math.isnan(m) for m in recent) and trusted
         band = band and band_settled(recent, settle)
         outcome: SettleOutcome | None = None
         waited_s = (w.end_ms - self._settle_start) / 1000
-        if w.used:  # (frames are only used once the reference heading is known)
+        if w.used and limit is None:  # (frames are used once the reference heading is known)
             assert self._ref is not None
             self._record.add(w.start_ms / 1000, w.end_ms / 1000, self._ref + w.mean_ndeg() / NANO)
         estimate = settle.estimate
@@ -1123,7 +1173,7 @@ class Engine:
                 outcome = SettleOutcome(
                     "band", waited_s, self._ref + sum(recent) / need, band_s=waited_s
                 )
-        elif w.used:
+        elif w.used and limit is None:
             if self._early is None:
                 spacing = round(self.plan.observation.spacing_s * 1000)
                 self._early = EarlySettle(
@@ -1134,18 +1184,19 @@ class Engine:
                     (width + spacing) / 1000,
                     self.plan.n_obs,
                 )
-            if self._early.check(w.end_ms, band).ready:
+            if self._early.check(w.end_ms, band).ready and trusted:
                 outcome = self._early_settled(w)
         if outcome is not None:
             outcome = replace(outcome, step_ms=self._step_ms, blocks=self._settle_record())
             self._settle_durations.append(w.end_ms - self._settle_start)
             self.sink.series_settled(self._trial.index, self._j, w.end_ms, outcome)
             self._enter(Phase.OBSERVE)
-            self._window = _Window(w.end_ms, w.end_ms + width, runs=True)
+            self._window = _Window(w.end_ms, w.end_ms + width)
             return
         if w.end_ms - self._settle_start > settle.max_wait_s * 1000:
+            stuck = f" (stuck sensor in the last {need} settle blocks)" if not trusted else ""
             self.fail(
-                f"not settled within {settle.max_wait_s:g} s{self._why_not()}",
+                f"not settled within {settle.max_wait_s:g} s{stuck or self._why_not()}",
                 kind="settle timeout",
             )
             return
@@ -1153,6 +1204,46 @@ class Engine:
         if self._last_t is not None and self._last_t >= next_start + width:  # skip empty blocks
             next_start += (self._last_t - next_start) // width * width
         self._window = _Window(next_start, next_start + width)
+
+    def _stuck_limit(self, w: _Window) -> int | None:
+        """The run limit when window `w`'s longest run of identical readings is stuck (None:
+        it is not, or cannot be told yet); the readings' repeat rate learns from `w`."""
+        rate = self._repeat_rate[self._j]
+        run = max(w.longest_run - 1, 0)  # its repeats, left out of the rate
+        repeated, pairs = rate[0] + w.repeats - run, rate[1] + max(w.used - 1, 0) - run
+        limit = None
+        p = repeated / pairs if pairs >= STUCK_LEARN else None  # a reading repeats the last
+        if p is not None and p <= STUCK_RESOLVED:
+            limit = max(STUCK_MIN_RUN, int(w.used * STUCK_FRACTION))
+            if p > 0:  # n p^(L-1) < STUCK_CHANCE (geometric run lengths)
+                limit = max(limit, 1 + math.ceil(math.log(STUCK_CHANCE / w.used) / math.log(p)))
+            if w.longest_run <= limit:
+                limit = None
+        elif p is not None and not self._coarse_told:
+            self._coarse_told = True
+            self.sink.event(
+                "stuck sensor",
+                "info",
+                f"runs of identical heading readings are not judged while {p:.0%} of the "
+                "readings repeat the one before (the angle sensor's resolution is coarser than the "
+                "compass's noise, so a still compass cannot be told from a stuck sensor)",
+                self._tidx,
+                self._j,
+                w.end_ms,
+            )
+        rate[0], rate[1] = (repeated, pairs) if limit is not None else (repeated + run, pairs + run)
+        return limit
+
+    def _tell_stuck(self, w: _Window, where: str, limit: int, then: str = "") -> None:
+        self.sink.event(
+            "stuck sensor",
+            "warning",
+            f"{where}: {w.longest_run} identical heading readings in a row "
+            f"({w.longest_run / w.used:.0%} of its {w.used} frames; flagged above {limit}){then}",
+            self._tidx,
+            self._j,
+            w.end_ms,
+        )
 
     def _settle_record(self) -> tuple[tuple[int, int, float], ...]:
         """The series' settle blocks as (start ms, end ms, mean heading deg), those with frames."""
@@ -1192,15 +1283,15 @@ class Engine:
         if w.used == 0:
             self.fail(f"no valid heading frame in observation window {self._k}")
             return
-        if w.used >= 3 and w.low == w.high:
+        limit = self._stuck_limit(w)
+        if limit is not None and w.used >= 3 and w.low == w.high:
             w.anomalies["stuck"] += 1
             self.fail(
                 f"stuck sensor: {w.used} identical readings in observation window {self._k}",
                 kind="stuck sensor",
             )
             return
-        stuck = w.longest_run > w.stuck_limit()
-        if stuck:
+        if limit is not None:
             w.anomalies["stuck"] = w.longest_run
         value = self._ref + w.mean_ndeg() / NANO
         flags = w.flags()
@@ -1210,17 +1301,8 @@ class Engine:
         self.sink.observation(obs)
         self._record.add(w.start_ms / 1000, w.end_ms / 1000, value)
         self._windows.append((w.start_ms, w.end_ms))
-        if stuck:
-            self.sink.event(
-                "stuck sensor",
-                "warning",
-                f"observation {self._k}: {w.longest_run} identical heading readings in a row "
-                f"({w.longest_run / w.used:.0%} of its {w.used} frames; flagged above "
-                f"{w.stuck_limit()})",
-                trial.index,
-                self._j,
-                w.end_ms,
-            )
+        if limit is not None:
+            self._tell_stuck(w, f"observation {self._k}", limit)
         if flags:
             self.sink.event(
                 "frame anomalies",
@@ -1234,7 +1316,7 @@ class Engine:
         self._k += 1
         if self._k <= self.plan.n_obs:
             start = w.end_ms + round(self.plan.observation.spacing_s * 1000)
-            self._window = _Window(start, start + (w.end_ms - w.start_ms), runs=True)
+            self._window = _Window(start, start + (w.end_ms - w.start_ms))
             return
         self.sink.series_completed(trial.index, self._j, self._compensation())
         self._window = None

@@ -21,7 +21,7 @@ import numpy as np
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from gyrostand.acquisition.bus import LiveBus, sim_config
+from gyrostand.acquisition.bus import LiveBus
 from gyrostand.acquisition.engine import Command, CommandNotSent, Engine, Phase
 from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
@@ -32,9 +32,8 @@ from gyrostand.db.queries import latest_attempt, live_file_of, raw_log_segments,
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.plan.codec import codec_for
-from gyrostand.plan.model import Plan, PlanError
+from gyrostand.plan.model import Plan
 from gyrostand.stand.controller import StandController, StandError
-from gyrostand.stand.protocol import ProtocolError
 
 BATCH_FRAMES = 50_000
 VIRTUAL_STALL_WALL_S = 60.0  # virtual time: no frame at all for this long = no simulator
@@ -49,22 +48,6 @@ class RunResult:
     observations: int
     raw_log: Path | None
     raw_log_sha256: str | None
-
-
-def prepare(plan: Plan) -> None:
-    """Everything that can be checked before the bus or the database is touched (PlanError),
-    including that the stand command of every trial can be encoded (its DBC ranges)."""
-    codec = codec_for(plan)
-    problems = []
-    for t in plan.trials:
-        try:
-            codec.encode_command_set(t.direction_deg, t.amplitude_cm, t.period_s)
-        except ProtocolError as exc:
-            problems.append(f"[[trials]] {t.index}: the stand command cannot carry it: {exc}")
-    if problems:
-        raise PlanError(problems)
-    if plan.bus.simulated:
-        sim_config(plan.bus)
 
 
 class LiveCommander:
@@ -183,7 +166,13 @@ def run_live(
                 if live.recorder.dropped > dropped:
                     lost = live.recorder.dropped - dropped
                     dropped = live.recorder.dropped
-                    store.run_event("queue full", "error", f"{lost} frames dropped: queue full")
+                    store.run_event(
+                        "queue overflow",
+                        "error",
+                        f"the acquisition's queue overflowed: {lost} frames dropped",
+                    )
+                for before, overflow in live.recorder.overflows:
+                    engine.frames_dropped(position + before, overflow)
                 if live.recorder.log_error is not None and not log_failed:
                     log_failed = True
                     store.run_event(

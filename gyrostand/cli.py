@@ -33,6 +33,7 @@ from gyrostand import (
     cmd_station,
 )
 from gyrostand.errors import unexpected, usage_error
+from gyrostand.interrupt import interrupted
 
 _NEXT_SENTENCE = re.compile(r"(?<=[.!?])\s+(?=[A-Z`\[(])")
 
@@ -122,6 +123,14 @@ class RootGroup(HelpGroup):
         if standalone_mode:  # super().main returned the exit code of a typer.Exit, or None
             sys.exit(result if isinstance(result, int) else 0)
         return result
+
+    def invoke(self, ctx: Any) -> Any:
+        """Ctrl-C in a command that does not handle it (typer would exit 130 without a word):
+        one line, exit code 130, as during the start-up (`gyrostand.__main__`)."""
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:
+            interrupted()
 
 
 def use_help_layout(typer_app: typer.Typer) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 import threading
 from collections.abc import Iterator, Mapping, Sequence
@@ -12,9 +13,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
-from rich.console import Console
-from rich.table import Table
-from rich.text import Text
 
 from gyrostand.cmd_data import DEFAULT_DB, CampaignId, JsonOption, TagOption, open_db, parse_tags
 from gyrostand.db.url import shown_url
@@ -22,12 +20,22 @@ from gyrostand.errors import EXIT_FAILED, fail, printable
 from gyrostand.stand.simconfig import TIMINGS
 
 if TYPE_CHECKING:
+    from rich.console import Console
+
     from gyrostand.acquisition.runner import RunResult
     from gyrostand.acquisition.store import CampaignStore
     from gyrostand.db.queries import CampaignRow
     from gyrostand.plan.model import Plan
 
-_out = Console(highlight=False, soft_wrap=True, markup=False, emoji=False)  # text, never markup
+
+@functools.cache
+def _out() -> Console:
+    """stdout as text, never markup (rich: imported when something is printed)."""
+    from rich.console import Console
+
+    return Console(highlight=False, soft_wrap=True, markup=False, emoji=False)
+
+
 RECENT_EVENTS = 5  # campaign status: the latest warnings and errors shown
 
 
@@ -53,7 +61,7 @@ def checked_plan(
     """The plan with the command line's bus and database options, validated as the plan file
     and prepared as the run will use it (one-line errors). The bus options are written into the
     plan's text, which a new campaign stores."""
-    from gyrostand.acquisition.runner import prepare
+    from gyrostand.plan.codec import prepare
     from gyrostand.plan.model import PlanError, revised
     from gyrostand.plan.overrides import with_keys
 
@@ -181,21 +189,21 @@ def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None
     """The outcome on stdout; exit code 1 unless the campaign completed (with how to continue
     it and to retry its failed trials when it can be continued)."""
     shown = printable(shown_url(db))
-    _out.print(
+    _out().print(
         f"campaign {result.campaign_id} {result.outcome}: {result.trials_completed} trials "
         f"completed, {result.trials_failed} failed, {result.observations} observations in "
         f"{shown}"
     )
     if result.raw_log is not None:
-        _out.print(f"raw frames: {printable(result.raw_log)} (sha256 {result.raw_log_sha256})")
+        _out().print(f"raw frames: {printable(result.raw_log)} (sha256 {result.raw_log_sha256})")
     if result.trials_failed and resumable:
-        _out.print(
+        _out().print(
             f"retry the failed trials with: gyrostand campaign resume {result.campaign_id} "
             f"--retry-failed --db {shown}"
         )
     if result.outcome != "completed":
         if resumable:
-            _out.print(
+            _out().print(
                 f"continue with: gyrostand campaign resume {result.campaign_id} --db {shown}"
             )
         raise typer.Exit(EXIT_FAILED)
@@ -348,7 +356,7 @@ def continue_campaign(
             if retry is not None:
                 retried = retry_trials(sessions, campaign_id, None if retry == "failed" else retry)
                 for r in retried:
-                    _out.print(
+                    _out().print(
                         printable(
                             f"trial {r.index}: attempt {r.attempt} (attempt {r.attempt - 1} "
                             f"failed: {r.reason})"
@@ -367,7 +375,7 @@ def continue_campaign(
         if acquired and not (start == "continued" and not all(t.finished for t in trials)):
             store.complete_acquired()
             store.set_status("completed")
-            _out.print(f"campaign {campaign_id}: nothing left to acquire")
+            _out().print(f"campaign {campaign_id}: nothing left to acquire")
             return
         outcome = run_campaign(checked, store, quiet, stop, db, start, answers=given)
     print_outcome(outcome, db)
@@ -528,10 +536,13 @@ def register(app: typer.Typer) -> None:
         if s.status == "running" and not held_elsewhere(sessions, campaign_id):
             status = "interrupted (left running by a process that is gone; resume continues it)"
         # every stored string goes through printable() and is printed as text (markup off)
-        _out.print(
+        _out().print(
             f"campaign {s.campaign_id} ({printable(s.source)}): {status}, "
             f"{printable(s.instrument)}, operator {printable(s.operator)}, N={s.n_obs}"
         )
+        from rich.table import Table
+        from rich.text import Text
+
         table = Table("trial", "role", "status", "j=1", "j=2", "failure")
         for t in s.trials:
             table.add_row(
@@ -547,19 +558,21 @@ def register(app: typer.Typer) -> None:
                     )
                 )
             )
-        _out.print(table)
+        _out().print(table)
         for t in s.trials:
             if t.earlier:
                 before = "; ".join(
                     f"attempt {e.attempt} {e.status}: {e.failure_reason or ''}" for e in t.earlier
                 )
-                _out.print(printable(f"trial {t.index}: attempt {t.attempt} {t.status} ({before})"))
+                _out().print(
+                    printable(f"trial {t.index}: attempt {t.attempt} {t.status} ({before})")
+                )
         events = ", ".join(f"{n} {printable(sev)}" for sev, n in s.events_by_severity.items())
-        _out.print(f"observations: {s.observations_stored}; events: {events}")
+        _out().print(f"observations: {s.observations_stored}; events: {events}")
         for severity, kind, message in reversed(recent):
-            _out.print(f"  {printable(severity)} ({printable(kind)}): {printable(message)}")
+            _out().print(f"  {printable(severity)} ({printable(kind)}): {printable(message)}")
         if s.resume is not None and s.source == "stand":
-            _out.print(
+            _out().print(
                 f"next: trial {s.resume.trial_index}, series j={s.resume.j}, "
                 f"observation {s.resume.next_k}"
             )

@@ -139,9 +139,11 @@ def register(app: typer.Typer) -> None:
             data = read_import_file(file)
         except (MetadataError, ImportFileError) as error:
             fail(str(error))
+        from gyrostand.db.session import writer
+
         sessions = open_db(db)
-        try:
-            with sessions.begin() as session:
+        try:  # waits its turn behind another writer (a campaign running into the same file)
+            with writer(sessions).begin() as session:
                 campaign_id = store_import(session, data, metadata, labels).id
         except OperationalError as error:  # e.g. locked by another writer; rolled back
             fail(f"nothing imported, the database refused the write: {error.orig}")

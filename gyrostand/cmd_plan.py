@@ -48,7 +48,7 @@ def register(app: typer.Typer) -> None:
     def check(plan: Annotated[Path, typer.Argument(help="Campaign plan (TOML).")]) -> None:
         """Validate a plan as `campaign run` does before it touches the bus or the database:
         one summary line, or every problem one per line (exit code 1)."""
-        from gyrostand.acquisition.runner import prepare
+        from gyrostand.plan.codec import prepare
         from gyrostand.plan.model import PlanError, load_plan
 
         try:

@@ -17,8 +17,7 @@ import typer
 from gyrostand.cmd_data import DEFAULT_DB, CampaignId, DbOption, open_db
 from gyrostand.db.url import shown_url
 from gyrostand.errors import fail, printable
-from gyrostand.report import FORMATS
-from gyrostand.report.compliance import SHIPPED, SHIPPED_PROFILES
+from gyrostand.report import FORMATS, SHIPPED, SHIPPED_PROFILES
 
 DEFAULT_OUT = Path("runs/reports")
 

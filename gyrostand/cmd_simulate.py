@@ -13,15 +13,11 @@ import time
 import typing
 from dataclasses import MISSING, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import can
 import typer
-from rich.console import Console
 
 from gyrostand.errors import fail
-from gyrostand.stand.protocol import Codec, ProtocolError
-from gyrostand.stand.schedule import LOG_SUFFIXES, ScheduleError, Step, load_schedule, run_schedule
 from gyrostand.stand.simconfig import (
     CompassParams,
     FaultParams,
@@ -29,9 +25,19 @@ from gyrostand.stand.simconfig import (
     SimConfig,
     StandParams,
 )
-from gyrostand.stand.simulator import Simulator
 
-_out = Console(stderr=True, highlight=False, markup=False, emoji=False)  # text
+if TYPE_CHECKING:  # the simulator and the bus are imported when the command runs
+    import can
+
+    from gyrostand.stand.protocol import Codec
+
+
+def _say(text: str) -> None:
+    """A line of plain text on stderr."""
+    from rich.console import Console
+
+    Console(stderr=True, highlight=False, markup=False, emoji=False).print(text)
+
 
 # (SimConfig field or None for its top-level fields, dataclass, help panel)
 _GROUPS: tuple[tuple[str | None, type, str], ...] = (
@@ -199,6 +205,7 @@ def _codec(dbc: Path | None, signals: Path | None) -> Codec | None:
     """The lab's DBC and signal map as the stand's codec, the one a plan with them uses
     (`Codec.of`); None: gyrostand's own DBC."""
     from gyrostand.simulated_stand import StandSetupError, read_signals
+    from gyrostand.stand.protocol import Codec, ProtocolError
 
     if dbc is None and signals is None:
         return None
@@ -210,6 +217,8 @@ def _codec(dbc: Path | None, signals: Path | None) -> Codec | None:
 
 
 def _open_bus(interface: str, channel: str | None) -> can.BusABC:
+    import can
+
     try:
         return can.Bus(interface=interface, channel=channel)
     except (can.CanError, ValueError, ImportError, OSError, NotImplementedError) as exc:
@@ -219,6 +228,14 @@ def _open_bus(interface: str, channel: str | None) -> can.BusABC:
 def _standalone(
     config: SimConfig, run: dict[str, Any], bus: can.BusABC | None, codec: Codec | None
 ) -> None:
+    from gyrostand.stand.schedule import (
+        LOG_SUFFIXES,
+        ScheduleError,
+        Step,
+        load_schedule,
+        run_schedule,
+    )
+
     log: Path | None = run["log"]
     if log is None or log.suffix.lower() not in LOG_SUFFIXES:
         fail(f"standalone mode needs --log FILE ending in {' or '.join(LOG_SUFFIXES)}")
@@ -233,14 +250,19 @@ def _standalone(
     except ScheduleError as exc:
         fail(str(exc))
     for ack in result.refusals:
-        _out.print(f"warning: stand refused {ack.command!r}: {ack.reason}")
-    _out.print(
+        _say(f"warning: stand refused {ack.command!r}: {ack.reason}")
+    _say(
         f"{result.frames} frames, {result.stand_duration_s:g} s of stand time in "
         f"{result.wall_s:.2f} s -> {log}"
     )
 
 
 def _live(config: SimConfig, run: dict[str, Any], bus: can.BusABC, codec: Codec | None) -> None:
+    import can
+
+    from gyrostand.stand.schedule import LOG_SUFFIXES
+    from gyrostand.stand.simulator import Simulator
+
     log: Path | None = run["log"]
     if log is not None and log.suffix.lower() not in LOG_SUFFIXES:
         fail(f"--log must end in {' or '.join(LOG_SUFFIXES)}")
@@ -249,7 +271,7 @@ def _live(config: SimConfig, run: dict[str, Any], bus: can.BusABC, codec: Codec 
         bus, config, codec=codec, recorder=recorder, start_epoch_s=run["start_epoch"]
     )
     pace = "in virtual time" if config.timing == "virtual" else f"at {config.speedup:g}x"
-    _out.print(f"simulating on {run['interface']}:{run['channel']} {pace} (Ctrl-C to stop)")
+    _say(f"simulating on {run['interface']}:{run['channel']} {pace} (Ctrl-C to stop)")
     deadline = None if run["duration_s"] is None else time.monotonic() + run["duration_s"]
     simulator.start()
     try:
@@ -269,7 +291,7 @@ def _live(config: SimConfig, run: dict[str, Any], bus: can.BusABC, codec: Codec 
         finally:
             if recorder is not None:
                 recorder.stop()
-    _out.print(
+    _say(
         f"sent {simulator.frames_sent} frames ({simulator.frames_failed} failed, "
         f"{simulator.receive_errors} receive errors), "
         f"stand time {simulator.stand_time_s:.1f} s"

@@ -6,18 +6,28 @@ unexpected (`unexpected`: a database failing under a command is one line; anythi
 from __future__ import annotations
 
 import datetime
+import functools
 import os
 import sys
 import tempfile
 import traceback
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 import typer
-from rich.console import Console
 
 from gyrostand.db.url import shown_url
 
-_err = Console(stderr=True, highlight=False, soft_wrap=True, markup=False, emoji=False)
+if TYPE_CHECKING:
+    from rich.console import Console
+
+
+@functools.cache
+def _err() -> Console:
+    """stderr as text (rich: imported when an error is printed)."""
+    from rich.console import Console
+
+    return Console(stderr=True, highlight=False, soft_wrap=True, markup=False, emoji=False)
+
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -42,7 +52,7 @@ def printable_lines(text: str) -> str:
 
 def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
     """Print `gyrostand: error: <message>` (one line) to stderr and exit with `code`."""
-    _err.print(f"gyrostand: error: {printable(message)}")
+    _err().print(f"gyrostand: error: {printable(message)}")
     raise typer.Exit(code)
 
 
@@ -81,5 +91,5 @@ def internal_error(exc: BaseException, argv: list[str]) -> NoReturn:
         where = f"traceback written to {printable(path)}"
     except OSError as write_error:
         where = f"the traceback could not be written ({printable(write_error)})"
-    _err.print(f"gyrostand: internal error: {what}; {where}")
+    _err().print(f"gyrostand: internal error: {what}; {where}")
     raise typer.Exit(EXIT_INTERNAL)

@@ -1,9 +1,12 @@
-"""The plan's CAN codec: its DBC (the shipped one unless the plan names a lab DBC), signal map."""
+"""The plan's CAN codec (its DBC: the shipped one unless the plan names a lab DBC; its signal
+map), its simulated stand, and `prepare`: what is checked before the bus or the database is
+touched (`campaign run`, `plan check`)."""
 
 from __future__ import annotations
 
-from gyrostand.plan.model import Plan, PlanError
+from gyrostand.plan.model import BusPlan, Plan, PlanError
 from gyrostand.stand.protocol import Codec, ProtocolError
+from gyrostand.stand.simconfig import SimConfig, simulator_config
 
 
 def codec_for(plan: Plan) -> Codec:
@@ -12,3 +15,25 @@ def codec_for(plan: Plan) -> Codec:
         return Codec.of(plan.dbc_path, plan.signals)
     except ProtocolError as exc:
         raise PlanError([str(exc)]) from None
+
+
+def sim_config(bus: BusPlan) -> SimConfig:
+    """The simulated stand for a plan: its `[bus.simulator]` overrides (validated with the plan)
+    on the defaults, with the plan's speedup, seed and timing."""
+    return simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
+
+
+def prepare(plan: Plan) -> None:
+    """Everything that can be checked before the bus or the database is touched (PlanError),
+    including that the stand command of every trial can be encoded (its DBC ranges)."""
+    codec = codec_for(plan)
+    problems = []
+    for t in plan.trials:
+        try:
+            codec.encode_command_set(t.direction_deg, t.amplitude_cm, t.period_s)
+        except ProtocolError as exc:
+            problems.append(f"[[trials]] {t.index}: the stand command cannot carry it: {exc}")
+    if problems:
+        raise PlanError(problems)
+    if plan.bus.simulated:
+        sim_config(plan.bus)

@@ -21,7 +21,7 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Annotated, Any, Literal, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeVar
 
 from pydantic import (
     AfterValidator,
@@ -38,10 +38,12 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from gyrostand.analysis.transient import TransientModel
 from gyrostand.stand.protocol import SignalMap
 from gyrostand.stand.simconfig import SimConfigError, simulator_config, simulator_tables
 from gyrostand.stand.tables import TABLE_CONFIG, check, problems
+
+if TYPE_CHECKING:  # (numpy and scipy: not for checking a plan)
+    from gyrostand.analysis.transient import TransientModel
 
 EARTH_RATE_RAD_S = 7.292115e-5  # the sidereal rotation rate of the Earth (IERS)
 GRAVITY_CM_S2 = 981.0
@@ -336,6 +338,8 @@ class EstimatePlan:
 
     @property
     def model(self) -> TransientModel:
+        from gyrostand.analysis.transient import TransientModel
+
         return TransientModel(self.undamped_period_s, self.damping_ratio)
 
 
@@ -431,6 +435,8 @@ class SettlePlan(_Table):
         """The compass's transient (Bezvesilna & Gura eq 1) when the plan gives it."""
         if self.undamped_period_s is None or self.damping_ratio is None:
             return None
+        from gyrostand.analysis.transient import TransientModel
+
         return TransientModel(self.undamped_period_s, self.damping_ratio)
 
 

@@ -16,3 +16,5 @@ inputs, the CLI (`gyrostand report`) composes.
 """
 
 FORMATS = ("html", "pdf", "json", "csv")  # what `writer.write_report` writes
+SHIPPED = "imo-a424"  # the default limits profile (`compliance.load_profile`)
+SHIPPED_PROFILES = ("imo-a424", "imo-a821", "iso-22090-1")

@@ -36,17 +36,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gyrostand.report import SHIPPED, SHIPPED_PROFILES
 from gyrostand.report.errors import ReportError
 
-if TYPE_CHECKING:  # annotations only: the CLI reads SHIPPED without loading scipy
+if TYPE_CHECKING:  # annotations only (scipy is not loaded for this module)
     from gyrostand.analysis.campaign import CampaignAnalysis
     from gyrostand.analysis.forecast import EnvelopeWorst
     from gyrostand.report.model import PlanSummary
 
 PASS, FAIL, NOT_ASSESSED = "PASS", "FAIL", "NOT ASSESSED"
 INDICATIVE, INDICATIVE_PASS, INDICATIVE_FAIL = "INDICATIVE", "INDICATIVE PASS", "INDICATIVE FAIL"
-SHIPPED = "imo-a424"
-SHIPPED_PROFILES = ("imo-a424", "imo-a821", "iso-22090-1")
 INTERVAL_TOLERANCE = 0.05
 """A campaign's reading interval matches the standard's within this fraction."""
 

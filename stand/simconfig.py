@@ -9,8 +9,6 @@ import typing
 from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING, Any
 
-from gyrostand.stand.physics import rolling_error_rad
-
 if TYPE_CHECKING:
     from pydantic import BaseModel
 
@@ -67,6 +65,8 @@ class CompassParams:
         """The settled reading shift while rocking (0 when the rolling error is switched off)."""
         if not self.rolling_error:
             return 0.0
+        from gyrostand.stand.physics import rolling_error_rad  # numpy: not for the CLI's options
+
         alpha = rolling_error_rad(
             direction_deg,
             amplitude_cm,

@@ -32,6 +32,7 @@ from starlette.templating import Jinja2Templates
 from gyrostand.db.lease import held_elsewhere
 from gyrostand.db.models import CAMPAIGN_STATUSES, Campaign
 from gyrostand.db.queries import CampaignFilter, campaign_list, sign_offs
+from gyrostand.db.session import writer
 from gyrostand.plan.model import Plan, PlanError, load_plan, parse_plan
 from gyrostand.station.operator import (
     FIELD,
@@ -81,7 +82,8 @@ class Station:
             return query(session, *args)
 
     def write(self, action: Any, *args: Any) -> Any:
-        with self.sessions.begin() as session:
+        """A short write transaction, queued behind another writer (a running campaign)."""
+        with writer(self.sessions).begin() as session:
             return action(session, *args)
 
     def acquiring(self, campaign_id: int) -> bool:
@@ -372,5 +374,5 @@ def create_app(
 
 
 def _write(sessions: sessionmaker[Session], cid: int, role: str, name: str) -> None:
-    with sessions.begin() as session:
+    with writer(sessions).begin() as session:
         sign_off(session, cid, role, name)

@@ -149,8 +149,13 @@ def test_recorder_counts_what_a_full_queue_drops(tmp_path) -> None:
     for i in range(5):
         recorder.on_message_received(can.Message(arbitration_id=i))
     assert recorder.dropped == 2
-    assert [m.arbitration_id for m in recorder.drain(10, 0.0)] == [0, 1, 2]
-    assert recorder.drain(10, 0.01) == []
+    assert [m.arbitration_id for m in recorder.drain(2, 0.0)] == [0, 1]
+    assert recorder.overflows == []
+    recorder.on_message_received(can.Message(arbitration_id=5))  # room again: kept
+    assert [m.arbitration_id for m in recorder.drain(10, 0.0)] == [2, 5]
+    # where the two went missing: after frame 2, the first of this drain
+    assert [(before, o.frames) for before, o in recorder.overflows] == [(1, 2)]
+    assert recorder.drain(10, 0.01) == [] and recorder.overflows == []
 
 
 def test_replay_with_another_plan_is_flagged() -> None:

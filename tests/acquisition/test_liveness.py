@@ -8,13 +8,15 @@ the stream times out."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import can
 import numpy as np
 import pytest
 
-from gyrostand.acquisition.engine import Command, Engine
+from gyrostand.acquisition.bus import Recorder as FrameQueue
+from gyrostand.acquisition.engine import Command, Engine, Phase
 from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.plan.model import parse_plan
@@ -225,6 +227,64 @@ def test_a_clean_run_has_no_stuck_flag() -> None:
     assert len(sink.observations) == 12
 
 
+def settled_at(sink: Recorder) -> dict[tuple[int, int], int]:
+    """(trial, j) -> stand time (ms) each series settled."""
+    return {(a[0], a[1]): a[2] for a in sink.of("series_settled")}
+
+
+def test_a_stuck_run_inside_a_settle_hold_is_flagged_and_not_settled_on() -> None:
+    """The sensor stuck from 30 s to 55 s, inside the hold (two 30 s blocks) that settles
+    series 1 of trial 1 at 60.1 s in the clean run: the block 30.1-60.1 s is flagged and the
+    series settles on the next two blocks instead, at 120.1 s. Before: settled at 60.1 s on
+    the stuck readings, without a word."""
+    clean, _, _ = run()
+    assert settled_at(clean)[1, 1] == 60_100
+    sink, _, engine = run(stuck_at_s=30.0, stuck_for_s=25.0)
+    assert engine.outcome == "completed" and not failures(sink)
+    assert settled_at(sink)[1, 1] == 60_100 + 60_000
+    run_length = round((55.0 - 30.1) / 0.1)  # heading frames 30.1 .. 54.9 s of that block
+    assert events(sink, "stuck sensor") == [
+        (
+            "warning",
+            f"settle block 30.1-60.1 s: {run_length} identical heading readings in a row "
+            f"({run_length / 300:.0%} of its 300 frames; flagged above 30); the series does not "
+            "settle on it",
+            1,
+            1,
+            60_100,
+        )
+    ]
+    assert all(o.flags == "" for o in sink.observations)
+
+
+def test_a_sensor_stuck_through_the_settle_times_it_out_with_the_reason() -> None:
+    """Before: the series settled on the stuck readings and the trial failed in its first
+    observation window ("stuck sensor: 300 identical readings in observation window 1")."""
+    text = plan_text().replace("max_wait_s = 3600.0", "max_wait_s = 300.0")
+    sink, sim = Recorder(), Tampered(stuck_at_s=30.0, stuck_for_s=2_000.0)
+    engine = Engine(parse_plan(text), sink, sim)
+    sim.run(engine, 1_000.0)
+    reason = "not settled within 300 s (stuck sensor in the last 2 settle blocks)"
+    assert failures(sink)[0] == (1, 1, reason)
+    assert not [o for o in sink.observations if o.trial == 1]
+
+
+def test_a_still_compass_on_a_coarse_sensor_is_not_flagged() -> None:
+    """An angle sensor in 0.05 deg steps, coarser than the compass's noise: a still compass
+    repeats its reading for whole windows. Told once that runs are not judged; nothing flagged,
+    nothing failed. Before: trial 2 failed "stuck sensor: 300 identical readings in
+    observation window 2"."""
+    sink, sim = Recorder(), Tampered()
+    noise = dataclasses.replace(sim.stand.config.noise, quantum_deg=0.05)
+    sim.stand = type(sim.stand)(dataclasses.replace(sim.stand.config, noise=noise), Codec())
+    engine = Engine(small_plan(), sink, sim)
+    sim.run(engine, 3_000.0)
+    assert engine.outcome == "completed" and not failures(sink)
+    assert len(sink.observations) == 12 and all(o.flags == "" for o in sink.observations)
+    (told,) = events(sink, "stuck sensor")
+    assert told[0] == "info" and told[1].startswith("runs of identical heading readings are not")
+
+
 # ------------------------------------------------------------------------- command not seen
 class Deaf(Lockstep):
     """Commands never reach the bus (nor the raw stream): the stand keeps sending, still."""
@@ -270,3 +330,76 @@ def test_the_new_rules_do_not_depend_on_batching(tamper: Tamper | None, faults: 
             chunk = sim.stream[start : start + size]
             engine.feed(decoder.decode(RawFrames.from_messages(start, chunk)))
         assert sink.calls == live.calls, size
+
+
+# ---------------------------------------------------------------------------- queue overflow
+class Congested(Lockstep):
+    """The lockstep stand's frames pass through the acquisition's bounded queue
+    (`acquisition.bus.Recorder`), which the campaign does not drain during the steps that end
+    in `stalls` (stand time s, as a campaign thread held up would not): the queue fills and
+    drops what comes, as live. `sent`: frames the stand put in the queue, per step end, and
+    `stream` all of them."""
+
+    def __init__(self, maxsize: int, stalls: set[float], **faults: object) -> None:
+        super().__init__(quick_config(**faults))
+        self.queue, self.stalls = FrameQueue(maxsize, None), stalls
+        self.sent: dict[float, int] = {}
+
+    def run(self, engine: Engine, max_stand_s: float = 1_000.0) -> None:
+        decoder = BatchDecoder(Codec())
+        position, t = 0, 0.0
+        while engine.phase is not Phase.DONE and t < max_stand_s:
+            t += self.step_s
+            frames, self._pending = self._pending + self.stand.advance_to(t), []
+            self.sent[t] = len(frames)
+            self.stream += frames
+            for msg in frames:
+                self.queue.on_message_received(msg)
+            if t in self.stalls:
+                continue
+            msgs = self.queue.drain(1_000_000, 0.0)
+            for before, overflow in self.queue.overflows:
+                engine.frames_dropped(position + before, overflow)
+            engine.feed(decoder.decode(RawFrames.from_messages(position, msgs)))
+            position += len(msgs)
+
+
+def congested(maxsize: int, stalls: set[float], **faults: object) -> tuple[Recorder, Congested]:
+    sink, sim = Recorder(), Congested(maxsize, stalls, **faults)
+    engine = Engine(small_plan(), sink, sim)
+    sim.run(engine)
+    assert engine.outcome == "completed"
+    return sink, sim
+
+
+def test_a_queue_overflow_fails_the_trial_as_an_overflow_not_as_bus_silence() -> None:
+    """The campaign held up from 100 s to 130 s of stand time (inside trial 1's second still
+    window): the queue of 200 frames fills and every later frame is dropped until it is
+    drained. Before: "bus silence: no heading frame for 25.6 s of stand time"."""
+    stalls = {100.0, 105.0, 110.0, 115.0, 120.0, 125.0}
+    sink, sim = congested(200, stalls)
+    dropped = sum(sim.sent[t] for t in (*stalls, 130.0)) - 200  # the last step's too
+    assert dropped > 300 and sim.queue.dropped == dropped
+    (trial, j, reason), *_ = failures(sink)
+    assert (trial, j) == (1, 1)
+    assert reason.startswith(
+        f"the acquisition's queue overflowed: {dropped} frames dropped (no valid heading frame for "
+    )
+    assert [(e[0], e[1]) for e in events(sink, "queue overflow")] == [("error", reason)]
+    assert not events(sink, "bus silence")
+
+
+def test_an_overflow_shorter_than_the_timeout_is_lost_frames_and_no_later_silence_s_cause() -> None:
+    """Frames dropped for a few seconds are lost frames of the window they fall in; the stand's
+    silence of 30 s later on is still told as bus silence."""
+    sink, sim = congested(120, {65.0}, silence_at_s=150.0, silence_for_s=30.0)
+    # the queue, empty after the step ending at 60 s, keeps the first 120 frames of the next two
+    before = sum(n for t, n in sim.sent.items() if t <= 60.0)
+    lost = sim.stream[before + 120 : before + sim.sent[65.0] + sim.sent[70.0]]
+    assert sim.queue.dropped == len(lost) == 40  # 2.5 s, less than the 5 s timeout
+    first = sink.observations[0]
+    assert (first.trial, first.j, first.k) == (1, 1, 1)
+    assert first.flags == f"lost={sum(m.arbitration_id == HEADING_ID for m in lost)}"
+    (trial, _, reason), *_ = failures(sink)
+    assert trial == 1 and reason.startswith("bus silence: no heading frame for ")
+    assert not events(sink, "queue overflow")

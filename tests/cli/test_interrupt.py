@@ -168,3 +168,52 @@ def test_sigint_while_resume_takes_the_campaign_over_stops_it_with_an_event(
     resumed = [e for e in events if e[0] == "resume"]
     assert len(resumed) == 1 and resumed[0][2].startswith("resumed by process")
     assert events == [STOPPED_BEFORE, resumed[0], STOPPED_BEFORE]
+
+
+# --------------------------------------------------------------------- Ctrl-C during start-up
+SIGINT_AT_IMPORT = '''
+import os, signal, sys
+
+class SigintAt:
+    """SIGINT delivered (to this main thread, at once) when the named module is imported."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name == os.environ["GYROSTAND_TEST_SIGINT_AT"]:
+            sys.meta_path.remove(self)
+            signal.raise_signal(signal.SIGINT)
+        return None
+
+sys.meta_path.insert(0, SigintAt())
+'''
+
+
+@pytest.mark.parametrize(
+    ("program", "module", "args"),
+    [
+        ("-m", "typer", ["--version"]),  # the CLI's first third-party import
+        ("-m", "gyrostand.cmd_simulate", ["--help"]),  # one of the command modules
+        ("-m", "gyrostand.plan.model", ["plan", "check", "plan.toml"]),  # inside the command
+        ("script", "gyrostand.cli", ["--version"]),  # the installed `gyrostand` command
+    ],
+)
+def test_ctrl_c_during_start_up_is_one_line_and_exit_code_130(
+    tmp_path: Path, program: str, module: str, args: list[str]
+) -> None:
+    """Before: a KeyboardInterrupt traceback from the imports (exit code 1). The SIGINT is
+    raised by an import hook (a sitecustomize on PYTHONPATH) as the module is imported."""
+    import os
+    import subprocess
+    import sys
+
+    (tmp_path / "sitecustomize.py").write_text(SIGINT_AT_IMPORT)
+    (tmp_path / "plan.toml").write_text("")
+    env = {**os.environ, "PYTHONPATH": str(tmp_path), "GYROSTAND_TEST_SIGINT_AT": module}
+    command = (
+        [sys.executable, "-m", "gyrostand"]
+        if program == "-m"
+        else [str(Path(sys.executable).with_name("gyrostand"))]
+    )
+    run = subprocess.run(
+        [*command, *args], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120
+    )
+    assert (run.returncode, run.stdout, run.stderr) == (130, "", "gyrostand: interrupted\n")

@@ -2,6 +2,7 @@
 
 import re
 import sqlite3
+import time
 from pathlib import Path
 
 import pandas as pd
@@ -163,3 +164,48 @@ def test_locked_database_is_a_clean_error_and_nothing_is_written(
         "gyrostand: error: nothing imported, the database refused the write: database is locked\n"
     )
     assert dump(db_path) == before
+
+
+def test_import_waits_for_a_campaign_that_writes_and_commits_meanwhile(
+    paper: Path, db_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Another writer (a running campaign) holds the write lock while the import starts, writes
+    and commits half a second later: the import waits its turn (busy timeout) and then stores
+    its campaign. Before: "database is locked" (the import's transaction had read the database
+    before the other commit, so it could not write after it)."""
+    import threading
+
+    from gyrostand.db import io
+
+    assert gyrostand("import", paper, "--db", db_path)[0] == 0
+    other_writer = sqlite3.connect(db_path, isolation_level=None, check_same_thread=False)
+    other_writer.execute("BEGIN IMMEDIATE")
+    other_writer.execute("UPDATE campaign SET operator = 'campaign writer' WHERE id = 1")
+    importing = threading.Event()
+
+    def commit_later() -> None:
+        importing.wait(60)
+        time.sleep(0.5)  # the import is inside its transaction meanwhile
+        other_writer.execute("COMMIT")
+
+    def store_import(*args: object, **kwargs: object) -> object:
+        importing.set()
+        return real_store_import(*args, **kwargs)
+
+    real_store_import = io.store_import
+    monkeypatch.setattr(io, "store_import", store_import)
+    committer = threading.Thread(target=commit_later)
+    committer.start()
+    try:
+        code, out, err = gyrostand("import", paper, "--db", db_path)
+    finally:
+        importing.set()
+        committer.join()
+        other_writer.close()
+    assert code == 0 and out.endswith("as campaign 2\n"), err
+    assert campaign(db_path, 1).operator == "campaign writer"
+    with sqlite3.connect(db_path) as connection:
+        counts = connection.execute(
+            "SELECT campaign_id, COUNT(*) FROM trial GROUP BY campaign_id ORDER BY 1"
+        ).fetchall()
+    assert counts == [(1, 6), (2, 6)]  # PAPER_CSV's 6 trials, imported twice

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from gyrostand.acquisition.bus import sim_config
+from gyrostand.plan.codec import sim_config
 from gyrostand.plan.model import PlanError, parse_plan, schema
 from gyrostand.stand.simconfig import SimConfig, SimConfigError
 

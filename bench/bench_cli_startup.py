@@ -1,0 +1,86 @@
+"""Start-up of the light commands: `--version`, `--help`, `plan check`, `campaign status` and
+`campaign list` (on a database holding the paper's campaign, imported from examples/paper.csv).
+Prints, per command, the wall time of `python -m gyrostand ...` (best and median of --runs) and
+the `python -X importtime` total (the sum of every module's own import time, best run), with
+the heaviest top-level packages it imported.
+
+Target (issue 36): each <= 0.3 s on an idle machine. What the commands cannot do without: Python
+and typer (~0.1 s; typer coerces the arguments of a command with pydantic); `plan check`
+pydantic (the plan model) and python-can, cantools and numpy (the DBC's ranges, checked with the
+stand protocol's codec); `campaign status` and `campaign list` SQLAlchemy and Alembic (the
+schema version is checked before anything is read).
+
+Run: .venv/bin/python bench/bench_cli_startup.py [--runs 7]"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+GYROSTAND = [sys.executable, "-m", "gyrostand"]
+LINE = re.compile(r"^import time:\s+(\d+) \|\s+(\d+) \|( *)(\S+)$")
+
+
+def commands(db: Path) -> dict[str, list[str]]:
+    return {
+        "--version": ["--version"],
+        "--help": ["--help"],
+        "plan check": ["plan", "check", str(ROOT / "examples" / "paper.toml")],
+        "campaign status": ["campaign", "status", "1", "--db", str(db)],
+        "campaign list": ["campaign", "list", "--db", str(db)],
+    }
+
+
+def wall_s(args: list[str]) -> float:
+    start = time.perf_counter()
+    subprocess.run([*GYROSTAND, *args], capture_output=True, check=True)
+    return time.perf_counter() - start
+
+
+def import_times(args: list[str]) -> tuple[float, Counter[str]]:
+    """The `-X importtime` total (s) and each top-level package's own time summed (s)."""
+    err = subprocess.run(
+        [sys.executable, "-X", "importtime", "-m", "gyrostand", *args],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stderr
+    own: Counter[str] = Counter()
+    for line in err.splitlines():
+        if m := LINE.match(line):
+            own[m[4].split(".")[0]] += int(m[1]) / 1e6
+    return sum(own.values()), own
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=int, default=7)
+    runs = parser.parse_args().runs
+    with tempfile.TemporaryDirectory() as folder:
+        db = Path(folder) / "bench.sqlite"
+        subprocess.run(
+            [*GYROSTAND, "import", str(ROOT / "examples" / "paper.csv"), "--db", str(db)],
+            capture_output=True,
+            check=True,
+        )
+        print(f"{'command':<16} {'wall best':>9} {'median':>7} {'imports':>8}  heaviest packages")
+        for name, args in commands(db).items():
+            walls = [wall_s(args) for _ in range(runs)]
+            total, own = min((import_times(args) for _ in range(3)), key=lambda r: r[0])
+            heavy = ", ".join(f"{p} {s * 1000:.0f} ms" for p, s in own.most_common(4))
+            print(
+                f"{name:<16} {min(walls):>8.3f}s {statistics.median(walls):>6.3f}s "
+                f"{total:>7.3f}s  {heavy}"
+            )
+
+
+if __name__ == "__main__":
+    main()
