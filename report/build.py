@@ -15,7 +15,7 @@ from gyrostand.analysis.forecast import (
     forecast_grid,
 )
 from gyrostand.report.compliance import (
-    INDICATIVE,
+    INCONCLUSIVE,
     NOT_ASSESSED,
     PASS,
     Compliance,
@@ -25,7 +25,7 @@ from gyrostand.report.compliance import (
 from gyrostand.report.model import ReportInputs
 from gyrostand.report.signal import SignalSection, signal_section
 
-SCHEMA = "gyrostand.report/4"
+SCHEMA = "gyrostand.report/5"
 COURSE_STEP_DEG = 5.0  # forecast grid
 TABLE_COURSE_STEP_DEG = 15.0  # forecast table
 
@@ -85,11 +85,14 @@ class ForecastSection:
 
 @dataclass(frozen=True)
 class Conformity:
-    """The report's one statement of conformity: ``verdict`` (PASS, FAIL, INDICATIVE or NOT
-    ASSESSED), the sentence that states it, and every reason a PASS became INDICATIVE."""
+    """The report's one statement of conformity (ISO/IEC 17025:2017 7.8.6): the overall
+    ``verdict`` (PASS, FAIL, INCONCLUSIVE or NOT ASSESSED), the ``statement`` that follows it
+    (what it covers; the word itself is not repeated), the ``decision_rule`` applied, and every
+    reason that keeps a PASS from being issued."""
 
     verdict: str
     statement: str
+    decision_rule: str
     reasons: tuple[str, ...]
 
 
@@ -100,14 +103,13 @@ def conformity(
     simulated: bool,
     planned_trials: int,
 ) -> Conformity:
-    """The profile's verdict (`Compliance.verdict`), qualified by what it rests on: a PASS is
-    only INDICATIVE when trials are missing, a statistical check of the method failed, or the
+    """The profile's decision (`Compliance.decision`), qualified by what it rests on: a PASS
+    is INCONCLUSIVE when trials are missing, a statistical check of the method failed, or the
     instrument was simulated; a FAIL on a verified limit stands whatever else holds."""
+    rule = compliance.decision_rule_text
     if analysis is None:
         return Conformity(
-            NOT_ASSESSED,
-            f"NOT ASSESSED: the campaign could not be analysed ({analysis_error}).",
-            (),
+            NOT_ASSESSED, f"the campaign could not be analysed ({analysis_error}).", rule, ()
         )
     reasons = []
     if simulated:
@@ -131,13 +133,13 @@ def conformity(
         },
     }
     reasons += [reason for reason, broken in checks.items() if broken]
-    verdict = compliance.verdict
+    verdict = compliance.decision
     if verdict == PASS and reasons:
-        verdict = INDICATIVE
-    statement = f"{verdict}: {compliance.summary}."
+        verdict = INCONCLUSIVE
+    statement = f"against {compliance.profile_name}: {compliance.summary}."
     if reasons:
         statement += " The result rests on a campaign in which " + "; ".join(reasons) + "."
-    return Conformity(verdict, statement, tuple(reasons))
+    return Conformity(verdict, statement, rule, tuple(reasons))
 
 
 @dataclass(frozen=True)

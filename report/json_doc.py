@@ -1,14 +1,18 @@
 """The report as one JSON document: every number the report prints, for machines and for diffing
 two reports. Deterministic: the same database gives the same text except ``generated_at``.
 
-Schema ``gyrostand.report/4`` (plain JSON types; absent values are null). Version 2 added
+Schema ``gyrostand.report/5`` (plain JSON types; absent values are null). Version 2 added
 ``signal``; version 3 the laboratory items of ``identification`` (the plan's [report] table),
 ``plan.settle_criterion`` (text, in place of the band's three numbers), ``signatures``
 {recorded_operator}, the parameters' ``fit.confidence_intervals`` and ``conformity``; version 4
-``draft``.
+``draft``; version 5 one decision per requirement under a stated decision rule (``compliance``
+``decision``, ``decision_rule``, ``predictions``; per item ``uncertainty_deg``,
+``acceptance_limit_deg``, ``verified_by``), ``conformity.decision_rule``.
 
 - ``schema``, ``generated_at`` (the only wall-clock field), ``draft`` (true: not for signature);
-- ``conformity``: verdict, statement, reasons (`report.build.Conformity`);
+- ``conformity``: verdict (the overall decision: PASS, FAIL, INCONCLUSIVE or NOT ASSESSED),
+  statement (what it covers; the word not repeated), decision_rule (the rule in words), reasons
+  (`report.build.Conformity`);
 - ``identification``: the fields of `report.model.Identification`;
 - ``plan``: `PlanSummary` (n_obs, trials [index, role, direction_deg, amplitude_cm, period_s],
   windows, settle criterion, notes, plan_toml);
@@ -30,13 +34,17 @@ Schema ``gyrostand.report/4`` (plain JSON types; absent values are null). Versio
   worst_by_period, worst (grid points: course_deg, direction_deg, roll_deg, period_s,
   latitude_deg, alpha_deg, half_width_deg, bound_deg)};
 - ``compliance``: profile_id, profile_name, edition, source, caution, envelope,
-  envelope_source, envelope_verified, site_latitude_deg, verdict (PASS, FAIL, INDICATIVE or
-  NOT ASSESSED: `Compliance.verdict`), summary, items (id, clause, requirement, evidence, source,
-  verified, stated_limit_deg, secant_latitude, limit_deg, limit_text, value_deg, verdict (PASS,
-  FAIL, INDICATIVE PASS, INDICATIVE FAIL or NOT ASSESSED), detail, worst: null or the forecast's
-  worst case over the envelope {course_deg, direction_deg, angle_deg, period_s,
-  acceleration_m_s2, latitude_deg, amplitude_cm, alpha_deg, half_width_deg, ratio, motion,
-  arm_cm, q});
+  envelope_source, envelope_verified, site_latitude_deg, decision_rule ("simple" or "guarded",
+  ILAC-G8:09/2019 4.2.1-4.2.2) and decision_rule_text, decision (PASS, FAIL, INCONCLUSIVE or NOT
+  ASSESSED: `Compliance.decision`), summary (counts, the decision word not repeated), items (one
+  decision per measured requirement: id, clause, requirement, evidence, source, verified,
+  verified_by (who at the laboratory, when, against which edition; null: nobody), stated_limit_deg,
+  secant_latitude, limit_deg, limit_text, value_deg, uncertainty_deg (expanded, about 95 %),
+  uncertainty_text, acceptance_limit_deg (limit - guard band), verdict (PASS, FAIL, UNVERIFIED or
+  NOT ASSESSED), detail, exceeds, worst: null), predictions (the forecasts, the same keys, verdict
+  PREDICTION, exceeds: the predicted bound beyond the limit, worst: the forecast's worst case
+  over the envelope {course_deg, direction_deg, angle_deg, period_s, acceleration_m_s2,
+  latitude_deg, amplitude_cm, alpha_deg, half_width_deg, ratio, motion, arm_cm, q});
 - ``signal`` (section 10, `report.signal.SignalSection.to_dict`): ``record`` {source,
   start_ms, dt_s, n, duration_s, frames, filled} or null, record_note, trend_deg_per_h,
   ``noise`` (`analysis.noise.NoiseCharacterisation.to_dict`: correlation {lag_s, covariance,
@@ -138,7 +146,8 @@ def report_document(report: Report) -> dict[str, Any]:
             "forecast": forecast,
             "compliance": {
                 **asdict(report.compliance),
-                "verdict": report.compliance.verdict,
+                "decision": report.compliance.decision,
+                "decision_rule_text": report.compliance.decision_rule_text,
                 "summary": report.compliance.summary,
             },
             "signal": report.signal.to_dict(),

@@ -76,9 +76,11 @@ def test_report_takes_each_shipped_profile(stored: Stored, tmp_path: Path, profi
     assert result.exit_code == 0, result.output
     compliance = json.loads((out / "campaign-1.json").read_text())["compliance"]
     assert compliance["profile_id"] == profile
-    assert compliance["verdict"] == "INDICATIVE"  # the 1982 compass: forecast beyond the limit
-    assert compliance["summary"].startswith(f"INDICATIVE against {profile}: ")
-    worst = next(i["worst"] for i in compliance["items"] if i["worst"] is not None)
+    # no shipped limit is verified by a laboratory; the ISO draft's stand test moves 3 axes
+    decision = "NOT ASSESSED" if profile == "iso-22090-1" else "INCONCLUSIVE"
+    assert compliance["decision"] == decision and decision not in compliance["summary"]
+    assert compliance["decision_rule"] == "guarded"
+    worst = next(i["worst"] for i in compliance["predictions"] if i["worst"] is not None)
     assert worst["angle_deg"] == pytest.approx(20.0) and worst["period_s"] > 10.0
 
 

@@ -116,7 +116,7 @@ def test_json_is_deterministic_and_the_run_is_recorded_once(paper: Stored) -> No
             select(func.count(AnalysisRun.id)).where(AnalysisRun.campaign_id == paper.campaign_id)
         )
     assert runs == 1
-    assert first["schema"] == "gyrostand.report/4"
+    assert first["schema"] == "gyrostand.report/5"
     assert first["analysis"]["cochran"]["g_ex"] == pytest.approx(REFERENCE["g_ex"], abs=1e-4)
     assert first["identification"]["analysis_run"] >= 1
 
@@ -150,26 +150,34 @@ def test_missing_pdf_engine_is_one_clear_error(
 
 
 def test_one_statement_of_conformity(paper_report: Report, paper_files: Rendered) -> None:
-    """The profile's verdict, qualified: a PASS rests on the whole campaign and its checks."""
+    """The profile's decision, qualified: a PASS rests on the whole campaign and its checks;
+    the decision word appears once, with the decision rule."""
     from dataclasses import replace
 
     from gyrostand.analysis.campaign import LeftOutTrial
     from gyrostand.report.build import conformity
-    from gyrostand.report.compliance import FAIL, INDICATIVE, PASS
+    from gyrostand.report.compliance import DECISION_RULES, FAIL, INCONCLUSIVE, PASS
 
     c, a = paper_report.compliance, paper_report.analysis
     stated = paper_report.conformity
-    assert stated.verdict == c.verdict and stated.statement.startswith(f"{c.verdict}: {c.summary}")
+    assert stated.verdict == c.decision == INCONCLUSIVE  # the limits are not verified by a lab
+    assert stated.statement.startswith(f"against {c.profile_name}: {c.summary}")
+    assert stated.decision_rule == DECISION_RULES["guarded"]
     assert stated.reasons == ()  # the paper's campaign: every check of the method holds
-    assert "Statement of conformity." in paper_files.pdf_text
+    page_1 = paper_files.pdf_text.split("Results at a glance")[0]
+    assert "Statement of conformity." in page_1 and "Decision rule: guarded acceptance" in page_1
+    assert re.sub(r"\s+", " ", page_1).count("INCONCLUSIVE") == 1
+    document = json.loads(paper_files.files["json"].read_text())
+    assert INCONCLUSIVE not in document["compliance"]["summary"]
+    assert INCONCLUSIVE not in document["conformity"]["statement"]
     passed = replace(c, items=tuple(replace(i, verdict=PASS) for i in c.items))
     assert conformity(passed, a, None, False, 6).verdict == PASS
     simulated = conformity(passed, a, None, True, 6)
-    assert simulated.verdict == INDICATIVE
+    assert simulated.verdict == INCONCLUSIVE
     assert simulated.reasons == ("the instrument and the stand were simulated",)
     dropped = replace(a, left_out=(LeftOutTrial(7, 1, "fit", "failed", "trial failed: x"),))
     missing = conformity(passed, dropped, None, False, 7)
-    assert missing.verdict == INDICATIVE
+    assert missing.verdict == INCONCLUSIVE
     assert missing.reasons == (f"{len(a.trials)} of 7 planned trials analysed (trial 7 not)",)
     unequal = replace(a, cochran=replace(a.cochran, homogeneous=False))
     assert conformity(passed, unequal, None, False, 6).reasons == (
@@ -180,7 +188,7 @@ def test_one_statement_of_conformity(paper_report: Report, paper_files: Rendered
     not_analysed = conformity(passed, None, "every trial failed", False, 6)
     assert (not_analysed.verdict, not_analysed.statement) == (
         "NOT ASSESSED",
-        "NOT ASSESSED: the campaign could not be analysed (every trial failed).",
+        "the campaign could not be analysed (every trial failed).",
     )
 
 
