@@ -22,7 +22,7 @@ from gyrostand.report.compliance import (
     Profile,
     assess,
 )
-from gyrostand.report.model import ReportInputs
+from gyrostand.report.model import NOT_STATED, ReportInputs
 from gyrostand.report.signal import SignalSection, signal_section
 
 SCHEMA = "gyrostand.report/5"
@@ -158,7 +158,42 @@ class Report:
     compliance: Compliance
     signal: SignalSection
     conformity: Conformity
-    draft: bool = False  # not for signature: DRAFT on every page
+    missing: tuple[str, ...] = ()  # the items of ISO/IEC 17025 7.8.2 it lacks (`missing_items`)
+    draft: bool = False  # not for issue: DRAFT on every page (always when ``missing``)
+
+    @property
+    def title(self) -> str:
+        """The report's own title: the instrument, its serial and the report number."""
+        ident = self.inputs.identification
+        number = ident.report_number or f"of campaign {ident.campaign_id} (unnumbered)"
+        return (
+            f"Rolling-error test report {number}: {ident.instrument_model}, serial "
+            f"{ident.instrument_serial}"
+        )
+
+    @property
+    def end_of_report(self) -> str:
+        """The line that closes the document (ISO/IEC 17025 7.8.2.1 d)."""
+        number = self.inputs.identification.report_number
+        return f"End of report {number}" if number else "End of report (unnumbered: a DRAFT)"
+
+
+def missing_items(inputs: ReportInputs) -> tuple[str, ...]:
+    """What a report must identify (ISO/IEC 17025:2017 7.8.2.1) and this one does not state:
+    report number, laboratory, customer, the instrument's manufacturer, the dates of the
+    trials, and the two sign-offs of the operator station (tested by, checked by). Empty: it
+    can be issued as final."""
+    ident, signed = inputs.identification, inputs.signatures
+    stated = {
+        "report number": ident.report_number is not None,
+        "laboratory": ident.laboratory != NOT_STATED,
+        "customer": ident.customer != NOT_STATED,
+        "manufacturer": ident.manufacturer != NOT_STATED,
+        "dates of the trials": ident.test_dates != NOT_STATED,
+        "sign-off 'tested by'": signed.tested_by is not None,
+        "sign-off 'checked by'": signed.checked_by is not None,
+    }
+    return tuple(item for item, given in stated.items() if not given)
 
 
 def trial_rows(analysis: CampaignAnalysis) -> tuple[TrialRow, ...]:
@@ -249,10 +284,12 @@ def build_report(
     *,
     generated_at: str,
     signal: SignalSection | None = None,
+    draft: bool = False,
 ) -> Report:
     """Assemble the report; ``analysis`` is the analysis or, when it failed, the reason.
     ``generated_at`` is the report's only wall-clock field (ISO 8601 text); ``signal`` the
-    signal analysis the analysis used (default: made from the inputs' reading record)."""
+    signal analysis the analysis used (default: made from the inputs' reading record). The
+    report is a DRAFT when ``draft`` or when it lacks an item of `missing_items`."""
     if signal is None:
         signal = signal_section(
             inputs.reading, inputs.reading_note, inputs.records, inputs.acceptance
@@ -265,6 +302,7 @@ def build_report(
         else None
     )
     error = analysis if isinstance(analysis, str) else None
+    missing = missing_items(inputs)
     return Report(
         schema=SCHEMA,
         generated_at=generated_at,
@@ -282,4 +320,6 @@ def build_report(
             inputs.identification.simulated,
             len(inputs.plan.trials),
         ),
+        missing=missing,
+        draft=draft or bool(missing),
     )

@@ -7,9 +7,12 @@ Schema ``gyrostand.report/5`` (plain JSON types; absent values are null). Versio
 {recorded_operator}, the parameters' ``fit.confidence_intervals`` and ``conformity``; version 4
 ``draft``; version 5 one decision per requirement under a stated decision rule (``compliance``
 ``decision``, ``decision_rule``, ``predictions``; per item ``uncertainty_deg``,
-``acceptance_limit_deg``, ``verified_by``), ``conformity.decision_rule``.
+``acceptance_limit_deg``, ``verified_by``), ``conformity.decision_rule``; ``title``,
+``missing``, ``end_of_report``, ``identification.manufacturer`` and ``.test_dates``.
 
-- ``schema``, ``generated_at`` (the only wall-clock field), ``draft`` (true: not for signature);
+- ``schema``, ``title`` (instrument, serial, report number), ``generated_at`` (the only
+  wall-clock field: the date of issue), ``draft`` (true: not for issue), ``missing`` (the items
+  of ISO/IEC 17025 7.8.2 the report lacks: when any, it is a draft), ``end_of_report``;
 - ``conformity``: verdict (the overall decision: PASS, FAIL, INCONCLUSIVE or NOT ASSESSED),
   statement (what it covers; the word not repeated), decision_rule (the rule in words), reasons
   (`report.build.Conformity`);
@@ -128,8 +131,11 @@ def report_document(report: Report) -> dict[str, Any]:
     return json_safe(
         {
             "schema": report.schema,
+            "title": report.title,
             "generated_at": report.generated_at,
             "draft": report.draft,
+            "missing": list(report.missing),
+            "end_of_report": report.end_of_report,
             "conformity": asdict(report.conformity),
             "identification": asdict(inputs.identification),
             "plan": asdict(inputs.plan),

@@ -206,18 +206,62 @@ def test_pdf_is_archival_pdf_a_3b(paper_files: Rendered) -> None:
 def test_draft_is_marked_on_every_page_and_in_the_json(
     paper_report: Report, paper_files: Rendered, tmp_path: Path
 ) -> None:
-    assert json.loads(paper_files.files["json"].read_text())["draft"] is False
-    assert "DRAFT" not in paper_files.pdf_text
-    files = write_report(replace(paper_report, draft=True), tmp_path, ("json", "pdf"))
-    assert json.loads(files["json"].read_text())["draft"] is True
-    assert (
-        "DRAFT: not for signature"
-        in subprocess.run(
-            ["pdftotext", "-l", "1", str(files["pdf"]), "-"], check=True, capture_output=True
-        ).stdout.decode()
+    """Imported without a plan's [report] table and unsigned, the paper's report lacks every
+    item of ISO/IEC 17025 7.8.2: a DRAFT on every page, saying what it lacks; identified and
+    signed, it is not."""
+    from gyrostand.report.build import build_report
+    from gyrostand.report.compliance import load_profile
+    from gyrostand.report.model import Signatures
+
+    lacks = (
+        "report number, laboratory, customer, manufacturer, dates of the trials, "
+        "sign-off 'tested by', sign-off 'checked by'"
     )
-    assert set(watermark_letters(files["pdf"])) == {"ADFRT"}  # on every page
-    assert set(watermark_letters(paper_files.files["pdf"])) == {""}
+    assert paper_report.draft and ", ".join(paper_report.missing) == lacks
+    assert json.loads(paper_files.files["json"].read_text())["draft"] is True
+    page_1 = subprocess.run(
+        ["pdftotext", "-l", "1", str(paper_files.files["pdf"]), "-"],
+        check=True,
+        capture_output=True,
+    ).stdout.decode()
+    assert f"DRAFT: not for issue; it lacks {lacks}" in re.sub(r"\s+", " ", page_1)
+    assert set(watermark_letters(paper_files.files["pdf"])) == {"ADFRT"}  # on every page
+    inputs = paper_report.inputs
+    stated = replace(
+        inputs,
+        identification=replace(
+            inputs.identification,
+            report_number="GS-1",
+            laboratory="Gyro lab",
+            customer="Black Sea Shipping",
+            manufacturer="Kurs works",
+            test_dates="1981-03-02 to 1981-03-06",
+        ),
+        signatures=Signatures(
+            "I. Ivanov", ("I. Ivanov", "2026-01-02"), ("P. Petrov", "2026-01-03")
+        ),
+    )
+    issued = build_report(
+        stated,
+        paper_report.analysis,
+        load_profile(),
+        generated_at=GENERATED,
+        signal=paper_report.signal,
+    )
+    assert not issued.draft and issued.missing == ()
+    files = write_report(issued, tmp_path, ("json", "pdf"))
+    assert json.loads(files["json"].read_text())["draft"] is False
+    assert set(watermark_letters(files["pdf"])) == {""}
+    text = subprocess.run(["pdftotext", str(files["pdf"]), "-"], check=True, capture_output=True)
+    assert "DRAFT" not in text.stdout.decode() and "End of report GS-1" in text.stdout.decode()
+    unsigned = build_report(
+        replace(stated, signatures=Signatures("I. Ivanov")),
+        paper_report.analysis,
+        load_profile(),
+        generated_at=GENERATED,
+        signal=paper_report.signal,
+    )
+    assert unsigned.draft and unsigned.missing == ("sign-off 'tested by'", "sign-off 'checked by'")
 
 
 @pytest.mark.parametrize(
