@@ -56,7 +56,13 @@ from typing import Any
 import numpy as np
 from scipy.stats import t as student_t
 
-from gyrostand.analysis.adequacy import Adequacy, ControlResult, adequacy_test, judge_controls
+from gyrostand.analysis.adequacy import (
+    ADEQUACY_BASIS,
+    Adequacy,
+    ControlResult,
+    adequacy_test,
+    judge_controls,
+)
 from gyrostand.analysis.assumptions import (
     AssumptionCheck,
     homogeneity_check,
@@ -185,7 +191,11 @@ class CampaignAnalysis:
                 "condition_number": fit.condition_number,
                 "log": log,
             },
-            "adequacy": asdict(self.adequacy),
+            "adequacy": {
+                **asdict(self.adequacy),
+                "basis": ADEQUACY_BASIS,
+                "decision": self.adequacy.decision,
+            },
             "controls": [asdict(c) for c in self.controls],
             "assumptions": [{**asdict(a), "verdict": a.verdict} for a in self.assumptions],
             "predictor": self.predictor.to_dict(),
@@ -409,11 +419,15 @@ def _warnings(
             f"G* = {cochran.g_critical:.4f}; trial {cochran.largest}): S_e and the adequacy "
             "test are not valid"
         )
-    elif adequacy.adequate != adequacy.adequate_mean_basis:
+    elif adequacy.decision is False:
         found.append(
-            f"adequacy depends on the error basis: F_p = {adequacy.f_p:.3g} on the paper's "
-            f"single-observation basis, {adequacy.f_p_mean:.3g} on the trial-mean basis "
-            f"(F_T = {adequacy.f_critical:.3g})"
+            f"the model is NOT adequate on the trial means (F_p = {adequacy.f_p_mean:.3g} >= "
+            f"F_T = {adequacy.f_critical:.3g})"
+            + (
+                f"; the paper's single-observation basis would accept it (F_p = {adequacy.f_p:.3g})"
+                if adequacy.adequate
+                else ""
+            )
         )
     for check in assumptions:
         if check.holds is False and check.name != "homogeneity":

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gyrostand.analysis.adequacy import ADEQUACY_BASIS
 from gyrostand.analysis.campaign import CampaignAnalysis
 from gyrostand.analysis.forecast import (
     Forecast,
@@ -84,6 +85,93 @@ class ForecastSection:
 
 
 @dataclass(frozen=True)
+class MethodCheck:
+    """A check of the method as the report states it wherever it appears (page 1, its section,
+    the JSON): the verdict and, when an assumption it rests on fails, the caveat beside it."""
+
+    name: str
+    verdict: bool | None  # None: not made
+    caveat: str | None
+
+
+def method_checks(analysis: CampaignAnalysis) -> tuple[MethodCheck, ...]:
+    """Cochran's homogeneity (eq 2.5), Fisher's adequacy on the trial means (eq 2.8,
+    `ADEQUACY_BASIS`) and the control trials against their prediction intervals (eq 2.11).
+    Cochran's and Fisher's tests assume independent observations: when the independence check
+    fails, their verdicts lean towards acceptance and say so."""
+    independence = next((c for c in analysis.assumptions if c.name == "independence"), None)
+    leans = (
+        None
+        if independence is None or independence.holds is not False
+        else f"the observations are not independent ({independence.detail}): S_e understates "
+        "the scatter and the verdict leans towards acceptance"
+    )
+    a = analysis.adequacy
+    controls = analysis.controls
+    return (
+        MethodCheck("variances homogeneous (Cochran)", analysis.cochran.homogeneous, leans),
+        MethodCheck(
+            f"model adequate (Fisher, on the {ADEQUACY_BASIS})",
+            a.decision,
+            "not tested: Cochran's test rejected homogeneity" if a.decision is None else leans,
+        ),
+        MethodCheck(
+            "control trials within the prediction interval",
+            all(c.within_interval for c in controls) if controls else None,
+            None if controls else "no control trial",
+        ),
+    )
+
+
+@dataclass(frozen=True)
+class DegreesOfFreedom:
+    """Where each number of degrees of freedom comes from, and the t quantiles of the control
+    trials' bounds: ``nu_trial`` of each fit trial's S^2{<delta_i>} (eq 2.4), Cochran's k,
+    nu_r = n - m of S^2_r (eq 2.7), nu_e of S^2_e (eq 2.6), t(1 - q/2; nu_r) of the prediction
+    interval (eq 2.11) and t(1 - q/2; nu_e) of the S_e bound; ``text`` says it in words."""
+
+    nu_trial: tuple[int, ...]
+    n_obs: int | None
+    k: int
+    n_fit: int
+    m: int
+    dof_r: int
+    dof_e: int
+    q: float
+    t_prediction: float
+    t_s_e_bound: float
+    text: str
+
+
+def degrees_of_freedom(analysis: CampaignAnalysis) -> DegreesOfFreedom:
+    from scipy import stats
+
+    fit = [t for t in analysis.trials if t.index in set(analysis.fit_indices)]
+    nu = tuple(int(t.dof) for t in fit if t.dof)
+    n_obs = fit[0].n_under if fit and len({t.n_under for t in fit}) == 1 else None
+    a, q, m = analysis.adequacy, analysis.q, len(analysis.fit.names)
+    t_pred = float(stats.t.ppf(1 - q / 2, a.dof_r))
+    t_bound = float(stats.t.ppf(1 - q / 2, a.dof_e))
+    each = (f"nu_i = {nu[0]} for each fit trial" if len(set(nu)) == 1 else f"nu_i = {list(nu)}") + (
+        f": S^2{{<delta_i>}} (eq 2.3) adds the variances of two series of N = {n_obs} readings, "
+        f"N - 1 = {n_obs - 1} each (eq 2.4)"
+        if n_obs
+        else " (eq 2.4)"
+    )
+    text = (
+        f"{each}; Cochran's test compares k = {analysis.cochran.k} such variances; "
+        f"nu_r = n - m = {analysis.fit.n} - {m} = {a.dof_r} (fit trials less the parameters C "
+        f"and T); nu_e = sum(nu_i) / 2 = {a.dof_e}, as the paper's example counts the pooled "
+        f"S_e^2 (eq 2.6: N - 1 per trial; both series would give {sum(nu)}). Control trials: "
+        f"prediction interval t(1 - q/2; nu_r) = t({1 - q / 2:g}; {a.dof_r}) = {t_pred:.3f}, "
+        f"S_e bound t(1 - q/2; nu_e) = t({1 - q / 2:g}; {a.dof_e}) = {t_bound:.3f}"
+    )
+    return DegreesOfFreedom(
+        nu, n_obs, analysis.cochran.k, analysis.fit.n, m, a.dof_r, a.dof_e, q, t_pred, t_bound, text
+    )
+
+
+@dataclass(frozen=True)
 class Conformity:
     """The report's one statement of conformity (ISO/IEC 17025:2017 7.8.6): the overall
     ``verdict`` (PASS, FAIL, INCONCLUSIVE or NOT ASSESSED), the ``statement`` that follows it
@@ -122,7 +210,9 @@ def conformity(
         )
     checks = {
         "the trial variances are not homogeneous (Cochran)": not analysis.cochran.homogeneous,
-        "the model is not adequate (F test)": not analysis.adequacy.adequate,
+        f"the model is not adequate (Fisher, on the {ADEQUACY_BASIS})": (
+            analysis.adequacy.decision is False
+        ),
         "a control trial lies outside its prediction interval": any(
             not c.within_interval for c in analysis.controls
         ),
@@ -158,6 +248,8 @@ class Report:
     compliance: Compliance
     signal: SignalSection
     conformity: Conformity
+    checks: tuple[MethodCheck, ...] = ()  # `method_checks`; empty when not analysed
+    dof: DegreesOfFreedom | None = None  # `degrees_of_freedom`; None when not analysed
     missing: tuple[str, ...] = ()  # the items of ISO/IEC 17025 7.8.2 it lacks (`missing_items`)
     draft: bool = False  # not for issue: DRAFT on every page (always when ``missing``)
 
@@ -320,6 +412,8 @@ def build_report(
             inputs.identification.simulated,
             len(inputs.plan.trials),
         ),
+        checks=() if fitted is None else method_checks(fitted),
+        dof=None if fitted is None else degrees_of_freedom(fitted),
         missing=missing,
         draft=draft or bool(missing),
     )

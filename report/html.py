@@ -10,6 +10,7 @@ from importlib.resources import files
 from jinja2 import Environment, StrictUndefined
 from markupsafe import Markup, escape
 
+from gyrostand.analysis.adequacy import ADEQUACY_BASIS_TEXT
 from gyrostand.analysis.forecast import SIGN_CONVENTION
 from gyrostand.report import plots
 from gyrostand.report.build import COURSE_STEP_DEG, Report
@@ -189,4 +190,5 @@ def render_html(report: Report) -> str:
         time_saved_note=TIME_SAVED_NOTE,
         course_step_deg=COURSE_STEP_DEG,
         DECISIONS=DECISIONS,
+        adequacy_basis=ADEQUACY_BASIS_TEXT,
     )

@@ -28,6 +28,11 @@ Schema ``gyrostand.report/5`` (plain JSON types; absent values are null). Versio
   {criterion, standard_error_deg, band_s, band_measured, saved_s} or null; ``trace``: {frames,
   bins, t_first_ms, t_last_ms} or null: the binned heading itself is only plotted);
 - ``trial_table``: `report.build.TrialRow` each;
+- ``checks``: the method's checks as every page states them (`report.build.MethodCheck`: name,
+  verdict, caveat when an assumption they rest on fails); Fisher's on the trial means
+  (``analysis.adequacy.basis``, ``.decision``);
+- ``degrees_of_freedom``: `report.build.DegreesOfFreedom` (nu_trial, n_obs, k, n_fit, m, dof_r,
+  dof_e, q, t_prediction, t_s_e_bound, text) or null;
 - ``analysis``: `CampaignAnalysis.to_dict()` (schema gyrostand.analysis/1, keys documented in
   `analysis.campaign`), or null with ``analysis_error`` saying why the campaign could not be
   analysed;
@@ -147,6 +152,8 @@ def report_document(report: Report) -> dict[str, Any]:
                 "records": [_record(r) for r in inputs.records],
             },
             "trial_table": [asdict(t) for t in report.trials],
+            "checks": [asdict(c) for c in report.checks],
+            "degrees_of_freedom": None if report.dof is None else asdict(report.dof),
             "analysis": None if report.analysis is None else report.analysis.to_dict(),
             "analysis_error": report.analysis_error,
             "forecast": forecast,

@@ -163,7 +163,8 @@ def test_one_statement_of_conformity(paper_report: Report, paper_files: Rendered
     assert stated.verdict == c.decision == INCONCLUSIVE  # the limits are not verified by a lab
     assert stated.statement.startswith(f"against {c.profile_name}: {c.summary}")
     assert stated.decision_rule == DECISION_RULES["guarded"]
-    assert stated.reasons == ()  # the paper's campaign: every check of the method holds
+    # the paper's campaign: Fisher's test on the trial means rejects the model (F_p 7.05 > 3.63)
+    assert stated.reasons == ("the model is not adequate (Fisher, on the trial means)",)
     page_1 = paper_files.pdf_text.split("Results at a glance")[0]
     assert "Statement of conformity." in page_1 and "Decision rule: guarded acceptance" in page_1
     assert re.sub(r"\s+", " ", page_1).count("INCONCLUSIVE") == 1
@@ -171,6 +172,8 @@ def test_one_statement_of_conformity(paper_report: Report, paper_files: Rendered
     assert INCONCLUSIVE not in document["compliance"]["summary"]
     assert INCONCLUSIVE not in document["conformity"]["statement"]
     passed = replace(c, items=tuple(replace(i, verdict=PASS) for i in c.items))
+    assert conformity(passed, a, None, False, 6).verdict == INCONCLUSIVE  # not adequate
+    a = replace(a, adequacy=replace(a.adequacy, adequate_mean_basis=True))  # were it adequate
     assert conformity(passed, a, None, False, 6).verdict == PASS
     simulated = conformity(passed, a, None, True, 6)
     assert simulated.verdict == INCONCLUSIVE
@@ -284,3 +287,67 @@ def test_plain_text_notation_is_typeset(text: str, html: str) -> None:
 def test_no_plain_text_notation_reaches_the_pdf(paper_files: Rendered) -> None:
     body = paper_files.pdf_text.split("Appendix B: the plan as submitted")[-2]  # not the plan
     assert not re.findall(r"\b[A-Z]_[a-z]+\b|<=|>=|\^\d|<delta|\+/-|deg x sec", body)
+
+
+def test_one_adequacy_basis_everywhere(paper_report: Report, paper_files: Rendered) -> None:
+    """Fisher's test decides on the trial means (S_r^2 against S_e^2 / N): page 1, the body,
+    the JSON and `campaign list` give the same verdict; the paper's basis is for comparison."""
+    from gyrostand.db.queries import verdict
+
+    a = paper_report.analysis.adequacy
+    f_p = a.s2_r / (a.s2_e / 5)  # the paper's N = 5 readings per series
+    assert a.f_p_mean == pytest.approx(f_p) == pytest.approx(7.046, abs=1e-3)
+    assert a.decision is False and a.adequate is True  # 7.05 > F_T 3.63 > 1.41
+    text = re.sub(r"\s+", " ", paper_files.pdf_text)
+    assert "model adequate (Fisher, on the trial means): NO" in text.split("Contents")[0]
+    assert "Adequacy of the model: the decision on the trial means, the paper's basis" in text
+    assert "would be adequate" in text
+    document = json.loads(paper_files.files["json"].read_text())
+    assert document["analysis"]["adequacy"]["basis"] == "trial means"
+    assert document["analysis"]["adequacy"]["decision"] is False
+    assert document["checks"][1] == {
+        "name": "model adequate (Fisher, on the trial means)",
+        "verdict": False,
+        "caveat": None,
+    }
+    assert verdict(document["analysis"]) == "homogeneous yes, adequate on trial means no"
+
+
+def test_a_verdict_whose_assumption_fails_says_so(paper_report: Report) -> None:
+    """Cochran's and Fisher's tests assume independent observations: when that check fails,
+    both verdicts carry the caveat where they stand."""
+    from gyrostand.report.build import method_checks
+
+    a = paper_report.analysis
+    assert [c.caveat for c in method_checks(a)] == [None, None, None]
+    correlated = tuple(
+        replace(c, holds=False, detail="12 of 12 series show lag-1 correlation at q = 0.05")
+        if c.name == "independence"
+        else c
+        for c in a.assumptions
+    )
+    cochran, fisher, controls = method_checks(replace(a, assumptions=correlated))
+    assert cochran.verdict is True and fisher.verdict is False and controls.verdict is True
+    for check in (cochran, fisher):
+        assert check.caveat == (
+            "the observations are not independent (12 of 12 series show lag-1 correlation at "
+            "q = 0.05): S_e understates the scatter and the verdict leans towards acceptance"
+        )
+    assert controls.caveat is None
+
+
+def test_degrees_of_freedom_and_t_quantiles_are_stated(
+    paper_report: Report, paper_files: Rendered
+) -> None:
+    from scipy import stats
+
+    dof = paper_report.dof
+    # 4 fit trials of two series of N = 5: nu_i = 2 (N - 1) = 8; nu_r = 4 - 2; nu_e = 4 (5 - 1)
+    assert (dof.nu_trial, dof.n_obs, dof.k, dof.dof_r, dof.dof_e) == ((8, 8, 8, 8), 5, 4, 2, 16)
+    assert dof.t_prediction == pytest.approx(stats.t.ppf(0.975, 2)) == pytest.approx(4.303, 1e-3)
+    assert dof.t_s_e_bound == pytest.approx(stats.t.ppf(0.975, 16)) == pytest.approx(2.120, 1e-3)
+    bound = paper_report.analysis.controls[0].s_e_bound_deg
+    assert bound == pytest.approx(dof.t_s_e_bound * paper_report.analysis.cochran.s_e)
+    text = re.sub(r"\s+", " ", paper_files.pdf_text)
+    assert "t(0.975; νr = 2) = 4.303" in text and "t(0.975; 16) = 2.120" in text
+    assert "νi = 8 for each fit trial" in text and "νe = sum(νi) / 2 = 16" in text
