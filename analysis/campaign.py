@@ -83,7 +83,9 @@ from gyrostand.analysis.forecast import (
     Forecast,
     Predictor,
     ShipConditions,
+    TestedRange,
     forecast_ship,
+    tested_range,
 )
 from gyrostand.analysis.gyro_model import PARAMETERS, Conditions, KnownConstants, RollingErrorModel
 from gyrostand.analysis.nlsq import COND_LIMIT, FitResult, fit_nonlinear
@@ -138,6 +140,14 @@ class CampaignAnalysis:
     warnings: tuple[str, ...]
     left_out: tuple[LeftOutTrial, ...] = ()  # named by the caller that chose the trials
     transient: TransientCheck | None = None  # by the caller that has the settle records
+
+    @property
+    def tested_range(self) -> TestedRange:
+        """The motion the analysed trials (fit and control) covered: a forecast beyond it is
+        an extrapolation of model 1.1."""
+        return tested_range(
+            [t.amplitude_cm for t in self.trials], [t.period_s for t in self.trials]
+        )
 
     @property
     def estimates(self) -> dict[str, float]:

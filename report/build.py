@@ -10,8 +10,10 @@ import numpy as np
 from gyrostand.analysis.adequacy import ADEQUACY_BASIS
 from gyrostand.analysis.campaign import CampaignAnalysis
 from gyrostand.analysis.forecast import (
+    Extrapolation,
     Forecast,
     ForecastGrid,
+    TestedRange,
     acceleration_direction_deg,
     forecast_grid,
 )
@@ -63,6 +65,7 @@ class GridPoint:
     latitude_deg: float
     alpha_deg: float
     half_width_deg: float
+    extrapolation: Extrapolation | None  # beyond the trials' motion (None: inside it)
 
     @property
     def bound_deg(self) -> float:
@@ -74,8 +77,12 @@ class GridPoint:
 class ForecastSection:
     """Section 9: the plan's point forecast, the grid over course x roll x period x latitude,
     the table (plan's conditions, every 15 deg of course), the worst course per period and the
-    worst case of the whole grid."""
+    worst case of the whole grid; the motion the trials covered (``tested``), how far the point
+    forecast lies beyond it, and the dof of the fit every forecast rests on."""
 
+    tested: TestedRange
+    point_extrapolation: Extrapolation | None
+    fit_dof: int
     point: Forecast
     grid: ForecastGrid
     amplitude_note: str
@@ -315,8 +322,9 @@ def trial_rows(analysis: CampaignAnalysis) -> tuple[TrialRow, ...]:
     )
 
 
-def _point(grid: ForecastGrid, at: tuple[int, ...]) -> GridPoint:
+def _point(grid: ForecastGrid, at: tuple[int, ...], tested: TestedRange) -> GridPoint:
     c, r, p, lat = at
+    amplitude_cm = float(np.radians(grid.roll_deg[r]) * grid.arm_cm)
     return GridPoint(
         course_deg=float(grid.course_deg[c]),
         direction_deg=float(acceleration_direction_deg(grid.course_deg[c], grid.motion)),
@@ -325,6 +333,7 @@ def _point(grid: ForecastGrid, at: tuple[int, ...]) -> GridPoint:
         latitude_deg=float(grid.latitude_deg[lat]),
         alpha_deg=float(grid.alpha_deg[at]),
         half_width_deg=float(grid.half_width_deg[at]),
+        extrapolation=tested.beyond(amplitude_cm, float(grid.period_s[p])),
     )
 
 
@@ -355,17 +364,22 @@ def forecast_section(analysis: CampaignAnalysis, periods_s: tuple[float, ...]) -
         (np.mod(grid.course_deg, TABLE_COURSE_STEP_DEG) == 0) & (grid.course_deg < 360)
     )
     bound = np.abs(grid.alpha_deg) + grid.half_width_deg
+    tested = analysis.tested_range
     worst_by_period = tuple(
-        _point(grid, (int(np.argmax(bound[:, 0, p, 0])), 0, p, 0)) for p in range(periods.size)
+        _point(grid, (int(np.argmax(bound[:, 0, p, 0])), 0, p, 0), tested)
+        for p in range(periods.size)
     )
     worst = np.unravel_index(int(np.argmax(bound)), bound.shape)
     return ForecastSection(
+        tested=tested,
+        point_extrapolation=tested.beyond(point.amplitude_cm, ship.period_s),
+        fit_dof=analysis.fit.dof,
         point=point,
         grid=grid,
         amplitude_note=note,
-        table=tuple(_point(grid, (int(c), 0, plan_p, 0)) for c in in_table),
+        table=tuple(_point(grid, (int(c), 0, plan_p, 0), tested) for c in in_table),
         worst_by_period=worst_by_period,
-        worst=_point(grid, tuple(int(i) for i in worst)),
+        worst=_point(grid, tuple(int(i) for i in worst), tested),
     )
 
 

@@ -51,7 +51,7 @@ from gyrostand.report.errors import ReportError
 
 if TYPE_CHECKING:  # annotations only: the CLI reads SHIPPED without loading scipy
     from gyrostand.analysis.campaign import CampaignAnalysis
-    from gyrostand.analysis.forecast import EnvelopeWorst
+    from gyrostand.analysis.forecast import EnvelopeWorst, Extrapolation
     from gyrostand.report.model import PlanSummary
 
 PASS, FAIL, NOT_ASSESSED = "PASS", "FAIL", "NOT ASSESSED"
@@ -178,6 +178,7 @@ class ComplianceItem:
     detail: str
     exceeds: bool | None
     worst: EnvelopeWorst | None
+    extrapolation: Extrapolation | None  # a prediction beyond the trials' motion
 
 
 @dataclass(frozen=True)
@@ -442,6 +443,7 @@ class Finding:
     uncertainty_deg: float | None = None
     uncertainty_text: str = ""
     worst: EnvelopeWorst | None = None
+    extrapolation: Extrapolation | None = None
 
 
 def _guard(e: Evidence, uncertainty_deg: float) -> float:
@@ -618,6 +620,8 @@ def _rolling_error_forecast(req: Requirement, e: Evidence) -> Finding:
         motion=ship.motion,
         secant_latitude=req.secant_latitude,
     )
+    tested = e.analysis.tested_range
+    beyond = tested.beyond(w.amplitude_cm, w.period_s)
     at_max = forecast_ship(
         e.analysis.predictor,
         ShipConditions(
@@ -636,11 +640,19 @@ def _rolling_error_forecast(req: Requirement, e: Evidence) -> Finding:
         f"{w.acceleration_m_s2:.3f} m/s^2, course {w.course_deg:.1f} deg, latitude "
         f"{w.latitude_deg:.1f} deg; at {env.max_latitude_deg:g} deg the same motion gives "
         f"{abs(at_max.alpha_deg) + at_max.half_width_deg:.3f} deg. Model 1.1 predicts the "
-        "steady error of one-axis motion; yaw and simultaneous axes are not modelled. A "
+        "steady error of one-axis motion; yaw and simultaneous axes are not modelled. "
+        + (
+            ""
+            if beyond is None
+            else f"The trials covered {tested.describe()}: {beyond.text}, from a fit with "
+            f"nu_r = {e.analysis.fit.dof} degrees of freedom. "
+        )
+        + "A "
         "prediction by model 1.1 of Potemkin (1982), not a test by the standard's procedure: "
         "it decides nothing",
         uncertainty_text=f"the {1 - w.q:.0%} prediction interval is in the value",
         worst=w,
+        extrapolation=beyond,
     )
 
 
@@ -720,6 +732,7 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
         detail=detail,
         exceeds=exceeds,
         worst=finding.worst,
+        extrapolation=finding.extrapolation,
     )
 
 

@@ -8,7 +8,8 @@ Schema ``gyrostand.report/5`` (plain JSON types; absent values are null). Versio
 ``draft``; version 5 one decision per requirement under a stated decision rule (``compliance``
 ``decision``, ``decision_rule``, ``predictions``; per item ``uncertainty_deg``,
 ``acceptance_limit_deg``, ``verified_by``), ``conformity.decision_rule``; ``title``,
-``missing``, ``end_of_report``, ``identification.manufacturer`` and ``.test_dates``.
+``missing``, ``end_of_report``, ``identification.manufacturer`` and ``.test_dates``; the
+extrapolation of every forecast beyond the trials' motion (``forecast.tested``, ...).
 
 - ``schema``, ``title`` (instrument, serial, report number), ``generated_at`` (the only
   wall-clock field: the date of issue), ``draft`` (true: not for issue), ``missing`` (the items
@@ -36,11 +37,14 @@ Schema ``gyrostand.report/5`` (plain JSON types; absent values are null). Versio
 - ``analysis``: `CampaignAnalysis.to_dict()` (schema gyrostand.analysis/1, keys documented in
   `analysis.campaign`), or null with ``analysis_error`` saying why the campaign could not be
   analysed;
-- ``forecast``: null, or {point (forecast at the plan's conditions, as in analysis.forecasts[0]),
+- ``forecast``: null, or {tested (the trials' motion: amplitude_cm, period_s,
+  acceleration_m_s2 as [smallest, largest]), point_extrapolation ({factor, text} when the plan's
+  forecast lies beyond it, else null), fit_dof (nu_r of the fit), point (forecast at the plan's
+  conditions, as in analysis.forecasts[0]),
   amplitude_note, grid {course_deg, roll_deg, period_s, latitude_deg, arm_cm, motion, q,
   alpha_deg and half_width_deg as nested lists indexed [course][roll][period][latitude]}, table,
   worst_by_period, worst (grid points: course_deg, direction_deg, roll_deg, period_s,
-  latitude_deg, alpha_deg, half_width_deg, bound_deg)};
+  latitude_deg, alpha_deg, half_width_deg, bound_deg, extrapolation: {factor, text} or null)};
 - ``compliance``: profile_id, profile_name, edition, source, caution, envelope,
   envelope_source, envelope_verified, site_latitude_deg, decision_rule ("simple" or "guarded",
   ILAC-G8:09/2019 4.2.1-4.2.2) and decision_rule_text, decision (PASS, FAIL, INCONCLUSIVE or NOT
@@ -52,7 +56,8 @@ Schema ``gyrostand.report/5`` (plain JSON types; absent values are null). Versio
   NOT ASSESSED), detail, exceeds, worst: null), predictions (the forecasts, the same keys, verdict
   PREDICTION, exceeds: the predicted bound beyond the limit, worst: the forecast's worst case
   over the envelope {course_deg, direction_deg, angle_deg, period_s, acceleration_m_s2,
-  latitude_deg, amplitude_cm, alpha_deg, half_width_deg, ratio, motion, arm_cm, q});
+  latitude_deg, amplitude_cm, alpha_deg, half_width_deg, ratio, motion, arm_cm, q},
+  extrapolation: {factor, text} when the worst case lies beyond the trials' motion);
 - ``signal`` (section 10, `report.signal.SignalSection.to_dict`): ``record`` {source,
   start_ms, dt_s, n, duration_s, frames, filled} or null, record_note, trend_deg_per_h,
   ``noise`` (`analysis.noise.NoiseCharacterisation.to_dict`: correlation {lag_s, covariance,
@@ -112,6 +117,11 @@ def report_document(report: Report) -> dict[str, Any]:
     if f is not None:
         g = f.grid
         forecast = {
+            "tested": asdict(f.tested),
+            "point_extrapolation": None
+            if f.point_extrapolation is None
+            else asdict(f.point_extrapolation),
+            "fit_dof": f.fit_dof,
             "point": {
                 **asdict(f.point),
                 "lower_deg": f.point.interval_deg[0],

@@ -351,3 +351,31 @@ def test_degrees_of_freedom_and_t_quantiles_are_stated(
     text = re.sub(r"\s+", " ", paper_files.pdf_text)
     assert "t(0.975; νr = 2) = 4.303" in text and "t(0.975; 16) = 2.120" in text
     assert "νi = 8 for each fit trial" in text and "νe = sum(νi) / 2 = 16" in text
+
+
+def test_every_forecast_beyond_the_tested_range_is_an_extrapolation(
+    paper_report: Report, paper_files: Rendered
+) -> None:
+    """The trials covered A 17.8-24 cm, tau 3.5-8 s: the plan's forecast (A = 65 cm) and the
+    envelope's worst case (20 deg at h = 750 cm, 1 m/s^2) lie far beyond, and say by how much."""
+    trials = paper_report.trials
+    amplitude = [t.amplitude_cm for t in trials]
+    accel = [t.amplitude_cm * (2 * math.pi / t.period_s) ** 2 / 100 for t in trials]
+    f = paper_report.forecast
+    assert f.tested.amplitude_cm == (min(amplitude), max(amplitude)) == (17.8, 24.0)
+    assert f.tested.period_s == (3.5, 8.0)
+    assert f.tested.acceleration_m_s2[1] == pytest.approx(max(accel))
+    assert f.point_extrapolation.factor == pytest.approx(65 / 24)
+    assert f.point_extrapolation.text == "extrapolation: A = 65 cm (\u00d72.71)"
+    assert all(g.extrapolation.factor == pytest.approx(65 / 24) for g in f.table)
+    assert f.tested.beyond(20.0, 5.0) is None  # inside: no mark
+    (worst,) = paper_report.compliance.predictions
+    a_worst = math.radians(20) * 750
+    assert worst.extrapolation.factor == pytest.approx(a_worst / 24)  # x10.9
+    assert f"A p^2 = 1 m/s^2 (\u00d7{1 / max(accel):.3g})" in worst.extrapolation.text
+    assert "from a fit with nu_r = 2 degrees of freedom" in worst.detail
+    document = json.loads(paper_files.files["json"].read_text())
+    assert document["forecast"]["point_extrapolation"]["factor"] == pytest.approx(65 / 24)
+    assert document["compliance"]["predictions"][0]["extrapolation"]["factor"] > 10
+    text = re.sub(r"\s+", " ", paper_files.pdf_text)
+    assert "Tested range. The stand's analysed trials covered A 17.8-24 cm" in text
