@@ -101,10 +101,12 @@ PHYSICAL_BOUNDS = {"C_gcm2s2": (0.0, np.inf), "T_s": (0.0, np.inf)}
 
 @dataclass(frozen=True)
 class AdmissibleRegion:
-    """The plan's prior range of the parameters (checked and reported, not imposed)."""
+    """The prior range of the parameters (checked and reported, not imposed) and where it
+    comes from, as the warnings say it."""
 
     C_gcm2s2: tuple[float, float]
     T_s: tuple[float, float]
+    source: str = "stated in the plan"
 
 
 @dataclass(frozen=True)
@@ -421,7 +423,7 @@ def _warnings(
             if not lo <= value <= hi:
                 found.append(
                     f"{name} = {value:.6g} lies outside the admissible region [{lo:g}, {hi:g}] "
-                    "stated in the plan; reported unconstrained"
+                    f"{admissible.source}; reported unconstrained"
                 )
     if not cochran.homogeneous:
         found.append(

@@ -401,7 +401,12 @@ def build_report(
             inputs.reading, inputs.reading_note, inputs.records, inputs.acceptance
         )
     fitted = None if isinstance(analysis, str) else analysis
-    compliance = assess(profile, fitted, None if fitted is None else inputs.plan)
+    compliance = assess(
+        profile,
+        fitted,
+        None if fitted is None else inputs.plan,
+        imported=inputs.identification.source == "import",
+    )
     section = (
         forecast_section(fitted, profile.envelope.forecast_periods_s)
         if fitted is not None and fitted.forecasts

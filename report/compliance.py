@@ -424,6 +424,7 @@ class Evidence:
     analysis: CampaignAnalysis
     plan: PlanSummary | None
     profile: Profile
+    imported: bool = False  # the data were imported from a file, not acquired on the stand
 
     @property
     def site_latitude_deg(self) -> float:
@@ -477,6 +478,8 @@ def _procedure_differs(req: Requirement, e: Evidence) -> str | None:
 
 
 def _settling_time(req: Requirement, e: Evidence) -> Finding:
+    if e.imported:
+        return _not_assessed("the imported data record no run-up from switch-on")
     return _not_assessed(
         "the campaign starts with the compass running; no run-up from switch-on is recorded "
         "(the settle waits in the plan follow changes of rocking, not a start)"
@@ -493,6 +496,11 @@ def _settle_point_error(req: Requirement, e: Evidence) -> Finding:
 
 
 def _settle_repeatability(req: Requirement, e: Evidence) -> Finding:
+    if e.imported:
+        return _not_assessed(
+            "the imported data record no run-up and no reference heading: repeatability not "
+            "measured"
+        )
     return _not_assessed("one run-up only and no reference heading: repeatability not measured")
 
 
@@ -737,15 +745,20 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
 
 
 def assess(
-    profile: Profile, analysis: CampaignAnalysis | None, plan: PlanSummary | None = None
+    profile: Profile,
+    analysis: CampaignAnalysis | None,
+    plan: PlanSummary | None = None,
+    *,
+    imported: bool = False,
 ) -> Compliance:
     """Every requirement of the profile judged on this campaign and its plan's observation
-    protocol (all NOT ASSESSED when the campaign could not be analysed)."""
+    protocol (all NOT ASSESSED when the campaign could not be analysed); ``imported``: the data
+    came from a file, and the reasons say so rather than describe the stand."""
     if analysis is None:
         findings = [_not_assessed("the campaign could not be analysed")] * len(profile.requirements)
         latitude = None
     else:
-        evidence = Evidence(analysis, plan, profile)
+        evidence = Evidence(analysis, plan, profile, imported)
         findings = [EVIDENCE[req.evidence](req, evidence) for req in profile.requirements]
         latitude = evidence.site_latitude_deg
     judged = [

@@ -379,3 +379,15 @@ def test_every_forecast_beyond_the_tested_range_is_an_extrapolation(
     assert document["compliance"]["predictions"][0]["extrapolation"]["factor"] > 10
     text = re.sub(r"\s+", " ", paper_files.pdf_text)
     assert "Tested range. The stand's analysed trials covered A 17.8-24 cm" in text
+
+
+def test_imported_data_get_no_stand_boilerplate(paper_report: Report) -> None:
+    """Imported without a plan: the reasons speak of the imported data, and the admissible
+    region is the example's, not a plan's."""
+    details = {i.evidence: i.detail for i in paper_report.compliance.items}
+    assert details["settling_time"] == "the imported data record no run-up from switch-on"
+    assert details["settle_repeatability"].startswith("the imported data record no run-up")
+    assert not any("settle waits" in d or "one run-up only" in d for d in details.values())
+    (admissible,) = [w for w in paper_report.analysis.warnings if "admissible" in w]
+    assert "[0.1, 1] of the example of Potemkin (1982); reported unconstrained" in admissible
+    assert "stated in the plan" not in admissible
