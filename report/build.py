@@ -261,6 +261,19 @@ class Report:
     draft: bool = False  # not for issue: DRAFT on every page (always when ``missing``)
 
     @property
+    def compass_heading(self) -> str:
+        """The compass's own heading at rest: the range of its still-series means (eq 2.1)."""
+        means = (
+            []
+            if self.analysis is None
+            else [t.before.mean_deg for t in self.analysis.trials if t.before is not None]
+        )
+        if not means:
+            return "not recorded (no still-series readings)"
+        lo, hi = min(means), max(means)
+        return f"{lo:.3f} to {hi:.3f} deg, the means of the {len(means)} still series (eq 2.1)"
+
+    @property
     def title(self) -> str:
         """The report's own title: the instrument, its serial and the report number."""
         ident = self.inputs.identification

@@ -489,8 +489,8 @@ def _settling_time(req: Requirement, e: Evidence) -> Finding:
 def _settle_point_error(req: Requirement, e: Evidence) -> Finding:
     differs = _procedure_differs(req, e)
     return _not_assessed(
-        "the campaign records no reference (true) heading of the stand, so the settle point "
-        "heading cannot be compared with the true heading"
+        "no reference (true) heading is recorded with the campaign's observations, so the "
+        "settle point heading cannot be compared with the true heading"
         + ("" if differs is None else f"; and the stand procedure differs: {differs}")
     )
 

@@ -8,7 +8,8 @@ Schema ``gyrostand.report/5`` (plain JSON types; absent values are null). Versio
 ``draft``; version 5 one decision per requirement under a stated decision rule (``compliance``
 ``decision``, ``decision_rule``, ``predictions``; per item ``uncertainty_deg``,
 ``acceptance_limit_deg``, ``verified_by``), ``conformity.decision_rule``; ``title``,
-``missing``, ``end_of_report``, ``identification.manufacturer`` and ``.test_dates``; the
+``missing``, ``end_of_report``, ``compass_heading`` (the still-series means, in words),
+``identification.manufacturer`` and ``.test_dates``; the
 extrapolation of every forecast beyond the trials' motion (``forecast.tested``, ...).
 
 - ``schema``, ``title`` (instrument, serial, report number), ``generated_at`` (the only
@@ -151,6 +152,7 @@ def report_document(report: Report) -> dict[str, Any]:
             "draft": report.draft,
             "missing": list(report.missing),
             "end_of_report": report.end_of_report,
+            "compass_heading": report.compass_heading,
             "conformity": asdict(report.conformity),
             "identification": asdict(inputs.identification),
             "plan": asdict(inputs.plan),

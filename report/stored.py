@@ -325,7 +325,12 @@ def _lab_items(campaign: Campaign, number: str | None) -> dict[str, Any]:
         "stand_identity": items.stand or ("gyrostand simulated stand" if simulated else NOT_STATED),
         "stand_calibration": items.stand_calibration or na,
         "reference_heading": items.reference_heading
-        or ("the simulator's commanded heading (exact)" if simulated else NOT_STATED),
+        or (
+            f"the simulator's true heading {plan.bus.simulator.compass.heading_deg:g} deg "
+            "(exact; [bus.simulator.compass] heading_deg), not recorded with the observations"
+            if simulated and isinstance(plan, Plan)
+            else NOT_STATED
+        ),
         "environment": items.environment or na,
     }
 
