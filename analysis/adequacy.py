@@ -1,9 +1,11 @@
 """Adequacy of the fitted model (seed 000 eqs 2.7-2.8) and the judgement of control trials.
 
-Two error bases are reported side by side. The paper's (eq 2.8) divides S^2_r by the pooled
+Two error bases are computed. The paper's (eq 2.8) divides S^2_r by the pooled
 single-observation variance S^2_e (2.6) with nu_e = n (N - 1) dof, as its example does. The trial
 means <delta_i> that S^2_r scatters about have variance S^2_e / N, so the ratio on that basis is
-N times larger; a report should show both.
+N times larger. The decision stands on the trial means (`ADEQUACY_BASIS`, `Adequacy.decision`):
+S^2_r and its error variance then describe the same quantity; the paper's basis is kept to
+compare with its example.
 """
 
 from dataclasses import dataclass
@@ -13,6 +15,14 @@ from scipy import stats
 
 from gyrostand.analysis.forecast import Predictor
 from gyrostand.analysis.gyro_model import Conditions
+
+ADEQUACY_BASIS = "trial means"
+ADEQUACY_BASIS_TEXT = (
+    "Fisher's F on the trial means: F_p = S_r^2 / (S_e^2 / N), the residual variance of the fit "
+    "against the variance of a trial mean <delta_i> (the quantity the residuals scatter); the "
+    "paper's eq 2.8 divides by S_e^2, the variance of one observation, and is shown only to "
+    "compare with its example"
+)
 
 
 @dataclass(frozen=True)
@@ -35,6 +45,12 @@ class Adequacy:
     p_value_mean: float
     adequate_mean_basis: bool | None
     q: float
+
+    @property
+    def decision(self) -> bool | None:
+        """Is the model adequate, on the basis the decision stands on (`ADEQUACY_BASIS`)?
+        None: not tested (Cochran rejected homogeneity)."""
+        return self.adequate_mean_basis
 
 
 def adequacy_test(

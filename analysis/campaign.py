@@ -56,7 +56,13 @@ from typing import Any
 import numpy as np
 from scipy.stats import t as student_t
 
-from gyrostand.analysis.adequacy import Adequacy, ControlResult, adequacy_test, judge_controls
+from gyrostand.analysis.adequacy import (
+    ADEQUACY_BASIS,
+    Adequacy,
+    ControlResult,
+    adequacy_test,
+    judge_controls,
+)
 from gyrostand.analysis.assumptions import (
     AssumptionCheck,
     homogeneity_check,
@@ -77,7 +83,9 @@ from gyrostand.analysis.forecast import (
     Forecast,
     Predictor,
     ShipConditions,
+    TestedRange,
     forecast_ship,
+    tested_range,
 )
 from gyrostand.analysis.gyro_model import PARAMETERS, Conditions, KnownConstants, RollingErrorModel
 from gyrostand.analysis.nlsq import COND_LIMIT, FitResult, fit_nonlinear
@@ -93,10 +101,12 @@ PHYSICAL_BOUNDS = {"C_gcm2s2": (0.0, np.inf), "T_s": (0.0, np.inf)}
 
 @dataclass(frozen=True)
 class AdmissibleRegion:
-    """The plan's prior range of the parameters (checked and reported, not imposed)."""
+    """The prior range of the parameters (checked and reported, not imposed) and where it
+    comes from, as the warnings say it."""
 
     C_gcm2s2: tuple[float, float]
     T_s: tuple[float, float]
+    source: str = "stated in the plan"
 
 
 @dataclass(frozen=True)
@@ -132,6 +142,14 @@ class CampaignAnalysis:
     warnings: tuple[str, ...]
     left_out: tuple[LeftOutTrial, ...] = ()  # named by the caller that chose the trials
     transient: TransientCheck | None = None  # by the caller that has the settle records
+
+    @property
+    def tested_range(self) -> TestedRange:
+        """The motion the analysed trials (fit and control) covered: a forecast beyond it is
+        an extrapolation of model 1.1."""
+        return tested_range(
+            [t.amplitude_cm for t in self.trials], [t.period_s for t in self.trials]
+        )
 
     @property
     def estimates(self) -> dict[str, float]:
@@ -185,7 +203,11 @@ class CampaignAnalysis:
                 "condition_number": fit.condition_number,
                 "log": log,
             },
-            "adequacy": asdict(self.adequacy),
+            "adequacy": {
+                **asdict(self.adequacy),
+                "basis": ADEQUACY_BASIS,
+                "decision": self.adequacy.decision,
+            },
             "controls": [asdict(c) for c in self.controls],
             "assumptions": [{**asdict(a), "verdict": a.verdict} for a in self.assumptions],
             "predictor": self.predictor.to_dict(),
@@ -401,7 +423,7 @@ def _warnings(
             if not lo <= value <= hi:
                 found.append(
                     f"{name} = {value:.6g} lies outside the admissible region [{lo:g}, {hi:g}] "
-                    "stated in the plan; reported unconstrained"
+                    f"{admissible.source}; reported unconstrained"
                 )
     if not cochran.homogeneous:
         found.append(
@@ -409,11 +431,15 @@ def _warnings(
             f"G* = {cochran.g_critical:.4f}; trial {cochran.largest}): S_e and the adequacy "
             "test are not valid"
         )
-    elif adequacy.adequate != adequacy.adequate_mean_basis:
+    elif adequacy.decision is False:
         found.append(
-            f"adequacy depends on the error basis: F_p = {adequacy.f_p:.3g} on the paper's "
-            f"single-observation basis, {adequacy.f_p_mean:.3g} on the trial-mean basis "
-            f"(F_T = {adequacy.f_critical:.3g})"
+            f"the model is NOT adequate on the trial means (F_p = {adequacy.f_p_mean:.3g} >= "
+            f"F_T = {adequacy.f_critical:.3g})"
+            + (
+                f"; the paper's single-observation basis would accept it (F_p = {adequacy.f_p:.3g})"
+                if adequacy.adequate
+                else ""
+            )
         )
     for check in assumptions:
         if check.holds is False and check.name != "homogeneity":

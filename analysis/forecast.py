@@ -244,6 +244,58 @@ def horizontal_acceleration_m_s2(amplitude_cm: Any, period_s: Any) -> Any:
 
 
 @dataclass(frozen=True)
+class Extrapolation:
+    """How far a forecast lies beyond the tested range: the largest ``factor`` over amplitude,
+    period and acceleration (value / largest tested, or smallest tested period / period) and
+    ``text`` naming each quantity beyond it with its factor."""
+
+    factor: float
+    text: str
+
+
+@dataclass(frozen=True)
+class TestedRange:
+    """The motion the stand's analysed trials covered: amplitude A (cm), period tau (s) and
+    peak horizontal acceleration A p^2 (m/s^2), each as (smallest, largest)."""
+
+    amplitude_cm: tuple[float, float]
+    period_s: tuple[float, float]
+    acceleration_m_s2: tuple[float, float]
+
+    def describe(self) -> str:
+        (a0, a1), (t0, t1), (g0, g1) = self.amplitude_cm, self.period_s, self.acceleration_m_s2
+        return f"A {a0:.4g}-{a1:.4g} cm, tau {t0:.4g}-{t1:.4g} s, A p^2 {g0:.3g}-{g1:.3g} m/s^2"
+
+    def beyond(self, amplitude_cm: float, period_s: float) -> Extrapolation | None:
+        """None when the motion lies inside the tested range, else how far beyond it."""
+        accel = float(horizontal_acceleration_m_s2(amplitude_cm, period_s))
+        (_, a1), (t0, t1), (_, g1) = self.amplitude_cm, self.period_s, self.acceleration_m_s2
+        factors = {
+            f"A = {amplitude_cm:.4g} cm": amplitude_cm / a1,
+            f"tau = {period_s:.4g} s": max(period_s / t1, t0 / period_s),
+            f"A p^2 = {accel:.3g} m/s^2": accel / g1,
+        }
+        outside = {what: f for what, f in factors.items() if f > 1 + 1e-9}
+        if not outside:
+            return None
+        return Extrapolation(
+            max(outside.values()),
+            "extrapolation: " + ", ".join(f"{w} (\u00d7{f:.3g})" for w, f in outside.items()),
+        )
+
+
+def tested_range(amplitude_cm: Any, period_s: Any) -> TestedRange:
+    """The range of the trials' motion (arrays of A and tau)."""
+    a, t = np.asarray(amplitude_cm, dtype=float), np.asarray(period_s, dtype=float)
+    g = horizontal_acceleration_m_s2(a, t)
+    return TestedRange(
+        (float(a.min()), float(a.max())),
+        (float(t.min()), float(t.max())),
+        (float(g.min()), float(g.max())),
+    )
+
+
+@dataclass(frozen=True)
 class MotionBox:
     """The ship motion a forecast is bounded over: the angle of the plan's motion (roll or pitch)
     up to ``max_angle_deg``, periods in ``period_s``, the compass's peak horizontal acceleration

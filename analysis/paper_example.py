@@ -13,7 +13,9 @@ CONSTANTS = KnownConstants(
     latitude_deg=46.5,
 )
 START = (7e7, 0.55)  # C0 (g cm^2 s^-2), T0 (s): mid-points of the admissible region
-ADMISSIBLE = AdmissibleRegion(C_gcm2s2=(2e7, 12e7), T_s=(0.1, 1.0))
+ADMISSIBLE = AdmissibleRegion(
+    C_gcm2s2=(2e7, 12e7), T_s=(0.1, 1.0), source="of the example of Potemkin (1982)"
+)
 EPS = {"C_gcm2s2": 0.01e7, "T_s": 0.01}  # the paper's epsilon_1, epsilon_2 of eq 1.8
 # Roll 5 deg at h = 7.5 m, tau = 7 s, course 45 deg, latitude 57 deg; the paper rounds
 # A = theta0 h = 0.087265 x 750 = 65.45 cm to 65 cm, and its alpha_p = -2.322 deg uses 65 cm.

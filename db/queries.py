@@ -432,11 +432,12 @@ class CampaignFilter:
 
 
 def method_checks(results: dict[str, Any]) -> tuple[bool | None, bool | None]:
-    """An analysis run's Cochran homogeneity and Fisher adequacy (None: the test was not made,
+    """An analysis run's Cochran homogeneity and Fisher adequacy on the trial means, the basis
+    the decision stands on (`analysis.adequacy.ADEQUACY_BASIS`; None: the test was not made,
     e.g. Fisher's after Cochran's failed)."""
     return (
         (results.get("cochran") or {}).get("homogeneous"),
-        (results.get("adequacy") or {}).get("adequate"),
+        (results.get("adequacy") or {}).get("adequate_mean_basis"),
     )
 
 
@@ -447,7 +448,7 @@ def verdict(results: dict[str, Any] | None) -> str:
     homogeneous, adequate = (
         "?" if value is None else ("yes" if value else "no") for value in method_checks(results)
     )
-    return f"homogeneous {homogeneous}, adequate {adequate}"
+    return f"homogeneous {homogeneous}, adequate on trial means {adequate}"
 
 
 @dataclass(frozen=True)

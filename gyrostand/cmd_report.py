@@ -1,10 +1,16 @@
 """CLI: report -- the certification document of a stored campaign.
 
 `gyrostand report CAMPAIGN [--db URL_OR_PATH] [--out DIR] [--format html,pdf,json,csv]
-[--profile NAME_OR_FILE] [--number N] [--draft]` analyses the campaign (recording the analysis
-run), assembles the report from the database and the raw CAN log, and writes campaign-ID.html,
-.pdf (PDF/A-3a, carrying the JSON, the trial CSV and the plan), .json and
-campaign-ID-trials.csv. `write_campaign_report` does the same for other commands (the demo).
+[--profile NAME_OR_FILE] [--number N] [--draft | --final]` analyses the campaign (recording
+the analysis run), assembles the report from the database and the raw CAN log, and writes
+campaign-ID.html, .pdf (PDF/A-3a, carrying the JSON, the trial CSV and the plan), .json and
+campaign-ID-trials.csv. `write_campaign_report`
+does the same for other commands (the demo).
+
+A report that lacks an item of ISO/IEC 17025 7.8.2 (`report.build.missing_items`: report number,
+laboratory, customer, manufacturer, dates of the trials, the station's two sign-offs) is a
+DRAFT whatever the options; `--final` refuses to write it, naming what is missing, and records
+nothing.
 """
 
 from dataclasses import replace
@@ -30,9 +36,11 @@ def write_campaign_report(
     profile: str = SHIPPED,
     number: str | None = None,
     draft: bool = False,
+    final: bool = False,
 ) -> dict[str, Path]:
     """Analyse and report one campaign; the files written by format (one-line CLI errors,
-    every input checked before the analysis run is recorded). A line on stderr per stage: the
+    every input checked before the analysis run is recorded). ``final``: refuse (one line, the
+    database unchanged) a report that would be a DRAFT. A line on stderr per stage: the
     analysis and the PDF take seconds."""
     from gyrostand.analysis.errors import AnalysisError
     from gyrostand.db.models import Campaign
@@ -70,7 +78,14 @@ def write_campaign_report(
                 generated_at=generated,
                 report_number=number,
             )
-        report = replace(report, draft=draft)
+            if final and report.missing:  # raised inside the transaction: no run recorded
+                fail(
+                    f"report --final: campaign {campaign_id} lacks "
+                    f"{', '.join(report.missing)} (ISO/IEC 17025 7.8.2); it can only be a DRAFT"
+                )
+        report = replace(report, draft=report.draft or draft)
+        if report.missing:
+            stage(f"a DRAFT: it lacks {', '.join(report.missing)}")
         if report.analysis is None:
             typer.echo(
                 f"note: campaign {campaign_id} could not be analysed "
@@ -119,7 +134,18 @@ def register(app: typer.Typer) -> None:
         ] = None,
         draft: Annotated[
             bool,
-            typer.Option("--draft", help="Not for signature: DRAFT on every page and in the JSON."),
+            typer.Option(
+                "--draft",
+                help="Not for issue: DRAFT on every page and in the JSON (always so when an "
+                "item of ISO/IEC 17025 7.8.2 or a sign-off is missing).",
+            ),
+        ] = False,
+        final: Annotated[
+            bool,
+            typer.Option(
+                "--final",
+                help="Issue it: refuse when the report would be a DRAFT, naming what is missing.",
+            ),
         ] = False,
     ) -> None:
         """Write the stand report (HTML, PDF, JSON, trial-table CSV) of a campaign."""
@@ -129,7 +155,9 @@ def register(app: typer.Typer) -> None:
             fail(f"--format: {', '.join(unknown) or 'nothing'} not among {', '.join(FORMATS)}")
         if number is not None and not number.strip():
             fail("--number: the report number is empty")
+        if draft and final:
+            fail("--draft and --final: give one of them")
         for kind, path in write_campaign_report(
-            db, campaign, out, formats, profile, number, draft
+            db, campaign, out, formats, profile, number, draft, final
         ).items():
             typer.echo(f"wrote {kind}: {path}")

@@ -177,6 +177,8 @@ class InstrumentPlan(_Table):
     """Instrument model."""
     serial: Text
     """Serial number."""
+    manufacturer: Text | None = None
+    """Manufacturer (the report names it; a final report needs it)."""
     lp_gcm2s2: float = Field(gt=0)
     """Maximum pendulous moment lP, g*cm^2*s^-2."""
     h1_gcm2s: float = Field(gt=0)
@@ -591,7 +593,8 @@ class AcceptancePlan(_Table):
 class ReportPlan(_Table):
     """[report]: what the stand report identifies besides the campaign (the items of ISO/IEC
     17025, 7.8.2); a key left out is printed "not stated" (for a simulated stand, what does
-    not apply says so)."""
+    not apply says so). A report lacking its number, laboratory, customer, the instrument's
+    manufacturer, the dates of the trials or its sign-offs is a DRAFT."""
 
     number: Text | None = None
     """Report number the laboratory assigns (`gyrostand report --number` overrides it)."""
@@ -607,6 +610,8 @@ class ReportPlan(_Table):
     """Reference heading: its source and uncertainty."""
     environment: Text | None = None
     """Environmental conditions during the trials (temperature, humidity, supply)."""
+    dates: Text | None = None
+    """Dates of the trials when the campaign does not record them (imported data)."""
 
 
 _SIGNALS_SCHEMA = {

@@ -6,8 +6,8 @@ inputs, the CLI (`gyrostand report`) composes.
 - `model`: the report's inputs (`ReportInputs`: identification, plan, acquisition, events,
   heading records, signatures);
 - `compliance`: limits profiles (`load_profile`; shipped in ``profiles/``: imo-a424, imo-a821,
-  iso-22090-1, each limit with its clause, source and verified flag), `assess` and the overall
-  `Compliance.verdict`;
+  iso-22090-1, each limit with its clause, source, verified flag and who verified it at the
+  laboratory; the decision rule), `assess` and the overall `Compliance.decision`;
 - `build`: `build_report(inputs, analysis, profile, generated_at=...) -> Report`;
 - `plots`: the figures as inline SVG; `html`: `render_html(report)`; `pdf`: `write_pdf` (the
   HTML laid out by Typst, templates/report.typ: PDF/A-3a carrying the JSON, CSV and plan);

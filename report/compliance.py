@@ -1,31 +1,42 @@
-"""Compliance: each requirement of a named limits profile judged on the campaign's evidence.
+"""Compliance: each requirement of a named limits profile decided on the campaign's evidence.
 
 A profile is a TOML file (shipped: ``profiles/imo-a424.toml``, ``imo-a821.toml``,
-``iso-22090-1.toml``) stating the standard and the edition it follows, the motion envelope (and
-latitude range) its limits apply to, and per requirement the clause, the limit in degrees
-(optionally times sec(latitude)), the text the limit was checked against (``source``), whether it
-was confirmed there (``verified``), the standard's test procedure where the stand can be compared
-with it, and the evidence it is judged on. A requirement the campaign gives no evidence for, or
-whose evidence was not obtained by the standard's procedure, is NOT ASSESSED with the reason.
+``iso-22090-1.toml``) stating the standard and the edition it follows, the decision rule, the
+motion envelope (and latitude range) its limits apply to, and per requirement the clause, the
+limit in degrees (optionally times sec(latitude)), the text the limit was checked against
+(``source``), whether it was confirmed there (``verified``), who at the laboratory verified it
+against which edition (``verified_by``), the standard's test procedure where the stand can be
+compared with it, and the evidence it is judged on. A requirement the campaign gives no evidence
+for, or whose evidence was not obtained by the standard's procedure, is NOT ASSESSED with the
+reason.
 
-Decision rules (stated in each item's ``detail``):
+Measured values and their expanded uncertainty U (about 95 %):
 - heading_rms: only when the campaign's still series follow the standard's procedure (as many
   readings, the same interval): the largest RMS of a still series about its mean,
-  sqrt(S^2 (N - 1) / N) from the series variance S^2 of eq 2.2, against the limit at the site;
-- rolling_error_stand: the largest |<delta_i>| (eq 2.1 difference) over the trials whose motion
-  lies inside the envelope, against the limit at the site latitude; not assessed when the
-  standard's test moves several axes at once (the stand rocks about one);
-- rolling_error_forecast: the largest |alpha_p| + half-width of the (1 - q) prediction interval
-  (eqs 1.1, 2.10-2.11) over the whole envelope (`envelope_worst`), relative to the limit at each
-  latitude; always indicative: a prediction by model 1.1 of Potemkin (1982), not the standard's
-  test.
-A judged requirement PASSes when the value does not exceed the limit, FAILs otherwise; when the
-limit (or the envelope it needs) is not verified, or the evidence is indicative, the verdict is
-INDICATIVE PASS or INDICATIVE FAIL instead. `Compliance.verdict` sums the items up.
+  sqrt(S^2 (N - 1) / N) from the series variance S^2 of eq 2.2; U = 2 u with u = RMS /
+  sqrt(2 (N - 1)), the standard deviation of a standard deviation (GUM, JCGM 100:2008, E.4.3);
+- rolling_error_stand: |<delta_i>| (eq 2.1) of the trials whose motion lies inside the envelope,
+  the one the decision rule finds worst; U = t(0.975, nu_i) sqrt(S^2/N) with the variance of the
+  mean difference and nu_i of eq 2.4; not assessed when the standard's test moves several axes
+  at once (the stand rocks about one).
+A forecast (rolling_error_forecast: |alpha_p| + half-width of the (1 - q) prediction interval,
+eqs 1.1, 2.10-2.11, worst over the envelope, `envelope_worst`) is a prediction by model 1.1 of
+Potemkin (1982), not a measurement by the standard's procedure: it is reported beside the
+decisions (`Compliance.predictions`) and decides nothing.
+
+Decision rule (ISO/IEC 17025:2017 7.8.6; ILAC-G8:09/2019 4.2), chosen in the profile:
+``simple`` (4.2.1, guard band w = 0: PASS when value <= limit) or ``guarded`` (4.2.2, w = U: PASS
+when value + U <= limit); FAIL otherwise. PASS or FAIL only on a limit that someone at the
+laboratory verified against a named edition (``verified_by``; for envelope evidence the
+envelope too); otherwise the requirement is UNVERIFIED, its comparison given in ``detail``.
+`Compliance.decision` sums the requirements up: FAIL when one fails; INCONCLUSIVE when one is
+UNVERIFIED; PASS when at least one passed and the rest were not assessed; NOT ASSESSED when
+nothing was.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import math
 import tomllib
 from collections.abc import Callable
@@ -41,13 +52,34 @@ from gyrostand.report.errors import ReportError
 
 if TYPE_CHECKING:  # annotations only (scipy is not loaded for this module)
     from gyrostand.analysis.campaign import CampaignAnalysis
-    from gyrostand.analysis.forecast import EnvelopeWorst
+    from gyrostand.analysis.forecast import EnvelopeWorst, Extrapolation
     from gyrostand.report.model import PlanSummary
 
 PASS, FAIL, NOT_ASSESSED = "PASS", "FAIL", "NOT ASSESSED"
-INDICATIVE, INDICATIVE_PASS, INDICATIVE_FAIL = "INDICATIVE", "INDICATIVE PASS", "INDICATIVE FAIL"
+UNVERIFIED = "UNVERIFIED"  # a requirement compared with a limit the laboratory has not verified
+INCONCLUSIVE = "INCONCLUSIVE"  # the overall decision when a requirement is unverified
+DECISIONS = (PASS, FAIL, UNVERIFIED, NOT_ASSESSED)
+PREDICTION = "PREDICTION"  # a forecast's place in the verdict column: it decides nothing
+DECISION_RULES = {
+    "simple": "simple acceptance (ILAC-G8:09/2019 4.2.1, guard band w = 0): PASS when the "
+    "measured value does not exceed the limit",
+    "guarded": "guarded acceptance (ILAC-G8:09/2019 4.2.2, guard band w = U): PASS when the "
+    "measured value plus its expanded uncertainty U (about 95 %) does not exceed the limit",
+}
 INTERVAL_TOLERANCE = 0.05
 """A campaign's reading interval matches the standard's within this fraction."""
+
+
+@dataclass(frozen=True)
+class Verification:
+    """Who at the laboratory verified a limit (or the envelope), when, against which edition."""
+
+    name: str
+    date: str
+    edition: str
+
+    def describe(self) -> str:
+        return f"verified by {self.name} on {self.date} against {self.edition}"
 
 
 @dataclass(frozen=True)
@@ -63,6 +95,7 @@ class Envelope:
     forecast_periods_s: tuple[float, ...]
     source: str
     verified: bool
+    verified_by: Verification | None = None
 
     def describe(self) -> str:
         lo, hi = self.period_s
@@ -95,6 +128,7 @@ class Requirement:
     source: str
     verified: bool
     procedure: Procedure | None
+    verified_by: Verification | None = None
 
 
 @dataclass(frozen=True)
@@ -104,6 +138,7 @@ class Profile:
     edition: str
     source: str
     caution: str
+    decision_rule: str  # a key of DECISION_RULES
     envelope: Envelope
     requirements: tuple[Requirement, ...]
     path: str
@@ -115,9 +150,13 @@ class Profile:
 
 @dataclass(frozen=True)
 class ComplianceItem:
-    """One requirement judged: the limit as evaluated, the value compared, the verdict, whether
-    the limit was verified in its source (an unverified envelope also makes the verdict
-    indicative: ``detail`` says so), and the envelope's worst case for a forecast."""
+    """One requirement: the limit as evaluated, the measured value with its expanded
+    uncertainty U (how U was obtained in ``uncertainty_text``), the acceptance limit of the
+    decision rule (limit - w), the decision (one of DECISIONS), whether the limit was
+    confirmed in its source and who verified it (None: nobody at the laboratory: UNVERIFIED).
+    A prediction (`Compliance.predictions`) has no decision: ``verdict`` is PREDICTION,
+    ``exceeds`` says whether the predicted bound exceeds the limit, ``worst`` is the
+    envelope's worst case."""
 
     id: str
     clause: str
@@ -125,14 +164,20 @@ class ComplianceItem:
     evidence: str
     source: str
     verified: bool
+    verified_by: str | None
     stated_limit_deg: float | None
     secant_latitude: bool
     limit_deg: float | None
     limit_text: str
     value_deg: float | None
+    uncertainty_deg: float | None
+    uncertainty_text: str
+    acceptance_limit_deg: float | None
     verdict: str
     detail: str
+    exceeds: bool | None
     worst: EnvelopeWorst | None
+    extrapolation: Extrapolation | None  # a prediction beyond the trials' motion
 
 
 @dataclass(frozen=True)
@@ -146,16 +191,26 @@ class Compliance:
     envelope_source: str
     envelope_verified: bool
     site_latitude_deg: float | None
-    items: tuple[ComplianceItem, ...]
+    decision_rule: str  # a key of DECISION_RULES
+    items: tuple[ComplianceItem, ...]  # the decisions, one per measured requirement
+    predictions: tuple[ComplianceItem, ...]  # forecasts: no decision
+
+    @property
+    def decision_rule_text(self) -> str:
+        return DECISION_RULES[self.decision_rule]
 
     def count(self, verdict: str) -> int:
-        """How many requirements got this verdict."""
+        """How many requirements got this decision."""
         return sum(item.verdict == verdict for item in self.items)
+
+    def ids(self, verdict: str) -> tuple[str, ...]:
+        """The requirements that got this decision."""
+        return tuple(item.id for item in self.items if item.verdict == verdict)
 
     def limit_at(self, evidence: str, latitude_deg: float) -> float | None:
         """The limit of the first requirement judged on this evidence, at this latitude (None:
         no such requirement, or it states no limit)."""
-        item = next((i for i in self.items if i.evidence == evidence), None)
+        item = next((i for i in self.items + self.predictions if i.evidence == evidence), None)
         if item is None or item.stated_limit_deg is None:
             return None
         if not item.secant_latitude:
@@ -163,32 +218,28 @@ class Compliance:
         return float(secant_limit(item.stated_limit_deg, latitude_deg))
 
     @property
-    def verdict(self) -> str:
-        """The profile's verdict on the campaign, for a conformity statement:
-        FAIL when some requirement fails on a verified limit; otherwise INDICATIVE when some
-        result rests on an unverified limit or envelope or on a forecast (an INDICATIVE PASS or
-        INDICATIVE FAIL); otherwise PASS when at least one requirement was assessed (all of them
-        pass); NOT ASSESSED when none was. Requirements not assessed never make a PASS a FAIL:
-        `summary` counts them."""
+    def decision(self) -> str:
+        """The profile's overall decision: FAIL when a requirement fails; otherwise
+        INCONCLUSIVE when one rests on a limit the laboratory has not verified; otherwise PASS
+        when at least one passed (the others not assessed); NOT ASSESSED when none was."""
         if self.count(FAIL):
             return FAIL
-        if self.count(INDICATIVE_PASS) or self.count(INDICATIVE_FAIL):
-            return INDICATIVE
+        if self.count(UNVERIFIED):
+            return INCONCLUSIVE
         return PASS if self.count(PASS) else NOT_ASSESSED
 
     @property
     def summary(self) -> str:
-        """One line: the verdict, what it rests on, and how much was not assessed."""
-        ids = {v: [i.id for i in self.items if i.verdict == v] for v in (FAIL, INDICATIVE_FAIL)}
+        """One line of counts, the requirements named (the decision word is not repeated)."""
         parts = [
-            f"{self.count(v)} {v.lower()}" + (f" ({', '.join(ids[v])})" if ids.get(v) else "")
-            for v in (PASS, FAIL, INDICATIVE_PASS, INDICATIVE_FAIL)
+            f"{self.count(v)} {v.lower()} ({', '.join(self.ids(v))})"
+            for v in (PASS, FAIL, UNVERIFIED)
             if self.count(v)
         ]
-        judged = "; ".join(parts) if parts else "no requirement judged"
+        judged = "; ".join(parts) if parts else "no requirement compared with its limit"
         return (
-            f"{self.verdict} against {self.profile_id}: {judged}; "
-            f"{self.count(NOT_ASSESSED)} of {len(self.items)} not assessed"
+            f"{judged}; {self.count(NOT_ASSESSED)} of {len(self.items)} requirements of "
+            f"{self.profile_id} not assessed"
         )
 
 
@@ -248,12 +299,18 @@ def load_profile(name_or_path: str | Path = SHIPPED) -> Profile:
 
 def _profile(doc: dict[str, Any], path: str) -> Profile:
     head = _get(doc, "profile", dict, "top level")
+    rule = _get(head, "decision_rule", str, "[profile]")
+    if rule not in DECISION_RULES:
+        raise ReportError(
+            f"[profile]: decision_rule {rule!r} is neither of {', '.join(DECISION_RULES)}"
+        )
     return Profile(
         id=_get(head, "id", str, "[profile]"),
         name=_get(head, "name", str, "[profile]"),
         edition=_get(head, "edition", str, "[profile]"),
         source=_get(head, "source", str, "[profile]"),
         caution=str(head.get("caution", "")),
+        decision_rule=rule,
         envelope=_envelope(_get(doc, "envelope", dict, "top level")),
         requirements=tuple(
             _requirement(row, f"requirements[{n}]")
@@ -277,6 +334,7 @@ def _envelope(env: dict[str, Any]) -> Envelope:
         forecast_periods_s=_numbers(env, "forecast_periods_s", where),
         source=_get(env, "source", str, where),
         verified=_get(env, "verified", bool, where),
+        verified_by=_verification(env, where),
     )
     if not 0 < envelope.max_latitude_deg < 90:
         raise ReportError("[envelope]: max_latitude_deg must lie in (0, 90)")
@@ -309,7 +367,26 @@ def _requirement(row: Any, where: str) -> Requirement:
         source=_get(row, "source", str, where),
         verified=_get(row, "verified", bool, where),
         procedure=None if procedure is None else _procedure(procedure, f"{where}.procedure"),
+        verified_by=_verification(row, where),
     )
+
+
+def _verification(table: dict[str, Any], where: str) -> Verification | None:
+    """``verified_by = { name = "...", date = YYYY-MM-DD, edition = "..." }``: only with
+    ``verified = true`` (a limit not confirmed in its source cannot have been verified)."""
+    entry = _optional(table, "verified_by", dict, where)
+    if entry is None:
+        return None
+    if not table.get("verified"):
+        raise ReportError(f"{where}: verified_by needs verified = true")
+    at = f"{where}.verified_by"
+    date = entry.get("date")
+    if not isinstance(date, dt.date) or isinstance(date, dt.datetime):
+        raise ReportError(f"{at}: date must be a TOML date (YYYY-MM-DD)")
+    name, edition = _get(entry, "name", str, at).strip(), _get(entry, "edition", str, at).strip()
+    if not name or not edition:
+        raise ReportError(f"{at}: name and edition must not be empty")
+    return Verification(name, date.isoformat(), edition)
 
 
 def _procedure(table: dict[str, Any], where: str) -> Procedure:
@@ -346,6 +423,7 @@ class Evidence:
     analysis: CampaignAnalysis
     plan: PlanSummary | None
     profile: Profile
+    imported: bool = False  # the data were imported from a file, not acquired on the stand
 
     @property
     def site_latitude_deg(self) -> float:
@@ -355,14 +433,22 @@ class Evidence:
 @dataclass(frozen=True)
 class Finding:
     """An evaluator's answer: the value (None: not assessed), the latitude its limit is taken
-    at, the explanation, why the value is only indicative even on a verified limit (None: it is
-    not), and the envelope's worst case (forecasts)."""
+    at, the explanation, the value's expanded uncertainty U and how it was obtained (a
+    forecast: its prediction interval is in the value), and the envelope's worst case
+    (forecasts)."""
 
     value_deg: float | None
     latitude_deg: float | None
     detail: str
-    indicative: str | None = None
+    uncertainty_deg: float | None = None
+    uncertainty_text: str = ""
     worst: EnvelopeWorst | None = None
+    extrapolation: Extrapolation | None = None
+
+
+def _guard(e: Evidence, uncertainty_deg: float) -> float:
+    """The guard band w of the profile's decision rule (ILAC-G8:09/2019 4.2.1-4.2.2)."""
+    return uncertainty_deg if e.profile.decision_rule == "guarded" else 0.0
 
 
 def _not_assessed(why: str) -> Finding:
@@ -391,6 +477,8 @@ def _procedure_differs(req: Requirement, e: Evidence) -> str | None:
 
 
 def _settling_time(req: Requirement, e: Evidence) -> Finding:
+    if e.imported:
+        return _not_assessed("the imported data record no run-up from switch-on")
     return _not_assessed(
         "the campaign starts with the compass running; no run-up from switch-on is recorded "
         "(the settle waits in the plan follow changes of rocking, not a start)"
@@ -400,13 +488,18 @@ def _settling_time(req: Requirement, e: Evidence) -> Finding:
 def _settle_point_error(req: Requirement, e: Evidence) -> Finding:
     differs = _procedure_differs(req, e)
     return _not_assessed(
-        "the campaign records no reference (true) heading of the stand, so the settle point "
-        "heading cannot be compared with the true heading"
+        "no reference (true) heading is recorded with the campaign's observations, so the "
+        "settle point heading cannot be compared with the true heading"
         + ("" if differs is None else f"; and the stand procedure differs: {differs}")
     )
 
 
 def _settle_repeatability(req: Requirement, e: Evidence) -> Finding:
+    if e.imported:
+        return _not_assessed(
+            "the imported data record no run-up and no reference heading: repeatability not "
+            "measured"
+        )
     return _not_assessed("one run-up only and no reference heading: repeatability not measured")
 
 
@@ -424,19 +517,24 @@ def _heading_rms(req: Requirement, e: Evidence) -> Finding:
             "no still-series readings: the data were imported as per-trial summaries"
         )
     rms = {i: math.sqrt(s.var_deg2 * (s.n - 1) / s.n) for i, s in still}  # eq 2.2, N - 1 -> N
-    worst = max(rms, key=rms.__getitem__)
+    n = dict(still)
+    # U = 2 u(RMS), u = RMS / sqrt(2 (N - 1)): GUM (JCGM 100:2008) E.4.3
+    u = {i: 2 * rms[i] / math.sqrt(2 * (n[i].n - 1)) for i in rms}
+    worst = max(rms, key=lambda i: rms[i] + _guard(e, u[i]))
     seconds = None if e.plan is None else e.plan.still_window_s
     window = "" if seconds is None else f", each reading a {seconds:g} s window mean"
     return Finding(
         rms[worst],
         e.site_latitude_deg,
         f"largest RMS about the series mean over {len(rms)} still series (trial {worst}, "
-        f"N = {dict(still)[worst].n}){window}; "
+        f"N = {n[worst].n}){window}; "
         + (
             "the profile states no reading procedure to compare with"
             if req.procedure is None
             else f"the readings follow the standard's procedure ({req.procedure.text})"
         ),
+        u[worst],
+        f"U = 2 u, u = RMS / sqrt(2 (N - 1)) with N = {n[worst].n} (GUM E.4.3)",
     )
 
 
@@ -461,7 +559,17 @@ def _rolling_error_stand(req: Requirement, e: Evidence) -> Finding:
             f"no trial inside the envelope ({env.describe()}); trials "
             f"{', '.join(str(t.index) for t in outside)} lie outside it"
         )
-    worst = max(inside, key=lambda t: abs(t.delta_deg))
+    basis = {t.index: _mean_variance(t, e.analysis) for t in inside}
+    unknown = [i for i, b in basis.items() if b is None]
+    if unknown:
+        return _not_assessed(
+            f"the uncertainty of <delta_i> is unknown for trial {', '.join(map(str, unknown))}: "
+            "no variance given, and the trial variances are not homogeneous (Cochran), so the "
+            "pooled S_e^2 cannot stand in"
+        )
+    u = {i: _t975(b[1]) * math.sqrt(b[0]) for i, b in basis.items() if b is not None}
+    worst = max(inside, key=lambda t: abs(t.delta_deg) + _guard(e, u[t.index]))
+    var, dof, how_u = basis[worst.index] or (0.0, 0, "")
     left_out = f"; outside the envelope: {', '.join(str(t.index) for t in outside)}"
     how = "" if proc is None else f"; the standard's procedure: {proc.text}"
     return Finding(
@@ -469,7 +577,29 @@ def _rolling_error_stand(req: Requirement, e: Evidence) -> Finding:
         e.site_latitude_deg,
         f"largest |<delta_i>| over trials {', '.join(str(t.index) for t in inside)} "
         f"(trial {worst.index}), one axis rocked per trial{left_out if outside else ''}{how}",
+        u[worst.index],
+        f"U = t(0.975, nu = {dof}) sqrt(S^2/N) = {_t975(dof):.3f} \u00d7 {math.sqrt(var):.4f} deg, "
+        f"{how_u}",
     )
+
+
+def _mean_variance(trial: Any, analysis: CampaignAnalysis) -> tuple[float, int, str] | None:
+    """The variance of a trial's mean difference <delta_i>, its degrees of freedom and where
+    they come from: the trial's own S1^2/N1 + S2^2/N2 with nu of eq 2.4, or, for a trial given
+    without a variance, the pooled S^2_e / N with nu_e (eq 2.6) when Cochran found the
+    variances homogeneous (None otherwise)."""
+    if trial.var_mean_deg2 is not None and trial.dof:
+        return trial.var_mean_deg2, int(trial.dof), "the trial's own variance (nu by eq 2.4)"
+    if not analysis.cochran.homogeneous:
+        return None
+    a = analysis.adequacy
+    return a.s2_e_mean, a.dof_e, "the pooled S_e^2 / N (eq 2.6; no variance of its own)"
+
+
+def _t975(dof: float) -> float:
+    from scipy import stats
+
+    return float(stats.t.ppf(0.975, dof))
 
 
 def _rolling_error_forecast(req: Requirement, e: Evidence) -> Finding:
@@ -497,6 +627,8 @@ def _rolling_error_forecast(req: Requirement, e: Evidence) -> Finding:
         motion=ship.motion,
         secant_latitude=req.secant_latitude,
     )
+    tested = e.analysis.tested_range
+    beyond = tested.beyond(w.amplitude_cm, w.period_s)
     at_max = forecast_ship(
         e.analysis.predictor,
         ShipConditions(
@@ -515,10 +647,19 @@ def _rolling_error_forecast(req: Requirement, e: Evidence) -> Finding:
         f"{w.acceleration_m_s2:.3f} m/s^2, course {w.course_deg:.1f} deg, latitude "
         f"{w.latitude_deg:.1f} deg; at {env.max_latitude_deg:g} deg the same motion gives "
         f"{abs(at_max.alpha_deg) + at_max.half_width_deg:.3f} deg. Model 1.1 predicts the "
-        "steady error of one-axis motion; yaw and simultaneous axes are not modelled",
-        indicative="a prediction by model 1.1 of Potemkin (1982), not a test by the standard's "
-        "procedure",
+        "steady error of one-axis motion; yaw and simultaneous axes are not modelled. "
+        + (
+            ""
+            if beyond is None
+            else f"The trials covered {tested.describe()}: {beyond.text}, from a fit with "
+            f"nu_r = {e.analysis.fit.dof} degrees of freedom. "
+        )
+        + "A "
+        "prediction by model 1.1 of Potemkin (1982), not a test by the standard's procedure: "
+        "it decides nothing",
+        uncertainty_text=f"the {1 - w.q:.0%} prediction interval is in the value",
         worst=w,
+        extrapolation=beyond,
     )
 
 
@@ -536,13 +677,13 @@ NEEDS_ENVELOPE = {"rolling_error_stand", "rolling_error_forecast"}
 
 
 def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceItem:
-    value, lat = finding.value_deg, finding.latitude_deg
+    value, lat, u = finding.value_deg, finding.latitude_deg, finding.uncertainty_deg
     limit: float | None = req.limit_deg
     limit_text = "-" if limit is None else f"{limit:g} deg"
     if limit is not None and req.secant_latitude:
         limit_text += " x sec(latitude)"
-    uses_envelope = req.evidence in NEEDS_ENVELOPE
-    verdict, detail = NOT_ASSESSED, finding.detail
+    forecast = req.evidence == "rolling_error_forecast"
+    verdict, detail, accept, exceeds = NOT_ASSESSED, finding.detail, None, None
     if value is None or limit is None:
         limit = None
     elif req.secant_latitude and (lat is None or abs(lat) > profile.max_latitude_deg):
@@ -551,21 +692,33 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
         if req.secant_latitude:
             limit = float(secant_limit(limit, lat))
             limit_text = f"{req.limit_deg:g} deg x sec({lat:.4g} deg) = {limit:.3f} deg"
-        why = [
-            *([] if req.verified else ["the limit is not verified against the standard's text"]),
-            *(
-                ["the motion envelope is not verified"]
-                if uses_envelope and not profile.envelope.verified
-                else []
-            ),
-            *([] if finding.indicative is None else [finding.indicative]),
-        ]
-        passed = value <= limit
-        if why:
-            verdict = INDICATIVE_PASS if passed else INDICATIVE_FAIL
-            detail = f"{detail}. Indicative only: {'; '.join(why)}"
-        else:
-            verdict = PASS if passed else FAIL
+        exceeds = value > limit
+        if not forecast:
+            assert u is not None  # every measured finding states its uncertainty
+            w = u if profile.decision_rule == "guarded" else 0.0
+            accept = limit - w  # ILAC-G8:09/2019 4.2.1 (w = 0), 4.2.2 (w = U)
+            unverified = [
+                *([] if req.verified_by else ["the limit"]),
+                *(
+                    ["the motion envelope"]
+                    if req.evidence in NEEDS_ENVELOPE and not profile.envelope.verified_by
+                    else []
+                ),
+            ]
+            compared = (
+                f"{value:.3f} +/- {u:.3f} deg against the acceptance limit {accept:.3f} deg "
+                f"({profile.decision_rule} acceptance)"
+            )
+            if unverified:
+                verdict = UNVERIFIED
+                detail = (
+                    f"{detail}. No decision: {' and '.join(unverified)} "
+                    f"{'are' if len(unverified) > 1 else 'is'} not verified by the "
+                    f"laboratory; {compared} would " + ("pass" if value <= accept else "fail")
+                )
+            else:
+                verdict = PASS if value <= accept else FAIL
+                detail = f"{detail}. {compared}"
     return ComplianceItem(
         id=req.id,
         clause=req.clause,
@@ -573,29 +726,44 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
         evidence=req.evidence,
         source=req.source,
         verified=req.verified,
+        verified_by=None if req.verified_by is None else req.verified_by.describe(),
         stated_limit_deg=req.limit_deg,
         secant_latitude=req.secant_latitude,
         limit_deg=limit,
         limit_text=limit_text,
         value_deg=value,
-        verdict=verdict,
+        uncertainty_deg=u,
+        uncertainty_text=finding.uncertainty_text,
+        acceptance_limit_deg=accept,
+        verdict=PREDICTION if forecast else verdict,
         detail=detail,
+        exceeds=exceeds,
         worst=finding.worst,
+        extrapolation=finding.extrapolation,
     )
 
 
 def assess(
-    profile: Profile, analysis: CampaignAnalysis | None, plan: PlanSummary | None = None
+    profile: Profile,
+    analysis: CampaignAnalysis | None,
+    plan: PlanSummary | None = None,
+    *,
+    imported: bool = False,
 ) -> Compliance:
     """Every requirement of the profile judged on this campaign and its plan's observation
-    protocol (all NOT ASSESSED when the campaign could not be analysed)."""
+    protocol (all NOT ASSESSED when the campaign could not be analysed); ``imported``: the data
+    came from a file, and the reasons say so rather than describe the stand."""
     if analysis is None:
         findings = [_not_assessed("the campaign could not be analysed")] * len(profile.requirements)
         latitude = None
     else:
-        evidence = Evidence(analysis, plan, profile)
+        evidence = Evidence(analysis, plan, profile, imported)
         findings = [EVIDENCE[req.evidence](req, evidence) for req in profile.requirements]
         latitude = evidence.site_latitude_deg
+    judged = [
+        _judge(req, finding, profile)
+        for req, finding in zip(profile.requirements, findings, strict=True)
+    ]
     return Compliance(
         profile_id=profile.id,
         profile_name=profile.name,
@@ -606,8 +774,7 @@ def assess(
         envelope_source=profile.envelope.source,
         envelope_verified=profile.envelope.verified,
         site_latitude_deg=latitude,
-        items=tuple(
-            _judge(req, finding, profile)
-            for req, finding in zip(profile.requirements, findings, strict=True)
-        ),
+        decision_rule=profile.decision_rule,
+        items=tuple(i for i in judged if i.verdict != PREDICTION),
+        predictions=tuple(i for i in judged if i.verdict == PREDICTION),
     )

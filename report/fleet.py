@@ -58,7 +58,7 @@ def failed_checks(results: dict[str, Any]) -> str:
     if homogeneous is False:
         failed.append("Cochran's test: the trials' variances are not homogeneous")
     if adequate is False:
-        failed.append("Fisher's test: the model is not adequate")
+        failed.append("Fisher's test: the model is not adequate on the trial means")
     return "; ".join(failed)
 
 

@@ -10,16 +10,17 @@ from importlib.resources import files
 from jinja2 import Environment, StrictUndefined
 from markupsafe import Markup, escape
 
+from gyrostand.analysis.adequacy import ADEQUACY_BASIS_TEXT
 from gyrostand.analysis.forecast import SIGN_CONVENTION
 from gyrostand.report import plots
 from gyrostand.report.build import COURSE_STEP_DEG, Report
 from gyrostand.report.compliance import (
+    DECISIONS,
     FAIL,
-    INDICATIVE,
-    INDICATIVE_FAIL,
-    INDICATIVE_PASS,
-    NOT_ASSESSED,
+    INCONCLUSIVE,
     PASS,
+    PREDICTION,
+    UNVERIFIED,
 )
 from gyrostand.report.model import TrialAcquisition
 from gyrostand.report.signal import TIME_SAVED_NOTE
@@ -54,16 +55,16 @@ def level(q: float) -> str:
 BADGES = {
     PASS: "pass",
     FAIL: "fail",
-    INDICATIVE: "indicative",
-    INDICATIVE_PASS: "indicative",
-    INDICATIVE_FAIL: "indicative-fail",
+    UNVERIFIED: "unverified",
+    INCONCLUSIVE: "unverified",
+    PREDICTION: "na",
 }
 """The badge class of each verdict text (others: grey)."""
 
 
 def verdict(value: bool | str | None, yes: str = "yes", no: str = "NO") -> Markup:
-    """A verdict as a coloured badge: True/PASS green, False/FAIL red, indicative amber (an
-    indicative fail outlined red), None and NOT ASSESSED grey."""
+    """A verdict as a coloured badge: True/PASS green, False/FAIL red, UNVERIFIED and
+    INCONCLUSIVE amber, None, NOT ASSESSED and PREDICTION grey."""
     if isinstance(value, str):
         text, kind = value, BADGES.get(value, "na")
     elif value is None:
@@ -188,9 +189,6 @@ def render_html(report: Report) -> str:
         sign_convention=SIGN_CONVENTION,
         time_saved_note=TIME_SAVED_NOTE,
         course_step_deg=COURSE_STEP_DEG,
-        PASS=PASS,
-        FAIL=FAIL,
-        NOT_ASSESSED=NOT_ASSESSED,
-        INDICATIVE_PASS=INDICATIVE_PASS,
-        INDICATIVE_FAIL=INDICATIVE_FAIL,
+        DECISIONS=DECISIONS,
+        adequacy_basis=ADEQUACY_BASIS_TEXT,
     )

@@ -13,6 +13,8 @@ import numpy as np
 from gyrostand.analysis.campaign import LeftOutTrial
 from gyrostand.analysis.settle import SettleOutcome
 
+NOT_STATED = "not stated"  # an identification item the plan does not give
+
 
 @dataclass(frozen=True)
 class RawLogFile:
@@ -32,6 +34,7 @@ class Identification:
     campaign_id: int
     instrument_model: str
     instrument_serial: str
+    manufacturer: str  # the plan's [instrument] manufacturer, "not stated" when it gives none
     operator: str
     source: str  # "stand", "import" or "replay"
     status: str
@@ -56,6 +59,7 @@ class Identification:
     stand_calibration: str
     reference_heading: str
     environment: str
+    test_dates: str  # when the trials were made: the campaign's start and end, or the plan's
 
 
 @dataclass(frozen=True)

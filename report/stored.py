@@ -49,6 +49,7 @@ from gyrostand.plan.model import PartialPlan, Plan, PlanError, ReportPlan, parse
 from gyrostand.report.build import Report, build_report
 from gyrostand.report.compliance import Profile
 from gyrostand.report.model import (
+    NOT_STATED,
     EventRecord,
     ExcursionCriterion,
     HeadingTrace,
@@ -291,9 +292,6 @@ def _raw_log_check(campaign: Campaign) -> tuple[str, list[Path]]:
     return "verified", [Path(s.path) for s in segments]
 
 
-NOT_STATED = "not stated"
-
-
 def is_simulated(campaign: Campaign, plan: Plan | PartialPlan | None = None) -> bool:
     """The campaign ran on the simulated stand (its stored plan, parsed unless given, says so;
     an import never did)."""
@@ -312,15 +310,27 @@ def _lab_items(campaign: Campaign, number: str | None) -> dict[str, Any]:
     items = ReportPlan() if plan is None else plan.report
     simulated = is_simulated(campaign, plan)
     na = "not applicable: simulated instrument and stand" if simulated else NOT_STATED
+    maker = None if plan is None else plan.instrument.manufacturer
+    started, finished = _when(campaign.started_at), _when(campaign.finished_at)
+    dates = items.dates or NOT_STATED
+    if started is not None:  # the campaign's own record comes first
+        dates = f"{started} to {finished or 'not finished'} (UTC)"
     return {
         "simulated": simulated,
+        "manufacturer": maker or ("gyrostand simulator" if simulated else NOT_STATED),
+        "test_dates": dates,
         "report_number": number or items.number,
         "laboratory": items.laboratory or NOT_STATED,
         "customer": items.customer or NOT_STATED,
         "stand_identity": items.stand or ("gyrostand simulated stand" if simulated else NOT_STATED),
         "stand_calibration": items.stand_calibration or na,
         "reference_heading": items.reference_heading
-        or ("the simulator's commanded heading (exact)" if simulated else NOT_STATED),
+        or (
+            f"the simulator's true heading {plan.bus.simulator.compass.heading_deg:g} deg "
+            "(exact; [bus.simulator.compass] heading_deg), not recorded with the observations"
+            if simulated and isinstance(plan, Plan)
+            else NOT_STATED
+        ),
         "environment": items.environment or na,
     }
 

@@ -185,13 +185,13 @@ def stored_failures(db: Path) -> list[tuple[int, bool | None, bool | None]]:
             " (SELECT max(id) FROM analysis_run GROUP BY campaign_id) ORDER BY campaign_id"
         ).fetchall()
     return [
-        (c, r["cochran"]["homogeneous"], r["adequacy"]["adequate"])
+        (c, r["cochran"]["homogeneous"], r["adequacy"]["adequate_mean_basis"])
         for c, r in ((c, json.loads(text)) for c, text in rows)
     ]
 
 
 COCHRAN = "Cochran's test: the trials' variances are not homogeneous"
-FISHER = "Fisher's test: the model is not adequate"
+FISHER = "Fisher's test: the model is not adequate on the trial means"  # the decision basis
 
 
 def failed(db: Path) -> list[tuple[int, str]]:
@@ -228,7 +228,7 @@ def test_a_unit_whose_own_analysis_failed_a_test_is_named(fleet: Fleet, tmp_path
             (passing,),
         ).fetchone()
         results = json.loads(text)
-        results["adequacy"]["adequate"] = False
+        results["adequacy"]["adequate_mean_basis"] = False
         connection.execute(
             "UPDATE analysis_run SET results_json = ? WHERE id = ?", (json.dumps(results), run)
         )

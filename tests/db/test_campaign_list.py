@@ -87,7 +87,8 @@ def listed_alike(db: str, client: TestClient, text: str = "") -> list[tuple[int,
 def test_text_and_latest_verdict_alike_in_json_and_station(db_url: str, tmp_path: Path) -> None:
     gyrostand("import", PAPER_CSV, "--db", db_url, "--operator", "Ann Smith")
     gyrostand("import", PAPER_CSV, "--db", db_url, "--operator", "bob_jones", "--tag", "lot=7")
-    gyrostand("analyze", "1", "--db", db_url)  # the paper: Cochran and Fisher both pass
+    # the paper: Cochran passes, Fisher's test on the trial means (the decision basis) fails
+    gyrostand("analyze", "1", "--db", db_url)
     sessions = open_database(db_url)
     client = TestClient(
         create_app(
@@ -97,7 +98,7 @@ def test_text_and_latest_verdict_alike_in_json_and_station(db_url: str, tmp_path
             tmp_path / "reports",
         )
     )
-    first = (1, "homogeneous yes, adequate yes")
+    first = (1, "homogeneous yes, adequate on trial means no")
     never = (2, "not analysed")
     assert listed_alike(db_url, client) == [first, never]
     assert listed_alike(db_url, client, "SMITH") == [first]  # operator, any case
@@ -114,8 +115,10 @@ def test_text_and_latest_verdict_alike_in_json_and_station(db_url: str, tmp_path
                 software_version="test",
             )
         )
-    assert listed_alike(db_url, client) == [(1, "homogeneous no, adequate ?"), never]
+    assert listed_alike(db_url, client) == [(1, "homogeneous no, adequate on trial means ?"), never]
     assert "<td>lot=7</td>" in client.get("/").text
     text = gyrostand("campaign", "list", "--db", db_url, "--text", "smith")
-    assert "  0    homogeneous no, adequate ?" in text and text.rstrip().endswith("1 campaign")
+    assert "  0    homogeneous no, adequate on trial means ?" in text and text.rstrip().endswith(
+        "1 campaign"
+    )
     sessions.kw["bind"].dispose()

@@ -64,10 +64,13 @@ class Stored:
             )
 
 
-def import_paper(folder: Path, operator: str = OPERATOR) -> Stored:
+def import_paper(folder: Path, operator: str = OPERATOR, plan_toml: str | None = None) -> Stored:
+    folder.mkdir(parents=True, exist_ok=True)
     path = folder / "paper.sqlite"
     sessions = open_database(sqlite_url(path))
     metadata = {**SEED_000_METADATA, "operator": operator, "software_version": "test"}
+    if plan_toml is not None:
+        metadata["plan_toml"] = plan_toml
     return Stored(path, sessions, import_file(sessions, PAPER_CSV, metadata))
 
 

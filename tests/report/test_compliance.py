@@ -1,6 +1,7 @@
-"""Compliance profiles: the shipped profiles and what they state, the verdict rules (verified /
-indicative / procedure differs) on the paper example, the forecast's worst case over the
-envelope against brute force and against eq 1.1 written out, and bad profiles."""
+"""Compliance profiles: the shipped profiles and what they state, the decisions (decision rule,
+verified by the laboratory or not, procedure differs, measurement uncertainty) on the paper
+example, the forecast's worst case over the envelope against brute force and against eq 1.1
+written out, and bad profiles."""
 
 import math
 from dataclasses import replace
@@ -19,12 +20,12 @@ from gyrostand.report.build import Report
 from gyrostand.report.compliance import (
     EVIDENCE,
     FAIL,
-    INDICATIVE,
-    INDICATIVE_FAIL,
-    INDICATIVE_PASS,
+    INCONCLUSIVE,
     NOT_ASSESSED,
     PASS,
+    PREDICTION,
     SHIPPED_PROFILES,
+    UNVERIFIED,
     assess,
     load_profile,
 )
@@ -38,8 +39,18 @@ PROFILES = Path(__file__).resolve().parents[2] / "report/profiles"
 A424, A821 = (PROFILES / "imo-a424.toml").read_text(), (PROFILES / "imo-a821.toml").read_text()
 
 
+LAB = 'verified_by = { name = "A. N. Other", date = 2026-05-04, edition = "A.821(19)" }'
+
+
+def lab_verified(text: str) -> str:
+    """The profile with every limit (and the envelope) confirmed in its source also verified by
+    the laboratory."""
+    return text.replace("verified = true\n", f"verified = true\n{LAB}\n")
+
+
 def item(report_or_items: object, evidence: str) -> object:
     items = getattr(report_or_items, "items", report_or_items)
+    items += getattr(report_or_items, "predictions", ())
     return next(i for i in items if i.evidence == evidence)
 
 
@@ -66,6 +77,10 @@ def test_every_shipped_profile_states_edition_clause_source_and_verified(name: s
     profile = load_profile(name)
     assert profile == replace(load_profile(PROFILES / f"{name}.toml"), path=profile.path)
     assert profile.id == name and profile.edition and profile.source
+    assert profile.decision_rule == "guarded"
+    # nobody at a laboratory verified the shipped limits: every decision is left to the lab
+    assert profile.envelope.verified_by is None
+    assert all(r.verified_by is None for r in profile.requirements)
     assert profile.envelope.source and isinstance(profile.envelope.verified, bool)
     assert {r.evidence for r in profile.requirements} == set(EVIDENCE)
     for r in profile.requirements:
@@ -109,14 +124,26 @@ def test_paper_verdicts_on_a424(paper_report: Report) -> None:
     assert [t.index for t in inside] == [1, 2, 5]
     assert stand.value_deg == max(abs(t.delta_deg) for t in inside) == 0.32
     assert stand.limit_deg == pytest.approx(1 / math.cos(math.radians(46.5)))
-    assert stand.verdict == INDICATIVE_PASS and not stand.verified  # 0.32 < 1.45, unverified
-    forecast = item(c, "rolling_error_forecast")
-    assert forecast.verdict == INDICATIVE_FAIL and "Potemkin (1982)" in forecast.detail
+    # trial 5 (a control) has no variance of its own: the pooled variance of a trial mean,
+    # mean of S1^2/N1 + S2^2/N2 over the trials that have one (eq 2.6), with nu_e = 16
+    pooled = np.mean([t.var_mean_deg2 for t in paper_report.trials if t.var_mean_deg2])
+    assert pooled == pytest.approx(4.7e-5)
+    assert stand.uncertainty_deg == pytest.approx(stats.t.ppf(0.975, 16) * math.sqrt(pooled))
+    assert stand.acceptance_limit_deg == pytest.approx(stand.limit_deg - stand.uncertainty_deg)
+    assert stand.verdict == UNVERIFIED and stand.verified_by is None  # 0.32 < 1.44: no decision
+    assert "would pass" in stand.detail
+    forecast = item(c, "rolling_error_forecast")  # beside the decisions, not one of them
+    assert forecast not in c.items and forecast.verdict == PREDICTION and forecast.exceeds
+    assert "Potemkin (1982)" in forecast.detail and "decides nothing" in forecast.detail
     assert forecast.value_deg == pytest.approx(forecast.worst.bound_deg)
-    assert c.verdict == INDICATIVE and "1 indicative fail (rolling-error-forecast)" in c.summary
+    assert [i.id for i in c.items if i.id.startswith("rolling")] == ["rolling-error-stand"]
+    assert c.decision == INCONCLUSIVE
+    assert c.summary == (
+        "1 unverified (rolling-error-stand); 5 of 6 requirements of imo-a424 not assessed"
+    )
 
 
-def test_heading_rms_needs_the_standards_reading_procedure() -> None:
+def test_heading_rms_needs_the_standards_reading_procedure(tmp_path: Path) -> None:
     analysis, a821 = paper_analysis(), load_profile("imo-a821")
     imported = item(assess(a821, analysis), "heading_rms")
     assert imported.verdict == NOT_ASSESSED and "reading times are not recorded" in imported.detail
@@ -135,8 +162,16 @@ def test_heading_rms_needs_the_standards_reading_procedure() -> None:
     rms = item(followed, "heading_rms")
     expected = math.sqrt(np.mean((readings - readings.mean()) ** 2))
     assert rms.value_deg == pytest.approx(expected, rel=1e-12)
+    assert rms.uncertainty_deg == pytest.approx(2 * expected / math.sqrt(18), rel=1e-12)
     assert rms.limit_deg == pytest.approx(0.25 / math.cos(math.radians(46.5)))
-    assert rms.verdict == PASS and rms.verified  # 0.148 < 0.363 on a verified limit
+    assert rms.verdict == UNVERIFIED and rms.verified  # confirmed in A.821, not by the lab
+    by_lab = load_profile(profile_file(tmp_path, lab_verified(A821)))
+    rms = item(
+        assess(by_lab, replace(analysis, trials=trials), plan(10, 60.0, 1140.0)), "heading_rms"
+    )
+    assert (
+        rms.verdict == PASS and "A. N. Other on 2026-05-04" in rms.verified_by
+    )  # 0.148 + 0.099 < 0.363
     # settle point error still needs a true heading, whatever the procedure
     assert item(followed, "settle_point_error").verdict == NOT_ASSESSED
 
@@ -144,7 +179,7 @@ def test_heading_rms_needs_the_standards_reading_procedure() -> None:
 def test_heading_rms_of_a_profile_stating_no_procedure(tmp_path: Path) -> None:
     procedure = A821.split('evidence = "heading_rms"')[1].split("[[requirements]]")[0]
     start = procedure.index("[requirements.procedure]")
-    text = A821.replace(procedure[start:], "\n", 1)
+    text = lab_verified(A821.replace(procedure[start:], "\n", 1))
     analysis = paper_analysis()
     still = SeriesSummary(0.0, 0.04, 5)
     trials = tuple(replace(t, before=still) for t in analysis.trials)
@@ -164,45 +199,72 @@ def test_iso_draft_a_multi_axis_test_and_a_forecast_on_a_verified_limit() -> Non
     stand = item(c, "rolling_error_stand")
     assert stand.verdict == NOT_ASSESSED and "the stand procedure differs" in stand.detail
     assert "Scorsby test" in stand.detail and "one axis at a time" in stand.detail
-    forecast = item(c, "rolling_error_forecast")  # 5.3.2 verified in the draft, yet indicative:
-    assert forecast.verified and forecast.verdict == INDICATIVE_FAIL  # a model, an unverified
-    assert "the motion envelope is not verified" in forecast.detail  # acceleration limit
+    forecast = item(c, "rolling_error_forecast")  # 5.3.2 verified in the draft, yet a model:
+    assert forecast.verified and forecast.verdict == PREDICTION and forecast.exceeds
     assert forecast.limit_deg == pytest.approx(1.5)  # at latitude 0, where the margin is least
+    assert c.decision == NOT_ASSESSED  # a forecast decides nothing
 
 
 @pytest.mark.parametrize(
-    ("limit", "verified", "item_verdict", "overall"),
+    ("limit", "rule", "by_lab", "decision", "overall"),
     [
-        ("1.0", "true", PASS, PASS),
-        ("1.0", "false", INDICATIVE_PASS, INDICATIVE),
-        ("0.2", "true", FAIL, FAIL),
-        ("0.2", "false", INDICATIVE_FAIL, INDICATIVE),
+        ("1.0", "guarded", True, PASS, PASS),
+        ("0.225", "simple", True, PASS, PASS),  # 0.320 <= 0.327
+        ("0.225", "guarded", True, FAIL, FAIL),  # 0.320 + 0.015 > 0.327: in the guard band
+        ("0.2", "simple", True, FAIL, FAIL),
+        ("1.0", "guarded", False, UNVERIFIED, INCONCLUSIVE),
+        ("0.2", "simple", False, UNVERIFIED, INCONCLUSIVE),
     ],
 )
-def test_verdicts_on_verified_and_unverified_limits(
-    tmp_path: Path, limit: str, verified: str, item_verdict: str, overall: str
+def test_decisions_by_rule_on_limits_verified_or_not_by_the_laboratory(
+    tmp_path: Path, limit: str, rule: str, by_lab: bool, decision: str, overall: str
 ) -> None:
-    """The A.821 profile with its stand rolling requirement (and envelope) marked as verified or
-    not: only a verified limit gives PASS or FAIL."""
+    """The A.821 profile with its stand rolling requirement (and envelope) confirmed in its
+    source, verified by the laboratory or not, under either decision rule (ILAC-G8 4.2.1,
+    4.2.2): only a limit the laboratory verified gives PASS or FAIL."""
     stand_only = A821.split("[[requirements]]")
     rolling = next(part for part in stand_only if 'evidence = "rolling_error_stand"' in part)
     text = (
-        stand_only[0].replace("verified = false", "verified = true")
+        stand_only[0]
+        .replace("verified = false", "verified = true")
+        .replace('decision_rule = "guarded"', f'decision_rule = "{rule}"')
         + "[[requirements]]"
         + rolling.replace("limit_deg = 1.0", f"limit_deg = {limit}").replace(
-            "verified = false", f"verified = {verified}"
+            "verified = false", "verified = true"
         )
     )
-    c = assess(load_profile(profile_file(tmp_path, text)), paper_analysis())
+    c = assess(
+        load_profile(profile_file(tmp_path, lab_verified(text) if by_lab else text)),
+        paper_analysis(),
+    )
     (judged,) = c.items
-    assert judged.verdict == item_verdict and judged.verified == (verified == "true")
-    assert judged.value_deg == 0.32
-    assert judged.limit_deg == pytest.approx(float(limit) / math.cos(math.radians(46.5)))
-    assert c.verdict == overall and c.summary.startswith(f"{overall} against imo-a821: ")
+    assert judged.verdict == decision and (judged.verified_by is not None) == by_lab
+    assert judged.value_deg == 0.32 and judged.uncertainty_deg == pytest.approx(0.01453, abs=1e-5)
+    secant = 1 / math.cos(math.radians(46.5))
+    assert judged.limit_deg == pytest.approx(float(limit) * secant)
+    guard = judged.uncertainty_deg if rule == "guarded" else 0.0
+    assert judged.acceptance_limit_deg == pytest.approx(float(limit) * secant - guard)
+    assert c.decision == overall and overall not in c.summary  # the word once, where it stands
+    assert c.summary.startswith(f"1 {decision.lower()} (rolling-error-stand); 0 of 1 ")
+
+
+def test_an_unverified_envelope_leaves_the_stand_requirement_undecided(tmp_path: Path) -> None:
+    """The trials are chosen by the envelope: a limit verified on an unverified envelope gives
+    no decision."""
+    text = (
+        lab_verified(A821)
+        .replace("verified = false\n", "verified = true\n", 1)  # the envelope
+        .replace("verified = false\n", f"verified = true\n{LAB}\n", 1)  # rolling-error-stand
+    )
+    profile = load_profile(profile_file(tmp_path, text))
+    assert profile.envelope.verified and profile.envelope.verified_by is None
+    stand = item(assess(profile, paper_analysis()), "rolling_error_stand")
+    assert stand.verdict == UNVERIFIED and stand.verified_by is not None
+    assert "the motion envelope is not verified by the laboratory" in stand.detail
 
 
 def test_nothing_assessed_and_beyond_the_standards_latitude() -> None:
-    assert assess(load_profile(), None).verdict == NOT_ASSESSED
+    assert assess(load_profile(), None).decision == NOT_ASSESSED
     c = assess(load_profile(), paper_analysis(latitude_deg=65.0))  # A.424 profile: up to 60 deg
     stand = item(c, "rolling_error_stand")
     assert stand.verdict == NOT_ASSESSED and "beyond" in stand.detail
@@ -284,9 +346,16 @@ def test_envelope_worst_case_is_eq_1_1_written_out() -> None:
         (("period_s = [6.0, 15.0]", "period_s = [15.0, 6.0]"), "period_s must be"),
         (("[profile]", "[profile"), "not valid TOML"),
         (("verified = false\n", "verified = 0\n"), "verified is missing or of the wrong type"),
-        (("edition = ", "edited = "), "edition is missing"),
+        (("\nedition = ", "\nedited = "), "edition is missing"),
         (("interval_s = 1200.0\n", ""), "give readings and interval_s together"),
         (("max_latitude_deg = 60.0", "max_latitude_deg = 90.0"), "max_latitude_deg must lie"),
+        (('decision_rule = "guarded"', 'decision_rule = "lenient"'), "neither of simple, guarded"),
+        (('decision_rule = "guarded"\n', ""), "decision_rule is missing"),
+        (("verified = false\n", f"verified = false\n{LAB}\n"), "verified_by needs verified = true"),
+        (
+            ("verified = false\n", "verified = true\n" + LAB.replace("2026-05-04", "'May'") + "\n"),
+            "date must be a TOML date",
+        ),
     ],
 )
 def test_bad_profiles_are_refused(tmp_path: Path, edit: tuple[str, str], message: str) -> None:

@@ -125,7 +125,7 @@ def test_json_is_deterministic_and_the_run_is_recorded_once(paper: Stored) -> No
             select(func.count(AnalysisRun.id)).where(AnalysisRun.campaign_id == paper.campaign_id)
         )
     assert runs == 1
-    assert first["schema"] == "gyrostand.report/4"
+    assert first["schema"] == "gyrostand.report/5"
     assert first["analysis"]["cochran"]["g_ex"] == pytest.approx(REFERENCE["g_ex"], abs=1e-4)
     assert first["identification"]["analysis_run"] >= 1
 
@@ -159,26 +159,37 @@ def test_missing_pdf_engine_is_one_clear_error(
 
 
 def test_one_statement_of_conformity(paper_report: Report, paper_files: Rendered) -> None:
-    """The profile's verdict, qualified: a PASS rests on the whole campaign and its checks."""
+    """The profile's decision, qualified: a PASS rests on the whole campaign and its checks;
+    the decision word appears once, with the decision rule."""
     from dataclasses import replace
 
     from gyrostand.analysis.campaign import LeftOutTrial
     from gyrostand.report.build import conformity
-    from gyrostand.report.compliance import FAIL, INDICATIVE, PASS
+    from gyrostand.report.compliance import DECISION_RULES, FAIL, INCONCLUSIVE, PASS
 
     c, a = paper_report.compliance, paper_report.analysis
     stated = paper_report.conformity
-    assert stated.verdict == c.verdict and stated.statement.startswith(f"{c.verdict}: {c.summary}")
-    assert stated.reasons == ()  # the paper's campaign: every check of the method holds
-    assert "Statement of conformity." in paper_files.pdf_text
+    assert stated.verdict == c.decision == INCONCLUSIVE  # the limits are not verified by a lab
+    assert stated.statement.startswith(f"against {c.profile_name}: {c.summary}")
+    assert stated.decision_rule == DECISION_RULES["guarded"]
+    # the paper's campaign: Fisher's test on the trial means rejects the model (F_p 7.05 > 3.63)
+    assert stated.reasons == ("the model is not adequate (Fisher, on the trial means)",)
+    page_1 = paper_files.pdf_text.split("Results at a glance")[0]
+    assert "Statement of conformity." in page_1 and "Decision rule: guarded acceptance" in page_1
+    assert re.sub(r"\s+", " ", page_1).count("INCONCLUSIVE") == 1
+    document = json.loads(paper_files.files["json"].read_text())
+    assert INCONCLUSIVE not in document["compliance"]["summary"]
+    assert INCONCLUSIVE not in document["conformity"]["statement"]
     passed = replace(c, items=tuple(replace(i, verdict=PASS) for i in c.items))
+    assert conformity(passed, a, None, False, 6).verdict == INCONCLUSIVE  # not adequate
+    a = replace(a, adequacy=replace(a.adequacy, adequate_mean_basis=True))  # were it adequate
     assert conformity(passed, a, None, False, 6).verdict == PASS
     simulated = conformity(passed, a, None, True, 6)
-    assert simulated.verdict == INDICATIVE
+    assert simulated.verdict == INCONCLUSIVE
     assert simulated.reasons == ("the instrument and the stand were simulated",)
     dropped = replace(a, left_out=(LeftOutTrial(7, 1, "fit", "failed", "trial failed: x"),))
     missing = conformity(passed, dropped, None, False, 7)
-    assert missing.verdict == INDICATIVE
+    assert missing.verdict == INCONCLUSIVE
     assert missing.reasons == (f"{len(a.trials)} of 7 planned trials analysed (trial 7 not)",)
     unequal = replace(a, cochran=replace(a.cochran, homogeneous=False))
     assert conformity(passed, unequal, None, False, 6).reasons == (
@@ -189,7 +200,7 @@ def test_one_statement_of_conformity(paper_report: Report, paper_files: Rendered
     not_analysed = conformity(passed, None, "every trial failed", False, 6)
     assert (not_analysed.verdict, not_analysed.statement) == (
         "NOT ASSESSED",
-        "NOT ASSESSED: the campaign could not be analysed (every trial failed).",
+        "the campaign could not be analysed (every trial failed).",
     )
 
 
@@ -207,13 +218,58 @@ def test_pdf_is_archival_pdf_a_3a(paper_files: Rendered) -> None:
 def test_draft_is_marked_on_every_page_and_in_the_json(
     paper_report: Report, paper_files: Rendered, tmp_path: Path
 ) -> None:
-    assert json.loads(paper_files.files["json"].read_text())["draft"] is False
-    assert "DRAFT" not in paper_files.pdf_text
-    files = write_report(replace(paper_report, draft=True), tmp_path, ("json", "pdf"))
-    assert json.loads(files["json"].read_text())["draft"] is True
-    assert "DRAFT: not for signature" in pdf_text(files["pdf"], "-l", "1")
-    assert set(watermark_letters(files["pdf"])) == {"ADFRT"}  # on every page
-    assert set(watermark_letters(paper_files.files["pdf"])) == {""}
+    """Imported without a plan's [report] table and unsigned, the paper's report lacks every
+    item of ISO/IEC 17025 7.8.2: a DRAFT on every page, saying what it lacks; identified and
+    signed, it is not."""
+    from gyrostand.report.build import build_report
+    from gyrostand.report.compliance import load_profile
+    from gyrostand.report.model import Signatures
+
+    lacks = (
+        "report number, laboratory, customer, manufacturer, dates of the trials, "
+        "sign-off 'tested by', sign-off 'checked by'"
+    )
+    assert paper_report.draft and ", ".join(paper_report.missing) == lacks
+    assert json.loads(paper_files.files["json"].read_text())["draft"] is True
+    page_1 = pdf_text(paper_files.files["pdf"], "-l", "1")
+    assert f"DRAFT: not for issue; it lacks {lacks}" in re.sub(r"\s+", " ", page_1)
+    assert set(watermark_letters(paper_files.files["pdf"])) == {"ADFRT"}  # on every page
+    inputs = paper_report.inputs
+    stated = replace(
+        inputs,
+        identification=replace(
+            inputs.identification,
+            report_number="GS-1",
+            laboratory="Gyro lab",
+            customer="Black Sea Shipping",
+            manufacturer="Kurs works",
+            test_dates="1981-03-02 to 1981-03-06",
+        ),
+        signatures=Signatures(
+            "I. Ivanov", ("I. Ivanov", "2026-01-02"), ("P. Petrov", "2026-01-03")
+        ),
+    )
+    issued = build_report(
+        stated,
+        paper_report.analysis,
+        load_profile(),
+        generated_at=GENERATED,
+        signal=paper_report.signal,
+    )
+    assert not issued.draft and issued.missing == ()
+    files = write_report(issued, tmp_path, ("json", "pdf"))
+    assert json.loads(files["json"].read_text())["draft"] is False
+    assert set(watermark_letters(files["pdf"])) == {""}
+    text = pdf_text(files["pdf"], "-raw")
+    assert "DRAFT" not in text and "End of report GS-1" in text
+    unsigned = build_report(
+        replace(stated, signatures=Signatures("I. Ivanov")),
+        paper_report.analysis,
+        load_profile(),
+        generated_at=GENERATED,
+        signal=paper_report.signal,
+    )
+    assert unsigned.draft and unsigned.missing == ("sign-off 'tested by'", "sign-off 'checked by'")
 
 
 @pytest.mark.parametrize(
@@ -236,3 +292,107 @@ def test_plain_text_notation_is_typeset(text: str, html: str) -> None:
 def test_no_plain_text_notation_reaches_the_pdf(paper_files: Rendered) -> None:
     body = paper_files.pdf_text.split("Appendix B: the plan as submitted")[-2]  # not the plan
     assert not re.findall(r"\b[A-Z]_[a-z]+\b|<=|>=|\^\d|<delta|\+/-|deg x sec", body)
+
+
+def test_one_adequacy_basis_everywhere(paper_report: Report, paper_files: Rendered) -> None:
+    """Fisher's test decides on the trial means (S_r^2 against S_e^2 / N): page 1, the body,
+    the JSON and `campaign list` give the same verdict; the paper's basis is for comparison."""
+    from gyrostand.db.queries import verdict
+
+    a = paper_report.analysis.adequacy
+    f_p = a.s2_r / (a.s2_e / 5)  # the paper's N = 5 readings per series
+    assert a.f_p_mean == pytest.approx(f_p) == pytest.approx(7.046, abs=1e-3)
+    assert a.decision is False and a.adequate is True  # 7.05 > F_T 3.63 > 1.41
+    text = re.sub(r"\s+", " ", paper_files.pdf_text)
+    assert "model adequate (Fisher, on the trial means): NO" in text.split("Contents")[0]
+    assert "Adequacy of the model: the decision on the trial means, the paper's basis" in text
+    assert "would be adequate" in text
+    document = json.loads(paper_files.files["json"].read_text())
+    assert document["analysis"]["adequacy"]["basis"] == "trial means"
+    assert document["analysis"]["adequacy"]["decision"] is False
+    assert document["checks"][1] == {
+        "name": "model adequate (Fisher, on the trial means)",
+        "verdict": False,
+        "caveat": None,
+    }
+    assert verdict(document["analysis"]) == "homogeneous yes, adequate on trial means no"
+
+
+def test_a_verdict_whose_assumption_fails_says_so(paper_report: Report) -> None:
+    """Cochran's and Fisher's tests assume independent observations: when that check fails,
+    both verdicts carry the caveat where they stand."""
+    from gyrostand.report.build import method_checks
+
+    a = paper_report.analysis
+    assert [c.caveat for c in method_checks(a)] == [None, None, None]
+    correlated = tuple(
+        replace(c, holds=False, detail="12 of 12 series show lag-1 correlation at q = 0.05")
+        if c.name == "independence"
+        else c
+        for c in a.assumptions
+    )
+    cochran, fisher, controls = method_checks(replace(a, assumptions=correlated))
+    assert cochran.verdict is True and fisher.verdict is False and controls.verdict is True
+    for check in (cochran, fisher):
+        assert check.caveat == (
+            "the observations are not independent (12 of 12 series show lag-1 correlation at "
+            "q = 0.05): S_e understates the scatter and the verdict leans towards acceptance"
+        )
+    assert controls.caveat is None
+
+
+def test_degrees_of_freedom_and_t_quantiles_are_stated(
+    paper_report: Report, paper_files: Rendered
+) -> None:
+    from scipy import stats
+
+    dof = paper_report.dof
+    # 4 fit trials of two series of N = 5: nu_i = 2 (N - 1) = 8; nu_r = 4 - 2; nu_e = 4 (5 - 1)
+    assert (dof.nu_trial, dof.n_obs, dof.k, dof.dof_r, dof.dof_e) == ((8, 8, 8, 8), 5, 4, 2, 16)
+    assert dof.t_prediction == pytest.approx(stats.t.ppf(0.975, 2)) == pytest.approx(4.303, 1e-3)
+    assert dof.t_s_e_bound == pytest.approx(stats.t.ppf(0.975, 16)) == pytest.approx(2.120, 1e-3)
+    bound = paper_report.analysis.controls[0].s_e_bound_deg
+    assert bound == pytest.approx(dof.t_s_e_bound * paper_report.analysis.cochran.s_e)
+    text = re.sub(r"\s+", " ", paper_files.pdf_text)
+    assert "t(0.975; νr = 2) = 4.303" in text and "t(0.975; 16) = 2.120" in text
+    assert "νi = 8 for each fit trial" in text and "νe = sum(νi) / 2 = 16" in text
+
+
+def test_every_forecast_beyond_the_tested_range_is_an_extrapolation(
+    paper_report: Report, paper_files: Rendered
+) -> None:
+    """The trials covered A 17.8-24 cm, tau 3.5-8 s: the plan's forecast (A = 65 cm) and the
+    envelope's worst case (20 deg at h = 750 cm, 1 m/s^2) lie far beyond, and say by how much."""
+    trials = paper_report.trials
+    amplitude = [t.amplitude_cm for t in trials]
+    accel = [t.amplitude_cm * (2 * math.pi / t.period_s) ** 2 / 100 for t in trials]
+    f = paper_report.forecast
+    assert f.tested.amplitude_cm == (min(amplitude), max(amplitude)) == (17.8, 24.0)
+    assert f.tested.period_s == (3.5, 8.0)
+    assert f.tested.acceleration_m_s2[1] == pytest.approx(max(accel))
+    assert f.point_extrapolation.factor == pytest.approx(65 / 24)
+    assert f.point_extrapolation.text == "extrapolation: A = 65 cm (\u00d72.71)"
+    assert all(g.extrapolation.factor == pytest.approx(65 / 24) for g in f.table)
+    assert f.tested.beyond(20.0, 5.0) is None  # inside: no mark
+    (worst,) = paper_report.compliance.predictions
+    a_worst = math.radians(20) * 750
+    assert worst.extrapolation.factor == pytest.approx(a_worst / 24)  # x10.9
+    assert f"A p^2 = 1 m/s^2 (\u00d7{1 / max(accel):.3g})" in worst.extrapolation.text
+    assert "from a fit with nu_r = 2 degrees of freedom" in worst.detail
+    document = json.loads(paper_files.files["json"].read_text())
+    assert document["forecast"]["point_extrapolation"]["factor"] == pytest.approx(65 / 24)
+    assert document["compliance"]["predictions"][0]["extrapolation"]["factor"] > 10
+    text = re.sub(r"\s+", " ", paper_files.pdf_text)
+    assert "Tested range. The stand's analysed trials covered A 17.8-24 cm" in text
+
+
+def test_imported_data_get_no_stand_boilerplate(paper_report: Report) -> None:
+    """Imported without a plan: the reasons speak of the imported data, and the admissible
+    region is the example's, not a plan's."""
+    details = {i.evidence: i.detail for i in paper_report.compliance.items}
+    assert details["settling_time"] == "the imported data record no run-up from switch-on"
+    assert details["settle_repeatability"].startswith("the imported data record no run-up")
+    assert not any("settle waits" in d or "one run-up only" in d for d in details.values())
+    (admissible,) = [w for w in paper_report.analysis.warnings if "admissible" in w]
+    assert "[0.1, 1] of the example of Potemkin (1982); reported unconstrained" in admissible
+    assert "stated in the plan" not in admissible

@@ -124,7 +124,7 @@ def test_html_and_json_carry_the_section(with_acceptance: Report) -> None:
         assert text in html, text
     assert html.index("<h2>The reading") < html.index("<h2>Compliance") < html.index("<h2>Signat")
     doc = report_document(with_acceptance)
-    assert doc["schema"] == "gyrostand.report/4"
+    assert doc["schema"] == "gyrostand.report/5"
     assert doc["signal"]["acceptance"]["verdict"] == section.acceptance.verdict
     assert doc["signal"]["noise"]["exponential"]["variance"] == section.noise.exponential.variance
     again = build_report(

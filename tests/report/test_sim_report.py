@@ -101,3 +101,27 @@ def test_a_tampered_raw_log_is_not_used(tmp_path: Path) -> None:
     assert "cannot be used" in report.inputs.raw_log_note
     simulated.log.unlink()
     assert simulated.report().inputs.identification.raw_log_check == "file not found"
+
+
+def test_reference_and_compass_heading_are_stated_alike(simulated_report: Report) -> None:
+    """The simulator's true heading is the reference (page 1) and is not recorded with the
+    observations (the settle point error says the same); the compass's own heading is given."""
+    import tomllib
+
+    plan = tomllib.loads(simulated_report.inputs.plan.plan_toml)
+    true = plan.get("bus", {}).get("simulator", {}).get("compass", {}).get("heading_deg", 120.0)
+    ident = simulated_report.inputs.identification
+    assert ident.reference_heading == (
+        f"the simulator's true heading {true:g} deg (exact; [bus.simulator.compass] "
+        "heading_deg), not recorded with the observations"
+    )
+    settle = next(
+        i for i in simulated_report.compliance.items if i.evidence == "settle_point_error"
+    )
+    assert settle.detail.startswith("no reference (true) heading is recorded with the campaign")
+    means = [t.before.mean_deg for t in simulated_report.analysis.trials]
+    assert simulated_report.compass_heading == (
+        f"{min(means):.3f} to {max(means):.3f} deg, the means of the {len(means)} still series "
+        "(eq 2.1)"
+    )
+    assert abs(min(means) - true) < 1.0  # the compass reads about the true heading
