@@ -156,7 +156,7 @@ def test_schema_0007_downgrade_refuses_while_signed(client_for, tmp_path: Path) 
         config.attributes["connection"] = connection
         command.downgrade(config, "0006")  # nothing signed: the table goes
         assert "sign_off" not in connection.execute(text("SELECT name FROM sqlite_master")).all()
-        command.upgrade(config, "0007")
+        command.upgrade(config, "head")  # the station reads the current schema
     engine.dispose()
     data = {"role": "tested_by", "name": "A", **csrf(client)}
     assert "signed" in client.post("/campaigns/1/signoff", data=data).text
