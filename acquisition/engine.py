@@ -71,12 +71,12 @@ INTERVAL_SAMPLE = 20  # heading-frame spacings whose median is the expected fram
 # coarser heading stays longer on one value), than STUCK_FRACTION of its valid frames (a real
 # heading at 0.001 deg under noise changes within ~13 frames: longest run in 800 000 still
 # frames of the simulated 16-bit sensor) and than the sensor's resolution makes likely:
-# readings that repeat at the rate p seen so far (still and rocking apart) give a run of L among n frames about
-# n p^(L-1) times (geometric run lengths); a run whose expected count is below STUCK_CHANCE is
-# stuck. A sensor coarser than the compass's noise repeats most readings (p > STUCK_RESOLVED)
-# and its runs are far longer than geometric (the noise is correlated: runs of 500 frames at
-# p = 0.84 on the simulated compass, 0.03 deg steps): a run is then no sign, and none is
-# judged (told once). Nor before STUCK_LEARN pairs of readings have been seen.
+# readings that repeat at the rate p seen so far (still and rocking apart) give a run of L
+# among n frames about n p^(L-1) times (geometric run lengths); a run whose expected count is
+# below STUCK_CHANCE is stuck. A sensor coarser than the compass's noise repeats most readings
+# (p > STUCK_RESOLVED) and its runs are far longer than geometric (the noise is correlated:
+# runs of 500 frames at p = 0.84 on the simulated compass, 0.03 deg steps): a run is then no
+# sign, and none is judged (told once). Nor before STUCK_LEARN pairs of readings have been seen.
 STUCK_MIN_RUN = 20
 STUCK_RESOLUTION_DEG = 0.001
 STUCK_FRACTION = 0.1
