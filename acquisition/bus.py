@@ -164,7 +164,8 @@ class RecordedSend:
 class LiveBus:
     """Opens everything a live campaign needs on the bus; `close()` releases it in order."""
 
-    def __init__(self, plan: Plan, codec: Codec, raw_log: Path | None) -> None:
+    def __init__(self, plan: Plan, codec: Codec, raw_log: Path | None, clock_ms: int = 0) -> None:
+        """`clock_ms`: the simulated stand's clock at its start (`Simulator`)."""
         self.plan = plan
         self.virtual = plan.bus.timing == "virtual"
         self.simulator: Simulator | None = None
@@ -173,7 +174,9 @@ class LiveBus:
         try:
             if config is not None:
                 self._sim_bus = SimulatorBus(channel=self._channel)
-                self.simulator = Simulator(self._sim_bus, config, codec=codec_for(plan))
+                self.simulator = Simulator(
+                    self._sim_bus, config, codec=codec_for(plan), clock_ms=clock_ms
+                )
             self.recorder = Recorder(plan.bus.queue_size, raw_log, log_rest=not self.virtual)
             # in virtual time the stand repeats each command in the stream at the stand time it
             # takes effect (stand.virtual_time); otherwise the stream records what we send

@@ -28,7 +28,14 @@ from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.acquisition.virtual_time import Grants, StreamClock
 from gyrostand.db.models import Campaign, Observation, Series, Trial
-from gyrostand.db.queries import latest_attempt, live_file_of, raw_log_segments, stand_campaign
+from gyrostand.db.queries import (
+    RUN_START,
+    last_stand_time_ms,
+    latest_attempt,
+    live_file_of,
+    raw_log_segments,
+    stand_campaign,
+)
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.plan.codec import codec_for
@@ -140,7 +147,7 @@ def run_live(
     codec = codec_for(plan)
     with store.sessions() as session:
         segments = raw_log_segments(session, store.campaign_id)
-    first_frame = 0
+    first_frame, clock_ms = 0, 0
     if start == "continued":
         first_frame = sum(s.frames or 0 for s in segments)  # all closed, or found killed
         store.re_run()
@@ -149,16 +156,20 @@ def run_live(
         if start == "restarted":
             store.redo_uncompensated()
             store.complete_acquired()
+            if plan.bus.simulated:  # its clock goes on, as a stand's does: one campaign time
+                with store.sessions() as session:
+                    clock_ms = -(-last_stand_time_ms(session, store.campaign_id) // 1000) * 1000
         progress = store.progress()
     raw_log = raw_log_path(plan, store.campaign_id, len(segments))
     segment = store.open_segment(str(raw_log), start if segments else "new", first_frame)
     store.set_status("running")
-    live = LiveBus(plan, codec, raw_log)
+    live = LiveBus(plan, codec, raw_log, clock_ms)
     grants = Grants(live.bus) if live.virtual else None
     stream_clock = StreamClock()
     display = ProgressDisplay(quiet=quiet)
     operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)
-    engine = Engine(plan, store, LiveCommander(live.controller, grants), progress, operator)
+    commander = LiveCommander(live.controller, grants)
+    engine = Engine(plan, store, commander, progress, operator, start_ms=clock_ms)
     decoder = BatchDecoder(codec)
     if grants is None:
         silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
@@ -170,6 +181,7 @@ def run_live(
             "time (is it running, in virtual time?)"
         )
     position, dropped, errors, log_failed = 0, 0, 0, False
+    run_start = start == "restarted"  # a boundary of the compass's record, at its first frame
     last_frame = time.monotonic()
     live_file = LiveFile(live_file_of(raw_log))
     try:
@@ -201,6 +213,11 @@ def run_live(
                     raw = RawFrames.from_messages(position, msgs)
                     batch = decoder.decode(raw)
                     engine.feed(batch)
+                    if run_start and batch.headings.t_ms.size:
+                        t_ms = int(batch.headings.t_ms[0])
+                        first = f"this run's first heading at stand time {t_ms / 1000:g} s"
+                        store.run_event(RUN_START, "info", first, t_ms)
+                        run_start = False
                     live_file.headings(batch.headings)
                     if grants is not None:  # the log ends where the campaign did
                         keep = engine.consumed - position
