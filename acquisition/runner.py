@@ -39,7 +39,7 @@ from gyrostand.db.queries import (
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.plan.codec import codec_for
-from gyrostand.plan.model import Plan, PlanError
+from gyrostand.plan.model import MIN_FIT_TRIALS, Plan, PlanError
 from gyrostand.stand.controller import StandController, StandError
 from gyrostand.stand.protocol import ProtocolError
 
@@ -50,7 +50,7 @@ VIRTUAL_STALL_WALL_S = 60.0  # virtual time: no frame at all for this long = no 
 @dataclass(frozen=True)
 class RunResult:
     campaign_id: int
-    outcome: str  # completed | paused | stopped
+    outcome: str  # completed | failed (cannot be analysed) | paused | stopped
     trials_completed: int
     trials_failed: int
     observations: int
@@ -242,8 +242,33 @@ def run_live(
         store.close_segment(segment, live.recorder.logged, sha)
         store.run_event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
         outcome = engine.outcome if engine.outcome != "running" else "stopped"
+        if outcome == "completed":
+            outcome = _judged(store, plan)
         store.set_status(outcome)
     return result(store, outcome, raw_log, sha)
+
+
+def _judged(store: CampaignStore, plan: Plan) -> str:
+    """A campaign whose every trial was acquired or failed: "completed" when the analysis can use
+    it (or it is `acquisition_only` and a trial completed), else "failed", with an event saying
+    why (`campaign resume --retry-failed` takes it up again)."""
+    with store.sessions() as session:
+        completed = session.scalars(
+            select(Trial.role).where(
+                Trial.campaign_id == store.campaign_id,
+                Trial.status == "completed",
+                latest_attempt(),
+            )
+        ).all()
+    fit = sum(role == "fit" for role in completed)
+    if not completed:
+        why = "no trial completed"
+    elif fit < MIN_FIT_TRIALS and not plan.campaign.acquisition_only:
+        why = f"{fit} fit trial{'s' * (fit != 1)} completed: the analysis needs {MIN_FIT_TRIALS}"
+    else:
+        return "completed"
+    store.run_event("campaign failed", "error", f"the campaign cannot be analysed: {why}")
+    return "failed"
 
 
 def _show(engine: Engine, display: ProgressDisplay, live_file: LiveFile) -> None:
@@ -414,7 +439,7 @@ def replay(
     except BaseException:
         store.set_status("failed")
         raise
-    outcome = engine.outcome
+    outcome = engine.outcome if engine.outcome != "completed" else _judged(store, plan)
     store.set_status(outcome)
     return result(store, outcome, checked[-1].path, checked[-1].sha256)
 

@@ -177,8 +177,8 @@ def not_interrupted(stop: threading.Event, before: str) -> None:
 
 
 def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None:
-    """The outcome on stdout; exit code 1 unless the campaign completed (with how to continue
-    it and to retry its failed trials when it can be continued)."""
+    """The outcome on stdout; exit code 1 unless the campaign completed (failed: it cannot be
+    analysed; with how to continue it and to retry its failed trials when it can be continued)."""
     _out.print(
         f"campaign {result.campaign_id} {result.outcome}: {result.trials_completed} trials "
         f"completed, {result.trials_failed} failed, {result.observations} observations in "
@@ -190,6 +190,12 @@ def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None
         _out.print(
             f"retry the failed trials with: gyrostand campaign resume {result.campaign_id} "
             f"--retry-failed --db {printable(db)}"
+        )
+    if result.outcome == "failed":  # every trial attempted, too few completed to analyse
+        fail(
+            f"campaign {result.campaign_id} failed: it cannot be analysed "
+            f"({result.trials_completed} trials completed, {result.trials_failed} failed)",
+            code=EXIT_FAILED,
         )
     if result.outcome != "completed":
         if resumable:
@@ -526,6 +532,8 @@ def register(app: typer.Typer) -> None:
         status = printable(s.status)
         if s.status == "running" and not held_elsewhere(sessions, campaign_id):
             status = "interrupted (left running by a process that is gone; resume continues it)"
+        elif s.status == "failed":
+            status = "failed (too few trials completed to analyse it; resume --retry-failed)"
         # every stored string goes through printable() and is printed as text (markup off)
         _out.print(
             f"campaign {s.campaign_id} ({printable(s.source)}): {status}, "
