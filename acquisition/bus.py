@@ -140,7 +140,10 @@ class Recorder(can.Listener):
             rest = list(self._frames)
             self.log(RawFrames.from_messages(0, rest), rest)
         if self.writer is not None:
-            self.writer.stop()
+            try:
+                self.writer.stop()
+            except Exception as exc:  # its last frames did not reach the file
+                self.log_error = self.log_error or exc
         self._stopped = True
 
 

@@ -180,7 +180,7 @@ def run_live(
             f"bus silence: the simulated stand sent nothing for {silence_wall_s:g} s of wall "
             "time (is it running, in virtual time?)"
         )
-    position, dropped, errors, log_failed = 0, 0, 0, False
+    position, dropped, errors = 0, 0, 0
     run_start = start == "restarted"  # a boundary of the compass's record, at its first frame
     last_frame = time.monotonic()
     live_file = LiveFile(live_file_of(raw_log))
@@ -196,11 +196,9 @@ def run_live(
                     lost = live.recorder.dropped - dropped
                     dropped = live.recorder.dropped
                     store.run_event("queue full", "error", f"{lost} frames dropped: queue full")
-                if live.recorder.log_error is not None and not log_failed:
-                    log_failed = True
-                    store.run_event(
-                        "raw log", "error", f"raw log incomplete: {live.recorder.log_error!r}"
-                    )
+                if live.recorder.log_error is not None:  # as a database refusing writes
+                    engine.interrupt(f"the raw log cannot be written: {live.recorder.log_error}")
+                    break
                 while errors < len(live.recorder.errors):
                     exc = live.recorder.errors[errors]
                     errors += 1
@@ -239,13 +237,31 @@ def run_live(
         live_file.close()
         live.close()
         sha = sha256_of(raw_log)
-        store.close_segment(segment, live.recorder.logged, sha)
-        store.run_event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
+        log_error = live.recorder.log_error
+        if log_error is None:
+            store.close_segment(segment, live.recorder.logged, sha)
+            store.run_event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
+        else:  # it ends before the run did, as a killed run's does
+            frames = _readable_frames(raw_log)
+            store.close_segment(segment, frames, sha, ending="killed")
+            store.run_event(
+                "raw log",
+                "error",
+                f"raw log {raw_log} incomplete: {frames} frames readable of the run's; "
+                f"writing it failed: {log_error}",
+            )
         outcome = engine.outcome if engine.outcome != "running" else "stopped"
         if outcome == "completed":
             outcome = _judged(store, plan)
         store.set_status(outcome)
+    if log_error is not None:
+        raise RawLogFailed(f"the raw log {raw_log} cannot be written: {log_error}")
     return result(store, outcome, raw_log, sha)
+
+
+class RawLogFailed(RuntimeError):
+    """A run's raw log could not be written (a full disk): the run stopped the stand and ended
+    with what the database holds; the log holds the frames up to its last complete block."""
 
 
 def _judged(store: CampaignStore, plan: Plan) -> str:
@@ -502,16 +518,20 @@ def _readable_frames(path: Path) -> int:
 
 def resume_start(store: CampaignStore, stored: Plan, plan: Plan) -> str:
     """How a resumed run starts (`run_live`): "continued" for a simulation in virtual time on
-    the stored plan's bus whose every earlier run was killed and no trial retried (so the
-    database holds a prefix of what re-running the simulation gives: the resumed campaign equals
-    an uninterrupted one); else "restarted", at the first incomplete series."""
+    the stored plan's bus whose every earlier run was killed (the last one left the campaign
+    planned or running) and no trial retried (so the database holds a prefix of what re-running
+    the simulation gives: the resumed campaign equals an uninterrupted one); else "restarted",
+    at the first incomplete series."""
     with store.sessions() as session:
         segments = raw_log_segments(session, store.campaign_id)
         attempts = session.scalar(
             select(func.max(Trial.attempt)).where(Trial.campaign_id == store.campaign_id)
         )
+        status = session.get_one(Campaign, store.campaign_id).status
+    killed = status in ("planned", "running")  # left so by a killed run
     rerun = (
-        plan.bus.simulated
+        killed  # (a run that stopped itself, e.g. on a raw log it could not write, is no prefix)
+        and plan.bus.simulated
         and plan.bus.timing == "virtual"
         and plan.bus == stored.bus
         and all(s.ending == "killed" and s.start != "restarted" for s in segments)

@@ -221,7 +221,7 @@ def run_campaign(
     import can
     from sqlalchemy.exc import OperationalError
 
-    from gyrostand.acquisition.runner import result, run_live
+    from gyrostand.acquisition.runner import RawLogFailed, result, run_live
     from gyrostand.acquisition.store import ReRunMismatch
     from gyrostand.db.session import unusable
 
@@ -244,6 +244,12 @@ def run_campaign(
     except ReRunMismatch as exc:
         mark("resume", "error", str(exc), "stopped")
         fail(f"campaign {store.campaign_id}: {exc}", code=EXIT_FAILED)
+    except RawLogFailed as exc:
+        fail(
+            f"campaign {store.campaign_id} stopped: {exc}; what was committed is kept: resume "
+            f"it (gyrostand campaign resume {store.campaign_id} --db {db}) once the disk has room",
+            code=EXIT_FAILED,
+        )
     except KeyboardInterrupt:  # python's own handler (ours cannot be set outside the main thread)
         mark("interrupted", "warning", "interrupted before acquiring (Ctrl-C)", "stopped")
         return result(store, "stopped", None, None)
