@@ -36,6 +36,7 @@ from gyrostand.db.queries import (
     raw_log_segments,
     stand_campaign,
 )
+from gyrostand.db.wal import checkpoint
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.plan.codec import codec_for
@@ -254,6 +255,7 @@ def run_live(
         if outcome == "completed":
             outcome = _judged(store, plan)
         store.set_status(outcome)
+        checkpoint(store.sessions.kw["bind"])  # the file alone holds the run (a copy of it)
     if log_error is not None:
         raise RawLogFailed(f"the raw log {raw_log} cannot be written: {log_error}")
     return result(store, outcome, raw_log, sha)

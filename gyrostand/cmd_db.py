@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from gyrostand.cmd_data import JsonOption, open_db
-from gyrostand.errors import EXIT_BAD_INPUT, EXIT_FAILED, fail, printable
+from gyrostand.errors import EXIT_BAD_INPUT, EXIT_FAILED, fail, printable, warn
 
 if TYPE_CHECKING:
     from sqlalchemy.orm import Session, sessionmaker
@@ -87,6 +87,26 @@ DRY = {
     "merged": "would be merged as a new lab campaign",
     "replaced": "would replace its earlier, incomplete copy, lab campaign {lab_id}",
 }
+
+
+def stand_wal(stand: str) -> None:
+    """Warn when a stand's SQLite file has commits in its write-ahead log beside it: merged from
+    there, but a copy of the file alone lacks them (db.wal)."""
+    from sqlalchemy.engine import make_url
+
+    from gyrostand.db.session import database_url
+    from gyrostand.db.wal import unmerged_wal
+
+    url = make_url(database_url(stand))
+    if url.get_backend_name() != "sqlite" or not url.database:
+        return
+    path = Path(url.database)
+    if size := unmerged_wal(path):
+        warn(
+            f"{path}-wal beside it holds {size} bytes of its write-ahead log (a process has "
+            f"it open, or one ended without closing it): merged from there, but a copy of "
+            f"{path.name} without its -wal would lack the latest commits"
+        )
 
 
 def open_stand(stand: str) -> sessionmaker[Session]:
@@ -178,6 +198,7 @@ def register(app: typer.Typer) -> None:
         from gyrostand.db.merge import MergeRefused, merge_database
         from gyrostand.db.session import database_url
 
+        stand_wal(stand)
         source = open_stand(stand)
         lab = open_db(into)
         merged_from = make_url(database_url(stand)).render_as_string(hide_password=True)

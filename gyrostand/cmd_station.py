@@ -4,6 +4,7 @@ campaigns (`gyrostand.station`)."""
 from __future__ import annotations
 
 import os
+import signal
 import socket
 from pathlib import Path
 from typing import Annotated
@@ -13,6 +14,11 @@ import typer
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
 from gyrostand.cmd_report import DEFAULT_OUT
 from gyrostand.errors import EXIT_FAILED, fail, printable
+
+
+def _terminated(signum: int, _frame: object) -> None:
+    """SIGTERM as a normal exit (128 + 15): the exit handlers run."""
+    raise SystemExit(128 + signum)
 
 
 def register(app: typer.Typer) -> None:
@@ -59,4 +65,7 @@ def register(app: typer.Typer) -> None:
         typer.echo(f"gyrostand station on {printable(db)}: open {address}", err=True)
         app = create_app(db, sessions, access, reports)
         config = uvicorn.Config(app, log_level="warning", timeout_graceful_shutdown=2)
+        # uvicorn shuts down on SIGTERM, then raises it again: as an exit (143), so that the
+        # database's write-ahead log is checkpointed into the file (db.wal) as at Ctrl-C
+        signal.signal(signal.SIGTERM, _terminated)
         uvicorn.Server(config).run(sockets=[listening])
