@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
-from itertools import count
+from itertools import chain, count
 from pathlib import Path
 from typing import IO
 
@@ -27,7 +27,8 @@ from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.acquisition.virtual_time import Grants, StreamClock
-from gyrostand.db.models import Campaign, Observation, Series, Trial
+from gyrostand.db.merge import database_identity
+from gyrostand.db.models import Campaign, Observation, RawLogSegment, Series, Trial
 from gyrostand.db.queries import (
     RUN_START,
     last_stand_time_ms,
@@ -117,14 +118,28 @@ def _stop_on_signals(stop: threading.Event) -> Iterator[None]:
             signal.signal(s, h)
 
 
-def raw_log_path(plan: Plan, campaign_id: int, earlier: int) -> Path:
-    """campaign-ID.blf for the first run, campaign-ID-resumeN.blf for each resume (`earlier`:
-    the campaign's segments so far), never an existing file; absolute, so that the database
-    finds it from any working directory."""
+def raw_log_path(store: CampaignStore, plan: Plan, segments: Sequence[RawLogSegment]) -> Path:
+    """DB-campaign-ID.blf for the first run, DB the database's name (its file's stem), so that
+    databases sharing a folder never share a name (DB-IDENTITY-campaign-ID.blf when one of the
+    same name elsewhere wrote that one: `db.merge.database_identity`); then the first run's name
+    with -resumeN for each resume (`segments`: the campaign's so far). Never an existing file;
+    absolute, so that the database finds it from any working directory."""
     folder = Path(plan.raw_log_dir).resolve()
     folder.mkdir(parents=True, exist_ok=True)
-    names = (f"campaign-{campaign_id}" + (f"-resume{n}" if n else "") for n in count(earlier))
-    return next(p for name in names if not (p := folder / f"{name}.{plan.raw_log_format}").exists())
+    if segments:
+        first = Path(segments[0].path).stem
+        names: Iterator[str] = (f"{first}-resume{n}" for n in count(len(segments)))
+    else:
+        url = store.sessions.kw["bind"].url
+        database = Path(url.database).stem if url.database else url.get_backend_name()
+        with store.sessions() as session:
+            identity = (database_identity(session) or "")[:8]
+        base = f"{database}-{identity}-campaign-{store.campaign_id}"
+        names = chain(
+            [f"{database}-campaign-{store.campaign_id}", base], (f"{base}-{n}" for n in count(2))
+        )
+    suffix = f".{plan.raw_log_format}"
+    return next(p for name in names if not (p := folder / f"{name}{suffix}").exists())
 
 
 def run_live(
@@ -161,7 +176,8 @@ def run_live(
                 with store.sessions() as session:
                     clock_ms = -(-last_stand_time_ms(session, store.campaign_id) // 1000) * 1000
         progress = store.progress()
-    raw_log = raw_log_path(plan, store.campaign_id, len(segments))
+    _remove_live_files(segments)  # left by killed runs: never to be taken for this one's
+    raw_log = raw_log_path(store, plan, segments)
     segment = store.open_segment(str(raw_log), start if segments else "new", first_frame)
     store.set_status("running")
     live = LiveBus(plan, codec, raw_log, clock_ms)
@@ -287,6 +303,11 @@ def _judged(store: CampaignStore, plan: Plan) -> str:
         return "completed"
     store.run_event("campaign failed", "error", f"the campaign cannot be analysed: {why}")
     return "failed"
+
+
+def _remove_live_files(segments: Sequence[RawLogSegment]) -> None:
+    for s in segments:
+        LiveFile(live_file_of(s.path)).close()
 
 
 def _show(engine: Engine, display: ProgressDisplay, live_file: LiveFile) -> None:

@@ -83,8 +83,8 @@ def test_same_seed_same_database_and_raw_log_under_load(
     for table in a:
         assert a[table] == b[table], table
     assert idle.raw_log_sha256 == busy.raw_log_sha256
-    assert (tmp_path / "idle" / "raw" / "campaign-1.blf").read_bytes() == (
-        tmp_path / "busy" / "raw" / "campaign-1.blf"
+    assert (tmp_path / "idle" / "raw" / "db-campaign-1.blf").read_bytes() == (
+        tmp_path / "busy" / "raw" / "db-campaign-1.blf"
     ).read_bytes()
 
 

@@ -51,13 +51,13 @@ def test_raw_log_on_a_full_disk_stops_the_campaign_resumably(tmp_path: Path) -> 
     assert proc.returncode == 0, proc.stderr
     ((code, err),) = json.loads(proc.stdout)
     assert code == 1 and len(err.splitlines()) == 1, err
-    log = raw / "campaign-1.blf"
+    log = raw / "db-campaign-1.blf"
     assert err.startswith(
         f"gyrostand: error: campaign 1 stopped: the raw log {log} cannot be written: "
         "[Errno 28] No space left on device; what was committed is kept: resume it "
         f"(gyrostand campaign resume 1 --db {db}) once the disk has room"
     ), err
-    saved = tmp_path / "raw-saved" / "campaign-1.blf"
+    saved = tmp_path / "raw-saved" / "db-campaign-1.blf"
     in_file = sum(len(r) for r in read_raw_frames(saved))  # up to its last complete block
     with sqlite3.connect(db) as conn:
         status = conn.execute("SELECT status FROM campaign").fetchone()
