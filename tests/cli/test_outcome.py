@@ -13,12 +13,8 @@ from typer.testing import CliRunner
 from gyrostand.cli import app
 from tests.acquisition.harness import FAST_SIM, plan_text
 
-TRIALS = [
-    (45.0, 24.0, 6.0, "fit"),
-    (315.0, 20.0, 5.0, "fit"),
-    (135.0, 24.0, 8.0, "fit"),
-    (225.0, 20.0, 7.0, "control"),
-]
+from .test_retry import TRIALS
+
 # the bus falls silent in trial 3's still series (tests/cli/test_retry.py: ~1350 s)
 SILENCE = "\n[bus.simulator.faults]\nsilence_at_s = 1400.0\nsilence_for_s = 10.0\n"
 NO_ACK = "\n[bus.simulator.faults]\nno_ack = true\n"

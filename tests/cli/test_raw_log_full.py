@@ -20,7 +20,7 @@ from gyrostand.cli import app
 from gyrostand.frames.logfile import read_raw_frames, sha256_of
 from tests.acquisition.harness import FAST_SIM, plan_text
 
-from .test_outcome import TRIALS
+from .test_retry import TRIALS
 
 ROOT = Path(__file__).resolve().parents[2]
 
