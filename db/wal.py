@@ -7,10 +7,12 @@ holds commits (a process has the file open, or one ended without closing it)."""
 from __future__ import annotations
 
 import atexit
+import sqlite3
 import weakref
 from pathlib import Path
 
 from sqlalchemy import Engine
+from sqlalchemy.exc import DBAPIError
 
 _OPEN: weakref.WeakSet[Engine] = weakref.WeakSet()
 
@@ -26,17 +28,21 @@ def _file(engine: Engine) -> Path | None:
 def checkpoint(engine: Engine) -> bool:
     """Copy the write-ahead log into the file and empty it (`PRAGMA wal_checkpoint(TRUNCATE)`):
     the file alone then holds every commit. False when another process's reader or writer kept
-    it from completing (it then holds what that allowed); True for other backends."""
+    it from completing, or the file refused it (a full disk: the commits stay in the log, where
+    SQLite reads them); True for other backends."""
     path = _file(engine)
     if path is None or not path.exists():
         return True
-    raw = engine.raw_connection()  # outside any transaction (a checkpoint cannot run inside one)
     try:
-        busy, _, _ = raw.driver_connection.execute(  # type: ignore[union-attr]
-            "PRAGMA wal_checkpoint(TRUNCATE)"
-        ).fetchone()
-    finally:
-        raw.close()
+        raw = engine.raw_connection()  # outside any transaction (a checkpoint cannot run in one)
+        try:
+            busy, _, _ = raw.driver_connection.execute(  # type: ignore[union-attr]
+                "PRAGMA wal_checkpoint(TRUNCATE)"
+            ).fetchone()
+        finally:
+            raw.close()
+    except (DBAPIError, sqlite3.Error):
+        return False
     return busy == 0
 
 
@@ -50,11 +56,8 @@ def checkpoint_at_exit(engine: Engine) -> None:
 @atexit.register
 def _at_exit() -> None:
     for engine in list(_OPEN):
-        try:
-            checkpoint(engine)
-            engine.dispose()
-        except Exception:  # noqa: S110  (exiting: a file gone or locked keeps its WAL)
-            pass
+        checkpoint(engine)
+        engine.dispose()
 
 
 def unmerged_wal(path: Path) -> int:
