@@ -181,7 +181,7 @@ def run_live(
     segment = store.open_segment(str(raw_log), start if segments else "new", first_frame)
     store.set_status("running")
     live = LiveBus(plan, codec, raw_log, clock_ms)
-    grants = Grants(live.bus) if live.virtual else None
+    grants = Grants(live.bus, start_ms=clock_ms) if live.virtual else None
     stream_clock = StreamClock()
     display = ProgressDisplay(quiet=quiet)
     operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)

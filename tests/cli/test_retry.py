@@ -415,6 +415,7 @@ def test_a_retried_campaign_is_not_re_run_from_its_start(runs: Runs, tmp_path: P
     db = copy(runs, tmp_path)
     with sqlite3.connect(db) as conn:
         conn.execute("UPDATE raw_log_segment SET ending = 'killed'")  # as a kill -9 leaves it
+        conn.execute("UPDATE campaign SET status = 'running'")
     sessions = open_database(sqlite_url(db))
     plan = parse_plan(query(db, "SELECT plan_toml FROM campaign")[0][0])
     store = CampaignStore(sessions, 1)
