@@ -197,6 +197,7 @@ def register(app: typer.Typer) -> None:
 
         from gyrostand.db.merge import MergeRefused, merge_database
         from gyrostand.db.session import database_url
+        from gyrostand.db.wal import checkpoint
 
         stand_wal(stand)
         source = open_stand(stand)
@@ -211,6 +212,7 @@ def register(app: typer.Typer) -> None:
             if raw_logs is not None:
                 raw_logs.remove_copies()
             raise
+        checkpoint(lab.kw["bind"])  # the lab's file alone holds the merge (db.wal)
         if as_json:
             document = {
                 "source_database": result.source_database,
