@@ -175,7 +175,10 @@ class Recorder(can.Listener):
             rest = self._unmark(list(self._frames))
             self.log(RawFrames.from_messages(0, rest), rest)
         if self.writer is not None:
-            self.writer.stop()
+            try:
+                self.writer.stop()
+            except Exception as exc:  # its last frames did not reach the file
+                self.log_error = self.log_error or exc
         self._stopped = True
 
 
@@ -199,7 +202,8 @@ class RecordedSend:
 class LiveBus:
     """Opens everything a live campaign needs on the bus; `close()` releases it in order."""
 
-    def __init__(self, plan: Plan, codec: Codec, raw_log: Path | None) -> None:
+    def __init__(self, plan: Plan, codec: Codec, raw_log: Path | None, clock_ms: int = 0) -> None:
+        """`clock_ms`: the simulated stand's clock at its start (`Simulator`)."""
         self.plan = plan
         self.virtual = plan.bus.timing == "virtual"
         self.simulator: Simulator | None = None
@@ -209,7 +213,11 @@ class LiveBus:
             if config is not None:
                 self._sim_bus = SimulatorBus(channel=self._channel)
                 self.simulator = Simulator(
-                    self._sim_bus, config, codec=codec_for(plan), transmitter=transmitter(plan)
+                    self._sim_bus,
+                    config,
+                    codec=codec_for(plan),
+                    clock_ms=clock_ms,
+                    transmitter=transmitter(plan),
                 )
             self.recorder = Recorder(plan.bus.queue_size, raw_log, log_rest=not self.virtual)
             # in virtual time the stand repeats each command in the stream at the stand time it

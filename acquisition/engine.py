@@ -314,7 +314,10 @@ class Engine:
         progress: dict[int, TrialState] | None = None,
         operator: Operator | None = None,
         source: SourceInfo = GYROSTAND,
+        start_ms: int = 0,
     ) -> None:
+        """`start_ms`: the stand clock where this run starts (a resumed campaign's stand clock
+        goes on from its last stored time), until the stream says otherwise."""
         self.plan = plan
         self.source = source  # the heading source: its sequence rule and resolution
         self._modulo = source.sequence.modulo
@@ -331,7 +334,7 @@ class Engine:
         self.todo = [t for t in plan.trials if not self.progress.get(t.index, _NONE).completed]
         self.outcome: Literal["running", "completed", "paused", "stopped"] = "running"
         self.phase = Phase.DONE
-        self.now_ms = 0
+        self.now_ms = start_ms
         self._last_t: int | None = None  # stand time of the last heading frame
         self._last_counter: int | None = None
         self._last_pos: int | None = None  # its stream position

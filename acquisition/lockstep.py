@@ -31,7 +31,7 @@ class Lockstep:
         stream (a new one per run)."""
         self.codec = codec or Codec()
         transmitter, self._decoder = compass if compass is not None else (None, None)
-        self.stand = StandEngine(config, self.codec, transmitter)
+        self.stand = StandEngine(config, self.codec, transmitter=transmitter)
         self.step_s = step_s
         self.stream: list[can.Message] = []  # what `run` fed the engine
         self._pending: list[can.Message] = []

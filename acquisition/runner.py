@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
-from itertools import count
+from itertools import chain, count
 from pathlib import Path
 from typing import IO
 
@@ -28,13 +28,22 @@ from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.acquisition.virtual_time import Grants, StreamClock
-from gyrostand.db.models import Campaign, Observation, Series, Trial
-from gyrostand.db.queries import latest_attempt, live_file_of, raw_log_segments, stand_campaign
+from gyrostand.db.merge import database_identity
+from gyrostand.db.models import Campaign, Observation, RawLogSegment, Series, Trial
+from gyrostand.db.queries import (
+    RUN_START,
+    last_stand_time_ms,
+    latest_attempt,
+    live_file_of,
+    raw_log_segments,
+    stand_campaign,
+)
+from gyrostand.db.wal import checkpoint
 from gyrostand.devices.decoder import frame_decoder, source_info
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.plan.codec import codec_for
-from gyrostand.plan.model import Plan
+from gyrostand.plan.model import MIN_FIT_TRIALS, Plan
 from gyrostand.stand.controller import StandController, StandError
 
 BATCH_FRAMES = 50_000
@@ -44,7 +53,7 @@ VIRTUAL_STALL_WALL_S = 60.0  # virtual time: no frame at all for this long = no 
 @dataclass(frozen=True)
 class RunResult:
     campaign_id: int
-    outcome: str  # completed | paused | stopped
+    outcome: str  # completed | failed (cannot be analysed) | paused | stopped
     trials_completed: int
     trials_failed: int
     observations: int
@@ -94,14 +103,28 @@ def _stop_on_signals(stop: threading.Event) -> Iterator[None]:
             signal.signal(s, h)
 
 
-def raw_log_path(plan: Plan, campaign_id: int, earlier: int) -> Path:
-    """campaign-ID.blf for the first run, campaign-ID-resumeN.blf for each resume (`earlier`:
-    the campaign's segments so far), never an existing file; absolute, so that the database
-    finds it from any working directory."""
+def raw_log_path(store: CampaignStore, plan: Plan, segments: Sequence[RawLogSegment]) -> Path:
+    """DB-campaign-ID.blf for the first run, DB the database's name (its file's stem), so that
+    databases sharing a folder never share a name (DB-IDENTITY-campaign-ID.blf when one of the
+    same name elsewhere wrote that one: `db.merge.database_identity`); then the first run's name
+    with -resumeN for each resume (`segments`: the campaign's so far). Never an existing file;
+    absolute, so that the database finds it from any working directory."""
     folder = Path(plan.raw_log_dir).resolve()
     folder.mkdir(parents=True, exist_ok=True)
-    names = (f"campaign-{campaign_id}" + (f"-resume{n}" if n else "") for n in count(earlier))
-    return next(p for name in names if not (p := folder / f"{name}.{plan.raw_log_format}").exists())
+    if segments:
+        first = Path(segments[0].path).stem
+        names: Iterator[str] = (f"{first}-resume{n}" for n in count(len(segments)))
+    else:
+        url = store.sessions.kw["bind"].url
+        database = Path(url.database).stem if url.database else url.get_backend_name()
+        with store.sessions() as session:
+            identity = (database_identity(session) or "")[:8]
+        base = f"{database}-{identity}-campaign-{store.campaign_id}"
+        names = chain(
+            [f"{database}-campaign-{store.campaign_id}", base], (f"{base}-{n}" for n in count(2))
+        )
+    suffix = f".{plan.raw_log_format}"
+    return next(p for name in names if not (p := folder / f"{name}{suffix}").exists())
 
 
 def run_live(
@@ -125,7 +148,7 @@ def run_live(
     codec = codec_for(plan)
     with store.sessions() as session:
         segments = raw_log_segments(session, store.campaign_id)
-    first_frame = 0
+    first_frame, clock_ms = 0, 0
     if start == "continued":
         first_frame = sum(s.frames or 0 for s in segments)  # all closed, or found killed
         store.re_run()
@@ -134,18 +157,22 @@ def run_live(
         if start == "restarted":
             store.redo_uncompensated()
             store.complete_acquired()
+            if plan.bus.simulated:  # its clock goes on, as a stand's does: one campaign time
+                with store.sessions() as session:
+                    clock_ms = -(-last_stand_time_ms(session, store.campaign_id) // 1000) * 1000
         progress = store.progress()
-    raw_log = raw_log_path(plan, store.campaign_id, len(segments))
+    _remove_live_files(segments)  # left by killed runs: never to be taken for this one's
+    raw_log = raw_log_path(store, plan, segments)
     segment = store.open_segment(str(raw_log), start if segments else "new", first_frame)
     store.set_status("running")
-    live = LiveBus(plan, codec, raw_log)
-    grants = Grants(live.bus) if live.virtual else None
+    live = LiveBus(plan, codec, raw_log, clock_ms)
+    grants = Grants(live.bus, start_ms=clock_ms) if live.virtual else None
     stream_clock = StreamClock()
     display = ProgressDisplay(quiet=quiet)
     operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)
     commander = LiveCommander(live.controller, grants)
     source = source_info(codec, plan.compass.protocol)
-    engine = Engine(plan, store, commander, progress, operator, source)
+    engine = Engine(plan, store, commander, progress, operator, source, start_ms=clock_ms)
     decoder = frame_decoder(codec, *plan.heading_source)
     if grants is None:
         silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
@@ -156,7 +183,8 @@ def run_live(
             f"bus silence: the simulated stand sent nothing for {silence_wall_s:g} s of wall "
             "time (is it running, in virtual time?)"
         )
-    position, dropped, errors, log_failed = 0, 0, 0, False
+    position, dropped, errors = 0, 0, 0
+    run_start = start == "restarted"  # a boundary of the compass's record, at its first frame
     last_frame = time.monotonic()
     live_file = LiveFile(live_file_of(raw_log))
     try:
@@ -177,11 +205,9 @@ def run_live(
                     )
                 for before, overflow in live.recorder.overflows:
                     engine.frames_dropped(position + before, overflow)
-                if live.recorder.log_error is not None and not log_failed:
-                    log_failed = True
-                    store.run_event(
-                        "raw log", "error", f"raw log incomplete: {live.recorder.log_error!r}"
-                    )
+                if live.recorder.log_error is not None:  # as a database refusing writes
+                    engine.interrupt(f"the raw log cannot be written: {live.recorder.log_error}")
+                    break
                 while errors < len(live.recorder.errors):
                     exc = live.recorder.errors[errors]
                     errors += 1
@@ -194,6 +220,11 @@ def run_live(
                     raw = RawFrames.from_messages(position, msgs)
                     batch = decoder.decode(raw)
                     engine.feed(batch)
+                    if run_start and batch.headings.t_ms.size:
+                        t_ms = int(batch.headings.t_ms[0])
+                        first = f"this run's first heading at stand time {t_ms / 1000:g} s"
+                        store.run_event(RUN_START, "info", first, t_ms)
+                        run_start = False
                     live_file.headings(batch.headings)
                     if grants is not None:  # the log ends where the campaign did
                         keep = engine.consumed - position
@@ -215,11 +246,60 @@ def run_live(
         live_file.close()
         live.close()
         sha = sha256_of(raw_log)
-        store.close_segment(segment, live.recorder.logged, sha)
-        store.run_event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
+        log_error = live.recorder.log_error
+        if log_error is None:
+            store.close_segment(segment, live.recorder.logged, sha)
+            store.run_event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
+        else:  # it ends before the run did, as a killed run's does
+            frames = _readable_frames(raw_log)
+            store.close_segment(segment, frames, sha, ending="killed")
+            store.run_event(
+                "raw log",
+                "error",
+                f"raw log {raw_log} incomplete: {frames} frames readable of the run's; "
+                f"writing it failed: {log_error}",
+            )
         outcome = engine.outcome if engine.outcome != "running" else "stopped"
+        if outcome == "completed":
+            outcome = _judged(store, plan)
         store.set_status(outcome)
+        checkpoint(store.sessions.kw["bind"])  # the file alone holds the run (a copy of it)
+    if log_error is not None:
+        raise RawLogFailed(f"the raw log {raw_log} cannot be written: {log_error}")
     return result(store, outcome, raw_log, sha)
+
+
+class RawLogFailed(RuntimeError):
+    """A run's raw log could not be written (a full disk): the run stopped the stand and ended
+    with what the database holds; the log holds the frames up to its last complete block."""
+
+
+def _judged(store: CampaignStore, plan: Plan) -> str:
+    """A campaign whose every trial was acquired or failed: "completed" when the analysis can use
+    it (or it is `acquisition_only` and a trial completed), else "failed", with an event saying
+    why (`campaign resume --retry-failed` takes it up again)."""
+    with store.sessions() as session:
+        completed = session.scalars(
+            select(Trial.role).where(
+                Trial.campaign_id == store.campaign_id,
+                Trial.status == "completed",
+                latest_attempt(),
+            )
+        ).all()
+    fit = sum(role == "fit" for role in completed)
+    if not completed:
+        why = "no trial completed"
+    elif fit < MIN_FIT_TRIALS and not plan.campaign.acquisition_only:
+        why = f"{fit} fit trial{'s' * (fit != 1)} completed: the analysis needs {MIN_FIT_TRIALS}"
+    else:
+        return "completed"
+    store.run_event("campaign failed", "error", f"the campaign cannot be analysed: {why}")
+    return "failed"
+
+
+def _remove_live_files(segments: Sequence[RawLogSegment]) -> None:
+    for s in segments:
+        LiveFile(live_file_of(s.path)).close()
 
 
 def _show(engine: Engine, display: ProgressDisplay, live_file: LiveFile) -> None:
@@ -390,7 +470,7 @@ def replay(
     except BaseException:
         store.set_status("failed")
         raise
-    outcome = engine.outcome
+    outcome = engine.outcome if engine.outcome != "completed" else _judged(store, plan)
     store.set_status(outcome)
     return result(store, outcome, checked[-1].path, checked[-1].sha256)
 
@@ -453,16 +533,20 @@ def _readable_frames(path: Path) -> int:
 
 def resume_start(store: CampaignStore, stored: Plan, plan: Plan) -> str:
     """How a resumed run starts (`run_live`): "continued" for a simulation in virtual time on
-    the stored plan's bus whose every earlier run was killed and no trial retried (so the
-    database holds a prefix of what re-running the simulation gives: the resumed campaign equals
-    an uninterrupted one); else "restarted", at the first incomplete series."""
+    the stored plan's bus whose every earlier run was killed (the last one left the campaign
+    planned or running) and no trial retried (so the database holds a prefix of what re-running
+    the simulation gives: the resumed campaign equals an uninterrupted one); else "restarted",
+    at the first incomplete series."""
     with store.sessions() as session:
         segments = raw_log_segments(session, store.campaign_id)
         attempts = session.scalar(
             select(func.max(Trial.attempt)).where(Trial.campaign_id == store.campaign_id)
         )
+        status = session.get_one(Campaign, store.campaign_id).status
+    killed = status in ("planned", "running")  # left so by a killed run
     rerun = (
-        plan.bus.simulated
+        killed  # (a run that stopped itself, e.g. on a raw log it could not write, is no prefix)
+        and plan.bus.simulated
         and plan.bus.timing == "virtual"
         and plan.bus == stored.bus
         and all(s.ending == "killed" and s.start != "restarted" for s in segments)

@@ -378,11 +378,11 @@ class CampaignStore:
         if j is not None:
             self._series(session, trial, j).status = "failed"
 
-    def run_event(self, kind: str, severity: str, message: str) -> None:
+    def run_event(self, kind: str, severity: str, message: str, t_ms: int | None = None) -> None:
         """An event of the run rather than of the acquisition (raw log, queue, resume): not one
         of the engine's writes, so never re-derived by a re-run."""
         with self._tx() as session:
-            self._add_event(session, kind, severity, message)
+            self._add_event(session, kind, severity, message, t_ms=t_ms)
 
     def _add_event(
         self,

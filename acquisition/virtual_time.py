@@ -20,9 +20,11 @@ class Grants:
     """Sends SIM_SYNC: before every command (which then takes effect at processed + lead) and
     whenever the processed stand time has moved on."""
 
-    def __init__(self, bus: can.BusABC, lead_ms: int = DEFAULT_LEAD_MS) -> None:
+    def __init__(self, bus: can.BusABC, lead_ms: int = DEFAULT_LEAD_MS, start_ms: int = 0) -> None:
+        """`start_ms`: the stand clock where the run starts (`Engine`'s `start_ms`)."""
         self.bus = bus
         self.lead_ms = lead_ms
+        self.start_ms = start_ms
         self._sent_ms: int | None = None
         self._sent_wall = 0.0
 
@@ -40,7 +42,7 @@ class Grants:
         """Nothing arrived: repeat the last SIM_SYNC now and then (it changes nothing for a
         stand that already has it)."""
         if time.monotonic() - self._sent_wall >= RESEND_WALL_S:
-            self.sync(self._sent_ms or 0)
+            self.sync(self.start_ms if self._sent_ms is None else self._sent_ms)
 
 
 class StreamClock:

@@ -362,8 +362,10 @@ class RawLogSegment(Base):
     `start`: "new" (the first run, or a replayed log), "continued" (a resumed simulation in
     virtual time: its frames continue the earlier segments' stream exactly, from stream position
     `first_frame`), "restarted" (a resume that started the stand again at the first incomplete
-    series). `sha256` and `frames` are set when the run closes the file ("closed") or when a
-    later resume finds it left open by a killed run ("killed")."""
+    series). `sha256` and `frames` are set when the run closes the file with every frame of the
+    run in it ("closed"), or, for a log that ends before its run did ("killed": left open by a
+    killed run, found by a later resume; or a write that failed, e.g. on a full disk, which stops
+    the run), with the frames readable up to its last complete block."""
 
     __tablename__ = "raw_log_segment"
     __table_args__ = (

@@ -617,6 +617,24 @@ def model_campaigns(session: Session, model: str, key: str) -> list[AnalysedCamp
     ]
 
 
+RUN_START = "run start"
+"""The event of a resumed run (not a re-run of a simulation) at its first stand time: the
+compass's state does not carry over this boundary (`report.transient`)."""
+
+
+def last_stand_time_ms(session: Session, campaign_id: int) -> int:
+    """The latest stand time any run of the campaign stored (0 for none): where a resumed run's
+    stand clock goes on from."""
+    trial_ids = select(Trial.id).where(Trial.campaign_id == campaign_id)
+    series_ids = select(Series.id).where(Series.trial_id.in_(trial_ids))
+    latest = [
+        select(func.max(Event.stand_time_ms)).where(Event.campaign_id == campaign_id),
+        select(func.max(Series.settle_done_ms)).where(Series.id.in_(series_ids)),
+        select(func.max(Observation.window_end_ms)).where(Observation.series_id.in_(series_ids)),
+    ]
+    return max((session.scalar(q) or 0 for q in latest), default=0)
+
+
 def live_file_of(raw_log: str | Path) -> Path:
     """Where a running acquisition keeps its latest progress snapshot (JSON, deleted when the
     run ends): beside the run's raw log, campaign-ID.live.json."""

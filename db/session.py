@@ -21,6 +21,7 @@ from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
 from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand.db.url import shown_url
+from gyrostand.db.wal import checkpoint_at_exit
 
 MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
 BUSY_TIMEOUT_MS = 10_000
@@ -145,6 +146,7 @@ def open_database(url: str, *, upgrade: bool = True, create: bool = True) -> ses
         migrate(engine, upgrade=upgrade)
         if engine.dialect.name == "sqlite":
             _enable_wal(engine)
+            checkpoint_at_exit(engine)
     except DBAPIError as exc:
         engine.dispose()
         raise unusable(exc, where) from None

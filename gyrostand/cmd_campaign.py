@@ -186,8 +186,8 @@ def not_interrupted(stop: threading.Event, before: str) -> None:
 
 
 def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None:
-    """The outcome on stdout; exit code 1 unless the campaign completed (with how to continue
-    it and to retry its failed trials when it can be continued)."""
+    """The outcome on stdout; exit code 1 unless the campaign completed (failed: it cannot be
+    analysed; with how to continue it and to retry its failed trials when it can be continued)."""
     shown = printable(shown_url(db))
     _out().print(
         f"campaign {result.campaign_id} {result.outcome}: {result.trials_completed} trials "
@@ -200,6 +200,12 @@ def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None
         _out().print(
             f"retry the failed trials with: gyrostand campaign resume {result.campaign_id} "
             f"--retry-failed --db {shown}"
+        )
+    if result.outcome == "failed":  # every trial attempted, too few completed to analyse
+        fail(
+            f"campaign {result.campaign_id} failed: it cannot be analysed "
+            f"({result.trials_completed} trials completed, {result.trials_failed} failed)",
+            code=EXIT_FAILED,
         )
     if result.outcome != "completed":
         if resumable:
@@ -224,7 +230,7 @@ def run_campaign(
     import can
     from sqlalchemy.exc import OperationalError
 
-    from gyrostand.acquisition.runner import result, run_live
+    from gyrostand.acquisition.runner import RawLogFailed, result, run_live
     from gyrostand.acquisition.store import ReRunMismatch
     from gyrostand.db.session import unusable
 
@@ -247,6 +253,12 @@ def run_campaign(
     except ReRunMismatch as exc:
         mark("resume", "error", str(exc), "stopped")
         fail(f"campaign {store.campaign_id}: {exc}", code=EXIT_FAILED)
+    except RawLogFailed as exc:
+        fail(
+            f"campaign {store.campaign_id} stopped: {exc}; what was committed is kept: resume "
+            f"it (gyrostand campaign resume {store.campaign_id} --db {db}) once the disk has room",
+            code=EXIT_FAILED,
+        )
     except KeyboardInterrupt:  # python's own handler (ours cannot be set outside the main thread)
         mark("interrupted", "warning", "interrupted before acquiring (Ctrl-C)", "stopped")
         return result(store, "stopped", None, None)
@@ -535,6 +547,8 @@ def register(app: typer.Typer) -> None:
         status = printable(s.status)
         if s.status == "running" and not held_elsewhere(sessions, campaign_id):
             status = "interrupted (left running by a process that is gone; resume continues it)"
+        elif s.status == "failed":
+            status = "failed (too few trials completed to analyse it; resume --retry-failed)"
         # every stored string goes through printable() and is printed as text (markup off)
         _out().print(
             f"campaign {s.campaign_id} ({printable(s.source)}): {status}, "

@@ -15,7 +15,7 @@ import typer
 
 from gyrostand.cmd_data import JsonOption, open_db
 from gyrostand.db.url import shown_url
-from gyrostand.errors import EXIT_BAD_INPUT, EXIT_FAILED, fail, printable
+from gyrostand.errors import EXIT_BAD_INPUT, EXIT_FAILED, fail, printable, warn
 
 if TYPE_CHECKING:
     from sqlalchemy.orm import Session, sessionmaker
@@ -88,6 +88,26 @@ DRY = {
     "merged": "would be merged as a new lab campaign",
     "replaced": "would replace its earlier, incomplete copy, lab campaign {lab_id}",
 }
+
+
+def stand_wal(stand: str) -> None:
+    """Warn when a stand's SQLite file has commits in its write-ahead log beside it: merged from
+    there, but a copy of the file alone lacks them (db.wal)."""
+    from sqlalchemy.engine import make_url
+
+    from gyrostand.db.session import database_url
+    from gyrostand.db.wal import unmerged_wal
+
+    url = make_url(database_url(stand))
+    if url.get_backend_name() != "sqlite" or not url.database:
+        return
+    path = Path(url.database)
+    if size := unmerged_wal(path):
+        warn(
+            f"{path}-wal beside it holds {size} bytes of its write-ahead log (a process has "
+            f"it open, or one ended without closing it): merged from there, but a copy of "
+            f"{path.name} without its -wal would lack the latest commits"
+        )
 
 
 def open_stand(stand: str) -> sessionmaker[Session]:
@@ -177,7 +197,9 @@ def register(app: typer.Typer) -> None:
         left running are skipped."""
         from gyrostand.db.merge import MergeRefused, merge_database
         from gyrostand.db.session import database_url
+        from gyrostand.db.wal import checkpoint
 
+        stand_wal(stand)
         source = open_stand(stand)
         lab = open_db(into)
         merged_from = shown_url(database_url(stand))
@@ -190,6 +212,7 @@ def register(app: typer.Typer) -> None:
             if raw_logs is not None:
                 raw_logs.remove_copies()
             raise
+        checkpoint(lab.kw["bind"])  # the lab's file alone holds the merge (db.wal)
         if as_json:
             document = {
                 "source_database": result.source_database,

@@ -4,6 +4,7 @@ campaigns (`gyrostand.station`)."""
 from __future__ import annotations
 
 import os
+import signal
 import socket
 from pathlib import Path
 from typing import Annotated
@@ -14,6 +15,11 @@ from gyrostand.cmd_data import DEFAULT_DB, DbOption, open_db
 from gyrostand.cmd_report import DEFAULT_OUT
 from gyrostand.db.url import shown_url
 from gyrostand.errors import EXIT_FAILED, fail, printable
+
+
+def _terminated(signum: int, _frame: object) -> None:
+    """SIGTERM as a normal exit (128 + 15): the exit handlers run."""
+    raise SystemExit(128 + signum)
 
 
 def register(app: typer.Typer) -> None:
@@ -97,6 +103,9 @@ def register(app: typer.Typer) -> None:
             ssl_certfile=tls_cert,
             ssl_keyfile=tls_key,
         )
+        # uvicorn shuts down on SIGTERM, then raises it again: as an exit (143), so that the
+        # database's write-ahead log is checkpointed into the file (db.wal) as at Ctrl-C
+        signal.signal(signal.SIGTERM, _terminated)
         uvicorn.Server(config).run(sockets=[listening])
 
 

@@ -56,6 +56,11 @@ def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
     raise typer.Exit(code)
 
 
+def warn(message: str) -> None:
+    """Print `gyrostand: warning: <message>` (one line) to stderr; the command goes on."""
+    _err.print(f"gyrostand: warning: {printable(message)}")
+
+
 def usage_error(message: str, help_hint: str | None, code: int = EXIT_BAD_INPUT) -> NoReturn:
     """A command line that does not parse: one line, with where to find the command's help."""
     hint = f"; see '{help_hint}'" if help_hint else ""

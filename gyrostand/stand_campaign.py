@@ -28,7 +28,7 @@ class CampaignRun:
     `acquisition_only`)."""
 
     campaign_id: int
-    outcome: str  # completed | paused | stopped
+    outcome: str  # completed | failed (cannot be analysed) | paused | stopped
     trials_completed: int
     trials_failed: int
     observations: int

@@ -30,7 +30,7 @@ from gyrostand.analysis.transient import (
     fit_transient_free,
 )
 from gyrostand.db.models import Campaign, Series
-from gyrostand.db.queries import current_trials
+from gyrostand.db.queries import RUN_START, current_trials
 from gyrostand.plan.model import Plan
 
 
@@ -46,20 +46,45 @@ class _Segment:
 
 
 def _segments(campaign: Campaign) -> list[_Segment]:
+    """The series in the order they were acquired (series rows are made as a series starts), on
+    one campaign time: a run whose stand clock restarted (a power-cycled stand controller, or a
+    database from before the simulated stand's clock went on across runs) is placed after the
+    run before it (`_placed`)."""
+    runs = sorted(
+        e.stand_time_ms
+        for e in campaign.events
+        if e.kind == RUN_START and e.stand_time_ms is not None
+    )
+    attempts = {t.id: t for t in current_trials(campaign.trials)}
+    series = sorted((s for t in attempts.values() for s in t.series), key=lambda s: s.id)
     out: list[_Segment] = []
     previous: tuple[int, int] | None = None  # (trial attempt, end ms) of the last series
-    for trial in sorted(current_trials(campaign.trials), key=lambda t: t.index):
-        for s in sorted(trial.series, key=lambda s: s.j):
-            seg = _segment(trial.index, trial.attempt, s, previous)
-            if seg is not None:
-                out.append(seg)
-                previous = (trial.attempt, int(max(w[1] for w in seg.windows)))
+    offset = 0  # campaign time - stand time of the run being placed
+    for s in series:
+        trial = attempts[s.trial_id]
+        raw = _segment(trial.index, trial.attempt, s, previous, offset, runs)
+        if raw is None:
+            continue
+        if previous is not None and raw.windows[0][0] < previous[1]:  # the clock went back
+            offset = previous[1] - (raw.windows[0][0] - offset)
+            raw = _segment(trial.index, trial.attempt, s, None, offset, runs)
+            assert raw is not None
+        out.append(raw)
+        previous = (trial.attempt, int(max(w[1] for w in raw.windows)))
     return out
 
 
 def _segment(
-    index: int, attempt: int, s: Series, previous: tuple[int, int] | None
+    index: int,
+    attempt: int,
+    s: Series,
+    previous: tuple[int, int] | None,
+    offset: int,
+    runs: list[int],
 ) -> _Segment | None:
+    """Series `s` in campaign time (its stand times + `offset`), chained to the series before
+    (`previous`: its attempt and end) when both ran in one run of the stand: first attempts,
+    times increasing, and no run started in between (`runs`: run starts, stand ms)."""
     outcome = None if s.settle_outcome is None else SettleOutcome.from_dict(s.settle_outcome)
     blocks = [] if outcome is None else [tuple(map(float, b)) for b in outcome.blocks]
     timed = [o for o in s.observations if o.window_start_ms is not None]
@@ -67,21 +92,23 @@ def _segment(
     windows = blocks + [(a, b, o.value_deg) for (a, b), o in zip(observed, timed, strict=True)]
     if not windows:
         return None
+    windows.sort(key=lambda w: w[0])
     step = None if outcome is None else outcome.step_ms
     chained = (
         previous is not None
         and step is not None
         and attempt == previous[0] == 1
-        and previous[1] <= step <= windows[0][0]
+        and previous[1] <= step + offset <= windows[0][0] + offset
+        and not any(previous[1] < t + offset <= windows[0][0] + offset for t in runs)
     )
     comp = [o.compensation_deg for o in timed if o.compensation_deg is not None]
     return _Segment(
         trial=index,
         j=s.j,
-        start_ms=step if chained and step is not None else int(windows[0][0]),
+        start_ms=(step if chained and step is not None else int(windows[0][0])) + offset,
         free=not chained,
-        windows=windows,
-        observed=observed,
+        windows=[(a + offset, b + offset, v) for a, b, v in windows],
+        observed=[(a + offset, b + offset) for a, b in observed],
         compensation_deg=float(np.mean(comp)) if comp else None,
     )
 

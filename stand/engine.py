@@ -48,13 +48,18 @@ class HeadingTransmitter(Protocol):
 
 
 class StandEngine:
+    """`clock_ms`: the stand clock at power-up, which the frames' STAND_TIME count from (a
+    resumed campaign's stand, whose controller clock continues; the physics starts at 0)."""
+
     def __init__(
         self,
         config: SimConfig,
         codec: Codec | None = None,
+        clock_ms: int = 0,
         transmitter: HeadingTransmitter | None = None,
     ) -> None:
         self.config = config
+        self.clock_ms = clock_ms
         self.codec = codec or Codec()
         self.transmitter = transmitter  # None: the compass sends the DBC's heading frame
         compass = config.compass
@@ -182,7 +187,8 @@ class StandEngine:
         out_of_range = u[:, _OOR] < f.out_of_range_rate  # up to the 19-bit raw maximum
         readings = np.where(out_of_range, 360.0 + np.round(u[:, _OOR_VALUE] * 164.0, 3), readings)
         values = {
-            "heading_time": np.round(index * (1000.0 / self.config.heading_rate_hz)),
+            "heading_time": np.round(index * (1000.0 / self.config.heading_rate_hz))
+            + self.clock_ms,
             "heading": readings,
             "heading_valid": u[:, _INVALID] >= f.invalid_rate,
             "heading_counter": counter,
@@ -226,7 +232,7 @@ class StandEngine:
             direction, amplitude, period = self._actual_motion()
             cycles = np.maximum(t - self._rocking_since_s, 0.0) / period
         values = {
-            "status_time": np.round(index * (1000.0 / self.config.status_rate_hz)),
+            "status_time": np.round(index * (1000.0 / self.config.status_rate_hz)) + self.clock_ms,
             "status_rocking": np.full(n, self.rocking),
             "status_direction": np.full(n, direction),
             "status_amplitude": np.full(n, amplitude),
@@ -265,7 +271,7 @@ class StandEngine:
             reason is None,
             reason or "",
             seq=frame.seq,
-            stand_time_ms=round(self._time_s * 1000.0),
+            stand_time_ms=round(self._time_s * 1000.0) + self.clock_ms,
         )
         ack.timestamp = self._time_s
         return [ack]

@@ -130,7 +130,7 @@ def run_schedule(
         raise ScheduleError(f"log file must end in {' or '.join(LOG_SUFFIXES)}: {log_path}")
     wall0 = time.perf_counter()
     codec = codec or Codec()
-    engine = StandEngine(config, codec, transmitter)
+    engine = StandEngine(config, codec, transmitter=transmitter)
     epoch = time.time() if start_epoch_s is None else start_epoch_s
     frames = 0
     refusals: list[AckFrame] = []

@@ -60,11 +60,14 @@ class Simulator:
         codec: Codec | None = None,
         recorder: can.Listener | None = None,
         start_epoch_s: float | None = None,
+        clock_ms: int = 0,
         transmitter: HeadingTransmitter | None = None,
     ) -> None:
+        """`clock_ms`: the stand clock at power-up (a resumed campaign's: a stand's clock goes
+        on counting); the simulation itself starts at 0 as after a power-up."""
         self.bus = bus
         self.config = config
-        self.engine = StandEngine(config, codec, transmitter)
+        self.engine = StandEngine(config, codec, clock_ms, transmitter)
         self._recorder = recorder
         self._epoch_s = time.time() if start_epoch_s is None else start_epoch_s
         self._stop = threading.Event()
@@ -77,7 +80,7 @@ class Simulator:
         self._batch_wall_s = min(max(interval_wall_s, _MIN_BATCH_WALL_S), _MAX_BATCH_WALL_S)
         # virtual time: how far the controller lets the stand run, when the next command takes
         # effect, the commands waiting for their stand time, the controller's last progress
-        self._clock = ClockEncoder()
+        self._clock = ClockEncoder(clock_ms)
         self._horizon_ms = 0
         self._apply_ms: int | None = None
         self._commands: list[tuple[int, can.Message]] = []
@@ -200,12 +203,14 @@ class Simulator:
         """Take in a SIM_SYNC (how far to run, when the next command applies) or a command."""
         sync = decode_sync(msg)
         if sync is not None:
-            if self._processed_ms is not None and sync.processed_ms < self._processed_ms:
+            processed_ms = sync.processed_ms - self.engine.clock_ms  # simulation time
+            horizon_ms = sync.horizon_ms - self.engine.clock_ms
+            if self._processed_ms is not None and processed_ms < self._processed_ms:
                 # a new controller (resume): tell it where the stand clock is
                 self._send([self._clock.now(self.engine.stand_time_s)])
-            self._processed_ms = sync.processed_ms
-            self._horizon_ms = max(self._horizon_ms, sync.horizon_ms)
-            self._apply_ms = sync.horizon_ms
+            self._processed_ms = processed_ms
+            self._horizon_ms = max(self._horizon_ms, horizon_ms)
+            self._apply_ms = horizon_ms
             return
         if msg.is_error_frame or msg.arbitration_id != self.engine.codec.command_arbitration_id:
             return

@@ -96,8 +96,10 @@ def decode_sync(msg: can.Message) -> SyncFrame | None:
 class ClockEncoder:
     """SIM_CLOCK frames for every whole clock interval in a stand-time span, batch-encoded."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock_ms: int = 0) -> None:
+        """`clock_ms`: the stand clock at simulated stand time 0 (`StandEngine.clock_ms`)."""
         message = clock_message()
+        self.clock_ms = clock_ms
         self._encoder = BatchEncoder(message, {"time": message.get_signal_by_name("STAND_TIME")})
         self._next = 0  # index of the next tick
 
@@ -109,9 +111,11 @@ class ClockEncoder:
         if not len(ticks):
             return []
         t_ms = ticks * CLOCK_INTERVAL_MS
-        return self._encoder.messages(self._encoder.pack({"time": t_ms}, len(t_ms)), t_ms / 1000)
+        clock = {"time": t_ms + self.clock_ms}
+        return self._encoder.messages(self._encoder.pack(clock, len(t_ms)), t_ms / 1000)
 
     def now(self, t_s: float) -> can.Message:
         """One SIM_CLOCK at stand time t_s (the answer to a new controller)."""
         t_ms = np.array([round(t_s * 1000)])
-        return self._encoder.messages(self._encoder.pack({"time": t_ms}, 1), t_ms / 1000)[0]
+        clock = {"time": t_ms + self.clock_ms}
+        return self._encoder.messages(self._encoder.pack(clock, 1), t_ms / 1000)[0]

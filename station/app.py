@@ -262,7 +262,7 @@ def create_app(
                     acquiring = state["acquiring"]
                     path = await run_in_threadpool(station.read, live_file, cid)  # a new run's
                 mtime, snapshot = await run_in_threadpool(live_change, path, mtime)
-                if snapshot is not None and not fresh:
+                if snapshot is not None and not fresh and acquiring:  # (not a killed run's)
                     yield f"event: live\ndata: {compact(snapshot)}\n\n"
                 await asyncio.sleep(TICK_S if acquiring else IDLE_TICK_S)
 

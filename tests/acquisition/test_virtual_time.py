@@ -83,8 +83,8 @@ def test_same_seed_same_database_and_raw_log_under_load(
     for table in a:
         assert a[table] == b[table], table
     assert idle.raw_log_sha256 == busy.raw_log_sha256
-    assert (tmp_path / "idle" / "raw" / "campaign-1.blf").read_bytes() == (
-        tmp_path / "busy" / "raw" / "campaign-1.blf"
+    assert (tmp_path / "idle" / "raw" / "db-campaign-1.blf").read_bytes() == (
+        tmp_path / "busy" / "raw" / "db-campaign-1.blf"
     ).read_bytes()
 
 
@@ -148,7 +148,7 @@ def test_a_stand_that_never_answers_fails_in_stand_time(
     result = run_in(
         tmp_path / "run", monkeypatch, "\n[bus.simulator.faults]\nno_ack = true\n", n_obs=2
     )
-    assert result.outcome == "completed" and result.trials_failed == 2
+    assert result.outcome == "failed" and result.trials_failed == 2  # (nothing to analyse)
     with closing(sqlite3.connect("db.sqlite")) as conn:
         reasons = [r[0] for r in conn.execute("SELECT failure_reason FROM trial")]
     assert reasons == ["stand did not acknowledge 'stop' within 2 s of stand time"] * 2

@@ -56,7 +56,7 @@ def stand(tmp_path_factory: pytest.TempPathFactory) -> Stand:
     assert proc.returncode == 0, proc.stderr
     db = folder / "db.sqlite"
     assert not db.with_name(db.name + "-wal").exists()
-    return Stand(plan, db, folder / "raw" / "campaign-1.blf")
+    return Stand(plan, db, folder / "raw" / "db-campaign-1.blf")
 
 
 def db_state(db: Path) -> tuple[bytes, bytes] | None:

@@ -24,8 +24,11 @@ from gyrostand.acquisition.retry import RetriedTrial, retry_trials
 from gyrostand.acquisition.runner import resume_start
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.cli import app
+from gyrostand.db.queries import RUN_START
 from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.frames.logfile import read_segments
 from gyrostand.plan.model import parse_plan
+from gyrostand.stand.protocol import load_dbc
 from tests.acquisition.harness import FAST_SIM, plan_text
 
 from .conftest import checkpointed, db_state
@@ -38,9 +41,10 @@ TRIALS = [
 ]
 # The first run (virtual time, seed 1) reaches trial 3's still series at ~1350 s of stand time and
 # trial 4's rocking observations at ~1820 s: the bus falls silent in the first, the angle sensor
-# sticks for a whole window in the second. Every live run starts the simulated stand at stand
-# time 0 and a retry run acquires only the retried trials (~600 s of stand time each), so it ends
-# before either window opens: the retried trials meet the stand without the fault.
+# sticks for a whole window in the second. Every live run starts the simulation at 0 (the fault
+# windows count from there; its stand clock goes on from the campaign's last stored stand time)
+# and a retry run acquires only the retried trials (~600 s each), so it ends before either
+# window opens: the retried trials meet the stand without the fault.
 FAULTS = """
 [bus.simulator.faults]
 silence_at_s = 1400.0
@@ -65,7 +69,7 @@ class Runs:
     failed: Path
     failed_out: str  # what `campaign run` printed
     reference: Path
-    reference_sha256: str
+    reference_log: Path
 
 
 def run(plan: Path) -> subprocess.Popen[str]:
@@ -100,7 +104,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Runs:
         failed / "db.sqlite",
         first.stdout.read(),
         reference / "db.sqlite",
-        reference_sha256=second.stdout.read().split("(sha256 ")[1].split(")")[0],
+        reference_log=Path(second.stdout.read().split("raw frames: ")[1].split(" (sha256")[0]),
     )
 
 
@@ -135,10 +139,45 @@ def attempt_events(db: Path, index: int, attempt: int) -> list[tuple]:
     return query(db, sql, index, attempt)
 
 
-def reference_rows(runs: Runs, index: int) -> list[tuple]:
-    """The reference run's observations of trial `index` of the campaign (its index - 2)."""
+def reference_rows(runs: Runs, index: int, clock_ms: int) -> list[tuple]:
+    """The reference run's observations of trial `index` of the campaign (its index - 2), on a
+    stand clock starting at `clock_ms` (`run_clock`)."""
     rows = query(runs.reference, OBSERVATION + ' WHERE t."index" = ? ORDER BY s.j, o.k', index - 2)
-    return [(index, 2, *row[2:]) for row in rows]
+    return [(index, 2, *row[2:5], row[5] + clock_ms, row[6] + clock_ms, *row[7:]) for row in rows]
+
+
+def run_clock(db: Path) -> int:
+    """Where the stand clock of the (one) retry run started: its RUN_START event's stand time
+    (its first heading), past every stand time stored before it."""
+    ((first_heading,),) = query(db, f"SELECT stand_time_ms FROM event WHERE kind = '{RUN_START}'")
+    ((before,),) = query(
+        db,
+        f"SELECT max(stand_time_ms) FROM event WHERE kind != '{RUN_START}' AND id < "
+        f"(SELECT id FROM event WHERE kind = '{RUN_START}')",
+    )
+    assert first_heading == -(-before // 1000) * 1000  # the next whole second
+    return first_heading
+
+
+def frames_unclocked(logs: list[Path], clock_ms: int) -> list[tuple]:
+    """Every frame of the logs decoded (gyrostand's DBC), STAND_TIME less `clock_ms` (and without
+    the CRC, which covers it)."""
+    database = load_dbc()
+    out: list[tuple] = []
+    for batch in read_segments(logs):
+        for i in range(len(batch)):
+            frame_id = int(batch.arbitration_id[i])
+            data = bytes(batch.data[i][: batch.dlc[i]]) if not batch.is_error[i] else b"error"
+            try:
+                values = dict(database.decode_message(frame_id, data, decode_choices=False))
+            except (KeyError, ValueError):
+                out.append((frame_id, data))
+                continue
+            if "STAND_TIME" in values:
+                values["STAND_TIME"] -= clock_ms
+                values.pop("CRC", None)
+            out.append((frame_id, tuple(sorted(values.items()))))
+    return out
 
 
 def delta_and_variance(rows: list[tuple]) -> tuple[float, float]:
@@ -199,7 +238,8 @@ def test_retry_acquires_a_new_attempt_and_keeps_the_failed_one(runs: Runs, tmp_p
     )
     new = attempt_rows(db, 3, 2)
     assert [(r[2], r[3]) for r in new] == [(j, k) for j in (1, 2) for k in (1, 2, 3)]
-    assert new == reference_rows(runs, 3)  # as the uninterrupted run of trial 3
+    # as the uninterrupted run of trial 3, on the campaign's clock
+    assert new == reference_rows(runs, 3, run_clock(db))
 
     code, out, _ = invoke("campaign", "status", "1", "--db", str(db))
     assert code == 0 and f"trial 3: attempt 2 completed (attempt 1 failed: {SILENCE})\n" in out
@@ -274,10 +314,13 @@ def test_resume_retry_failed_retries_every_failed_trial(runs: Runs, tmp_path: Pa
         f"campaign 1 completed: 4 trials completed, 0 failed, 24 observations in {db}",
     ]
     assert len(lines) == 4  # nothing left to retry
-    # the retry run is the uninterrupted run of trials 3 and 4: the same frames, byte for byte
-    assert lines[3].endswith(f"(sha256 {runs.reference_sha256})")
+    # the retry run is the uninterrupted run of trials 3 and 4 on the campaign's stand clock:
+    # the same frames, their stand times shifted (all else the same)
+    clock_ms = run_clock(db)
+    retry_log = Path(lines[3].removeprefix("raw frames: ").split(" (sha256")[0])
+    assert frames_unclocked([retry_log], clock_ms) == frames_unclocked([runs.reference_log], 0)
     for index in (3, 4):
-        assert attempt_rows(db, index, 2) == reference_rows(runs, index)
+        assert attempt_rows(db, index, 2) == reference_rows(runs, index, clock_ms)
     assert query(db, "SELECT count(*) FROM trial WHERE attempt = 1 AND status = 'failed'") == [(2,)]
 
     code, out, err = invoke("analyze", "1", "--db", str(db), "--json")
@@ -288,7 +331,7 @@ def test_resume_retry_failed_retries_every_failed_trial(runs: Runs, tmp_path: Pa
         (4, 1, 2),
     ]
     control = analysis["controls"][0]
-    delta, _ = delta_and_variance(reference_rows(runs, 4))
+    delta, _ = delta_and_variance(reference_rows(runs, 4, clock_ms))
     assert control["index"] == 4
     assert control["observed_deg"] == pytest.approx(delta, rel=1e-12, abs=1e-12)
 
@@ -372,6 +415,7 @@ def test_a_retried_campaign_is_not_re_run_from_its_start(runs: Runs, tmp_path: P
     db = copy(runs, tmp_path)
     with sqlite3.connect(db) as conn:
         conn.execute("UPDATE raw_log_segment SET ending = 'killed'")  # as a kill -9 leaves it
+        conn.execute("UPDATE campaign SET status = 'running'")
     sessions = open_database(sqlite_url(db))
     plan = parse_plan(query(db, "SELECT plan_toml FROM campaign")[0][0])
     store = CampaignStore(sessions, 1)

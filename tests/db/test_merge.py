@@ -13,6 +13,7 @@ import os
 import shutil
 import sqlite3
 from collections.abc import Callable, Iterator
+from contextlib import closing, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -53,6 +54,21 @@ def stands(tmp_path_factory: pytest.TempPathFactory) -> Stands:
     folder = tmp_path_factory.mktemp("stands")
     run_stands_at_once(folder, [str(folder / "s1.sqlite"), str(folder / "s2.sqlite")])
     return Stands(folder / "s1.sqlite", folder / "s2.sqlite")
+
+
+@contextmanager
+def edited(path: Path) -> Iterator[sqlite3.Connection]:
+    """A change to PATH by another program, committed, checkpointed and closed (db.wal)."""
+    with closing(sqlite3.connect(path)) as connection:
+        with connection:
+            yield connection
+        connection.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+
+
+def checkpointed(path: Path) -> None:
+    """The commits of in-process commands moved from PATH-wal into PATH (db.wal)."""
+    with closing(sqlite3.connect(path)) as connection:
+        assert connection.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchone()[0] == 0
 
 
 def merge(stand: Path | str, lab: str, *extra: str) -> Any:
@@ -118,6 +134,7 @@ def test_two_stands_merge_whole_and_once(stands: Stands, db_url: str, tmp_path: 
         session.add(SignOff(campaign_id=1, role="tested_by", name="A. Tester"))
     sessions.kw["bind"].dispose()
     stand_fit = fit_of(["analyze", "1", "--json", "--db", str(s1)])
+    checkpointed(s1)  # as the analyze process's exit does (db.wal): in this process, by hand
 
     first = merge(s1, db_url)
     assert first.exit_code == 0, first.output
@@ -170,7 +187,7 @@ def test_conflict_merges_nothing(stands: Stands, db_url: str, tmp_path: Path) ->
     mixed = stands.copy(stands.s1, tmp_path, "mixed.sqlite")
     assert merge(stands.s2, sqlite_url(mixed)).exit_code == 0
     assert merge(stands.s2, db_url).exit_code == 0
-    with sqlite3.connect(mixed) as connection:  # S2's campaign changed after the lab merged it
+    with edited(mixed) as connection:  # S2's campaign changed after the lab merged it
         connection.execute("UPDATE observation SET value_deg = value_deg + 0.001 WHERE k = 2")
     before = row_counts(db_url)
     refused = merge(mixed, db_url)
@@ -186,7 +203,7 @@ def test_incomplete_copy_is_replaced_by_the_finished_campaign(
     stands: Stands, db_url: str, tmp_path: Path
 ) -> None:
     early = stands.copy(stands.s1, tmp_path, "early.sqlite")  # as it was in mid-campaign
-    with sqlite3.connect(early) as connection:
+    with edited(early) as connection:
         connection.execute("UPDATE campaign SET status = 'paused', finished_at = NULL")
         connection.execute(
             "DELETE FROM observation WHERE series_id IN (SELECT s.id FROM series s"
@@ -222,7 +239,7 @@ def test_incomplete_copy_worked_on_in_the_lab_is_not_replaced(
     stands: Stands, db_url: str, tmp_path: Path, work: Callable[[Session], None], problem: str
 ) -> None:
     early = stands.copy(stands.s1, tmp_path, "early.sqlite")
-    with sqlite3.connect(early) as connection:
+    with edited(early) as connection:
         connection.execute("UPDATE campaign SET status = 'stopped'")
         connection.execute("DELETE FROM observation WHERE k = 3")
     assert merge(early, db_url).exit_code == 0
@@ -250,7 +267,7 @@ def test_campaigns_running_are_skipped(
 ) -> None:
     leased = stands.copy(stands.s1, tmp_path, "leased.sqlite")
     left = stands.copy(stands.s2, tmp_path, "left.sqlite")
-    with sqlite3.connect(left) as connection:
+    with edited(left) as connection:
         connection.execute("UPDATE campaign SET status = 'running'")
     outputs = [merge(s, db_url).output.splitlines() for s in (leased, left)]
     assert outputs == [
@@ -323,7 +340,7 @@ def test_the_labs_own_campaign_coming_back_is_not_copied(stands: Stands, tmp_pat
     assert back.exit_code == 0, back.output
     assert "already merged (identical), lab campaign 1" in back.output
     assert row_counts(sqlite_url(lab)) == before
-    with sqlite3.connect(other) as connection:  # labelled there: its content differs now
+    with edited(other) as connection:  # labelled there: its content differs now
         connection.execute(
             "INSERT INTO campaign_label (campaign_id, key, value) VALUES (1, 'site', 'B')"
         )
@@ -401,7 +418,7 @@ def test_a_raw_log_not_as_recorded_merges_nothing(
     ((path, _),) = lab_raw_logs(sqlite_url(stand))
     changed = tmp_path / "changed.blf"
     changed.write_bytes(Path(path).read_bytes() + b"\0")
-    with sqlite3.connect(stand) as connection:
+    with edited(stand) as connection:
         connection.execute("UPDATE raw_log_segment SET path = ?", (str(changed),))
     before = row_counts(db_url)
     folder = tmp_path / "lab-raw"
