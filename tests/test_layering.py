@@ -5,9 +5,11 @@ folders stay at the top of the repository; pyproject maps them to `gyrostand.<fo
 - `stand` (protocol, simulator) imports analysis's pure helpers only;
 - `plan` (the one plan model) imports stand and analysis (the transient model); `frames` (raw
   log, vectorised decoder) imports stand;
-- `acquisition` (the write side) imports stand, db, analysis, plan, frames;
+- `devices` (heading source adapters: a compass's native stream -> the engine's frames) imports
+  stand, frames and analysis;
+- `acquisition` (the write side) imports stand, db, analysis, plan, frames, devices;
 - `report` (the read side: stored campaign -> analysis -> report/export) imports db, analysis,
-  plan, frames, stand and never acquisition;
+  plan, frames, stand, devices and never acquisition;
 - `station` (the operator station, a web page) reads db and checks plans with plan; it starts
   the acquisition and the report as `gyrostand` processes, never importing acquisition or report;
 - the CLI modules in `gyrostand/` import everything. The package root (`from gyrostand import
@@ -27,10 +29,21 @@ ALLOWED = {
     "stand": {"analysis"},
     "plan": {"stand", "analysis"},
     "frames": {"stand"},
-    "acquisition": {"stand", "db", "analysis", "plan", "frames"},
-    "report": {"db", "analysis", "plan", "frames", "stand"},
+    "devices": {"stand", "frames", "analysis"},
+    "acquisition": {"stand", "db", "analysis", "plan", "frames", "devices"},
+    "report": {"db", "analysis", "plan", "frames", "stand", "devices"},
     "station": {"db", "plan"},
-    CLI: {"acquisition", "analysis", "stand", "db", "plan", "frames", "report", "station"},
+    CLI: {
+        "acquisition",
+        "analysis",
+        "stand",
+        "db",
+        "plan",
+        "frames",
+        "devices",
+        "report",
+        "station",
+    },
 }
 LAYERS = set(ALLOWED) - {CLI}
 
