@@ -1,0 +1,233 @@
+"""The simulated gyrocompass speaking IEC 61162-1 on a serial line: HDT, THS and ROT sentences
+at a chosen rate and baud, from the simulated stand's physics.
+
+The headings are the simulated stand's own (`stand.engine.StandEngine`'s heading frames, read
+back with `frames.batch.BatchDecoder`): the same rolling error, transient, noise and faults. In
+virtual time `SerialCompass.until` gives (stand time of each sentence's first byte, its bytes)
+directly, so runs are byte-reproducible; `write_realtime` paces them onto a pseudo-terminal.
+
+Fault knobs of the line itself (`LineFaults`): checksum errors, garbage bytes, a silence, THS
+mode V; a reading the stand marks invalid goes out as THS mode V and an empty HDT field. A
+compass sending at another baud rate than the reader's is what a UART at the reader's rate
+makes of its bits (`uart_resample`)."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from gyrostand.analysis.angles import wrap180
+from gyrostand.devices.framing import BITS_PER_BYTE, byte_time_s
+from gyrostand.devices.nmea0183 import checksum
+from gyrostand.frames.batch import BatchDecoder, Headings, RawFrames
+from gyrostand.stand.engine import StandEngine
+
+SENTENCES = ("HDT", "THS", "ROT")
+MAX_RATE_HZ = 50.0  # IEC 61162-2 high-speed outputs: up to 50 Hz (GC80/GC85 manuals)
+
+
+class SerialSimError(ValueError):
+    """A serial compass that cannot be simulated as asked (one line)."""
+
+
+@dataclass(frozen=True)
+class LineFaults:
+    """Faults of the serial line, each drawn per sentence (or per sample) from a seeded
+    generator of its own, so switching one on does not change the others."""
+
+    checksum_error_rate: float = 0.0  # fraction of sentences with a wrong checksum
+    garbage_rate: float = 0.0  # fraction of samples preceded by 1-8 non-ASCII bytes
+    silence_at_s: float | None = None  # stand time from which nothing is sent
+    silence_for_s: float = 0.0
+    ths_mode_v_rate: float = 0.0  # fraction of THS sentences sent with mode V
+    sender_baud: int | None = None  # the compass's baud rate when it differs from the reader's
+
+
+@dataclass(frozen=True)
+class SerialCompassConfig:
+    rate_hz: float = 10.0
+    baud: int = 4800
+    talker: str = "HE"
+    sentences: tuple[str, ...] = ("HDT", "ROT")
+    faults: LineFaults = LineFaults()
+    seed: int = 0
+
+    def check(self) -> None:
+        """The configuration a real line can carry, or a `SerialSimError` saying why not."""
+        if not 1.0 <= self.rate_hz <= MAX_RATE_HZ:
+            raise SerialSimError(f"sentence rate {self.rate_hz:g} Hz outside 1-50 Hz")
+        unknown = [s for s in self.sentences if s not in SENTENCES]
+        if unknown or not self.sentences:
+            raise SerialSimError(f"sentences must be some of {', '.join(SENTENCES)}")
+        if not (len(self.talker) == 2 and self.talker.isalpha() and self.talker.isupper()):
+            raise SerialSimError(f"talker {self.talker!r} is not two capital letters")
+        # the longest sentences of a sample must fit on the line between two samples
+        longest = {"HDT": len("$HEHDT,359.9,T*hh\r\n"), "THS": len("$HETHS,359.99,A*hh\r\n")}
+        longest["ROT"] = len("$HEROT,-9999.9,A*hh\r\n")
+        per_s = sum(longest[s] for s in self.sentences) * self.rate_hz
+        capacity = self.baud / BITS_PER_BYTE
+        if per_s > capacity:
+            raise SerialSimError(
+                f"{'+'.join(self.sentences)} at {self.rate_hz:g} Hz need up to {per_s:g} bytes/s; "
+                f"{self.baud} baud carries {capacity:g}"
+            )
+
+
+def sentence(body: str) -> bytes:
+    """`$body*hh<CR><LF>` with its checksum (IEC 61162-1 §7.2.4)."""
+    raw = body.encode("ascii")
+    return b"$" + raw + b"*%02X\r\n" % checksum(raw)
+
+
+class SentenceWriter:
+    """Heading samples -> the line's bytes: each sample's sentences back to back, the first
+    starting at the sample's time, with the line faults applied."""
+
+    def __init__(self, config: SerialCompassConfig) -> None:
+        config.check()
+        self.config = config
+        checksum_seed, garbage_seed, mode_seed = np.random.SeedSequence(config.seed).spawn(3)
+        self._checksum_rng = np.random.default_rng(checksum_seed)
+        self._garbage_rng = np.random.default_rng(garbage_seed)
+        self._mode_rng = np.random.default_rng(mode_seed)
+        self._byte_s = byte_time_s(config.baud)
+        self._last: tuple[float, float] | None = None  # time, heading of the last valid sample
+
+    def write(self, headings: Headings) -> list[tuple[float, bytes]]:
+        """(time of the first byte, bytes) per sample of `headings` (t_ms on the stand clock)."""
+        c, f = self.config, self.config.faults
+        out: list[tuple[float, bytes]] = []
+        for t_ms, deg, valid in zip(
+            headings.t_ms.tolist(),
+            headings.heading_deg.tolist(),
+            headings.valid.tolist(),
+            strict=True,
+        ):
+            t = t_ms / 1000.0
+            lines = [self._sentence(kind, t, deg, valid) for kind in c.sentences]
+            if valid:
+                self._last = (t, deg)
+            if (
+                f.silence_at_s is not None
+                and f.silence_at_s <= t < f.silence_at_s + f.silence_for_s
+            ):
+                continue
+            data = b"".join(lines)
+            if self._garbage_rng.random() < f.garbage_rate:
+                n = int(self._garbage_rng.integers(1, 9))
+                garbage = self._garbage_rng.integers(0x80, 0x100, n, dtype=np.uint8).tobytes()
+                data = garbage + data
+                t -= n * self._byte_s  # the sentence itself still starts at the sample time
+            out.append((t, data))
+        return out
+
+    def _sentence(self, kind: str, t: float, deg: float, valid: bool) -> bytes:
+        c, f = self.config, self.config.faults
+        if kind == "HDT":
+            line = sentence(f"{c.talker}HDT,{_angle(deg, 1)},T" if valid else f"{c.talker}HDT,,T")
+        elif kind == "THS":
+            mode = "A" if valid and self._mode_rng.random() >= f.ths_mode_v_rate else "V"
+            line = sentence(f"{c.talker}THS,{_angle(deg, 2)},{mode}")
+        else:
+            rate = 0.0
+            if self._last is not None and t > self._last[0]:  # deg/min from the last reading
+                rate = float(wrap180(deg - self._last[1])) / (t - self._last[0]) * 60.0
+            line = sentence(f"{c.talker}ROT,{rate:.1f},{'A' if valid else 'V'}")
+        if self._checksum_rng.random() < f.checksum_error_rate:
+            wrong = (int(line[-4:-2], 16) ^ 0x01) & 0xFF
+            line = line[:-4] + b"%02X\r\n" % wrong
+        return line
+
+
+def _angle(deg: float, decimals: int) -> str:
+    """A heading in [0, 360) with `decimals` decimals (359.96 to one decimal is 0.0, not 360.0)."""
+    value = round(deg, decimals)
+    return f"{value - 360.0 if value >= 360.0 else value:.{decimals}f}"
+
+
+class SerialCompass:
+    """The simulated stand's compass on a serial line, advanced in stand time."""
+
+    def __init__(self, engine: StandEngine, config: SerialCompassConfig) -> None:
+        if abs(engine.config.heading_rate_hz - config.rate_hz) > 1e-9:
+            raise SerialSimError(
+                f"the stand's heading rate {engine.config.heading_rate_hz:g} Hz is not the "
+                f"sentence rate {config.rate_hz:g} Hz"
+            )
+        self.engine = engine
+        self.config = config
+        self._writer = SentenceWriter(config)
+        self._decoder = BatchDecoder(engine.codec)
+        self._heading_id = self._decoder.heading_id
+
+    def until(self, t_s: float) -> list[tuple[float, bytes]]:
+        """The line's bytes due up to stand time t_s (the stand's other frames are dropped:
+        this compass is not on the stand's bus)."""
+        frames = [m for m in self.engine.advance_to(t_s) if m.arbitration_id == self._heading_id]
+        if not frames:
+            return []
+        headings = self._decoder.decode(RawFrames.from_messages(0, frames)).headings
+        out = self._writer.write(headings)
+        sender = self.config.faults.sender_baud
+        if sender is not None and sender != self.config.baud:
+            out = [(t, uart_resample(d, sender, self.config.baud)) for t, d in out]
+        return out
+
+
+def uart_resample(data: bytes, tx_baud: int, rx_baud: int) -> bytes:
+    """What a UART at rx_baud reads of `data` sent back to back at tx_baud (8N1, idle high):
+    it waits for a low level (start bit), samples 8 data bits at their middles, checks the stop
+    bit; a byte with a framing error is read as NUL (POSIX termios without IGNPAR/PARMRK)."""
+    frame = np.unpackbits(np.frombuffer(data, np.uint8)[:, None], axis=1, bitorder="little")
+    bits = np.hstack([np.zeros((len(data), 1), np.uint8), frame, np.ones((len(data), 1), np.uint8)])
+    line = bits.ravel()
+    end_s = len(line) / tx_baud
+
+    def level(t: float) -> int:
+        i = math.floor(t * tx_baud)
+        return int(line[i]) if 0 <= i < len(line) else 1
+
+    out = bytearray()
+    t = 0.0
+    while t < end_s:
+        i = math.floor(t * tx_baud)
+        low = np.flatnonzero(line[i:] == 0)
+        if not len(low):
+            break
+        start = max(t, (i + int(low[0])) / tx_baud)
+        value = sum(level(start + (k + 1.5) / rx_baud) << k for k in range(8))
+        out.append(value if level(start + 9.5 / rx_baud) else 0)
+        t = start + 9.5 / rx_baud
+    return bytes(out)
+
+
+def write_realtime(
+    pieces: Iterator[tuple[float, bytes]],
+    fd: int,
+    baud: int,
+    *,
+    stop: Callable[[], bool] = lambda: False,
+    sleep: Callable[[float], None] = time.sleep,
+    clock: Callable[[], float] = time.monotonic,
+) -> int:
+    """Write each piece to `fd` when its last byte would have arrived on a real line (its first
+    byte's stand time plus its length on the wire at `baud`), stand time 0 being now. The bytes
+    written."""
+    byte_s = byte_time_s(baud)
+    t0 = clock()
+    written = 0
+    for t_s, data in pieces:
+        if stop():
+            break
+        due = t0 + t_s + len(data) * byte_s
+        wait = due - clock()
+        if wait > 0:
+            sleep(wait)
+        os.write(fd, data)
+        written += len(data)
+    return written
