@@ -43,7 +43,6 @@ class Received:
     time_s: float
     data: bytes
     junk: str | None = None
-    pos: int = 0  # stream position of the chunk holding its first byte
 
 
 class Framer:
@@ -54,11 +53,9 @@ class Framer:
         self._byte_s = byte_time_s(baud)
         self._sentence: bytearray | None = None  # the sentence being received
         self._sentence_time = 0.0
-        self._sentence_pos = 0
 
-    def feed(self, read_time_s: float, data: bytes, chunk_pos: int = 0) -> list[Received]:
-        """The pieces completed by a chunk read at `read_time_s` (its stream position
-        `chunk_pos`)."""
+    def feed(self, read_time_s: float, data: bytes) -> list[Received]:
+        """The pieces completed by a chunk read at `read_time_s`."""
         n = len(data)
         out: list[Received] = []
         pos = 0
@@ -70,12 +67,11 @@ class Framer:
                 if junk:
                     garbage = data[junk.start() : end].translate(None, _TERMINATORS)
                     t = self._time(read_time_s, n, junk.start())
-                    out.append(Received(t, garbage, GARBAGE, chunk_pos))
+                    out.append(Received(t, garbage, GARBAGE))
                 if m is None:
                     break
                 self._sentence = bytearray(data[end : end + 1])
                 self._sentence_time = self._time(read_time_s, n, end)
-                self._sentence_pos = chunk_pos
                 pos = end + 1
                 continue
             m = _START_OR_END.search(data, pos)
@@ -99,7 +95,7 @@ class Framer:
 
     def _end(self, junk: str | None) -> Received:
         assert self._sentence is not None
-        piece = Received(self._sentence_time, bytes(self._sentence), junk, self._sentence_pos)
+        piece = Received(self._sentence_time, bytes(self._sentence), junk)
         self._sentence = None
         return piece
 

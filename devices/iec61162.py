@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gyrostand.devices.framing import Framer, Received
-from gyrostand.devices.nmea0183 import Alarm, Heading, Invalid, Other, RateOfTurn, decode
+from gyrostand.devices.nmea0183 import Alarm, Heading, Invalid, Other, decode
 from gyrostand.devices.source import (
     NO_SEQUENCE,
     UNNUMBERED,
@@ -24,6 +24,7 @@ from gyrostand.devices.source import (
     SourceInfo,
     SourceOutput,
 )
+from gyrostand.devices.tagblock import TagBlockWriter, reception_ms
 from gyrostand.frames.batch import Headings
 from gyrostand.stand.protocol import InvalidFrame
 
@@ -55,8 +56,15 @@ class LineStats:
 class Iec61162Source:
     """One serial heading source; `decode` takes its chunks in stream order."""
 
-    def __init__(self, baud: int, port: str = "serial port", resolution_deg: float = 0.1) -> None:
+    def __init__(
+        self,
+        baud: int,
+        port: str = "serial port",
+        resolution_deg: float = 0.1,
+        raw_log: TagBlockWriter | None = None,
+    ) -> None:
         self.port = port
+        self.raw_log = raw_log
         self.baud = baud
         self.info = SourceInfo(
             protocol=PROTOCOL,
@@ -72,6 +80,7 @@ class Iec61162Source:
         self._good_bytes = 0
         self._other_bytes = 0
         self._baud_told = False
+        self._next_pos = 0  # stream position of the next piece: pieces are numbered
         self.kinds: Counter[str] = Counter()  # sentences and junk received, by kind
 
     @property
@@ -79,31 +88,46 @@ class Iec61162Source:
         return LineStats(self._good_bytes, self._other_bytes)
 
     def decode(self, chunks: ByteChunks, clock: CampaignClock) -> SourceOutput:
+        """Chunks read from the port (`ByteChunks.t_s`: when each read returned)."""
         pieces: list[Received] = []
-        for i, (data, t_s) in enumerate(zip(chunks.data, chunks.t_s.tolist(), strict=True)):
-            pieces += self._framer.feed(t_s, data, chunks.start + i)
-        return self._output(pieces, len(chunks.data), clock)
+        for data, t_s in zip(chunks.data, chunks.t_s.tolist(), strict=True):
+            pieces += self._framer.feed(t_s, data)
+        return self.decode_pieces(pieces, clock, len(chunks.data))
 
     def close(self, clock: CampaignClock) -> SourceOutput:
         """The end of the stream: a sentence cut by it is truncated."""
-        return self._output(self._framer.close(), 0, clock)
+        return self.decode_pieces(self._framer.close(), clock)
 
-    def _output(self, pieces: list[Received], n_chunks: int, clock: CampaignClock) -> SourceOutput:
-        pos = np.array([p.pos for p in pieces], dtype=np.int64)
-        t_ms = clock.to_campaign_ms(pos, np.array([p.time_s for p in pieces], dtype=np.float64))
+    def decode_pieces(
+        self, pieces: list[Received], clock: CampaignClock, n_chunks: int = 0
+    ) -> SourceOutput:
+        """Framed pieces, as `decode` makes them or a raw log gives them back (replay).
+
+        A piece's stream position is its number on the line (every sentence and every run of
+        junk counts), the line number in the raw log; its reception time is rounded to the
+        millisecond the raw log keeps, so a replay times everything as the live run did."""
+        if self.raw_log is not None:
+            self.raw_log.write(pieces)
+        pos = np.arange(self._next_pos, self._next_pos + len(pieces), dtype=np.int64)
+        self._next_pos += len(pieces)
+        rx_ms = np.array([reception_ms(p.time_s) for p in pieces], dtype=np.int64)
+        t_ms = clock.to_campaign_ms(pos, rx_ms / 1000.0)
         rows: list[int] = []
         headings: list[float] = []
         invalid: list[tuple[int, InvalidFrame]] = []
         events: list[SourceEvent] = []
         for i, piece in enumerate(pieces):
-            if piece.junk is not None:
-                reason: str | None = self._junk(piece)
-            else:
-                reason = self._take(
-                    decode(piece.data), i, int(t_ms[i]), piece, rows, headings, events
+            result = self._junk(piece) if piece.junk is not None else self._take(piece)
+            if isinstance(result, float):
+                rows.append(i)
+                headings.append(result)
+            elif isinstance(result, Alarm):
+                message = result.text
+                events.append(
+                    SourceEvent(int(pos[i]), int(t_ms[i]), ALARM_KIND, result.severity, message)
                 )
-            if reason is not None:
-                invalid.append((piece.pos, InvalidFrame(SERIAL_ID, reason, piece.data)))
+            elif result is not None:
+                invalid.append((int(pos[i]), InvalidFrame(SERIAL_ID, result, piece.data)))
         if self.stats.wrong_baud() and not self._baud_told:
             self._baud_told = True
             last = (int(pos[-1]), int(t_ms[-1])) if pieces else (0, None)
@@ -126,17 +150,10 @@ class Iec61162Source:
         self._other_bytes += len(piece.data)
         return f"{piece.junk} bytes ({len(piece.data)})"
 
-    def _take(
-        self,
-        decoded: Heading | RateOfTurn | Alarm | Invalid | Other,
-        row: int,
-        t_ms: int,
-        piece: Received,
-        rows: list[int],
-        headings: list[float],
-        events: list[SourceEvent],
-    ) -> str | None:
-        """Use one decoded sentence; the reason when it gives nothing usable."""
+    def _take(self, piece: Received) -> float | Alarm | str | None:
+        """One sentence: its valid heading, an alarm that changed (an event), why it gives
+        nothing usable, or None (a valid sentence that is not a heading)."""
+        decoded = decode(piece.data)
         if isinstance(decoded, Invalid):
             self.kinds["invalid"] += 1
             self._other_bytes += len(piece.data)
@@ -147,18 +164,11 @@ class Iec61162Source:
             return None
         if isinstance(decoded, Alarm):
             self.kinds["alarm"] += 1
-            if self._alarms.get(decoded.key) != decoded:
-                self._alarms[decoded.key] = decoded
-                events.append(
-                    SourceEvent(piece.pos, t_ms, ALARM_KIND, decoded.severity, decoded.text)
-                )
-            return None
-        kind = decoded.sentence if isinstance(decoded, Heading) else "ROT"
-        self.kinds[kind] += 1
+            if self._alarms.get(decoded.key) == decoded:
+                return None
+            self._alarms[decoded.key] = decoded
+            return decoded
+        self.kinds[decoded.sentence if isinstance(decoded, Heading) else "ROT"] += 1
         if decoded.invalid is not None:
             return decoded.invalid
-        if isinstance(decoded, Heading):
-            assert decoded.heading_deg is not None
-            rows.append(row)
-            headings.append(decoded.heading_deg)
-        return None
+        return decoded.heading_deg if isinstance(decoded, Heading) else None

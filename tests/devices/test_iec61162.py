@@ -30,12 +30,13 @@ def test_headings_timed_by_first_byte_on_the_campaign_clock() -> None:
     source = Iec61162Source(4800, "/dev/ttyS0")
     a, b = line("HEHDT,120.5,T"), line("HNTHS,121.25,A")
     # read at 100.5 s: a's '$' started (len a + len b) byte times of 1/480 s before
+    # (reception times are whole milliseconds, as the raw log keeps them)
     out = source.decode(chunks(7, (100.5, a + b)), MsClock(100.0))
     h = out.headings
-    assert h.pos.tolist() == [7, 7]
+    assert h.pos.tolist() == [0, 1]  # serial stream positions number the pieces on the line
     assert h.t_ms.tolist() == [
-        round((0.5 - (len(a) + len(b)) / 480) * 1000),
-        round((0.5 - len(b) / 480) * 1000),
+        round((100.5 - (len(a) + len(b)) / 480) * 1000) - 100_000,
+        round((100.5 - len(b) / 480) * 1000) - 100_000,
     ]
     assert h.heading_deg.tolist() == [120.5, 121.25]
     assert h.valid.all() and (h.counter == NO_SEQUENCE).all()
@@ -80,12 +81,13 @@ def test_alarms_are_events_when_they_change() -> None:
     hbt = line("HEHBT,10.0,A,1")
     parts = [(1.0, hbt), (2.0, alr_on), (3.0, alr_on), (4.0, hbt), (5.0, alr_off)]
     out = source.decode(chunks(0, *parts), MsClock())
-    assert [(e.pos, e.kind, e.severity, e.message) for e in out.events] == [
-        (0, ALARM_KIND, "info", "HEHBT heartbeat: normal operation"),
-        (1, ALARM_KIND, "error", "HEALR alarm 001 active: GYRO FAIL"),
-        (4, ALARM_KIND, "info", "HEALR alarm 001 normal: GYRO FAIL"),
+    assert [(e.kind, e.severity, e.message) for e in out.events] == [
+        (ALARM_KIND, "info", "HEHBT heartbeat: normal operation"),
+        (ALARM_KIND, "error", "HEALR alarm 001 active: GYRO FAIL"),
+        (ALARM_KIND, "info", "HEALR alarm 001 normal: GYRO FAIL"),
     ]
     assert out.events[1].t_ms == round((2.0 - len(alr_on) / 480) * 1000)
+    assert [e.pos for e in out.events] == [0, 1, 4]
 
 
 def test_a_sentence_cut_between_calls_is_kept() -> None:
@@ -94,7 +96,7 @@ def test_a_sentence_cut_between_calls_is_kept() -> None:
     first = source.decode(chunks(0, (1.0, s[:5])), MsClock())
     second = source.decode(chunks(1, (2.0, s[5:])), MsClock())
     assert len(first.headings) == 0
-    assert second.headings.pos.tolist() == [0]
+    assert second.headings.pos.tolist() == [0]  # the first piece of the line
     assert second.headings.t_ms.tolist() == [round((1.0 - 5 / 480) * 1000)]
     end = source.decode(chunks(2, (3.0, b"$HETHS,1")), MsClock())
     assert end.invalid == ()
