@@ -14,11 +14,11 @@ makes of its bits (`uart_resample`)."""
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
+import can
 import numpy as np
 
 from gyrostand.analysis.angles import wrap180
@@ -26,6 +26,7 @@ from gyrostand.devices.framing import BITS_PER_BYTE, byte_time_s
 from gyrostand.devices.nmea0183 import checksum
 from gyrostand.frames.batch import BatchDecoder, Headings, RawFrames
 from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.protocol import Codec
 
 SENTENCES = ("HDT", "THS", "ROT")
 MAX_RATE_HZ = 50.0  # IEC 61162-2 high-speed outputs: up to 50 Hz (GC80/GC85 manuals)
@@ -151,32 +152,38 @@ def _angle(deg: float, decimals: int) -> str:
 
 
 class SerialCompass:
-    """The simulated stand's compass on a serial line, advanced in stand time."""
+    """The simulated stand's compass on a serial line: the stand's heading frames in, the line's
+    bytes out (the stand's other frames are not the compass's: they stay on the stand's bus)."""
 
-    def __init__(self, engine: StandEngine, config: SerialCompassConfig) -> None:
-        if abs(engine.config.heading_rate_hz - config.rate_hz) > 1e-9:
-            raise SerialSimError(
-                f"the stand's heading rate {engine.config.heading_rate_hz:g} Hz is not the "
-                f"sentence rate {config.rate_hz:g} Hz"
-            )
-        self.engine = engine
+    def __init__(self, config: SerialCompassConfig, codec: Codec | None = None) -> None:
         self.config = config
         self._writer = SentenceWriter(config)
-        self._decoder = BatchDecoder(engine.codec)
+        self._decoder = BatchDecoder(codec or Codec())
         self._heading_id = self._decoder.heading_id
 
-    def until(self, t_s: float) -> list[tuple[float, bytes]]:
-        """The line's bytes due up to stand time t_s (the stand's other frames are dropped:
-        this compass is not on the stand's bus)."""
-        frames = [m for m in self.engine.advance_to(t_s) if m.arbitration_id == self._heading_id]
-        if not frames:
+    def is_heading(self, frame: can.Message) -> bool:
+        return bool(frame.arbitration_id == self._heading_id and not frame.is_error_frame)
+
+    def sentences(self, frames: list[can.Message]) -> list[tuple[float, bytes]]:
+        """(stand time of the first byte, bytes) for the heading frames among `frames`."""
+        headings = [m for m in frames if self.is_heading(m)]
+        if not headings:
             return []
-        headings = self._decoder.decode(RawFrames.from_messages(0, frames)).headings
-        out = self._writer.write(headings)
+        decoded = self._decoder.decode(RawFrames.from_messages(0, headings)).headings
+        out = self._writer.write(decoded)
         sender = self.config.faults.sender_baud
         if sender is not None and sender != self.config.baud:
             out = [(t, uart_resample(d, sender, self.config.baud)) for t, d in out]
         return out
+
+    def until(self, engine: StandEngine, t_s: float) -> list[tuple[float, bytes]]:
+        """Advance `engine` to stand time t_s; the line's bytes due by then."""
+        if abs(engine.config.heading_rate_hz - self.config.rate_hz) > 1e-9:
+            raise SerialSimError(
+                f"the stand's heading rate {engine.config.heading_rate_hz:g} Hz is not the "
+                f"sentence rate {self.config.rate_hz:g} Hz"
+            )
+        return self.sentences(engine.advance_to(t_s))
 
 
 def uart_resample(data: bytes, tx_baud: int, rx_baud: int) -> bytes:
@@ -208,14 +215,14 @@ def uart_resample(data: bytes, tx_baud: int, rx_baud: int) -> bytes:
 
 def write_realtime(
     pieces: Iterator[tuple[float, bytes]],
-    fd: int,
+    write: Callable[[bytes], object],
     baud: int,
     *,
     stop: Callable[[], bool] = lambda: False,
     sleep: Callable[[float], None] = time.sleep,
     clock: Callable[[], float] = time.monotonic,
 ) -> int:
-    """Write each piece to `fd` when its last byte would have arrived on a real line (its first
+    """`write` each piece when its last byte would have arrived on a real line (its first
     byte's stand time plus its length on the wire at `baud`), stand time 0 being now. The bytes
     written."""
     byte_s = byte_time_s(baud)
@@ -228,6 +235,6 @@ def write_realtime(
         wait = due - clock()
         if wait > 0:
             sleep(wait)
-        os.write(fd, data)
+        write(data)
         written += len(data)
     return written

@@ -1,6 +1,7 @@
 """The simulated serial compass: the stand's headings as sentences, reproducible, with faults."""
 
 import dataclasses
+import functools
 import os
 
 import numpy as np
@@ -28,9 +29,20 @@ class StandClock:
         return np.rint(rx_s * 1000).astype(np.int64)
 
 
-def compass(rate_hz: float = 10.0, seed: int = 3, **kw: object) -> SerialCompass:
-    engine = StandEngine(SimConfig(seed=seed, heading_rate_hz=rate_hz))
-    return SerialCompass(engine, SerialCompassConfig(rate_hz=rate_hz, seed=seed, **kw))  # type: ignore[arg-type]
+class Compass:
+    """A serial compass on a stand of its own."""
+
+    def __init__(self, rate_hz: float, seed: int, **kw: object) -> None:
+        self.engine = StandEngine(SimConfig(seed=seed, heading_rate_hz=rate_hz))
+        config = SerialCompassConfig(rate_hz=rate_hz, seed=seed, **kw)  # type: ignore[arg-type]
+        self.serial = SerialCompass(config)
+
+    def until(self, t_s: float) -> list[tuple[float, bytes]]:
+        return self.serial.until(self.engine, t_s)
+
+
+def compass(rate_hz: float = 10.0, seed: int = 3, **kw: object) -> Compass:
+    return Compass(rate_hz, seed, **kw)
 
 
 def received(pieces: list[tuple[float, bytes]], baud: int) -> ByteChunks:
@@ -134,7 +146,8 @@ def test_write_realtime_paces_by_the_last_byte() -> None:
     r, w = os.pipe()
     try:
         pieces = [(0.0, b"$A*41\r\n"), (0.1, b"$B*42\r\n")]
-        n = write_realtime(iter(pieces), w, 4800, sleep=sleep, clock=lambda: now[0])
+        write = functools.partial(os.write, w)
+        n = write_realtime(iter(pieces), write, 4800, sleep=sleep, clock=lambda: now[0])
         assert n == 14 and os.read(r, 100) == b"$A*41\r\n$B*42\r\n"
     finally:
         os.close(r)
@@ -149,7 +162,7 @@ def test_on_a_pty_in_real_time() -> None:
         sim = compass(50.0, baud=38400, sentences=("THS",))
         pieces = sim.until(0.2)
         with SerialReader(path, 38400) as reader:
-            write_realtime(iter(pieces), master, 38400)
+            write_realtime(iter(pieces), functools.partial(os.write, master), 38400)
             data = b""
             for _ in range(100):  # hang guard; returns once everything is read
                 data += b"".join(reader.take(wait_s=1.0).data)
@@ -159,6 +172,12 @@ def test_on_a_pty_in_real_time() -> None:
     finally:
         os.close(master)
         os.close(slave)
+
+
+def test_the_stand_rate_must_be_the_sentence_rate() -> None:
+    engine = StandEngine(SimConfig(heading_rate_hz=10.0))
+    with pytest.raises(SerialSimError, match="heading rate 10 Hz is not the sentence rate 5 Hz"):
+        SerialCompass(SerialCompassConfig(rate_hz=5.0)).until(engine, 1.0)
 
 
 def test_config_is_frozen() -> None:

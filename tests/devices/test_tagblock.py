@@ -38,8 +38,8 @@ def test_lines() -> None:
 def live_run(tmp_path: Path) -> tuple[Path, list, Iec61162Source]:  # type: ignore[type-arg]
     faults = LineFaults(checksum_error_rate=0.1, garbage_rate=0.2, ths_mode_v_rate=0.1)
     engine = StandEngine(SimConfig(seed=2))
-    sim = SerialCompass(engine, SerialCompassConfig(sentences=("THS", "ROT"), faults=faults))
-    pieces = sim.until(20.0)
+    sim = SerialCompass(SerialCompassConfig(sentences=("THS", "ROT"), faults=faults))
+    pieces = sim.until(engine, 20.0)
     # as a port would read them: each piece in two chunks, times as UNIX time
     data, times = [], []
     for t, d in pieces:
