@@ -27,6 +27,7 @@ from gyrostand.devices.nmea0183 import checksum
 from gyrostand.frames.batch import BatchDecoder, Headings, RawFrames
 from gyrostand.stand.engine import StandEngine
 from gyrostand.stand.protocol import Codec
+from gyrostand.stand.simconfig import param
 
 SENTENCES = ("HDT", "THS", "ROT")
 MAX_RATE_HZ = 50.0  # IEC 61162-2 high-speed outputs: up to 50 Hz (GC80/GC85 manuals)
@@ -38,23 +39,29 @@ class SerialSimError(ValueError):
 
 @dataclass(frozen=True)
 class LineFaults:
-    """Faults of the serial line, each drawn per sentence (or per sample) from a seeded
-    generator of its own, so switching one on does not change the others."""
+    """Faults of the serial line, each drawn from a seeded generator of its own, so switching
+    one on does not change the others."""
 
-    checksum_error_rate: float = 0.0  # fraction of sentences with a wrong checksum
-    garbage_rate: float = 0.0  # fraction of samples preceded by 1-8 non-ASCII bytes
-    silence_at_s: float | None = None  # stand time from which nothing is sent
-    silence_for_s: float = 0.0
-    ths_mode_v_rate: float = 0.0  # fraction of THS sentences sent with mode V
-    sender_baud: int | None = None  # the compass's baud rate when it differs from the reader's
+    checksum_error_rate: float = param(0.0, "fraction of sentences sent with a wrong checksum")
+    garbage_rate: float = param(0.0, "fraction of samples preceded by 1-8 non-ASCII bytes")
+    ths_mode_v_rate: float = param(0.0, "fraction of THS sentences sent with mode V (not valid)")
+    line_silence_at_s: float | None = param(
+        None, "stand time from which the compass sends nothing (the stand goes on), s"
+    )
+    line_silence_for_s: float = param(0.0, "how long the compass's line stays silent, s")
+    sender_baud: int | None = param(
+        None, "the compass's own baud rate when it is not the reader's (a wrong baud rate)"
+    )
 
 
 @dataclass(frozen=True)
 class SerialCompassConfig:
+    """The simulated compass's serial output (its heading rate is the stand's)."""
+
     rate_hz: float = 10.0
-    baud: int = 4800
-    talker: str = "HE"
-    sentences: tuple[str, ...] = ("HDT", "ROT")
+    baud: int = param(4800, "baud rate of the line (IEC 61162-1: 4800; 61162-2: 38400)")
+    talker: str = param("HE", "talker ID of the sentences (HE: gyrocompass)")
+    sentences: tuple[str, ...] = param(("HDT", "ROT"), "sentences sent each sample, in order")
     faults: LineFaults = LineFaults()
     seed: int = 0
 
@@ -113,10 +120,8 @@ class SentenceWriter:
             lines = [self._sentence(kind, t, deg, valid) for kind in c.sentences]
             if valid:
                 self._last = (t, deg)
-            if (
-                f.silence_at_s is not None
-                and f.silence_at_s <= t < f.silence_at_s + f.silence_for_s
-            ):
+            silent_from = f.line_silence_at_s
+            if silent_from is not None and silent_from <= t < silent_from + f.line_silence_for_s:
                 continue
             data = b"".join(lines)
             if self._garbage_rng.random() < f.garbage_rate:
@@ -223,16 +228,18 @@ def write_realtime(
     clock: Callable[[], float] = time.monotonic,
 ) -> int:
     """`write` each piece when its last byte would have arrived on a real line (its first
-    byte's stand time plus its length on the wire at `baud`), stand time 0 being now. The bytes
-    written."""
+    byte's stand time plus its length on the wire at `baud`); stand time 0 is set when the first
+    piece is there (the simulation's start-up is no delay of the line). The bytes written."""
     byte_s = byte_time_s(baud)
-    t0 = clock()
+    t0: float | None = None
     written = 0
     for t_s, data in pieces:
         if stop():
             break
-        due = t0 + t_s + len(data) * byte_s
-        wait = due - clock()
+        offset = t_s + len(data) * byte_s
+        if t0 is None:
+            t0 = clock() - offset
+        wait = t0 + offset - clock()
         if wait > 0:
             sleep(wait)
         write(data)

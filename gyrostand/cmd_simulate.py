@@ -19,6 +19,7 @@ import can
 import typer
 from rich.console import Console
 
+from gyrostand import cmd_simulate_serial
 from gyrostand.errors import fail
 from gyrostand.stand.protocol import Codec, ProtocolError
 from gyrostand.stand.schedule import LOG_SUFFIXES, ScheduleError, Step, load_schedule, run_schedule
@@ -159,6 +160,18 @@ _RUN_PARAMETERS = [
         default=typer.Option(None, help="Unix time of stand time 0 in the log (default: now)"),
     ),
 ]
+_RUN_PARAMETERS.append(
+    inspect.Parameter(
+        "protocol",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=typing.Literal["gyrostand", "iec61162"],
+        default=typer.Option(
+            "gyrostand",
+            help="how the compass sends its heading: gyrostand (its frame on the stand's CAN "
+            "bus) or iec61162 (NMEA 0183 sentences on a serial port: the Serial compass options)",
+        ),
+    )
+)
 _RUN_NAMES = [p.name for p in _RUN_PARAMETERS]
 
 
@@ -178,8 +191,12 @@ _HELP = (
 def simulate(**options: Any) -> None:
     """Run the simulated gyrocompass + roll stand (options: see _HELP and the config fields)."""
     run = {name: options.pop(name) for name in _RUN_NAMES}
+    serial = {name: options.pop(name) for name in cmd_simulate_serial.NAMES}
     config = _config(options)
     codec = _codec(run["dbc"], run["signals"])
+    if run["protocol"] == "iec61162":
+        cmd_simulate_serial.simulate_serial(config, run, serial, codec)
+        return
     standalone = run["schedule"] is not None or run["step"]
     if not standalone and run["interface"] is None:
         fail("give --interface/--channel to join a bus, or --schedule/--step to play a schedule")
@@ -276,7 +293,9 @@ def _live(config: SimConfig, run: dict[str, Any], bus: can.BusABC, codec: Codec 
     )
 
 
-simulate.__signature__ = inspect.Signature(_RUN_PARAMETERS + _config_parameters())  # type: ignore[attr-defined]
+simulate.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
+    _RUN_PARAMETERS + _config_parameters() + cmd_simulate_serial.OPTIONS
+)
 
 
 def register(app: typer.Typer) -> None:
