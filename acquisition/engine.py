@@ -26,8 +26,10 @@ as told by any heading frame, stand status or SIM_CLOCK tick) fails the trial wi
 that came had (CRC mismatch, a value outside its range, VALID cleared; bus silence when none came);
 acks, the stand's confirmation, settling and a command's own echo in the stream have theirs. Gaps
 between heading frames are judged from the stand time (against the expected interval learnt from
-the stream) as well as from the 4-bit counter: 16 or 32 missing frames are counted and told, a
-counter jump with no time gap is a "counter_jump", and a frame received unusable is not lost.
+the stream) as well as from the source's sequence numbers (gyrostand's 4-bit counter, NMEA 2000's
+SID modulo 253; none for serial sentences): 16 or 32 missing frames are counted and told, a
+counter jump with no time gap is a "counter_jump", and a frame received unusable is not lost. A
+heading without a sequence number (`devices.source.NO_SEQUENCE`) is judged by time alone.
 """
 
 from __future__ import annotations
@@ -49,7 +51,9 @@ from gyrostand.acquisition.early_settle import (
 )
 from gyrostand.analysis.angles import wrap180
 from gyrostand.analysis.settle import SettleOutcome
-from gyrostand.frames.batch import FrameBatch, Headings, Statuses
+from gyrostand.devices.source import SourceInfo
+from gyrostand.devices.stand_frames import GYROSTAND
+from gyrostand.frames.batch import DeviceEvent, FrameBatch, Headings, Statuses
 from gyrostand.plan.model import Plan, TrialPlan
 from gyrostand.stand.protocol import (
     AckFrame,
@@ -61,12 +65,13 @@ from gyrostand.stand.protocol import (
 )
 
 NANO = 1_000_000_000  # deviations are summed as integer nano-degrees
-COUNTER_MODULO = 16  # the heading frame's 4-bit rolling counter
 INTERVAL_SAMPLE = 20  # heading-frame spacings whose median is the expected frame interval
-# Stuck: a run of identical consecutive readings longer than STUCK_MIN_RUN frames and than
-# STUCK_FRACTION of the window's valid frames (a real heading at 0.001 deg under noise changes
-# within ~13 frames: longest run in 800 000 still frames of the simulated 16-bit sensor).
+# Stuck: a run of identical consecutive readings longer than STUCK_MIN_RUN frames (per
+# STUCK_RESOLUTION_DEG of the source's resolution: a coarser heading stays longer on one value)
+# and than STUCK_FRACTION of the window's valid frames (a real heading at 0.001 deg under noise
+# changes within ~13 frames: longest run in 800 000 still frames of the simulated 16-bit sensor).
 STUCK_MIN_RUN = 20
+STUCK_RESOLUTION_DEG = 0.001
 STUCK_FRACTION = 0.1
 CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the error frame's identifier
 COMPASS_FAULTS = ("rotor", "fluid temperature", "angle sensor", "follow-up")  # DBC FAULT_BITS
@@ -191,6 +196,7 @@ class _Window:
     high: int | None = None
     anomalies: Counter[str] = field(default_factory=Counter)
     runs: bool = False  # track runs of identical readings (observation windows)
+    min_run: int = STUCK_MIN_RUN  # the source's: see STUCK_RESOLUTION_DEG
     run_value: int | None = None  # the last reading (ndeg) and how many times in a row
     run_length: int = 0
     longest_run: int = 0
@@ -229,7 +235,7 @@ class _Window:
 
     def stuck_limit(self) -> int:
         """A run of identical readings longer than this is flagged "stuck"."""
-        return max(STUCK_MIN_RUN, int(self.used * STUCK_FRACTION))
+        return max(self.min_run, int(self.used * STUCK_FRACTION))
 
     def mean_ndeg(self) -> float:
         return self.total_ndeg / self.used if self.used else math.nan
@@ -294,8 +300,17 @@ class Engine:
         commander: Commander,
         progress: dict[int, TrialState] | None = None,
         operator: Operator | None = None,
+        source: SourceInfo = GYROSTAND,
     ) -> None:
         self.plan = plan
+        self.source = source  # the heading source: its sequence rule and resolution
+        self._modulo = source.sequence.modulo
+        self._min_run = max(
+            STUCK_MIN_RUN, math.ceil(STUCK_MIN_RUN * source.resolution_deg / STUCK_RESOLUTION_DEG)
+        )
+        # a window of identical readings fails the trial from 3 frames at the finest resolution;
+        # a coarser one may hold still longer: from more than the longest run allowed
+        self._min_identical = 3 if self._min_run == STUCK_MIN_RUN else self._min_run + 1
         self.operator = operator  # live runs: prompts before a trial (replay: none)
         self.sink = sink
         self.commander = commander
@@ -591,14 +606,26 @@ class Engine:
         if self._last_t is not None and self._last_pos is not None:
             dt, prev_c = t - self._last_t, int(self._last_counter or 0)
             timed = self._interval is not None
+            step = int(self._steps(np.array([prev_c]), np.array([counter]))[0])
             if not timed:
-                self._learn_interval(np.array([dt]), np.array([counter - prev_c]))
-            if (counter - prev_c) % COUNTER_MODULO != 1 or (timed and self._late(dt)):
+                self._learn_interval(np.array([dt]), np.array([step]))
+            if step != 1 or (timed and self._late(dt)):
                 prev = (self._last_pos, self._last_t, prev_c)
                 self._gap(prev, (pos, t, counter), timed)  # no window to count in: events only
                 self._tell_gaps(pos + 1)
         self._note_heading(pos, t, counter)
         return True
+
+    def _steps(self, prev: np.ndarray, now: np.ndarray) -> np.ndarray:
+        """Sequence-number steps from `prev` to `now` (modulo the source's rule), 1 where either
+        has no number (then only time tells a gap)."""
+        if self._modulo is None:
+            return np.ones(len(now), dtype=np.int64)
+        step = (now - prev) % self._modulo
+        return np.where((prev < 0) | (now < 0), 1, step)
+
+    def _numbered(self, prev_c: int, c: int) -> bool:
+        return self._modulo is not None and prev_c >= 0 and c >= 0
 
     def _note_heading(self, pos: int, t: int, counter: int) -> None:
         self._last_pos, self._last_t, self._last_counter = pos, t, counter
@@ -732,8 +759,11 @@ class Engine:
                 kind="mis-tracking",
             )
 
-    def _on_other(self, pos: int, frame: Frame) -> None:
-        if isinstance(frame, CommandFrame):
+    def _on_other(self, pos: int, frame: Frame | DeviceEvent) -> None:
+        if isinstance(frame, DeviceEvent):
+            j = self._j if self.phase in (Phase.SETTLE, Phase.OBSERVE) else None
+            self.sink.event(frame.kind, frame.severity, frame.message, self._tidx, j, self.now_ms)
+        elif isinstance(frame, CommandFrame):
             if self.phase is Phase.COMMANDS and not self._sent and self._awaits(frame):
                 self._sent = True
                 self._phase_start_ms = self.now_ms
@@ -934,6 +964,8 @@ class Engine:
                 self._tell_gaps(pos)
             if isinstance(frame, CommandFrame):
                 self._foreign_command(frame)
+            if isinstance(frame, DeviceEvent):
+                self._on_other(pos, frame)
             if isinstance(frame, ClockFrame):
                 self.now_ms = max(self.now_ms, frame.stand_time_ms)
             if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
@@ -945,6 +977,8 @@ class Engine:
                     self._window.anomalies["corrupt"] += 1
                 elif "outside" in frame.reason:
                     self._window.anomalies["out_of_range"] += 1
+                elif "not available" in frame.reason:
+                    self._window.anomalies["not_available"] += 1
                 else:
                     self._window.anomalies["invalid_frame"] += 1
         if self._gap_events:
@@ -1003,7 +1037,6 @@ class Engine:
         if self._interval is not None:
             return 0
         need = INTERVAL_SAMPLE - len(self._spacings)
-        step = step % COUNTER_MODULO
         taken = np.flatnonzero((dt > 0) & (step > 0))[:need]
         self._spacings.extend(float(x) for x in dt[taken] / step[taken])
         if len(self._spacings) < INTERVAL_SAMPLE:
@@ -1020,25 +1053,30 @@ class Engine:
         (those inside the window summed); gaps the counter under-reports are told as events."""
         t, counter = seg.t_ms[:end], seg.counter[:end]
         dt = t[1:] - t[:-1]  # before frame i + 1
-        step = counter[1:] - counter[:-1]
+        step = self._steps(counter[:-1], counter[1:])
         first = None if self._last_t is None else int(t[0]) - self._last_t  # before frame 0
+        step0 = 0  # before frame 0
+        if self._last_counter is not None and len(counter):
+            step0 = int(self._steps(np.array([self._last_counter]), counter[:1])[0])
         learned = 0  # frames from here on are judged with the interval
         if self._interval is None:  # (a spacing of 0 is never taken: none before frame 0)
-            step0 = 0 if self._last_counter is None else int(counter[0]) - self._last_counter
             learned = self._learn_interval(
                 np.concatenate(([first or 0], dt)), np.concatenate(([step0], step))
             )
-        odd = (step != 1) & (step != 1 - COUNTER_MODULO)
+        odd = step != 1
         if self._interval is not None:
             late = dt > self._late_ms
             if learned > 1:
                 late[: learned - 1] = False
             odd |= late
         at = (np.flatnonzero(odd) + 1).tolist()
-        if first is not None and self._last_pos is not None and self._last_counter is not None:
-            step0 = (int(counter[0]) - self._last_counter) % COUNTER_MODULO
-            if step0 != 1 or (learned == 0 and self._late(first)):
-                at.insert(0, 0)
+        known = first is not None and self._last_pos is not None
+        if (
+            known
+            and self._last_counter is not None
+            and (step0 != 1 or (learned == 0 and self._late(first or 0)))
+        ):
+            at.insert(0, 0)
         lost = jumps = 0
         for i in at:
             if i:
@@ -1065,23 +1103,27 @@ class Engine:
             return 0, 0
         a, b = np.searchsorted(self._inv_pos, (prev_pos, pos))
         unusable = int(b - a) + (self._inv_carry if prev_pos == self._carry_from else 0)
-        counted = (c - prev_c - 1) % COUNTER_MODULO  # unusable frames included
+        numbered = self._numbered(prev_c, c)
+        modulo = self._modulo or 1
+        counted = (c - prev_c - 1) % modulo if numbered else 0  # unusable frames included
         if not timed or self._interval is None:
             return counted - min(unusable, counted), 0
         slots = max(round(dt / self._interval) - 1, 0)  # frames due between the two
         unusable = min(unusable, slots)
         by_time = slots - unusable
-        by_counter = (counted - unusable) % COUNTER_MODULO
+        by_counter = (counted - unusable) % modulo if numbered else 0
         if by_time == 0:
             return 0, int(by_counter != 0)
         missing = max(by_counter, by_time)
         if by_time > by_counter:  # the counter cannot tell: never a silent gap
+            sequence = self.source.sequence.description
+            told = f"the {sequence} shows {by_counter}" if numbered else "no sequence number"
             self._gap_events.append(
                 (
                     pos,
                     f"{missing} heading frames missing before stand time {t / 1000:g} s "
                     f"({dt / 1000:g} s after the previous one, expected every "
-                    f"{self._interval:g} ms; the 4-bit counter shows {by_counter})",
+                    f"{self._interval:g} ms; {told})",
                     t,
                 )
             )
@@ -1141,7 +1183,7 @@ class Engine:
             self._settle_durations.append(w.end_ms - self._settle_start)
             self.sink.series_settled(self._trial.index, self._j, w.end_ms, outcome)
             self._enter(Phase.OBSERVE)
-            self._window = _Window(w.end_ms, w.end_ms + width, runs=True)
+            self._window = _Window(w.end_ms, w.end_ms + width, runs=True, min_run=self._min_run)
             return
         if w.end_ms - self._settle_start > settle.max_wait_s * 1000:
             self.fail(
@@ -1192,7 +1234,7 @@ class Engine:
         if w.used == 0:
             self.fail(f"no valid heading frame in observation window {self._k}")
             return
-        if w.used >= 3 and w.low == w.high:
+        if w.used >= self._min_identical and w.low == w.high:
             w.anomalies["stuck"] += 1
             self.fail(
                 f"stuck sensor: {w.used} identical readings in observation window {self._k}",
@@ -1234,7 +1276,9 @@ class Engine:
         self._k += 1
         if self._k <= self.plan.n_obs:
             start = w.end_ms + round(self.plan.observation.spacing_s * 1000)
-            self._window = _Window(start, start + (w.end_ms - w.start_ms), runs=True)
+            self._window = _Window(
+                start, start + (w.end_ms - w.start_ms), runs=True, min_run=self._min_run
+            )
             return
         self.sink.series_completed(trial.index, self._j, self._compensation())
         self._window = None

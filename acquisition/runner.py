@@ -61,6 +61,17 @@ def prepare(plan: Plan) -> None:
             codec.encode_command_set(t.direction_deg, t.amplitude_cm, t.period_s)
         except ProtocolError as exc:
             problems.append(f"[[trials]] {t.index}: the stand command cannot carry it: {exc}")
+    compass = plan.compass
+    if compass.protocol in ("iec61162", "cia406"):
+        problems.append(
+            f'[compass] protocol: "{compass.protocol}" is not runnable yet (gyrostand, dbc and '
+            "nmea2000 are)"
+        )
+    elif compass.own_bus:
+        problems.append(
+            "[compass] interface: a compass on a CAN bus of its own is not runnable yet (put it "
+            "on the stand's bus: leave interface and channel out)"
+        )
     if problems:
         raise PlanError(problems)
     if plan.bus.simulated:

@@ -20,12 +20,11 @@ from gyrostand.devices.source import (
     UNNUMBERED,
     ByteChunks,
     CampaignClock,
-    SourceEvent,
     SourceInfo,
     SourceOutput,
 )
 from gyrostand.devices.tagblock import TagBlockWriter, reception_ms
-from gyrostand.frames.batch import Headings
+from gyrostand.frames.batch import DeviceEvent, Headings
 from gyrostand.stand.protocol import InvalidFrame
 
 PROTOCOL = "iec61162"
@@ -99,40 +98,44 @@ class Iec61162Source:
         return self.decode_pieces(self._framer.close(), clock)
 
     def decode_pieces(
-        self, pieces: list[Received], clock: CampaignClock, n_chunks: int = 0
+        self,
+        pieces: list[Received],
+        clock: CampaignClock,
+        n_chunks: int = 0,
+        positions: np.ndarray | None = None,
     ) -> SourceOutput:
         """Framed pieces, as `decode` makes them or a raw log gives them back (replay).
 
         A piece's stream position is its number on the line (every sentence and every run of
-        junk counts), the line number in the raw log; its reception time is rounded to the
-        millisecond the raw log keeps, so a replay times everything as the live run did."""
+        junk counts), the line number in the raw log, unless `positions` (a stream merged with
+        the stand's) gives it; its reception time is rounded to the millisecond the raw log
+        keeps, so a replay times everything as the live run did."""
         if self.raw_log is not None:
             self.raw_log.write(pieces)
         pos = np.arange(self._next_pos, self._next_pos + len(pieces), dtype=np.int64)
         self._next_pos += len(pieces)
+        if positions is not None:
+            pos = np.asarray(positions, dtype=np.int64)
         rx_ms = np.array([reception_ms(p.time_s) for p in pieces], dtype=np.int64)
         t_ms = clock.to_campaign_ms(pos, rx_ms / 1000.0)
         rows: list[int] = []
         headings: list[float] = []
         invalid: list[tuple[int, InvalidFrame]] = []
-        events: list[SourceEvent] = []
+        events: list[tuple[int, DeviceEvent]] = []
         for i, piece in enumerate(pieces):
             result = self._junk(piece) if piece.junk is not None else self._take(piece)
             if isinstance(result, float):
                 rows.append(i)
                 headings.append(result)
             elif isinstance(result, Alarm):
-                message = result.text
-                events.append(
-                    SourceEvent(int(pos[i]), int(t_ms[i]), ALARM_KIND, result.severity, message)
-                )
+                events.append((int(pos[i]), DeviceEvent(ALARM_KIND, result.severity, result.text)))
             elif result is not None:
                 invalid.append((int(pos[i]), InvalidFrame(SERIAL_ID, result, piece.data)))
         if self.stats.wrong_baud() and not self._baud_told:
             self._baud_told = True
-            last = (int(pos[-1]), int(t_ms[-1])) if pieces else (0, None)
             message = wrong_baud(self.port, self.baud)
-            events.append(SourceEvent(*last, WRONG_BAUD_KIND, "error", message))
+            last = int(pos[-1]) if pieces else 0
+            events.append((last, DeviceEvent(WRONG_BAUD_KIND, "error", message)))
         index = np.array(rows, dtype=np.int64)
         out = Headings(
             pos=pos[index],

@@ -34,7 +34,7 @@ from typing import Protocol
 
 import numpy as np
 
-from gyrostand.frames.batch import Headings, RawFrames
+from gyrostand.frames.batch import DeviceEvent, Headings, RawFrames
 from gyrostand.stand.protocol import InvalidFrame
 
 NO_SEQUENCE = -1  # Headings.counter of a message without a sequence number
@@ -49,9 +49,9 @@ class SequenceRule:
     description: str
 
 
-COUNTER_4BIT = SequenceRule(16, "4-bit rolling counter")
-SID = SequenceRule(253, "NMEA 2000 SID 0-252 (255 = none: gaps from time)")
-UNNUMBERED = SequenceRule(None, "none: gaps from time only")
+COUNTER_4BIT = SequenceRule(16, "4-bit counter")
+SID = SequenceRule(253, "SID (0-252; 255 = none)")
+UNNUMBERED = SequenceRule(None, "no sequence number")
 
 
 @dataclass(frozen=True)
@@ -62,18 +62,6 @@ class SourceInfo:
     resolution_deg: float  # one step of the transmitted heading
     time_base: str  # how headings are timed, one line (stored with the campaign)
     sequence: SequenceRule
-
-
-@dataclass(frozen=True)
-class SourceEvent:
-    """Something the device told besides headings (an alarm, an address change, its product
-    information), at a campaign time."""
-
-    pos: int  # stream position
-    t_ms: int | None  # campaign clock, None before the clock is known
-    kind: str
-    severity: str  # info | warning | error
-    message: str
 
 
 @dataclass(frozen=True)
@@ -90,7 +78,7 @@ class ByteChunks:
 class SourceOutput:
     headings: Headings
     invalid: tuple[tuple[int, InvalidFrame], ...]
-    events: tuple[SourceEvent, ...]
+    events: tuple[tuple[int, DeviceEvent], ...]  # (stream position, event)
     claimed: np.ndarray  # bool per input row (frame or chunk): the source's own
 
 

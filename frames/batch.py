@@ -136,13 +136,23 @@ class Statuses:
 
 
 @dataclass(frozen=True)
+class DeviceEvent:
+    """Something a heading source's device told besides headings (an address change, its
+    product information, another device sending headings), for the campaign's events."""
+
+    kind: str
+    severity: str  # info | warning | error
+    message: str
+
+
+@dataclass(frozen=True)
 class FrameBatch:
     """One decoded batch: heading and status arrays plus the other frames, each with its
     stream position so that consumers can keep the order of the stream."""
 
     headings: Headings
     statuses: Statuses
-    others: tuple[tuple[int, Frame], ...]
+    others: tuple[tuple[int, Frame | DeviceEvent], ...]
     end: int  # stream position after the last frame
 
 
@@ -195,9 +205,13 @@ class BatchDecoder:
         except ProtocolError:
             self._clock = None
 
-    def decode(self, raw: RawFrames) -> FrameBatch:
+    def decode(self, raw: RawFrames, skip: np.ndarray | None = None) -> FrameBatch:
+        """The batch's stand frames; rows where `skip` is True are another decoder's (a
+        heading source's, `devices`) and left out."""
         ids, ok = raw.arbitration_id, ~(raw.is_error | raw.is_remote)
         slow = np.ones(len(raw), dtype=bool)  # rows left for the codec, one by one
+        if skip is not None:
+            slow &= ~skip
         headings = self._headings(raw, ids == self.heading_id, ok, slow)
         statuses = self._statuses(raw, ok, slow)
         rows, values = self._fast_rows(raw, ids == self.compass_id, ok, self._compass)
@@ -208,7 +222,7 @@ class BatchDecoder:
             rows, values = self._fast_rows(raw, ids == self.clock_id, ok, self._clock)
             times = values["STAND_TIME"].astype(np.int64).tolist()
             clocks = dict(zip(rows.tolist(), times, strict=True))
-        others: list[tuple[int, Frame]] = []
+        others: list[tuple[int, Frame | DeviceEvent]] = []
         for row in np.flatnonzero(slow).tolist():
             clock_ms = clocks.get(row)
             frame = (

@@ -28,6 +28,8 @@ def summary(plan: Plan) -> str:
         where = f"simulated stand in {bus.timing} time"
     else:
         where = f"python-can {bus.interface or '(configured)'} {bus.channel or ''}".rstrip()
+    if plan.compass.protocol != "gyrostand":
+        where += f", compass on {plan.compass.protocol}"
     acceptance = ", acceptance by excursions" if plan.acceptance is not None else ""
     return (
         f"{design}, N = {plan.n_obs}, settle by {plan.settle.method}{acceptance}, {where}, "

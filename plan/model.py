@@ -516,6 +516,67 @@ class BusPlan(_Table):
         return self
 
 
+HeadingProtocol = Literal["gyrostand", "dbc", "nmea2000", "iec61162", "cia406"]
+_CAN_KEYS = ("interface", "channel", "bitrate")
+_SERIAL_KEYS = ("port", "baud")
+
+
+def _iso_name(value: Any) -> str:
+    """An ISO 11783-5 NAME (64 bits) as 16 hexadecimal digits (TOML integers stop at 2^63)."""
+    if not isinstance(value, str) or not re.fullmatch(r"(0x)?[0-9A-Fa-f]{1,16}", value):
+        raise ValueError('must be the 64-bit NAME in hexadecimal, e.g. "0x00A0F2C2C2200F00"')
+    return f"0x{int(value, 16):016X}"
+
+
+class CompassPlan(_Table):
+    """[compass]: the heading source (docs/instruments.md). "gyrostand" and "dbc": the heading
+    frame of the stand's DBC (shipped, or the lab's [protocol] dbc_path), on the stand's bus;
+    "nmea2000": PGN 127250 on CAN (the stand's bus, or its own with interface/channel);
+    "iec61162": HDT/THS sentences on a serial port; "cia406": an absolute encoder on CANopen."""
+
+    protocol: HeadingProtocol = "gyrostand"
+    """How the compass sends its heading."""
+    interface: Interface | None = None
+    """The compass's own CAN bus, python-can interface (default: the stand's [bus])."""
+    channel: Channel | None = None
+    """Its channel, e.g. "can1"."""
+    bitrate: int | None = Field(None, ge=1)
+    """Its bit rate, bit/s (NMEA 2000: 250000)."""
+    port: Text | None = None
+    """Serial port of an IEC 61162 compass, e.g. "/dev/ttyUSB0"."""
+    baud: int = Field(4800, ge=1)
+    """Its baud rate (IEC 61162-1: 4800; IEC 61162-2: 38400)."""
+    name: Annotated[str, BeforeValidator(_iso_name)] | None = None
+    """NMEA 2000: the compass's NAME (address claim, hexadecimal); default: the device whose
+    product information (PGN 126996) gives [instrument] model and serial."""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> CompassPlan:
+        given = self.model_fields_set
+        problems = []
+        if self.protocol in ("gyrostand", "dbc"):
+            unused = [k for k in (*_CAN_KEYS, *_SERIAL_KEYS, "name") if k in given]
+            why = "the heading frame is in the stand's DBC, on the stand's bus"
+            problems += [(k, f'not with protocol = "{self.protocol}" ({why})') for k in unused]
+        elif self.protocol == "iec61162":
+            unused = [k for k in (*_CAN_KEYS, "name") if k in given]
+            problems += [(k, 'not with protocol = "iec61162" (a serial port)') for k in unused]
+        else:
+            unused = [k for k in _SERIAL_KEYS if k in given]
+            if self.protocol != "nmea2000" and "name" in given:
+                unused.append("name")
+            problems += [(k, f'not with protocol = "{self.protocol}" (CAN)') for k in unused]
+            if self.channel is not None and self.interface is None:
+                problems.append(("interface", "missing (the compass's own bus needs one)"))
+        check(problems)
+        return self
+
+    @property
+    def own_bus(self) -> bool:
+        """The compass on a CAN bus of its own (not the stand's)."""
+        return self.interface is not None
+
+
 class StandPlan(_Table):
     """[stand]: the limits of the real stand, outside which it refuses a command; every trial
     must lie within them. With the simulated stand the simulator's limits ([bus.simulator.stand],
@@ -629,6 +690,7 @@ class Plan(_Table):
     timeouts: TimeoutsPlan = Field(default_factory=TimeoutsPlan)
     checks: ChecksPlan = Field(default_factory=ChecksPlan)
     bus: BusPlan = Field(default_factory=BusPlan)
+    compass: CompassPlan = Field(default_factory=CompassPlan)
     stand: StandPlan = Field(default_factory=StandPlan)
     protocol: ProtocolPlan = Field(default_factory=ProtocolPlan)
     signals: Signals = Field(default_factory=dict, json_schema_extra=_SIGNALS_SCHEMA)
@@ -661,7 +723,11 @@ class Plan(_Table):
         within the stand time allowed. (A ValidationError, which pydantic passes on as it is,
         to name each problem's table and key.)"""
         errors = (
-            self._unanalysable() + self._beyond_stand() + self._too_long() + self._bad_prompts()
+            self._unanalysable()
+            + self._beyond_stand()
+            + self._too_long()
+            + self._bad_prompts()
+            + self._bad_compass()
         )
         if errors:
             raise ValidationError.from_exception_data(type(self).__name__, errors)
@@ -750,6 +816,16 @@ class Plan(_Table):
             if isinstance(prompt.before, int) and prompt.before > len(self.trials):
                 message = f"trial {prompt.before}, but the plan has {len(self.trials)} trials"
                 errors.append(_error("prompt", ("prompt", row, "before"), message))
+        return errors
+
+    def _bad_compass(self) -> list[InitErrorDetails]:
+        compass, errors = self.compass, []
+        if compass.protocol == "dbc" and self.protocol.dbc_path is None:
+            message = 'protocol = "dbc" needs the lab\'s DBC ([protocol] dbc_path)'
+            errors.append(_error("compass", ("compass", "protocol"), message))
+        if self.bus.simulated and compass.own_bus:
+            message = "the simulated compass sits on the simulated stand's bus ([bus])"
+            errors.append(_error("compass", ("compass", "interface"), message))
         return errors
 
     def prompts_before(self, before: str | int) -> tuple[PromptPlan, ...]:

@@ -337,6 +337,64 @@ VALUES = [
             ("a folder", str(Path(__file__).parent)),
         )
     ),
+    # the heading source ([compass], docs/instruments.md)
+    *(
+        plan_case(f"compass {what}", message, append=f"\n[compass]\n{table}\n")
+        for what, table, message in (
+            (
+                "protocol unknown",
+                'protocol = "nmea0183"',
+                "[compass] protocol: must be one of 'gyrostand', 'dbc', 'nmea2000', 'iec61162', "
+                "'cia406', not 'nmea0183'",
+            ),
+            (
+                "dbc without a DBC",
+                'protocol = "dbc"',
+                '[compass] protocol: protocol = "dbc" needs the lab\'s DBC ([protocol] dbc_path)',
+            ),
+            (
+                "gyrostand on a port",
+                'port = "/dev/ttyUSB0"',
+                '[compass] port: not with protocol = "gyrostand" (the heading frame is in the '
+                "stand's DBC, on the stand's bus)",
+            ),
+            (
+                "serial with a CAN channel",
+                'protocol = "iec61162"\nport = "/dev/ttyUSB0"\nchannel = "can1"',
+                '[compass] channel: not with protocol = "iec61162" (a serial port)',
+            ),
+            (
+                "nmea2000 with a baud rate",
+                'protocol = "nmea2000"\nbaud = 38400',
+                '[compass] baud: not with protocol = "nmea2000" (CAN)',
+            ),
+            (
+                "nmea2000 NAME not hexadecimal",
+                'protocol = "nmea2000"\nname = "gyro"',
+                "[compass] name: must be the 64-bit NAME in hexadecimal",
+            ),
+            (
+                "nmea2000 channel without interface",
+                'protocol = "nmea2000"\nchannel = "can1"',
+                "[compass] interface: missing (the compass's own bus needs one)",
+            ),
+            (
+                "own bus beside the simulated stand",
+                'protocol = "nmea2000"\ninterface = "socketcan"\nchannel = "can1"',
+                "[compass] interface: the simulated compass sits on the simulated stand's bus",
+            ),
+            (
+                "iec61162 not runnable yet",
+                'protocol = "iec61162"\nport = "/dev/ttyUSB0"',
+                '[compass] protocol: "iec61162" is not runnable yet',
+            ),
+            (
+                "cia406 not runnable yet",
+                'protocol = "cia406"',
+                '[compass] protocol: "cia406" is not runnable yet',
+            ),
+        )
+    ),
     Case(
         "dbc garbage",
         ("campaign", "run", "{file}", "--db", "{db}"),

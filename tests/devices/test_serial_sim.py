@@ -123,7 +123,7 @@ def test_a_compass_at_another_baud_rate_is_named() -> None:
     source = Iec61162Source(4800, "/dev/ttyS1")
     out = source.decode(received(pieces, 4800), StandClock())
     assert len(out.headings) == 0
-    assert [e.kind for e in out.events] == [WRONG_BAUD_KIND]
+    assert [e.kind for _, e in out.events] == [WRONG_BAUD_KIND]
 
 
 def test_uart_resample_at_the_same_rate_is_the_identity() -> None:
