@@ -1,15 +1,15 @@
 """The simulated gyrocompass speaking IEC 61162-1 on a serial line: HDT, THS and ROT sentences
 at a chosen rate and baud, from the simulated stand's physics.
 
-The headings are the simulated stand's own (`stand.engine.StandEngine`'s heading frames, read
-back with `frames.batch.BatchDecoder`): the same rolling error, transient, noise and faults. In
-virtual time `SerialCompass.until` gives (stand time of each sentence's first byte, its bytes)
+The readings are the simulated stand's own: `SerialCompass` is the stand's heading transmitter
+(`stand.engine.StandEngine`), so the same rolling error, transient, noise, drops and silences.
+In virtual time `SerialCompass.take` gives (stand time of each sample's first byte, its bytes)
 directly, so runs are byte-reproducible; `write_realtime` paces them onto a pseudo-terminal.
 
-Fault knobs of the line itself (`LineFaults`): checksum errors, garbage bytes, a silence, THS
-mode V; a reading the stand marks invalid goes out as THS mode V and an empty HDT field. A
-compass sending at another baud rate than the reader's is what a UART at the reader's rate
-makes of its bits (`uart_resample`)."""
+Fault knobs of the line itself (`LineFaults`): checksum errors, garbage bytes, a silence of the
+compass alone, readings marked not valid (THS mode V, an empty HDT field). A compass sending at
+another baud rate than the reader's is what a UART at the reader's rate makes of its bits
+(`uart_resample`)."""
 
 from __future__ import annotations
 
@@ -24,10 +24,9 @@ import numpy as np
 from gyrostand.analysis.angles import wrap180
 from gyrostand.devices.framing import BITS_PER_BYTE, byte_time_s
 from gyrostand.devices.nmea0183 import checksum
-from gyrostand.frames.batch import BatchDecoder, Headings, RawFrames
 from gyrostand.stand.engine import StandEngine
 from gyrostand.stand.protocol import Codec
-from gyrostand.stand.simconfig import param
+from gyrostand.stand.simconfig import SimConfig, param
 
 SENTENCES = ("HDT", "THS", "ROT")
 MAX_RATE_HZ = 50.0  # IEC 61162-2 high-speed outputs: up to 50 Hz (GC80/GC85 manuals)
@@ -44,7 +43,9 @@ class LineFaults:
 
     checksum_error_rate: float = param(0.0, "fraction of sentences sent with a wrong checksum")
     garbage_rate: float = param(0.0, "fraction of samples preceded by 1-8 non-ASCII bytes")
-    ths_mode_v_rate: float = param(0.0, "fraction of THS sentences sent with mode V (not valid)")
+    not_valid_rate: float = param(
+        0.0, "fraction of samples marked not valid (HDT heading empty, THS mode V, ROT status V)"
+    )
     line_silence_at_s: float | None = param(
         None, "stand time from which the compass sends nothing (the stand goes on), s"
     )
@@ -99,24 +100,19 @@ class SentenceWriter:
     def __init__(self, config: SerialCompassConfig) -> None:
         config.check()
         self.config = config
-        checksum_seed, garbage_seed, mode_seed = np.random.SeedSequence(config.seed).spawn(3)
+        checksum_seed, garbage_seed, invalid_seed = np.random.SeedSequence(config.seed).spawn(3)
         self._checksum_rng = np.random.default_rng(checksum_seed)
         self._garbage_rng = np.random.default_rng(garbage_seed)
-        self._mode_rng = np.random.default_rng(mode_seed)
+        self._invalid_rng = np.random.default_rng(invalid_seed)
         self._byte_s = byte_time_s(config.baud)
         self._last: tuple[float, float] | None = None  # time, heading of the last valid sample
 
-    def write(self, headings: Headings) -> list[tuple[float, bytes]]:
-        """(time of the first byte, bytes) per sample of `headings` (t_ms on the stand clock)."""
+    def write(self, t_s: np.ndarray, reading_deg: np.ndarray) -> list[tuple[float, bytes]]:
+        """(time of the first byte, bytes) per sample (stand time s, reading deg)."""
         c, f = self.config, self.config.faults
         out: list[tuple[float, bytes]] = []
-        for t_ms, deg, valid in zip(
-            headings.t_ms.tolist(),
-            headings.heading_deg.tolist(),
-            headings.valid.tolist(),
-            strict=True,
-        ):
-            t = t_ms / 1000.0
+        for t, deg in zip(t_s.tolist(), reading_deg.tolist(), strict=True):
+            valid = bool(self._invalid_rng.random() >= f.not_valid_rate)
             lines = [self._sentence(kind, t, deg, valid) for kind in c.sentences]
             if valid:
                 self._last = (t, deg)
@@ -129,16 +125,17 @@ class SentenceWriter:
                 garbage = self._garbage_rng.integers(0x80, 0x100, n, dtype=np.uint8).tobytes()
                 data = garbage + data
                 t -= n * self._byte_s  # the sentence itself still starts at the sample time
+            if f.sender_baud is not None and f.sender_baud != c.baud:
+                data = uart_resample(data, f.sender_baud, c.baud)
             out.append((t, data))
         return out
 
     def _sentence(self, kind: str, t: float, deg: float, valid: bool) -> bytes:
         c, f = self.config, self.config.faults
-        if kind == "HDT":
+        if kind == "HDT":  # IEC 61162-1 HDT has no status: a reading not valid is left empty
             line = sentence(f"{c.talker}HDT,{_angle(deg, 1)},T" if valid else f"{c.talker}HDT,,T")
         elif kind == "THS":
-            mode = "A" if valid and self._mode_rng.random() >= f.ths_mode_v_rate else "V"
-            line = sentence(f"{c.talker}THS,{_angle(deg, 2)},{mode}")
+            line = sentence(f"{c.talker}THS,{_angle(deg, 2)},{'A' if valid else 'V'}")
         else:
             rate = 0.0
             if self._last is not None and t > self._last[0]:  # deg/min from the last reading
@@ -157,38 +154,39 @@ def _angle(deg: float, decimals: int) -> str:
 
 
 class SerialCompass:
-    """The simulated stand's compass on a serial line: the stand's heading frames in, the line's
-    bytes out (the stand's other frames are not the compass's: they stay on the stand's bus)."""
+    """The simulated stand's compass on a serial line, as the stand's heading transmitter
+    (`stand.engine.HeadingTransmitter`): it sends no CAN frame; `take` gives the line's bytes
+    of the samples the stand has computed since the last call."""
 
-    def __init__(self, config: SerialCompassConfig, codec: Codec | None = None) -> None:
+    def __init__(self, config: SerialCompassConfig) -> None:
         self.config = config
         self._writer = SentenceWriter(config)
-        self._decoder = BatchDecoder(codec or Codec())
-        self._heading_id = self._decoder.heading_id
+        self._pending: list[tuple[float, bytes]] = []
 
-    def is_heading(self, frame: can.Message) -> bool:
-        return bool(frame.arbitration_id == self._heading_id and not frame.is_error_frame)
+    def frames(
+        self, t_s: np.ndarray, reading_deg: np.ndarray, index: np.ndarray
+    ) -> list[can.Message]:
+        self._pending += self._writer.write(t_s, reading_deg)
+        return []
 
-    def sentences(self, frames: list[can.Message]) -> list[tuple[float, bytes]]:
-        """(stand time of the first byte, bytes) for the heading frames among `frames`."""
-        headings = [m for m in frames if self.is_heading(m)]
-        if not headings:
-            return []
-        decoded = self._decoder.decode(RawFrames.from_messages(0, headings)).headings
-        out = self._writer.write(decoded)
-        sender = self.config.faults.sender_baud
-        if sender is not None and sender != self.config.baud:
-            out = [(t, uart_resample(d, sender, self.config.baud)) for t, d in out]
-        return out
+    def take(self) -> list[tuple[float, bytes]]:
+        """(stand time of the first byte, bytes) of each sample since the last call."""
+        pieces, self._pending = self._pending, []
+        return pieces
 
-    def until(self, engine: StandEngine, t_s: float) -> list[tuple[float, bytes]]:
-        """Advance `engine` to stand time t_s; the line's bytes due by then."""
-        if abs(engine.config.heading_rate_hz - self.config.rate_hz) > 1e-9:
+    def stand(self, config: SimConfig, codec: Codec | None = None) -> StandEngine:
+        """A simulated stand whose compass this is (its heading rate: the sentence rate)."""
+        if abs(config.heading_rate_hz - self.config.rate_hz) > 1e-9:
             raise SerialSimError(
-                f"the stand's heading rate {engine.config.heading_rate_hz:g} Hz is not the "
+                f"the stand's heading rate {config.heading_rate_hz:g} Hz is not the "
                 f"sentence rate {self.config.rate_hz:g} Hz"
             )
-        return self.sentences(engine.advance_to(t_s))
+        return StandEngine(config, codec, self)
+
+    def until(self, engine: StandEngine, t_s: float) -> list[tuple[float, bytes]]:
+        """Advance `engine` (this compass's stand) to stand time t_s; the line's bytes by then."""
+        engine.advance_to(t_s)
+        return self.take()
 
 
 def uart_resample(data: bytes, tx_baud: int, rx_baud: int) -> bytes:

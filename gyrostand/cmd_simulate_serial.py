@@ -32,7 +32,6 @@ from gyrostand.devices.serial_sim import (
 )
 from gyrostand.devices.tagblock import SUFFIX, TagBlockWriter
 from gyrostand.errors import fail
-from gyrostand.stand.engine import StandEngine
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.schedule import ScheduleError, Step, load_schedule, play
 from gyrostand.stand.simconfig import SimConfig
@@ -129,15 +128,15 @@ def _standalone(
         fail(f"folder {log.parent} does not exist")
     wall0 = time.perf_counter()
     epoch = time.time() if run["start_epoch"] is None else run["start_epoch"]
-    engine = StandEngine(replace(config, timing="virtual"), codec or Codec())
-    compass = SerialCompass(serial, engine.codec)
+    compass = SerialCompass(serial)
+    engine = compass.stand(replace(config, timing="virtual"), codec)
     framer = Framer(serial.baud)
     byte_s = byte_time_s(serial.baud)
     log.unlink(missing_ok=True)
     lines = 0
     with TagBlockWriter(log) as writer:
-        for batch in play(engine, steps):
-            for t, data in compass.sentences(batch):  # each read when its last byte is in
+        for _ in play(engine, steps):  # (the stand's own frames stay on its bus)
+            for t, data in compass.take():  # each read when its last byte is in
                 writer.write(framer.feed(epoch + t + len(data) * byte_s, data))
         writer.write(framer.close())
         lines = writer.lines
@@ -191,8 +190,8 @@ def _live(
         except SerialPortError as exc:
             fail(str(exc))
         write, close, where = device.write, device.close, port
-    engine = StandEngine(config, codec or Codec())
-    compass = SerialCompass(serial, engine.codec)
+    compass = SerialCompass(serial)
+    engine = compass.stand(config, codec)
     what = "+".join(serial.sentences)
     _out.print(
         f"serial compass on {where} at {serial.baud} baud: {what} at "

@@ -33,9 +33,9 @@ class Compass:
     """A serial compass on a stand of its own."""
 
     def __init__(self, rate_hz: float, seed: int, **kw: object) -> None:
-        self.engine = StandEngine(SimConfig(seed=seed, heading_rate_hz=rate_hz))
         config = SerialCompassConfig(rate_hz=rate_hz, seed=seed, **kw)  # type: ignore[arg-type]
         self.serial = SerialCompass(config)
+        self.engine = self.serial.stand(SimConfig(seed=seed, heading_rate_hz=rate_hz))
 
     def until(self, t_s: float) -> list[tuple[float, bytes]]:
         return self.serial.until(self.engine, t_s)
@@ -96,7 +96,7 @@ def test_a_line_too_slow_for_the_sentences_is_refused() -> None:
     ("faults", "reason"),
     [
         (LineFaults(checksum_error_rate=1.0), "checksum mismatch"),
-        (LineFaults(ths_mode_v_rate=1.0), "THS mode V (data not valid)"),
+        (LineFaults(not_valid_rate=1.0), "THS mode V (data not valid)"),
     ],
 )
 def test_sentence_faults_are_invalid_with_their_reason(faults: LineFaults, reason: str) -> None:
@@ -175,9 +175,8 @@ def test_on_a_pty_in_real_time() -> None:
 
 
 def test_the_stand_rate_must_be_the_sentence_rate() -> None:
-    engine = StandEngine(SimConfig(heading_rate_hz=10.0))
     with pytest.raises(SerialSimError, match="heading rate 10 Hz is not the sentence rate 5 Hz"):
-        SerialCompass(SerialCompassConfig(rate_hz=5.0)).until(engine, 1.0)
+        SerialCompass(SerialCompassConfig(rate_hz=5.0)).stand(SimConfig(heading_rate_hz=10.0))
 
 
 def test_config_is_frozen() -> None:

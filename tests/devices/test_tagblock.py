@@ -12,7 +12,6 @@ from gyrostand.devices.serial_sim import LineFaults, SerialCompass, SerialCompas
 from gyrostand.devices.source import ByteChunks
 from gyrostand.devices.tagblock import TagBlockWriter, read_tag_log, tag_line
 from gyrostand.frames.logfile import LogFileError, sha256_of
-from gyrostand.stand.engine import StandEngine
 from gyrostand.stand.simconfig import SimConfig
 
 
@@ -36,10 +35,9 @@ def test_lines() -> None:
 
 
 def live_run(tmp_path: Path) -> tuple[Path, list, Iec61162Source]:  # type: ignore[type-arg]
-    faults = LineFaults(checksum_error_rate=0.1, garbage_rate=0.2, ths_mode_v_rate=0.1)
-    engine = StandEngine(SimConfig(seed=2))
+    faults = LineFaults(checksum_error_rate=0.1, garbage_rate=0.2, not_valid_rate=0.1)
     sim = SerialCompass(SerialCompassConfig(sentences=("THS", "ROT"), faults=faults))
-    pieces = sim.until(engine, 20.0)
+    pieces = sim.until(sim.stand(SimConfig(seed=2)), 20.0)
     # as a port would read them: each piece in two chunks, times as UNIX time
     data, times = [], []
     for t, d in pieces:
