@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gyrostand.devices.clock import NO_CLOCK
 from gyrostand.devices.framing import Framer, Received
 from gyrostand.devices.nmea0183 import Alarm, Heading, Invalid, Other, decode
 from gyrostand.devices.source import (
@@ -90,8 +91,12 @@ class Iec61162Source:
         """Chunks read from the port (`ByteChunks.t_s`: when each read returned)."""
         pieces: list[Received] = []
         for data, t_s in zip(chunks.data, chunks.t_s.tolist(), strict=True):
-            pieces += self._framer.feed(t_s, data)
+            pieces += self.frame(t_s, data)
         return self.decode_pieces(pieces, clock, len(chunks.data))
+
+    def frame(self, read_time_s: float, data: bytes) -> list[Received]:
+        """The pieces a chunk read at `read_time_s` completes (to `decode_pieces` next)."""
+        return self._framer.feed(read_time_s, data)
 
     def close(self, clock: CampaignClock) -> SourceOutput:
         """The end of the stream: a sentence cut by it is truncated."""
@@ -124,7 +129,10 @@ class Iec61162Source:
         events: list[tuple[int, DeviceEvent]] = []
         for i, piece in enumerate(pieces):
             result = self._junk(piece) if piece.junk is not None else self._take(piece)
-            if isinstance(result, float):
+            if isinstance(result, float) and t_ms[i] == NO_CLOCK:
+                reason = "heading received before the stand's first status (no clock)"
+                invalid.append((int(pos[i]), InvalidFrame(SERIAL_ID, reason, piece.data)))
+            elif isinstance(result, float):
                 rows.append(i)
                 headings.append(result)
             elif isinstance(result, Alarm):
