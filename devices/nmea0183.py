@@ -1,12 +1,16 @@
 """IEC 61162-1 (NMEA 0183) sentences from a gyrocompass, one at a time: heading (HDT, THS), rate
 of turn (ROT), alarms (ALR, ALF, HBT, proprietary $P...), and why a sentence is not usable.
 
-Fields are read by pynmeagps (it knows THS; pynmea2 does not). The checks pynmeagps leaves to its
-caller are ours: the characters allowed, the checksum present and right (pynmeagps's own check
-reports both as one error text), empty and missing fields, THS modes other than A."""
+The alarms' fields are read by pynmeagps (it knows THS and the alarm sentences; pynmea2 lacks
+THS). The checks pynmeagps leaves to its caller are ours: the characters allowed, the checksum
+present and right (pynmeagps's own check reports both as one error text), empty and missing
+fields, THS modes other than A; and the hot sentences' few fields (see `_heading`)."""
 
 from __future__ import annotations
 
+import functools
+import operator
+import re
 from dataclasses import dataclass
 
 from pynmeagps import NMEAReader
@@ -74,85 +78,91 @@ Decoded = Heading | RateOfTurn | Alarm | Invalid | Other
 
 def checksum(body: bytes) -> int:
     """IEC 61162-1 §7.2.4: the XOR of every character between '$' (or '!') and '*'."""
-    value = 0
-    for b in body:
-        value ^= b
-    return value
+    return functools.reduce(operator.xor, body, 0)
 
 
 def decode(line: bytes) -> Decoded:
     """One sentence, from its '$' (or '!') up to, not including, its <CR><LF>."""
     if len(line) + 2 > MAX_SENTENCE_BYTES:
         return Invalid(f"longer than {MAX_SENTENCE_BYTES} characters")
-    if not all(0x20 <= b <= 0x7E for b in line):
+    text = line.decode("latin-1")
+    if not (line.isascii() and text.isprintable()):
         return Invalid("non-printable characters")
-    star = line.rfind(b"*")
+    star = text.rfind("*")
     if star < 0:
         return Invalid("no checksum")  # IEC 61162-1 §7.2.4: mandatory in every sentence
-    given = line[star + 1 :]
-    if len(given) != 2 or not all(c in b"0123456789ABCDEFabcdef" for c in given):
+    if not _CHECKSUM.fullmatch(text, star + 1):
         return Invalid("malformed checksum")
-    if int(given, 16) != checksum(line[1:star]):
+    if int(text[star + 1 :], 16) != checksum(line[1:star]):
         return Invalid("checksum mismatch")
-    text = line.decode("ascii")
-    address = text[1:star].split(",", 1)[0]
+    fields = text[1:star].split(",")
+    address = fields[0]
     if address.startswith("P"):
         return Alarm(f"proprietary {address}", f"proprietary sentence {text[:star]}", "info")
     if len(address) != 5:
         return Invalid(f"malformed address field {address!r}")
     talker, kind = address[:2], address[2:]
-    if kind not in ("HDT", "THS", "ROT", *ALARM_SENTENCES):
+    if kind in ("HDT", "THS"):
+        return _heading(talker, kind, fields[1:])
+    if kind == "ROT":
+        return _rate(talker, fields[1:])
+    if kind not in ALARM_SENTENCES:
         return Other(kind)
-    try:
+    try:  # the alarms' many fields: pynmeagps's names for them
         msg = NMEAReader.parse(line + b"\r\n", validate=VALNONE)
     except (NMEAMessageError, NMEAParseError, NMEATypeError, ValueError) as exc:
         return Invalid(f"{kind}: unreadable field ({exc})")
-    if kind == "HDT":
-        return _heading(talker, kind, msg, "headingT")
-    if kind == "THS":
-        heading = _heading(talker, kind, msg, "headt")
-        mode, reason = _field(msg, "mi")
-        if heading.invalid is None and reason is not None:
-            return Heading(talker, kind, None, f"THS: mode field {reason}")
-        if heading.invalid is None and mode != "A":
-            name = THS_MODES.get(str(mode), "unknown mode")
-            return Heading(talker, kind, heading.heading_deg, f"THS mode {mode} ({name})")
-        return heading
-    if kind == "ROT":
-        return _rate(talker, msg)
     return _alarm(talker, kind, msg)
 
 
-def _field(msg: object, name: str) -> tuple[object, str | None]:
-    """A field's value, or why there is none (a sentence cut short, or the field empty)."""
-    if not hasattr(msg, name):
-        return None, "missing"
-    value = getattr(msg, name)
+# The hot sentences (HDT, THS, ROT: every sample) are read here rather than through pynmeagps's
+# NMEAMessage, which took 60% of the serial source's time (bench/bench_serial.py); the result
+# is checked against pynmeagps's fields in tests/devices/test_nmea0183.py.
+_CHECKSUM = re.compile(r"[0-9A-Fa-f]{2}")
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)")  # IEC 61162-1 §7.2.3 numeric field: no exponent
+
+
+def _number(kind: str, name: str, fields: list[str], i: int) -> float | str:
+    """Field i as a number, or why it is none (missing: the sentence has fewer fields)."""
+    if i >= len(fields):
+        return f"{kind}: {name} field missing"
+    value = fields[i]
     if value == "":
-        return None, "empty"
-    return value, None
+        return f"{kind}: {name} field empty"
+    if not _NUMBER.fullmatch(value):
+        return f"{kind}: unreadable field ({name} {value!r})"
+    return float(value)
 
 
-def _heading(talker: str, kind: str, msg: object, name: str) -> Heading:
-    value, reason = _field(msg, name)
-    if reason is not None:
-        return Heading(talker, kind, None, f"{kind}: heading field {reason}")
-    heading = float(value)  # type: ignore[arg-type]
+def _heading(talker: str, kind: str, fields: list[str]) -> Heading:
+    heading = _number(kind, "heading", fields, 0)
+    if isinstance(heading, str):
+        return Heading(talker, kind, None, heading)
     if not 0.0 <= heading < 360.0:
         return Heading(talker, kind, None, f"{kind}: heading {heading:g} outside 0-360")
-    if kind == "HDT" and getattr(msg, "headingTu", "T") not in ("T", ""):
-        return Heading(talker, kind, None, "HDT: not a true heading")
+    if kind == "HDT":
+        if len(fields) > 1 and fields[1] not in ("T", ""):
+            return Heading(talker, kind, None, "HDT: not a true heading")
+        return Heading(talker, kind, heading)
+    if len(fields) < 2 or fields[1] == "":
+        return Heading(
+            talker, kind, None, f"THS: mode field {'missing' if len(fields) < 2 else 'empty'}"
+        )
+    mode = fields[1]
+    if mode != "A":
+        name = THS_MODES.get(mode, "unknown mode")
+        return Heading(talker, kind, heading, f"THS mode {mode} ({name})")
     return Heading(talker, kind, heading)
 
 
-def _rate(talker: str, msg: object) -> RateOfTurn:
-    value, reason = _field(msg, "rot")
-    if reason is not None:
-        return RateOfTurn(talker, None, f"ROT: rate field {reason}")
-    status = getattr(msg, "valid", "")
+def _rate(talker: str, fields: list[str]) -> RateOfTurn:
+    rate = _number("ROT", "rate", fields, 0)
+    if isinstance(rate, str):
+        return RateOfTurn(talker, None, rate)
+    status = fields[1] if len(fields) > 1 else ""
     if status != "A":
-        return RateOfTurn(talker, float(value), f"ROT: status {status or 'empty'} (not valid)")  # type: ignore[arg-type]
-    return RateOfTurn(talker, float(value))  # type: ignore[arg-type]
+        return RateOfTurn(talker, rate, f"ROT: status {status or 'empty'} (not valid)")
+    return RateOfTurn(talker, rate)
 
 
 def _alarm(talker: str, kind: str, msg: object) -> Alarm:
