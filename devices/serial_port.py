@@ -114,4 +114,4 @@ class SerialReader:
                     self._chunks.put((read_time, data))
         except (serial.SerialException, OSError) as exc:
             if not self._stop.is_set():
-                self.error = f"serial port {self.port}: {exc}: unplugged?"
+                self.error = f"serial port {self.port}: read failed ({_why(exc)}): unplugged?"
