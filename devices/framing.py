@@ -28,6 +28,7 @@ _HOLD_MAX = 4 * MAX_SENTENCE_BYTES  # bytes kept of a sentence with no end yet
 GARBAGE = "garbage"
 TRUNCATED = "truncated"
 OVERLONG = "overlong"
+BAD_TAG = "bad-tag-block"  # IEC 61162-450: a TAG block whose checksum is wrong
 
 
 def byte_time_s(baud: int) -> float:

@@ -14,6 +14,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 import serial
@@ -21,6 +22,21 @@ import serial
 from gyrostand.devices.source import ByteChunks
 
 POLL_S = 0.1  # longest wait of one read: how soon `stop` is seen on a silent port
+
+
+T = TypeVar("T")
+
+
+def drain(q: queue.Queue[T], wait_s: float) -> list[T]:
+    """Everything in a reader thread's queue; waits up to `wait_s` for the first item."""
+    got: list[T] = []
+    try:
+        got.append(q.get(timeout=wait_s) if wait_s > 0 else q.get_nowait())
+        while True:
+            got.append(q.get_nowait())
+    except queue.Empty:
+        pass
+    return got
 
 
 class SerialPortError(RuntimeError):
@@ -91,15 +107,7 @@ class SerialReader:
 
     def take(self, wait_s: float = 0.0) -> ByteChunks:
         """Every chunk read since the last call; waits up to `wait_s` for the first one."""
-        got: list[tuple[float, bytes]] = []
-        try:
-            got.append(
-                self._chunks.get(timeout=wait_s) if wait_s > 0 else self._chunks.get_nowait()
-            )
-            while True:
-                got.append(self._chunks.get_nowait())
-        except queue.Empty:
-            pass
+        got = drain(self._chunks, wait_s)
         start, self._next = self._next, self._next + len(got)
         return ByteChunks(start, tuple(d for _, d in got), np.array([t for t, _ in got]))
 

@@ -17,12 +17,12 @@ import re
 from collections.abc import Iterator
 from pathlib import Path
 
-from gyrostand.devices.framing import GARBAGE, OVERLONG, TRUNCATED, Received
+from gyrostand.devices.framing import BAD_TAG, GARBAGE, OVERLONG, TRUNCATED, Received
 from gyrostand.devices.nmea0183 import checksum
 from gyrostand.frames.logfile import LogFileError
 
 SUFFIX = ".nmea"
-_JUNK_KINDS = (GARBAGE, TRUNCATED, OVERLONG)
+_JUNK_KINDS = (GARBAGE, TRUNCATED, OVERLONG, BAD_TAG)
 _UNSAFE = re.compile(rb"[^\x20-\x5b\x5d-\x7e]")  # outside printable ASCII, or a backslash
 _ESCAPED = re.compile(rb"\\x([0-9A-F]{2})")
 _LINE = re.compile(rb"\\([^\\*]*)\*([0-9A-F]{2})\\(.*)")
