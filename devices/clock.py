@@ -26,6 +26,10 @@ TIME_BASE = (
     "reception time (CAN: SocketCAN kernel timestamps) on the stand clock, offset = minimum of "
     f"(reception - stand time) over the last {WINDOW} stand statuses"
 )
+VIRTUAL_TIME_BASE = (
+    "reception time on the stand clock; virtual time: the simulated compass's frames are "
+    "received at their stand time"
+)
 
 
 class ReceptionClock:

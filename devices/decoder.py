@@ -3,7 +3,9 @@
 
 from __future__ import annotations
 
-from gyrostand.devices.clock import ReceptionClock
+from dataclasses import replace
+
+from gyrostand.devices.clock import VIRTUAL_TIME_BASE, ReceptionClock
 from gyrostand.devices.n2k_heading import Nmea2000Heading
 from gyrostand.devices.source import SourceInfo
 from gyrostand.devices.stand_frames import stand_source_info
@@ -46,9 +48,12 @@ def frame_decoder(
     raise ValueError(f"heading source {protocol!r} is not runnable yet")
 
 
-def source_info(codec: Codec, protocol: str = "gyrostand") -> SourceInfo:
+def source_info(codec: Codec, protocol: str = "gyrostand", virtual: bool = False) -> SourceInfo:
+    """What the engine and the campaign record need of the source (`virtual`: a simulated
+    stand in virtual time, whose time base is the simulation's)."""
     if protocol in ("gyrostand", "dbc"):
         return stand_source_info(codec, protocol)
     if protocol == "nmea2000":
-        return Nmea2000Heading.info
+        info = Nmea2000Heading.info
+        return replace(info, time_base=VIRTUAL_TIME_BASE) if virtual else info
     raise ValueError(f"heading source {protocol!r} is not runnable yet")

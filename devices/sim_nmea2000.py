@@ -47,12 +47,19 @@ class Nmea2000Device:
     """Who the simulated compass is on the bus."""
 
     product: Product
-    unique_number: int = 4242
+    name: int = iso_name(4242)  # ISO 11783-5 NAME
     address: int = 35
 
-    @property
-    def name(self) -> int:
-        return iso_name(self.unique_number)
+
+def simulated_compass(
+    model: str, serial: str, name: str | None = None, seed: int = 0
+) -> Nmea2000Compass:
+    """The simulated compass of a plan: its [instrument] in the product information, the
+    [compass] name when the plan gives one."""
+    device = Nmea2000Device(Product(model, serial, "1.0"))
+    if name is not None:
+        device = Nmea2000Device(device.product, int(name, 16))
+    return Nmea2000Compass(device, seed=seed)
 
 
 class Nmea2000Compass:

@@ -20,6 +20,7 @@ from gyrostand.devices.nmea2000 import (
     VESSEL_HEADING,
     Product,
     decode_vessel_heading,
+    iso_name,
     split_id,
 )
 from gyrostand.devices.sim_nmea2000 import Nmea2000Compass, Nmea2000Device, Nmea2000Faults
@@ -133,7 +134,7 @@ class TwoSensors:
 
     def __init__(self) -> None:
         self.compass = compass()
-        other = Nmea2000Device(Product("other sensor", "X-9", "3.0"), 77, address=40)
+        other = Nmea2000Device(Product("other sensor", "X-9", "3.0"), iso_name(77), address=40)
         self.other = Nmea2000Compass(other, seed=5)
 
     def frames(self, t_s: np.ndarray, reading: np.ndarray, index: np.ndarray) -> list[can.Message]:
