@@ -14,7 +14,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Generic, Self, TypeVar
 
 import numpy as np
 import serial
@@ -27,16 +27,56 @@ POLL_S = 0.1  # longest wait of one read: how soon `stop` is seen on a silent po
 T = TypeVar("T")
 
 
-def drain(q: queue.Queue[T], wait_s: float) -> list[T]:
-    """Everything in a reader thread's queue; waits up to `wait_s` for the first item."""
-    got: list[T] = []
-    try:
-        got.append(q.get(timeout=wait_s) if wait_s > 0 else q.get_nowait())
-        while True:
-            got.append(q.get_nowait())
-    except queue.Empty:
-        pass
-    return got
+class ReaderThread(Generic[T]):
+    """A reader of a device in a daemon thread: `_run` puts what it reads in `_queue` until
+    `_stop` is set; `_drain` takes it out; `_close` closes the device after the thread ended."""
+
+    def __init__(self, name: str) -> None:
+        self._queue: queue.Queue[T] = queue.Queue()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def _run(self) -> None:
+        raise NotImplementedError
+
+    def _unblock(self) -> None:
+        """Make a read waiting for data return (a stop is then seen at once)."""
+
+    def _close(self) -> None:
+        raise NotImplementedError
+
+    def start(self) -> Self:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._unblock()
+        if self._thread.is_alive():
+            self._thread.join()
+        self._close()
+
+    def __enter__(self) -> Self:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def alive(self) -> bool:
+        """Still reading (not stopped, no error)."""
+        return self._thread.is_alive()
+
+    def _drain(self, wait_s: float) -> list[T]:
+        """Everything read so far; waits up to `wait_s` for the first item."""
+        got: list[T] = []
+        try:
+            got.append(self._queue.get(timeout=wait_s) if wait_s > 0 else self._queue.get_nowait())
+            while True:
+                got.append(self._queue.get_nowait())
+        except queue.Empty:
+            pass
+        return got
 
 
 class SerialPortError(RuntimeError):
@@ -66,7 +106,7 @@ def _why(exc: BaseException) -> str:
     return str(exc)
 
 
-class SerialReader:
+class SerialReader(ReaderThread[tuple[float, bytes]]):
     """Reads `port` in a background thread; `take()` gives what has arrived as `ByteChunks`.
     `error` is the one line naming the port once reading has failed."""
 
@@ -75,39 +115,20 @@ class SerialReader:
         self.baud = baud
         self._serial = open_port(port, baud)
         self._clock = clock
-        self._chunks: queue.Queue[tuple[float, bytes]] = queue.Queue()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"serial {port}", daemon=True)
         self._next = 0  # stream position of the next chunk taken
         self.error: str | None = None
         self.bytes_read = 0
+        super().__init__(f"serial {port}")
 
-    def start(self) -> SerialReader:
-        self._thread.start()
-        return self
+    def _unblock(self) -> None:
+        self._serial.cancel_read()
 
-    def stop(self) -> None:
-        self._stop.set()
-        if hasattr(self._serial, "cancel_read"):
-            self._serial.cancel_read()
-        if self._thread.is_alive():
-            self._thread.join()
+    def _close(self) -> None:
         self._serial.close()
-
-    def __enter__(self) -> SerialReader:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    @property
-    def alive(self) -> bool:
-        """Still reading (not stopped, no error)."""
-        return self._thread.is_alive()
 
     def take(self, wait_s: float = 0.0) -> ByteChunks:
         """Every chunk read since the last call; waits up to `wait_s` for the first one."""
-        got = drain(self._chunks, wait_s)
+        got = self._drain(wait_s)
         start, self._next = self._next, self._next + len(got)
         return ByteChunks(start, tuple(d for _, d in got), np.array([t for t, _ in got]))
 
@@ -119,7 +140,7 @@ class SerialReader:
                 read_time = self._clock()
                 if data:
                     self.bytes_read += len(data)
-                    self._chunks.put((read_time, data))
+                    self._queue.put((read_time, data))
         except (serial.SerialException, OSError) as exc:
             if not self._stop.is_set():
                 self.error = f"serial port {self.port}: read failed ({_why(exc)}): unplugged?"

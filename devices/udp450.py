@@ -9,17 +9,15 @@ give them as the bridge is configured."""
 
 from __future__ import annotations
 
-import queue
 import re
 import socket
 import struct
-import threading
 import time
 from collections.abc import Callable
 
 from gyrostand.devices.framing import BAD_TAG, GARBAGE, Received
 from gyrostand.devices.nmea0183 import checksum
-from gyrostand.devices.serial_port import drain
+from gyrostand.devices.serial_port import ReaderThread
 
 HEADER = b"UdPbC\x00"  # IEC 61162-450 §7.2: sentence datagrams
 _TAG = re.compile(rb"\\([^\\*]*)\*([0-9A-Fa-f]{2})\\")
@@ -50,7 +48,7 @@ def parse_datagram(data: bytes, time_s: float) -> list[Received]:
     return out
 
 
-class Udp450Reader:
+class Udp450Reader(ReaderThread[Received]):
     """Receives 61162-450 datagrams on `port` (joining multicast `group` when given) in a
     thread; `take()` gives their sentences as pieces."""
 
@@ -78,30 +76,15 @@ class Udp450Reader:
         self.port = sock.getsockname()[1]
         self._sock = sock
         self._clock = clock
-        self._pieces: queue.Queue[Received] = queue.Queue()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=self.where, daemon=True)
         self.datagrams = 0
+        super().__init__(self.where)
 
-    def start(self) -> Udp450Reader:
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join()
+    def _close(self) -> None:  # (a receive waits 0.1 s at most: the stop is seen)
         self._sock.close()
-
-    def __enter__(self) -> Udp450Reader:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
 
     def take(self, wait_s: float = 0.0) -> list[Received]:
         """The sentences received since the last call; waits up to `wait_s` for the first."""
-        return drain(self._pieces, wait_s)
+        return self._drain(wait_s)
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -113,4 +96,4 @@ class Udp450Reader:
                 return
             self.datagrams += 1
             for piece in parse_datagram(data, self._clock()):
-                self._pieces.put(piece)
+                self._queue.put(piece)
