@@ -11,20 +11,26 @@ import can
 
 from gyrostand.acquisition.engine import Engine
 from gyrostand.acquisition.lockstep import Lockstep
+from gyrostand.devices.decoder import frame_decoder, source_info
+from gyrostand.devices.sim_nmea2000 import simulated_compass
 from gyrostand.plan.model import Plan, parse_plan
+from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import SimConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def paper_plan(database: str, trial_repeats: int = 1, n_obs: int = 5) -> Plan:
+def paper_plan(
+    database: str, trial_repeats: int = 1, n_obs: int = 5, protocol: str = "gyrostand"
+) -> Plan:
     """The paper's campaign (examples/paper.toml), its six trials repeated `trial_repeats`
-    times, on a SQLite file."""
+    times, on a SQLite file, its compass speaking `protocol` ([compass])."""
     text = (ROOT / "examples" / "paper.toml").read_text()
     text = text.replace('database = "runs/gyrostand.sqlite"', f'database = "{database}"')
     text = text.replace("n_obs = 5", f"n_obs = {n_obs}")
     head, sep, trials = text.partition("[[trials]]")
-    return parse_plan(head + (sep + trials) * trial_repeats)
+    compass = f'\n[compass]\nprotocol = "{protocol}"\n'
+    return parse_plan(head + (sep + trials) * trial_repeats + compass)
 
 
 class _Null:
@@ -33,9 +39,17 @@ class _Null:
 
 
 def campaign_frames(plan: Plan, seed: int = 1, step_s: float = 20.0) -> Iterator[can.Message]:
-    """Every frame of a campaign run of `plan` on the simulated stand, in stream order."""
-    stand = Lockstep(SimConfig(seed=seed), step_s)
-    for frames in stand.steps(Engine(plan, _Null(), stand), max_stand_s=math.inf):
+    """Every frame of a campaign run of `plan` on the simulated stand, in stream order (its
+    compass speaking the plan's [compass] protocol)."""
+    compass = None
+    if plan.compass.protocol != "gyrostand":
+        codec = Codec()
+        transmitter = simulated_compass(plan.instrument.model, plan.instrument.serial, seed=seed)
+        compass = (transmitter, lambda: frame_decoder(codec, *plan.heading_source))
+    stand = Lockstep(SimConfig(seed=seed), step_s, compass=compass)  # type: ignore[arg-type]
+    source = source_info(Codec(), plan.compass.protocol, virtual=True)
+    engine = Engine(plan, _Null(), stand, source=source)
+    for frames in stand.steps(engine, max_stand_s=math.inf):
         yield from frames
 
 

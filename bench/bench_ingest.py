@@ -6,7 +6,9 @@ consumer they are first queued on a python-can `virtual` bus (untimed), then the
 `can.Notifier` drains that backlog and the clock runs until the consumer has the last frame.
 The process is pinned to one CPU. Targets: >= 87 000 frames/s (ten times a saturated 1 Mbit/s
 bus), zero loss, at least twice `can.Logger`. Last, the raw BLF writers alone (ours, python-can's)
-on the same frames, without a bus.
+on the same frames, without a bus; and the same campaign with its compass speaking NMEA 2000
+(PGN 127250/127251/127257 decoded by the heading source, `devices`): frames/s beside gyrostand's
+own heading frame (target: at least its rate, in frames and in headings).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import uuid
 from pathlib import Path
 
 import can
+import numpy as np
 from acquisition_stream import campaign_frames, paper_plan
 
 from gyrostand.acquisition.bus import Recorder
@@ -27,7 +30,8 @@ from gyrostand.acquisition.engine import Engine
 from gyrostand.acquisition.runner import _NoCommands
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.session import open_database, sqlite_url
-from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.devices.decoder import frame_decoder, source_info
+from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import BatchBLFWriter
 from gyrostand.stand.protocol import Codec
 
@@ -44,14 +48,17 @@ def loaded_bus(frames: list[can.Message]) -> tuple[can.BusABC, can.BusABC]:
     return rx, tx
 
 
-def ours(frames: list[can.Message], tmp: Path, raw_log: bool) -> tuple[float, int, int]:
+def ours(
+    frames: list[can.Message], tmp: Path, raw_log: bool, protocol: str = "gyrostand"
+) -> tuple[float, int, int]:
     """gyrostand's live path: Notifier -> Recorder (bounded queue + raw log) -> batch decode ->
     engine -> SQLite. Returns (seconds, frames processed, frames lost)."""
-    db = tmp / f"ours-{raw_log}.sqlite"
-    plan = paper_plan(str(db))
+    db = tmp / f"ours-{raw_log}-{protocol}.sqlite"
+    plan = paper_plan(str(db), protocol=protocol)
     store = CampaignStore.create(open_database(sqlite_url(db)), plan)
-    engine = Engine(plan, store, _NoCommands())  # the commands are in the recorded stream
-    decoder = BatchDecoder(Codec())
+    source = source_info(Codec(), protocol, virtual=True)
+    engine = Engine(plan, store, _NoCommands(), source=source)  # commands: in the stream
+    decoder = frame_decoder(Codec(), *plan.heading_source)
     rx, tx = loaded_bus(frames)
     recorder = Recorder(plan.bus.queue_size, tmp / "ours.blf" if raw_log else None)
     t0 = time.perf_counter()
@@ -107,6 +114,16 @@ def writers_alone(frames: list[can.Message], tmp: Path) -> tuple[float, float]:
     return len(frames) / (t1 - t0), len(frames) / (t2 - t1)
 
 
+def _headings(frames: list[can.Message]) -> int:
+    """Heading frames among them (gyrostand's GYRO_HEADING or PGN 127250)."""
+    from gyrostand.devices.nmea2000 import VESSEL_HEADING, split_id
+
+    heading_id = Codec().database.get_message_by_name("GYRO_HEADING").frame_id
+    ext = [m.arbitration_id for m in frames if m.is_extended_id]
+    n2k = int((split_id(np.array(ext, dtype=np.int64))[0] == VESSEL_HEADING).sum()) if ext else 0
+    return n2k + sum(1 for m in frames if not m.is_extended_id and m.arbitration_id == heading_id)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=300_000)
@@ -135,6 +152,17 @@ def main() -> None:
     ours_rate = rows["gyrostand (decode, check, aggregate, SQLite + raw BLF)"]
     rate = ours_rate[1] / ours_rate[0]
     best_logger = max(done / s for s, done, _ in list(rows.values())[2:])
+    n2k_plan = paper_plan(":memory:", protocol="nmea2000")
+    n2k_frames = list(itertools.islice(campaign_frames(n2k_plan), args.frames))
+    with tempfile.TemporaryDirectory() as folder:
+        n2k = ours(n2k_frames, Path(folder), True, "nmea2000")
+    n2k_rate = n2k[1] / n2k[0]
+    per_heading = _headings(n2k_frames) / n2k[0], _headings(frames) / ours_rate[0]
+    print(
+        f"NMEA 2000 compass ({len(n2k_frames):,} frames, SQLite + raw BLF): {n2k_rate:,.0f} "
+        f"frames/s, {n2k[2]:,} lost; headings/s {per_heading[0]:,.0f} vs gyrostand's frame "
+        f"{per_heading[1]:,.0f}: {'OK' if n2k_rate >= rate else 'BELOW'} gyrostand's rate"
+    )
     print(
         f"target >= 87,000 frames/s: {'OK' if rate >= 87_000 else 'BELOW TARGET'}; "
         f"zero loss: {'OK' if ours_rate[2] == 0 else 'FRAMES LOST'}; "
