@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gyrostand.devices.clock import NO_CLOCK
+from gyrostand.devices.clock import NO_CLOCK, WINDOW
 from gyrostand.devices.framing import Framer, Received
 from gyrostand.devices.nmea0183 import Alarm, Heading, Invalid, Other, decode
 from gyrostand.devices.source import (
@@ -37,7 +37,7 @@ WRONG_BAUD_KIND = "wrong baud rate"
 
 def wrong_baud(port: str, baud: int) -> str:
     """The one line naming a port that gives bytes but no sentence."""
-    return f"{port}: no NMEA sentences at {baud} baud: wrong baud rate?"
+    return f"serial port {port}: no NMEA sentences at {baud} baud: wrong baud rate?"
 
 
 @dataclass(frozen=True)
@@ -59,7 +59,7 @@ class Iec61162Source:
     def __init__(
         self,
         baud: int,
-        port: str = "serial port",
+        port: str = "(unnamed)",
         resolution_deg: float = 0.1,
         raw_log: TagBlockWriter | None = None,
     ) -> None:
@@ -70,8 +70,9 @@ class Iec61162Source:
             protocol=PROTOCOL,
             resolution_deg=resolution_deg,
             time_base=(
-                f"reception: the first byte of each sentence on {port} at {baud} baud "
-                "(read time less its bytes' time on the wire)"
+                f"reception of each sentence's first byte ({port}, {baud} baud: read time less "
+                "its bytes' time on the wire) on the stand clock, offset = minimum of "
+                f"(reception - stand time) over the last {WINDOW} stand statuses"
             ),
             sequence=UNNUMBERED,
         )

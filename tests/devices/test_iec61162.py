@@ -109,7 +109,8 @@ def test_garbage_only_is_named_a_wrong_baud_rate_once() -> None:
     out = source.decode(chunks(0, (1.0, noise[:300]), (2.0, noise[300:])), MsClock())
     ((_, event),) = out.events
     assert (event.kind, event.severity) == (WRONG_BAUD_KIND, "error")
-    assert event.message == "/dev/ttyUSB0: no NMEA sentences at 4800 baud: wrong baud rate?"
+    port = "serial port /dev/ttyUSB0"
+    assert event.message == f"{port}: no NMEA sentences at 4800 baud: wrong baud rate?"
     assert source.decode(chunks(2, (3.0, noise)), MsClock()).events == ()
 
 

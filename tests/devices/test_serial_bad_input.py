@@ -67,7 +67,7 @@ def test_one_record_each(case: Case) -> None:
         out = decode_line(source, case.line)
         assert len(out.headings) == 0
         assert [e.kind for _, e in out.events] == [WRONG_BAUD_KIND]
-        assert "/dev/ttyS0: no NMEA sentences at 4800 baud: wrong baud rate?" in [
+        assert "serial port /dev/ttyS0: no NMEA sentences at 4800 baud: wrong baud rate?" in [
             e.message for _, e in out.events
         ]
         return
