@@ -13,7 +13,11 @@ another baud rate than the reader's is what a UART at the reader's rate makes of
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import math
+import os
+import termios
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -187,6 +191,40 @@ class SerialCompass:
         """Advance `engine` (this compass's stand) to stand time t_s; the line's bytes by then."""
         engine.advance_to(t_s)
         return self.take()
+
+    def line(
+        self, engine: StandEngine, duration_s: float | None = None, step_s: float = 0.1
+    ) -> Iterator[tuple[float, bytes]]:
+        """The line's bytes sample by sample, `engine` advanced `step_s` at a time (until
+        `duration_s` of stand time, or for ever): for `write_realtime`."""
+        t = 0.0
+        while duration_s is None or t < duration_s:
+            t += step_s
+            yield from self.until(engine, t)
+
+
+class PtyLine:
+    """A pseudo-terminal pair as the compass's line: `write` to the master; a reader opens
+    `path`, the slave's. The slave stays open here so the path lasts while readers come and go,
+    and what nobody has read for a second is dropped (a line keeps no bytes nobody receives)."""
+
+    def __init__(self, baud: int) -> None:
+        self.master, self._slave = os.openpty()
+        self.path = os.ttyname(self._slave)
+        self._keep = baud // BITS_PER_BYTE  # one second of the line
+        flags = fcntl.fcntl(self.master, fcntl.F_GETFL)
+        fcntl.fcntl(self.master, fcntl.F_SETFL, flags | os.O_NONBLOCK)
+
+    def write(self, data: bytes) -> None:
+        pending = int.from_bytes(fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0"), "little")
+        if pending > self._keep:
+            termios.tcflush(self._slave, termios.TCIFLUSH)
+        with contextlib.suppress(BlockingIOError):
+            os.write(self.master, data)
+
+    def close(self) -> None:
+        os.close(self.master)
+        os.close(self._slave)
 
 
 def uart_resample(data: bytes, tx_baud: int, rx_baud: int) -> bytes:

@@ -7,14 +7,10 @@ byte-reproducible for a seed."""
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
 import inspect
-import os
-import termios
 import time
 import typing
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
@@ -25,6 +21,7 @@ from rich.console import Console
 from gyrostand.devices.framing import Framer, byte_time_s
 from gyrostand.devices.serial_sim import (
     LineFaults,
+    PtyLine,
     SerialCompass,
     SerialCompassConfig,
     SerialSimError,
@@ -37,7 +34,6 @@ from gyrostand.stand.schedule import ScheduleError, Step, load_schedule, play
 from gyrostand.stand.simconfig import SimConfig
 
 PANEL = "Serial compass (--protocol iec61162)"
-_STEP_S = 0.1  # stand time computed ahead of the line in live mode
 _out = Console(stderr=True, highlight=False, markup=False, emoji=False)
 
 
@@ -146,30 +142,6 @@ def _standalone(
     )
 
 
-class _PtyLine:
-    """A pseudo-terminal pair as the compass's line: we write to the master; a reader opens
-    the slave's path. We keep the slave open so the path lasts while readers come and go, and
-    drop what nobody has read for a second (a real line keeps no bytes nobody receives)."""
-
-    def __init__(self, baud: int) -> None:
-        self.master, self._slave = os.openpty()
-        self.path = os.ttyname(self._slave)
-        self._keep = baud // 10  # one second of the line
-        fl = fcntl.fcntl(self.master, fcntl.F_GETFL)
-        fcntl.fcntl(self.master, fcntl.F_SETFL, fl | os.O_NONBLOCK)
-
-    def write(self, data: bytes) -> None:
-        pending = int.from_bytes(fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0"), "little")
-        if pending > self._keep:
-            termios.tcflush(self._slave, termios.TCIFLUSH)
-        with contextlib.suppress(BlockingIOError):
-            os.write(self.master, data)
-
-    def close(self) -> None:
-        os.close(self.master)
-        os.close(self._slave)
-
-
 def _live(
     config: SimConfig,
     serial: SerialCompassConfig,
@@ -179,7 +151,7 @@ def _live(
 ) -> None:
     write: Callable[[bytes], object]
     if port is None:
-        line = _PtyLine(serial.baud)
+        line = PtyLine(serial.baud)
         write, close, where = line.write, line.close, line.path
         print(line.path, flush=True)  # the path to connect to, alone on stdout
     else:
@@ -198,15 +170,9 @@ def _live(
         f"{serial.rate_hz:g} Hz in real time (Ctrl-C to stop)"
     )
 
-    def pieces() -> Iterator[tuple[float, bytes]]:
-        t = 0.0
-        while duration_s is None or t < duration_s:
-            t += _STEP_S
-            yield from compass.until(engine, t)
-
     written = 0
     try:
-        written = write_realtime(pieces(), write, serial.baud)
+        written = write_realtime(compass.line(engine, duration_s), write, serial.baud)
     except KeyboardInterrupt:
         pass
     except OSError as exc:
