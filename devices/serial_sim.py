@@ -79,6 +79,15 @@ class SerialCompassConfig:
             raise SerialSimError(f"sentences must be some of {', '.join(SENTENCES)}")
         if not (len(self.talker) == 2 and self.talker.isalpha() and self.talker.isupper()):
             raise SerialSimError(f"talker {self.talker!r} is not two capital letters")
+        f = self.faults
+        for name in ("checksum_error_rate", "garbage_rate", "not_valid_rate"):
+            if not 0.0 <= getattr(f, name) <= 1.0:
+                raise SerialSimError(f"{name} {getattr(f, name):g} is not a fraction in [0, 1]")
+        for name, value in (("baud", self.baud), ("sender_baud", f.sender_baud or 1)):
+            if value <= 0:
+                raise SerialSimError(f"{name} {value} is not a baud rate")
+        if f.line_silence_for_s < 0:
+            raise SerialSimError(f"line_silence_for_s {f.line_silence_for_s:g} is negative")
         # the longest sentences of a sample must fit on the line between two samples
         longest = {"HDT": len("$HEHDT,359.9,T*hh\r\n"), "THS": len("$HETHS,359.99,A*hh\r\n")}
         longest["ROT"] = len("$HEROT,-9999.9,A*hh\r\n")

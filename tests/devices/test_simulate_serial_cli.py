@@ -59,6 +59,8 @@ def test_schedule_into_a_tag_block_log_is_reproducible(tmp_path: Path) -> None:
         (["--step", "still 1", "--log", "x.nmea", "--sentences", "GGA"], "some of HDT, THS"),
         (["--port", "/dev/ttyGYRO404", "--duration-s", "1"], "/dev/ttyGYRO404: cannot open"),
         (["--interface", "virtual", "--channel", "x"], "no --interface"),
+        (["--step", "still 1", "--log", "x.nmea", "--garbage-rate", "2"], "garbage_rate 2 is not"),
+        (["--step", "still 1", "--log", "x.nmea", "--baud", "0"], "baud 0 is not a baud rate"),
     ],
 )
 def test_bad_input_is_one_line(args: list[str], message: str, tmp_path: Path) -> None:
