@@ -1,8 +1,9 @@
 """The stand's CAN frames and a serial compass's bytes as one stream for the engine.
 
 The two arrive on different lines; the engine wants one stream in order. Each batch merges the
-stand's frames (by reception time) and the serial pieces (by the read time of the chunk that
-completed them) into one numbering, stand frames first at equal times. The stand's statuses
+stand's frames (by reception time) and the serial pieces (by when their last byte was in: their
+first byte's time plus their length on the wire) into one numbering, stand frames first at
+equal times. The stand's statuses
 give the campaign clock (`devices.clock.ReceptionClock`), the serial source times each sentence
 on it (`devices.iec61162`). Only times decide the order, so a replay of the two raw logs cut
 into other batches gives the same stream."""
@@ -15,7 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from gyrostand.devices.clock import ReceptionClock
-from gyrostand.devices.framing import Received
+from gyrostand.devices.framing import Received, byte_time_s
 from gyrostand.devices.iec61162 import Iec61162Source
 from gyrostand.devices.source import ByteChunks
 from gyrostand.frames.batch import BatchDecoder, FrameBatch, RawFrames
@@ -38,11 +39,10 @@ class SerialSourceDecoder:
     def decode(self, raw: RawFrames) -> FrameBatch:
         chunks = self.take()
         pieces: list[Received] = []
-        done: list[float] = []  # when each piece was read whole
         for data, t_s in zip(chunks.data, chunks.t_s.tolist(), strict=True):
-            new = self.source.frame(t_s, data)
-            pieces += new
-            done += [t_s] * len(new)
+            pieces += self.source.frame(t_s, data)
+        byte_s = byte_time_s(self.source.baud)  # when each piece was in, however chunks cut it
+        done = [p.time_s + len(p.data) * byte_s for p in pieces]
         n, m = len(raw), len(pieces)
         order = np.argsort(np.concatenate((raw.timestamp, np.array(done))), kind="stable")
         merged = np.empty(n + m, dtype=np.int64)

@@ -110,14 +110,25 @@ class SerialReader(ReaderThread[tuple[float, bytes]]):
     """Reads `port` in a background thread; `take()` gives what has arrived as `ByteChunks`.
     `error` is the one line naming the port once reading has failed."""
 
-    def __init__(self, port: str, baud: int, *, clock: Callable[[], float] = time.time) -> None:
+    def __init__(
+        self,
+        port: str,
+        baud: int,
+        *,
+        clock: Callable[[], float] = time.time,
+        line_clock: Callable[[int, bytes], list[tuple[float, bytes]]] | None = None,
+    ) -> None:
+        """`line_clock`: in virtual time, the bytes read at a stream offset as timed chunks (the
+        simulated line's times, not the host's clock: `devices.serial_sim.VirtualLine`)."""
         self.port = port
+        self._line_clock = line_clock
         self.baud = baud
         self._serial = open_port(port, baud)
         self._clock = clock
         self._next = 0  # stream position of the next chunk taken
         self.error: str | None = None
         self.bytes_read = 0
+        self.bytes_taken = 0  # in the chunks `take` gave
         super().__init__(f"serial {port}")
 
     def _unblock(self) -> None:
@@ -130,6 +141,7 @@ class SerialReader(ReaderThread[tuple[float, bytes]]):
         """Every chunk read since the last call; waits up to `wait_s` for the first one."""
         got = self._drain(wait_s)
         start, self._next = self._next, self._next + len(got)
+        self.bytes_taken += sum(len(d) for _, d in got)
         return ByteChunks(start, tuple(d for _, d in got), np.array([t for t, _ in got]))
 
     def _run(self) -> None:
@@ -138,9 +150,14 @@ class SerialReader(ReaderThread[tuple[float, bytes]]):
             while not self._stop.is_set():
                 data = ser.read(ser.in_waiting or 1)
                 read_time = self._clock()
-                if data:
-                    self.bytes_read += len(data)
+                if not data:
+                    continue
+                if self._line_clock is None:
                     self._queue.put((read_time, data))
+                else:
+                    for chunk in self._line_clock(self.bytes_read, data):
+                        self._queue.put(chunk)
+                self.bytes_read += len(data)
         except (serial.SerialException, OSError) as exc:
             if not self._stop.is_set():
                 self.error = f"serial port {self.port}: read failed ({_why(exc)}): unplugged?"

@@ -13,6 +13,7 @@ another baud rate than the reader's is what a UART at the reader's rate makes of
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import fcntl
 import math
@@ -210,6 +211,52 @@ class SerialCompass:
         while duration_s is None or t < duration_s:
             t += step_s
             yield from self.until(engine, t)
+
+
+class VirtualLine:
+    """The simulated compass's line in virtual time: its bytes written to a pseudo-terminal
+    at once (the reader gets them through the real port path), and when each would have been
+    received (`received`, a `SerialReader`'s line clock): the simulation's times, so a run is
+    byte-reproducible however the reads cut the stream."""
+
+    def __init__(self, baud: int) -> None:
+        self.master, self._slave = os.openpty()
+        self.path = os.ttyname(self._slave)
+        self._byte_s = byte_time_s(baud)
+        self._starts: list[int] = []  # stream offset of each piece's first byte ...
+        self._times: list[float] = []  # ... and its stand time
+        self.written = 0
+
+    def write(self, pieces: list[tuple[float, bytes]]) -> None:
+        for t, data in pieces:
+            self._starts.append(self.written)
+            self._times.append(t)
+            self.written += len(data)
+        data = memoryview(b"".join(d for _, d in pieces))
+        while data:  # (blocks while the reader lags)
+            data = data[os.write(self.master, data) :]
+
+    def time_at(self, n: int) -> float:
+        """When the line's n-th byte had been received (the end of its 10 bits)."""
+        i = bisect.bisect_right(self._starts, n - 1) - 1
+        return self._times[i] + (n - self._starts[i]) * self._byte_s
+
+    def received(self, offset: int, data: bytes) -> list[tuple[float, bytes]]:
+        """Bytes read at stream `offset` as a reader keeping up with the line reads them: cut
+        where the line fell idle between samples, each part timed when its last byte was in."""
+        end = offset + len(data)
+        lo = bisect.bisect_right(self._starts, offset)
+        hi = bisect.bisect_left(self._starts, end)
+        cuts = [offset, *self._starts[lo:hi], end]
+        return [
+            (self.time_at(b), data[a - offset : b - offset])
+            for a, b in zip(cuts, cuts[1:], strict=False)
+            if b > a
+        ]
+
+    def close(self) -> None:
+        os.close(self.master)
+        os.close(self._slave)
 
 
 class PtyLine:

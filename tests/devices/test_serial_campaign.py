@@ -4,6 +4,8 @@ has two decimals), byte-reproducible, line faults counted, a silent line failing
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -12,13 +14,20 @@ from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.devices.framing import byte_time_s
 from gyrostand.devices.iec61162 import Iec61162Source
 from gyrostand.devices.serial_decoder import SerialSourceDecoder
-from gyrostand.devices.serial_sim import LineFaults, SerialCompass, SerialCompassConfig
+from gyrostand.devices.serial_port import SerialReader
+from gyrostand.devices.serial_sim import (
+    LineFaults,
+    SerialCompass,
+    SerialCompassConfig,
+    VirtualLine,
+)
 from gyrostand.devices.source import ByteChunks
 from gyrostand.stand.protocol import Codec
 from tests.acquisition.harness import Recorder, quick_config, small_plan
 
 PLAN = small_plan(n_obs=3)
 BAUD = 38400
+HANG_GUARD_S = 120.0  # only against a hang: each wait returns once the bytes are read
 
 
 def run(compass: SerialCompass | None = None) -> tuple[Recorder, Lockstep]:
@@ -101,3 +110,34 @@ def test_line_faults_are_counted_not_lost(gyrostand_run: list[ObservationResult]
     ]
     assert len(counts) == 12 and all(c > 0 for c in counts)
     assert 15 <= np.mean(counts) <= 40
+
+
+def test_through_a_pseudo_terminal_pair(serial_run: Recorder) -> None:
+    """The same campaign with the compass's bytes through a real pty and pyserial (the port
+    path of a real compass), timed by the simulated line: the same calls, whatever the reads."""
+    compass = serial()
+    line = VirtualLine(BAUD)
+    try:
+        with SerialReader(line.path, BAUD, line_clock=line.received) as reader:
+
+            def take() -> ByteChunks:  # every byte written so far, read back through the pty
+                line.write(compass.take())
+                chunks: list[ByteChunks] = []
+                deadline = time.monotonic() + HANG_GUARD_S
+                while reader.bytes_taken < line.written and time.monotonic() < deadline:
+                    chunks.append(reader.take(wait_s=1.0))
+                data = tuple(d for c in chunks for d in c.data)
+                times = np.concatenate([c.t_s for c in chunks]) if chunks else np.zeros(0)
+                return ByteChunks(0, data, times)
+
+            sink = Recorder()
+            codec = Codec()
+            source = Iec61162Source(BAUD, line.path, resolution_deg=0.01)
+            decoder = (compass, lambda: SerialSourceDecoder(codec, source, take))
+            stand = Lockstep(quick_config(seed=1), 5.0, codec, decoder)  # type: ignore[arg-type]
+            stand.run(Engine(PLAN, sink, stand, source=source.info))
+    finally:
+        line.close()
+    assert reader.error is None
+    assert sink.observations == serial_run.observations
+    assert sink.calls == serial_run.calls
