@@ -1,7 +1,9 @@
 """The pytest plugin's serial compass: a user's test reads IEC 61162 sentences from a port."""
 
+import re
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -28,3 +30,12 @@ def test_sentences_on_the_fixtures_port(gyro_serial_compass: Callable[..., str])
             assert out.invalid == ()
     assert len(headings) >= 10 and all(abs(h - 120.0) < 1.0 for h in headings)
     assert source.kinds["ROT"] >= 9
+
+
+def test_the_documented_example(gyro_serial_compass: Callable[..., str]) -> None:
+    """docs/testing.md's serial example (its `py` block), run with this fixture."""
+    text = (Path(__file__).resolve().parents[2] / "docs" / "testing.md").read_text()
+    (block,) = re.findall(r"```py\n(.*?)```", text, re.S)
+    scope: dict[str, object] = {}
+    exec(compile(block, "docs/testing.md", "exec"), scope)
+    scope["test_reads_a_heading"](gyro_serial_compass)  # type: ignore[operator]
