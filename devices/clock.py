@@ -2,17 +2,23 @@
 
 The campaign clock is the stand's: every stand status carries the stand time it was sent at,
 and the acquisition stamps every frame with its reception time (SocketCAN: the kernel's receive
-timestamp; the host clock, shared by all buses and ports). For each stand status,
+timestamp; the host clock, shared by all buses and ports). Over the last WINDOW statuses before a
+frame (in the stream, so the result does not depend on how the stream is cut into batches:
+replay = live):
 
-    offset = reception ms - stand ms  (= the clocks' offset + the status's latency, >= the offset)
+    rate   = stand time / reception time elapsed since the first status: 1 for a real stand
+             (any clock drift, ppm, is within RATE_SNAP of 1 and left to the offset), the
+             speedup of a simulated stand in real time (estimated once it ran MIN_SPAN_MS)
+    offset = min over the window of (rate x reception ms - stand ms)
+             (the clocks' offset plus each status's latency, which is >= 0: the minimum drops
+             the latency's jitter, the window follows the clocks' drift)
 
-and a heading received at r ms is at stand time r - offset, with the offset the smallest of the
-last WINDOW statuses before it (the minimum drops the latency's jitter; a window, not all, so
-that the two clocks' drift is followed). Statuses only from before the heading in the stream,
-so the result does not depend on how the stream is cut into batches (replay = live).
+and a frame received at r ms is at stand time rate x r - offset.
 
-In virtual time the simulated devices' reception times are the stand time itself: the offset is
-0 and every heading keeps the simulation's time exactly.
+In virtual time on the in-process bus the simulated devices' reception times are their stand
+time itself: rate 1, offset 0, and every heading keeps the simulation's time exactly. (Over a real
+bus a virtual-time stand's clock bears no relation to reception times: the plan refuses a
+reception-timed compass there.)
 """
 
 from __future__ import annotations
@@ -20,11 +26,13 @@ from __future__ import annotations
 import numpy as np
 
 WINDOW = 32  # stand statuses (16 s at the simulated stand's 2 Hz)
+MIN_SPAN_MS = 10_000.0  # stand time since the first status before a rate is estimated
+RATE_SNAP = 1e-3  # a rate this close to 1 is 1 (clocks drift by ppm; this is latency jitter)
 NO_CLOCK = -1  # campaign time of a frame received before the first stand status
 
 TIME_BASE = (
-    "reception time (CAN: SocketCAN kernel timestamps) on the stand clock, offset = minimum of "
-    f"(reception - stand time) over the last {WINDOW} stand statuses"
+    "reception time (CAN: SocketCAN kernel timestamps) on the stand clock: rate and offset "
+    f"(minimum of reception - stand time) over the last {WINDOW} stand statuses"
 )
 VIRTUAL_TIME_BASE = (
     "reception time on the stand clock; virtual time: the simulated compass's frames are "
@@ -38,20 +46,41 @@ class ReceptionClock:
     def __init__(self, window: int = WINDOW) -> None:
         self.window = window
         self._pos = np.zeros(0, dtype=np.int64)  # the last statuses: stream positions ...
-        self._offset = np.zeros(0)  # ... and (reception - stand time), ms
+        self._rx = np.zeros(0)  # ... reception ms
+        self._stand = np.zeros(0)  # ... and stand ms
+        self._first: tuple[float, float] | None = None  # (reception ms, stand ms) of the first
 
     def observe(self, pos: np.ndarray, stand_ms: np.ndarray, rx_s: np.ndarray) -> None:
         """Take the stand statuses of a batch (stream order)."""
-        self._pos = np.concatenate((self._pos[-(2 * self.window) :], pos))
-        self._offset = np.concatenate((self._offset[-(2 * self.window) :], rx_s * 1000 - stand_ms))
+        if self._first is None and len(pos):
+            self._first = (float(rx_s[0]) * 1000.0, float(stand_ms[0]))
+        keep = -(2 * self.window)
+        self._pos = np.concatenate((self._pos[keep:], pos))
+        self._rx = np.concatenate((self._rx[keep:], rx_s * 1000.0))
+        self._stand = np.concatenate((self._stand[keep:], stand_ms.astype(np.float64)))
 
     def to_campaign_ms(self, pos: np.ndarray, rx_s: np.ndarray) -> np.ndarray:
         """Campaign ms of frames at stream positions `pos` received at `rx_s`; NO_CLOCK before
         the first status."""
+        n = len(self._pos)
         last = np.searchsorted(self._pos, pos) - 1  # the last status before each frame
-        smallest = self._offset.copy()  # over the window ending at each status
-        for k in range(1, self.window):
-            smallest[k:] = np.minimum(smallest[k:], self._offset[:-k])
-        offset = smallest[np.maximum(last, 0)] if len(smallest) else np.zeros(len(pos))
-        t_ms = np.round(rx_s * 1000 - offset).astype(np.int64)
+        if n == 0:
+            return np.full(len(pos), NO_CLOCK, dtype=np.int64)
+        assert self._first is not None
+        span = self._stand - self._first[1]
+        elapsed = self._rx - self._first[0]
+        rate = np.where(
+            (span >= MIN_SPAN_MS) & (elapsed > 0), span / np.where(elapsed > 0, elapsed, 1), 1.0
+        )
+        rate = np.where(np.abs(rate - 1.0) < RATE_SNAP, 1.0, rate)
+        first = np.maximum(np.arange(n) - (self.window - 1), 0)  # window: first..i
+        at = np.maximum(last, 0)
+        r = rate[at]
+        # offset = min over the window ending at status i of (rate_i x rx - stand)
+        lo = first[at]
+        offset = np.full(len(pos), np.inf)
+        for k in range(self.window):
+            j = np.minimum(lo + k, at)
+            offset = np.minimum(offset, r * self._rx[j] - self._stand[j])
+        t_ms = np.round(r * rx_s * 1000.0 - offset).astype(np.int64)
         return np.where(last >= 0, t_ms, NO_CLOCK)

@@ -109,15 +109,15 @@ class Nmea2000Heading:
         problems = decoded.problems()
         pos = rows + raw.start
         t_ms = clock.to_campaign_ms(pos, raw.timestamp[rows])
-        for i in range(len(rows)):
-            if raw.dlc[rows[i]] != 8:
-                problems[i] = f"PGN 127250 of {int(raw.dlc[rows[i]])} bytes, not 8"
-            elif t_ms[i] == NO_CLOCK:
-                problems[i] = "PGN 127250 received before the stand's first status (no clock)"
-        bad = np.array([p != "" for p in problems], dtype=bool)
-        for i in np.flatnonzero(bad).tolist():
+        for i in np.flatnonzero(t_ms == NO_CLOCK).tolist():
+            problems[i] = "PGN 127250 received before the stand's first status (no clock)"
+        for i in np.flatnonzero(raw.dlc[rows] != 8).tolist():
+            problems[i] = f"PGN 127250 of {int(raw.dlc[rows[i]])} bytes, not 8"
+        bad = np.zeros(len(rows), dtype=bool)
+        bad[list(problems)] = True
+        for i, why in sorted(problems.items()):
             row = int(rows[i])
-            frame = InvalidFrame(int(raw.arbitration_id[row]), problems[i], raw.data[row].tobytes())
+            frame = InvalidFrame(int(raw.arbitration_id[row]), why, raw.data[row].tobytes())
             invalid.append((int(pos[i]), frame))
         good = ~bad
         return Headings(

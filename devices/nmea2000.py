@@ -82,18 +82,17 @@ class VesselHeadings:
         """Heading, rad; NaN where not available."""
         return np.where(self.heading >= U16_NO_VALUE, np.nan, self.heading * ANGLE_RAD)
 
-    def problems(self) -> list[str]:
-        """Why each frame gives no usable heading ("" when it does)."""
-        out = [""] * len(self.sid)
+    def problems(self) -> dict[int, str]:
+        """Why frames give no usable heading, by row (the rows not named do)."""
+        out: dict[int, str] = {}
         na = self.heading >= U16_NO_VALUE
         beyond = ~na & (self.heading > MAX_HEADING_RAW)
         for i in np.flatnonzero(self.reference != 0).tolist():
             kind = ("magnetic", "error", "null")[int(self.reference[i]) - 1]
             out[i] = f"PGN 127250 heading reference {kind}, not true"
         for i in np.flatnonzero(beyond).tolist():
-            out[i] = (
-                f"PGN 127250 heading {int(self.heading[i]) * ANGLE_RAD:.4f} rad outside [0, 2 pi]"
-            )
+            rad = int(self.heading[i]) * ANGLE_RAD
+            out[i] = f"PGN 127250 heading {rad:.4f} rad outside [0, 2 pi]"
         for i in np.flatnonzero(na).tolist():
             out[i] = "PGN 127250 heading not available"
         return out

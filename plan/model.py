@@ -823,6 +823,16 @@ class Plan(_Table):
         if compass.protocol == "dbc" and self.protocol.dbc_path is None:
             message = 'protocol = "dbc" needs the lab\'s DBC ([protocol] dbc_path)'
             errors.append(_error("compass", ("compass", "protocol"), message))
+        if (
+            compass.protocol == "nmea2000"
+            and not self.bus.simulated
+            and self.bus.timing == "virtual"
+        ):
+            message = (
+                'a compass timed by reception needs timing = "realtime" on a real bus (a stand '
+                "in virtual time there runs unrelated to the reception clock)"
+            )
+            errors.append(_error("compass", ("compass", "protocol"), message))
         if self.bus.simulated and compass.own_bus:
             message = "the simulated compass sits on the simulated stand's bus ([bus])"
             errors.append(_error("compass", ("compass", "interface"), message))

@@ -395,6 +395,12 @@ VALUES = [
             ),
         )
     ),
+    plan_case(
+        "nmea2000 on a real bus in virtual time",
+        '[compass] protocol: a compass timed by reception needs timing = "realtime" on a real bus',
+        ("simulated = true", 'simulated = false\ninterface = "virtual"\ntiming = "virtual"'),
+        append='\n[compass]\nprotocol = "nmea2000"\n',
+    ),
     Case(
         "dbc garbage",
         ("campaign", "run", "{file}", "--db", "{db}"),

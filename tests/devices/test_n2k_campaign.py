@@ -35,17 +35,17 @@ WANTED = ("test compass", "T-1")
 def run(
     transmitter: object | None = None,
     source: Callable[[], Nmea2000Heading] | None = None,
+    **faults: float,
 ) -> tuple[Recorder, Lockstep]:
     sink = Recorder()
+    config = quick_config(seed=1, **faults)
     if transmitter is None:
-        stand = Lockstep(quick_config(seed=1), 5.0)
+        stand = Lockstep(config, 5.0)
         engine = Engine(PLAN, sink, stand)
     else:
         codec = Codec()
         make = source or (lambda: Nmea2000Heading(None, WANTED))
-        stand = Lockstep(
-            quick_config(seed=1), 5.0, codec, (transmitter, lambda: SourceDecoder(codec, make()))
-        )  # type: ignore[arg-type]
+        stand = Lockstep(config, 5.0, codec, (transmitter, lambda: SourceDecoder(codec, make())))  # type: ignore[arg-type]
         engine = Engine(PLAN, sink, stand, source=Nmea2000Heading.info)
     stand.run(engine)
     return sink, stand
@@ -165,3 +165,29 @@ def test_a_product_other_than_the_plans_instrument_is_an_error_event() -> None:
     sink, _ = run(compass(), lambda: Nmea2000Heading(name=name, product=("GX-2", "S-7")))
     (event,) = [a for a in sink.of("event") if a[0] == "product information"]
     assert event[1] == "error" and "the plan's instrument is 'GX-2', serial 'S-7'" in event[2]
+
+
+def heading_times(stand: Lockstep) -> np.ndarray:
+    """Stand ms of the PGN 127250 frames in the stream."""
+    frames = [m for m in stand.stream if m.is_extended_id]
+    pgn, _ = split_id(np.array([m.arbitration_id for m in frames]))
+    return np.round(
+        np.array([m.timestamp for m, p in zip(frames, pgn, strict=True) if p == 127250]) * 1000
+    )
+
+
+@pytest.mark.parametrize("no_sid", [False, True], ids=["SID", "SID 255: time only"])
+def test_dropped_frames_are_counted_lost(no_sid: bool) -> None:
+    """Frames the compass did not send (the stand's drop_rate knob), counted from the SID or,
+    without one, from the reception times: per window, the samples due (every 100 ms) that are
+    not in the stream."""
+    sink, stand = run(compass(no_sid=no_sid), drop_rate=0.03)
+    sent = heading_times(stand)
+    assert sink.observations and sink.of("trial_failed") == []
+    for obs in sink.observations:
+        due = np.arange(obs.window_start_ms, obs.window_end_ms, 100)
+        missing = len(set(due.tolist()) - set(sent.tolist()))
+        assert obs.frames_lost == missing
+    assert sum(o.frames_lost for o in sink.observations) > 30
+    gaps = [a for a in sink.of("event") if a[0] == "frame gap"]
+    assert bool(gaps) == no_sid and all("no sequence number" in g[2] for g in gaps)

@@ -1,0 +1,98 @@
+"""End to end on a real SocketCAN channel with the compass speaking NMEA 2000: `gyrostand simulate
+--protocol nmea2000` (real time, sped up: an NMEA 2000 compass is timed by reception) and
+`gyrostand campaign run` as separate processes, another NMEA 2000 heading sensor on the bus (its
+own NAME and address), and the compass claiming a new address mid-campaign: nothing is lost, the
+other sensor is told once and left out, the campaign is analysed."""
+
+from __future__ import annotations
+
+import threading
+
+import can
+import numpy as np
+import pytest
+
+from gyrostand.devices.nmea2000 import (
+    ADDRESS_CLAIM,
+    VESSEL_HEADING,
+    can_id,
+    encode_vessel_heading,
+    iso_name,
+)
+from tests.socketcan.processes import (
+    SIM_OPTIONS,
+    Process,
+    gyrostand_command,
+    plan_text,
+    query,
+    wait_for_output,
+)
+
+pytestmark = pytest.mark.socketcan
+
+SPEEDUP = 10.0
+TRIALS = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "fit"), (10.0, 15.0, 4.0, "fit")]
+CHANGE_AT_S = 400.0  # stand time of the compass's new address claim
+OTHER_ADDRESS = 40
+TIMEOUT_S = 1800.0
+
+
+class OtherSensor(threading.Thread):
+    """Another heading sensor: its address claim, then PGN 127250 at 5 Hz of wall time."""
+
+    def __init__(self, channel: str) -> None:
+        super().__init__(daemon=True)
+        self.bus = can.Bus(interface="socketcan", channel=channel)
+        self.stop = threading.Event()
+
+    def run(self) -> None:
+        claim = iso_name(77).to_bytes(8, "little")
+        self.bus.send(
+            can.Message(arbitration_id=can_id(ADDRESS_CLAIM, OTHER_ADDRESS, 6), data=claim)
+        )
+        sid = 0
+        while not self.stop.wait(0.2):
+            data = encode_vessel_heading(np.array([sid % 253]), np.array([1.0]))[0]
+            msg = can.Message(
+                arbitration_id=can_id(VESSEL_HEADING, OTHER_ADDRESS, 2), data=bytes(data)
+            )
+            self.bus.send(msg)
+            sid += 1
+
+    def close(self) -> None:
+        self.stop.set()
+        self.join(5)
+        self.bus.shutdown()
+
+
+def test_nmea2000_campaign_over_socketcan(tmp_path, channel) -> None:
+    sim = ["simulate", "--interface", "socketcan", "--channel", channel, "--seed", "7"]
+    sim += ["--timing", "realtime", "--speedup", str(SPEEDUP), *SIM_OPTIONS]
+    sim += ["--protocol", "nmea2000", "--model", "simulated compass", "--serial", "VCAN-1"]
+    sim += ["--address-change-at-s", str(CHANGE_AT_S)]
+    other = OtherSensor(channel)
+    stand = Process.start([*gyrostand_command(), *sim], tmp_path, "simulate")
+    try:
+        wait_for_output(stand, f"at {SPEEDUP:g}x", TIMEOUT_S)
+        other.start()
+        plan = tmp_path / "plan.toml"
+        text = plan_text(tmp_path, channel, TRIALS, 0.05).replace(
+            'timing = "virtual"', 'timing = "realtime"'
+        )
+        plan.write_text(text + '\n[compass]\nprotocol = "nmea2000"\n')
+        command = [*gyrostand_command(), "campaign", "run", str(plan), "--quiet"]
+        campaign = Process.start(command, tmp_path, "campaign")
+        assert campaign.popen.wait(TIMEOUT_S) == 0, campaign.output()
+    finally:
+        other.close()
+        stand.interrupt()
+    db = tmp_path / "campaign.sqlite"
+    assert query(db, "SELECT status, heading_source FROM campaign") == [("completed", "nmea2000")]
+    lost = query(db, "SELECT sum(frames_lost), count(*) FROM observation")
+    assert lost == [(0, 3 * 2 * 3)]
+    events = [m for (m,) in query(db, "SELECT message FROM event")]
+    assert any("claimed address 36 (was 35)" in m for m in events)
+    assert sum(f"from address {OTHER_ADDRESS} (NAME 0x" in m for m in events) == 1
+    analyze = Process.start([*gyrostand_command(), "analyze", "1", "--db", str(db)], tmp_path, "a")
+    assert analyze.popen.wait(TIMEOUT_S) == 0, analyze.output()
+    assert analyze.stdout.read_text().startswith("HEADING SOURCE\nnmea2000")
