@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
+from gyrostand import cmd_simulate_serial
 from gyrostand.errors import fail
 from gyrostand.stand.simconfig import (
     CompassParams,
@@ -165,8 +166,9 @@ _RUN_PARAMETERS = [
         annotation=str,
         default=typer.Option(
             "gyrostand",
-            help="what the compass speaks: gyrostand (the DBC's heading frame) or nmea2000 "
-            "(PGN 127250/127251/127257, address claim, product information; docs/instruments.md)",
+            help="what the compass speaks: gyrostand (the DBC's heading frame), nmea2000 "
+            "(PGN 127250/127251/127257, address claim, product information) or iec61162 (HDT/THS/"
+            "ROT sentences on a serial port: the Serial compass options); docs/instruments.md",
             rich_help_panel="Compass protocol",
         ),
     ),
@@ -222,8 +224,12 @@ _HELP = (
 def simulate(**options: Any) -> None:
     """Run the simulated gyrocompass + roll stand (options: see _HELP and the config fields)."""
     run = {name: options.pop(name) for name in _RUN_NAMES}
+    line = {name: options.pop(name) for name in cmd_simulate_serial.NAMES}
     config = _config(options)
     codec = _codec(run["dbc"], run["signals"])
+    if run["protocol"] == "iec61162":
+        cmd_simulate_serial.simulate_serial(config, run, line, codec)
+        return
     transmitter = _transmitter(run, config.seed)
     standalone = run["schedule"] is not None or run["step"]
     if not standalone and run["interface"] is None:
@@ -263,7 +269,7 @@ def _transmitter(run: dict[str, Any], seed: int) -> HeadingTransmitter | None:
     if run["protocol"] == "gyrostand":
         return None
     if run["protocol"] != "nmea2000":
-        fail(f"--protocol: {run['protocol']!r} is not one of gyrostand, nmea2000")
+        fail(f"--protocol: {run['protocol']!r} is not one of gyrostand, nmea2000, iec61162")
     for key in ("address", "new_address"):
         if not 0 <= run[key] <= 251:
             fail(f"--{key.replace('_', '-')}: {run[key]} is not a source address (0-251)")
@@ -379,7 +385,9 @@ def _live(
     )
 
 
-simulate.__signature__ = inspect.Signature(_RUN_PARAMETERS + _config_parameters())  # type: ignore[attr-defined]
+simulate.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
+    _RUN_PARAMETERS + _config_parameters() + cmd_simulate_serial.OPTIONS
+)
 
 
 def register(app: typer.Typer) -> None:

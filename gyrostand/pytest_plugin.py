@@ -18,6 +18,7 @@ import socket
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack
+from dataclasses import fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -178,6 +179,60 @@ def gyro_stand(
     (`gyro_stand_factory`'s knobs; none: gyrostand's defaults, seed 0, virtual time)."""
     marker = request.node.get_closest_marker("gyro_stand")
     return gyro_stand_factory(**(marker.kwargs if marker else {}))
+
+
+@pytest.fixture
+def gyro_serial_compass() -> Iterator[Callable[..., str]]:
+    """`start(**knobs)`: the simulated compass speaking IEC 61162 (NMEA 0183) on a
+    pseudo-terminal pair in real time, as `gyrostand simulate --protocol iec61162` does; returns
+    the port's path to open (pyserial, or the code under test). Knobs: baud, talker, sentences
+    (e.g. ("THS", "ROT")), rate_hz, seed, and the line faults checksum_error_rate,
+    garbage_rate, not_valid_rate, line_silence_at_s, line_silence_for_s, sender_baud. Stopped
+    after the test."""
+    import threading
+
+    from gyrostand.devices.serial_sim import (
+        LineFaults,
+        PtyLine,
+        SerialCompass,
+        SerialCompassConfig,
+        SerialSimError,
+        write_realtime,
+    )
+    from gyrostand.stand.simconfig import SimConfig
+
+    closing = ExitStack()
+
+    def start(**knobs: Any) -> str:
+        fault_names = {f.name for f in fields(LineFaults)}
+        faults = LineFaults(**{k: knobs.pop(k) for k in list(knobs) if k in fault_names})
+        try:
+            config = SerialCompassConfig(**knobs, faults=faults)
+            config.check()
+        except (SerialSimError, TypeError) as exc:
+            pytest.fail(f"gyro_serial_compass: {exc}", pytrace=False)
+        compass = SerialCompass(config)
+        engine = compass.stand(SimConfig(seed=config.seed, heading_rate_hz=config.rate_hz))
+        line = PtyLine(config.baud)
+        stop = threading.Event()
+        writer = threading.Thread(
+            target=write_realtime,
+            args=(compass.line(engine), line.write, config.baud),
+            kwargs={"stop": stop.is_set},
+            daemon=True,
+        )
+        writer.start()
+
+        def close() -> None:
+            stop.set()
+            writer.join()
+            line.close()
+
+        closing.callback(close)
+        return line.path
+
+    with closing:
+        yield start
 
 
 @pytest.fixture

@@ -11,6 +11,7 @@ import functools
 import math
 import time
 import tomllib
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
@@ -114,6 +115,40 @@ class ScheduleResult:
     refusals: tuple[AckFrame, ...]  # commands the stand refused (e.g. beyond its limits)
 
 
+def play(
+    engine: StandEngine,
+    steps: list[Step],
+    refused: Callable[[AckFrame], object] = lambda ack: None,
+) -> Iterator[list[can.Message]]:
+    """The frames of `steps` played on `engine`, in batches in stand-time order (timestamps in
+    stand seconds): the stand's frames, and each scripted command (as sent: `is_rx` False)
+    followed by the stand's answer; `refused` gets each refusal."""
+    codec = engine.codec
+
+    def command(msg: can.Message) -> list[can.Message]:
+        msg.timestamp, msg.is_rx = engine.stand_time_s, False
+        acks = engine.receive(msg)
+        for ack in map(codec.decode, acks):
+            if isinstance(ack, AckFrame) and not ack.accepted:
+                refused(ack)
+        return [msg, *acks]
+
+    t_s = 0.0
+    yield engine.advance_to(t_s)
+    for step in steps:
+        if engine.rocking:
+            yield command(codec.encode_command_stop())
+        if step.action == "rock":
+            yield command(
+                codec.encode_command_set(step.direction_deg, step.amplitude_cm, step.period_s)
+            )
+            yield command(codec.encode_command_start())
+        end_s = t_s + step.duration_s
+        while t_s < end_s:
+            t_s = min(t_s + _CHUNK_S, end_s)
+            yield engine.advance_to(t_s)
+
+
 def run_schedule(
     config: SimConfig,
     steps: list[Step],
@@ -129,43 +164,16 @@ def run_schedule(
     if log_path.suffix.lower() not in LOG_SUFFIXES:
         raise ScheduleError(f"log file must end in {' or '.join(LOG_SUFFIXES)}: {log_path}")
     wall0 = time.perf_counter()
-    codec = codec or Codec()
-    engine = StandEngine(config, codec, transmitter=transmitter)
+    engine = StandEngine(config, codec or Codec(), transmitter=transmitter)
     epoch = time.time() if start_epoch_s is None else start_epoch_s
     frames = 0
     refusals: list[AckFrame] = []
     with can.Logger(str(log_path)) as logger:
-
-        def emit(msgs: list[can.Message]) -> None:
-            nonlocal frames
-            for msg in msgs:
+        for batch in play(engine, steps, refusals.append):
+            for msg in batch:
                 msg.timestamp += epoch
                 logger.on_message_received(msg)
                 if bus is not None:
                     bus.send(msg)
-            frames += len(msgs)
-
-        def command(msg: can.Message) -> None:
-            msg.timestamp, msg.is_rx = engine.stand_time_s, False
-            emit([msg])
-            acks = engine.receive(msg)
-            emit(acks)
-            refusals.extend(
-                a for a in map(codec.decode, acks) if isinstance(a, AckFrame) and not a.accepted
-            )
-
-        t_s = 0.0
-        emit(engine.advance_to(t_s))
-        for step in steps:
-            if engine.rocking:
-                command(codec.encode_command_stop())
-            if step.action == "rock":
-                command(
-                    codec.encode_command_set(step.direction_deg, step.amplitude_cm, step.period_s)
-                )
-                command(codec.encode_command_start())
-            end_s = t_s + step.duration_s
-            while t_s < end_s:
-                t_s = min(t_s + _CHUNK_S, end_s)
-                emit(engine.advance_to(t_s))
-    return ScheduleResult(frames, t_s, time.perf_counter() - wall0, tuple(refusals))
+            frames += len(batch)
+    return ScheduleResult(frames, engine.stand_time_s, time.perf_counter() - wall0, tuple(refusals))
