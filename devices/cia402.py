@@ -21,11 +21,10 @@ stop ramp; at rest the axis is disabled (shutdown, then disable voltage).
 
 from __future__ import annotations
 
-import math
 import queue
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -115,6 +114,7 @@ class Cia402Axis:
         self._events: list[AxisEvent] = []
         self._heartbeat_cycle = 0
         self._drive_heard_cycle = 0
+        self._target = 0
 
     @property
     def t_s(self) -> float:
@@ -217,6 +217,7 @@ class Cia402Axis:
         rpdo = self.node.rpdo[1]
         rpdo["Controlword"].raw = controlword
         rpdo["Target position"].raw = target_counts
+        self._target = target_counts
         rpdo.transmit()
         c = self.config
         if self.cycle >= self._heartbeat_cycle:
@@ -248,9 +249,9 @@ class Cia402Axis:
             self._event("heartbeat_lost", f"no heartbeat from drive for {silent_s:.2f} s")
         if self.statusword & SW_FOLLOWING_ERROR and not self._has("following_error"):
             self._event("following_error", "statusword bit 13 (following error)")
-        if power_state(self.statusword) in ("FAULT", "FAULT REACTION ACTIVE"):
-            if not self._has("fault"):
-                self._event("fault", f"drive fault, error code 0x{self._error_code():04X}")
+        faulted = power_state(self.statusword) in ("FAULT", "FAULT REACTION ACTIVE")
+        if faulted and not self._has("fault"):
+            self._event("fault", f"drive fault, error code 0x{self._error_code():04X}")
 
     def _event(self, kind: str, detail: str) -> None:
         self._events.append(AxisEvent(self.t_s, kind, detail))  # type: ignore[arg-type]
@@ -261,10 +262,15 @@ class Cia402Axis:
     # -- rocking ----------------------------------------------------------------------------
 
     def rock(
-        self, trajectory: RollTrajectory, counts_per_degree: float, zero_counts: int = 0
+        self,
+        trajectory: RollTrajectory,
+        counts_per_degree: float,
+        zero_counts: int = 0,
+        stop_check: Callable[[float], str | None] | None = None,
     ) -> RollRecord:
         """Run `trajectory` (its stop ramp set, or set by a stop request) from the axis's current
-        cycle, then disable the axis at rest."""
+        cycle, then disable the axis at rest. `stop_check(t)` (the station's stop request) gives
+        a reason to stop, or None; signals set `stop_requested`."""
         t0 = self.t_s
         ts, targets, actuals = [], [], []
         failure: str | None = None
@@ -272,6 +278,8 @@ class Cia402Axis:
         cw = State402.CW_OPERATION_ENABLED
         while True:
             t = self.t_s - t0
+            if stop_check is not None and self.stop_requested is None:
+                self.stop_requested = stop_check(t)
             reason = self.stop_requested or failure
             if reason and t < trajectory.stop_at_s:
                 trajectory = trajectory.stopped_at(t)
@@ -286,8 +294,10 @@ class Cia402Axis:
             actuals.append(self.actual)
             if failure is None:
                 failure = self._failure()
-            if power_state(self.statusword) == "FAULT":
-                break  # the drive stopped the axis itself and switched it off
+            if power_state(self.statusword) in ("FAULT", "FAULT REACTION ACTIVE"):
+                self._await_fault_reaction()
+                break
+        self._settle(cw)
         self._disable()
         return RollRecord(
             np.asarray(ts),
@@ -304,6 +314,24 @@ class Cia402Axis:
                 emcy = next((x.detail for x in self._events if x.kind == "emcy"), None)
                 return f"{e.detail}" + (f": {emcy}" if emcy and e.kind == "fault" else "")
         return None
+
+    def _await_fault_reaction(self, max_cycles: int = 3000) -> None:
+        """The drive stops the axis itself (its fault reaction) and switches it off."""
+        for _ in range(max_cycles):
+            if power_state(self.statusword) == "FAULT":
+                return
+            self.step(State402.CW_OPERATION_ENABLED, self.actual)
+
+    def _settle(self, controlword: int, max_cycles: int = 200) -> None:
+        """Hold the last target until the axis has stopped moving (the servo's lag settled)."""
+        if power_state(self.statusword) != "OPERATION ENABLED":
+            return
+        target, previous = self._target, None
+        for _ in range(max_cycles):
+            if self.actual == previous:
+                return
+            previous = self.actual
+            self.step(controlword, target)
 
     def _disable(self) -> None:
         """At rest: shutdown (power stage off), then disable voltage."""
@@ -329,5 +357,3 @@ def stop_on_signals(axis: Cia402Axis) -> Iterator[None]:
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
-
-

@@ -155,10 +155,9 @@ class SimDrive:
         return self.node.nmt.state == "OPERATIONAL"
 
     def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
+        """A SYNC: apply RPDO1, send TPDO1, run one communication cycle."""
         with self._lock:
             if self._operational():
-                self._publish()
-                self.node.tpdo[1].transmit()
                 rpdo = self.node.rpdo[1]
                 if rpdo.is_received:  # a synchronous RPDO: applied on this SYNC
                     rpdo.is_received = False
@@ -168,6 +167,9 @@ class SimDrive:
                     self._command(int(rpdo["Controlword"].raw))
                     if self.status == OPERATION_ENABLED and self.mode == CSP:
                         self.demand = float(target)
+                # TPDO1: the state after this SYNC's command, the position sampled at the SYNC
+                self._publish()
+                self.node.tpdo[1].transmit()
             self.advance(self._od(0x1006) * 1e-6)
 
     def _publish(self) -> None:

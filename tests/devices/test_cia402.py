@@ -1,0 +1,178 @@
+"""The CiA 402 master against the simulated drive on python-can's virtual bus, in lockstep
+virtual time (one SYNC = one cycle of stand time): deterministic whatever the host's load."""
+
+from __future__ import annotations
+
+import cmath
+import itertools
+import math
+import signal
+
+import canopen
+import numpy as np
+import pytest
+
+from gyrostand.analysis.measured_roll import measure_roll
+from gyrostand.devices import sim_drive
+from gyrostand.devices.cia402 import AxisConfig, Cia402Axis, power_state, stop_on_signals
+from gyrostand.devices.roll_trajectory import RollTrajectory
+from gyrostand.devices.sim_drive import SIM_DRIVE_EDS, DriveFaults, ServoModel, SimDrive
+
+CPD = 10_000.0  # counts per degree
+CYCLE_MS = 10
+_channels = itertools.count()
+
+
+def _networks(channel: str) -> tuple[canopen.Network, canopen.Network]:
+    nets = canopen.Network(), canopen.Network()
+    for net in nets:
+        net.NOTIFIER_CYCLE = 0.05  # a quick disconnect
+        net.connect(interface="virtual", channel=channel)
+    return nets
+
+
+@pytest.fixture
+def stand(request):
+    """(axis, drive) on a fresh virtual bus; the drive booted, the axis not yet started."""
+    faults = getattr(request, "param", DriveFaults())
+    channel = f"cia402-{next(_channels)}"
+    drive_net, master_net = _networks(channel)
+    drive = SimDrive(drive_net, 3, faults=faults)
+    axis = Cia402Axis(master_net, AxisConfig(3, SIM_DRIVE_EDS, cycle_ms=CYCLE_MS))
+    drive.boot()
+    yield axis, drive
+    master_net.disconnect()
+    drive_net.disconnect()
+
+
+def test_start_reaches_operation_enabled_in_csp(stand):
+    axis, drive = stand
+    axis.start()
+    assert power_state(axis.statusword) == "OPERATION ENABLED"
+    assert axis.statusword & sim_drive.SW_FOLLOWING  # CSP: following the target
+    assert drive.mode == 8 and drive.node.nmt.state == "OPERATIONAL"
+    # what the master configured, read on the drive's side
+    assert drive._od(0x1016, 1) == (127 << 16) | 300
+    assert drive._od(0x6007) == 3 and drive._od(0x1006) == CYCLE_MS * 1000
+
+
+def _lag(servo: ServoModel, period_s: float, cycle_s: float) -> complex:
+    """Closed form: the second-order lag x/d = wn^2 / (wn^2 - w^2 + 2j zeta wn w), after the
+    cycle's zero-order hold (a delay of half a cycle)."""
+    wn, w = 2 * math.pi * servo.natural_hz, 2 * math.pi / period_s
+    return wn**2 / (wn**2 - w**2 + 2j * servo.damping * wn * w) * cmath.exp(-0.5j * w * cycle_s)
+
+
+def test_the_axis_follows_the_roll_as_the_servo_model_says(stand):
+    axis, drive = stand
+    axis.start()
+    roll = RollTrajectory(amplitude_deg=3.0, period_s=2.0, ramp_s=1.0, stop_at_s=7.0)
+    rec = axis.rock(roll, CPD)
+    assert rec.failure is None and rec.stopped_by is None and rec.events == ()
+    steady = (rec.t_s >= rec.t_s[0] + 1.0) & (rec.t_s < rec.t_s[0] + 7.0)
+    t = rec.t_s[steady]
+    target = measure_roll(t, rec.target_counts[steady] / CPD, 2.0)
+    actual = measure_roll(t, rec.actual_counts[steady] / CPD, 2.0)
+    h = _lag(ServoModel(), 2.0, CYCLE_MS / 1000)
+    assert target.amplitude == pytest.approx(3.0, abs=1e-4)
+    assert actual.amplitude / target.amplitude == pytest.approx(abs(h), abs=2e-4)
+    lag = actual.cycles[0].phase_rad - target.cycles[0].phase_rad
+    assert lag == pytest.approx(cmath.phase(h), abs=2e-3)
+    assert actual.period_s == pytest.approx(2.0, abs=1e-4)
+    # at rest at the end, and switched off
+    assert drive.at_rest and abs(drive.x) < 5
+    assert power_state(axis.statusword) == "SWITCH ON DISABLED"
+
+
+def test_a_stop_request_ramps_to_rest_then_disables(stand):
+    axis, drive = stand
+    axis.start()
+    roll = RollTrajectory(3.0, 2.0, 1.0, stop_at_s=60.0)
+    rec = axis.rock(roll, CPD, stop_check=lambda t: "stop request" if t >= 2.5 else None)
+    assert rec.stopped_by == "stop request" and rec.failure is None
+    assert [e.kind for e in rec.events] == ["stop"]
+    assert rec.t_s[-1] - rec.t_s[0] == pytest.approx(2.5 + 1.0, abs=0.011)
+    assert drive.at_rest and power_state(axis.statusword) == "SWITCH ON DISABLED"
+
+
+def test_sigterm_and_ctrl_c_request_the_stop(stand):
+    axis, _ = stand
+    before = signal.getsignal(signal.SIGTERM)
+    with stop_on_signals(axis):
+        signal.raise_signal(signal.SIGTERM)
+        assert axis.stop_requested == "SIGTERM"
+        signal.raise_signal(signal.SIGINT)
+        assert axis.stop_requested == "SIGINT"
+    assert signal.getsignal(signal.SIGTERM) is before
+
+
+def test_gyrostand_killed_mid_roll_the_drive_quick_stops_to_rest(stand):
+    axis, drive = stand
+    axis.start()
+    roll = RollTrajectory(3.0, 2.0, 1.0)
+    for k in range(150):  # 1.5 s of rocking, then gyrostand falls silent
+        axis.step(0x0F, round(CPD * float(roll.position_deg(k * CYCLE_MS / 1000))))
+    v0, x0 = drive.v, drive.x
+    assert abs(v0) > 1000  # moving when killed
+    drive.advance(0.15)  # last heartbeat 0.1 s before: within the consumer time (0.3 s)
+    assert drive.status == sim_drive.OPERATION_ENABLED
+    drive.advance(1.0)
+    assert drive.emcy_sent == [sim_drive.EMCY_HEARTBEAT]
+    assert drive.status == sim_drive.QUICK_STOP_ACTIVE and drive.at_rest
+    # it stopped by the quick-stop ramp: within v^2 / (2 d) (plus the servo's settling) of
+    # where it was when the loss was noticed
+    assert abs(drive.x - x0) < abs(v0) * 0.3 + v0**2 / (2 * drive._od(0x6085)) + 500
+
+
+@pytest.mark.parametrize(
+    "stand, code, kinds",
+    [
+        (DriveFaults(overcurrent_at_s=2.0), "0x2310", ["emcy", "fault"]),
+        (DriveFaults(jam_at_s=2.0), "0x8611", ["following_error", "emcy", "fault"]),
+    ],
+    indirect=["stand"],
+    ids=["emcy-fault", "following-error-trip"],
+)
+def test_a_drive_fault_fails_the_rocking_naming_the_code(stand, code, kinds):
+    axis, drive = stand
+    axis.start()
+    rec = axis.rock(RollTrajectory(3.0, 2.0, 1.0, stop_at_s=8.0), CPD)
+    assert rec.failure is not None and code in rec.failure
+    assert sorted(e.kind for e in rec.events) == sorted(kinds)
+    assert power_state(axis.statusword) == "FAULT"
+    assert drive.at_rest and drive.status == sim_drive.FAULT
+    assert rec.t_s[-1] - rec.t_s[0] < 3.0  # not rocked on
+
+
+@pytest.mark.parametrize("stand", [DriveFaults(heartbeat_silent_at_s=2.0)], indirect=True)
+def test_a_lost_drive_heartbeat_fails_the_rocking_and_stops_the_axis(stand):
+    axis, drive = stand
+    axis.start()
+    rec = axis.rock(RollTrajectory(3.0, 2.0, 1.0, stop_at_s=8.0), CPD)
+    assert rec.failure is not None and "no heartbeat from drive" in rec.failure
+    assert [e.kind for e in rec.events] == ["heartbeat_lost", "stop"]
+    # the last heartbeat in (1.9, 2.0] s of stand time; lost 3 periods (0.3 s) after it
+    assert 2.2 < rec.events[0].t_s <= 2.0 + 0.3 + 0.01
+    assert drive.at_rest and power_state(axis.statusword) == "SWITCH ON DISABLED"
+    assert np.abs(np.diff(rec.target_counts)).max() < 3.0 * 2 * math.pi / 2.0 * CPD * 0.011
+
+
+def test_a_run_is_the_same_frames_whatever_the_load(stand):
+    axis, _ = stand
+    axis.start()
+    rec = axis.rock(RollTrajectory(3.0, 2.0, 0.5, stop_at_s=1.0), CPD)
+    assert np.array_equal(rec.actual_counts, _replay())
+
+
+def _replay() -> np.ndarray:
+    channel = f"cia402-{next(_channels)}"
+    dn, mn = _networks(channel)
+    try:
+        drive = SimDrive(dn, 3)
+        axis = Cia402Axis(mn, AxisConfig(3, SIM_DRIVE_EDS, cycle_ms=CYCLE_MS))
+        drive.boot()
+        axis.start()
+        return axis.rock(RollTrajectory(3.0, 2.0, 0.5, stop_at_s=1.0), CPD).actual_counts
+    finally:
+        mn.disconnect()
+        dn.disconnect()
