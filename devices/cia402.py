@@ -21,6 +21,7 @@ stop ramp; at rest the axis is disabled (shutdown, then disable voltage).
 
 from __future__ import annotations
 
+import math
 import queue
 import signal
 import threading
@@ -276,6 +277,7 @@ class Cia402Axis:
         failure: str | None = None
         stopped_by: str | None = None
         cw = State402.CW_OPERATION_ENABLED
+        set_point, due = zero_counts, 0.0  # profile position: the current set-point
         while True:
             t = self.t_s - t0
             if stop_check is not None and self.stop_requested is None:
@@ -287,10 +289,19 @@ class Cia402Axis:
                 self._event("stop", f"stop ramp: {reason}")
             if t >= trajectory.end_s:
                 break
-            target = zero_counts + round(counts_per_degree * float(trajectory.position_deg(t)))
+            if self.mode == CSP:
+                target = zero_counts + round(counts_per_degree * float(trajectory.position_deg(t)))
+                self.step(cw, target)
+            else:
+                new = t >= due - 1e-9
+                if new:
+                    due, peak_deg = _next_peak(trajectory, t)
+                    start, set_point = set_point, zero_counts + round(counts_per_degree * peak_deg)
+                    self._load_profile(abs(set_point - start), due - t)
+                target = set_point
+                self.step(cw | (0x10 if new else 0), target)  # bit 4: new set-point
             ts.append(self.t_s)
             targets.append(target)
-            self.step(cw, target)
             actuals.append(self.actual)
             if failure is None:
                 failure = self._failure()
@@ -314,6 +325,14 @@ class Cia402Axis:
                 emcy = next((x.detail for x in self._events if x.kind == "emcy"), None)
                 return f"{e.detail}" + (f": {emcy}" if emcy and e.kind == "fault" else "")
         return None
+
+    def _load_profile(self, distance: float, duration_s: float) -> None:
+        """Profile position: the triangular velocity profile that covers `distance` in
+        `duration_s`, a = 4 d / T^2, v = a T / 2 = 2 d / T."""
+        a = max(1, math.ceil(4.0 * distance / duration_s**2))
+        self.node.sdo[0x6081].raw = max(1, math.ceil(a * duration_s / 2.0))
+        self.node.sdo[0x6083].raw = a
+        self.node.sdo[0x6084].raw = a
 
     def _await_fault_reaction(self, max_cycles: int = 3000) -> None:
         """The drive stops the axis itself (its fault reaction) and switches it off."""
@@ -342,6 +361,17 @@ class Cia402Axis:
     def close(self) -> None:
         if self.config.sync == "periodic":
             self.network.sync.stop()
+
+
+def _next_peak(trajectory: RollTrajectory, t: float) -> tuple[float, float]:
+    """Profile position's next set-point after `t`: the sinusoid's next peak (t = tau/4 +
+    k tau/2) and its angle, or the rest position at the trajectory's end."""
+    quarter = trajectory.period_s / 4.0
+    k = max(0, math.floor((t - quarter) / (2.0 * quarter) + 1e-9) + 1)
+    peak = quarter + 2.0 * quarter * k
+    if peak + quarter > trajectory.end_s:  # the last segment: back to rest at the end
+        return trajectory.end_s, 0.0
+    return peak, float(trajectory.position_deg(peak))
 
 
 @contextmanager

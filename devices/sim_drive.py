@@ -178,8 +178,11 @@ class SimDrive:
         if self.status == OPERATION_ENABLED:
             if self.mode == CSP:
                 status |= SW_FOLLOWING
-            elif self._pp_target is not None and self._pp_target == self.demand:
-                status |= SW_TARGET_REACHED
+            else:
+                if self._controlword & 0x10:  # PP: set-point acknowledge while bit 4 is set
+                    status |= SW_FOLLOWING
+                if self._pp_target is not None and self._pp_target == self.demand:
+                    status |= SW_TARGET_REACHED
         if self.following_error_since_s is not None or self.error_code == EMCY_FOLLOWING_ERROR:
             status |= SW_FOLLOWING_ERROR
         values = {

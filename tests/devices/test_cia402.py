@@ -76,7 +76,7 @@ def test_the_axis_follows_the_roll_as_the_servo_model_says(stand):
     h = _lag(ServoModel(), 2.0, CYCLE_MS / 1000)
     assert target.amplitude == pytest.approx(3.0, abs=1e-4)
     assert actual.amplitude / target.amplitude == pytest.approx(abs(h), abs=2e-4)
-    lag = actual.cycles[0].phase_rad - target.cycles[0].phase_rad
+    lag = cmath.phase(cmath.exp(1j * (actual.cycles[0].phase_rad - target.cycles[0].phase_rad)))
     assert lag == pytest.approx(cmath.phase(h), abs=2e-3)
     assert actual.period_s == pytest.approx(2.0, abs=1e-4)
     # at rest at the end, and switched off
@@ -176,3 +176,18 @@ def _replay() -> np.ndarray:
     finally:
         mn.disconnect()
         dn.disconnect()
+
+
+def test_profile_position_when_the_drive_has_no_csp(stand):
+    axis, drive = stand
+    drive.node.set_data(0x6502, 0, (0x01).to_bytes(4, "little"))  # profile position only
+    axis.start()
+    assert drive.mode == 1
+    rec = axis.rock(RollTrajectory(3.0, 2.0, 1.0, stop_at_s=7.0), CPD)
+    assert rec.failure is None and drive.at_rest
+    # set-points at the peaks, reached with a triangular velocity: between peaks the position
+    # is a parabola per half segment, whose fundamental is 32 / pi^3 of the peak
+    steady = (rec.t_s >= rec.t_s[0] + 1.5) & (rec.t_s < rec.t_s[0] + 6.5)
+    fit = measure_roll(rec.t_s[steady], rec.actual_counts[steady] / CPD, 2.0)
+    assert fit.amplitude == pytest.approx(3.0 * 32 / math.pi**3, rel=0.01)
+    assert fit.period_s == pytest.approx(2.0, rel=1e-3)
