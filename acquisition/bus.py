@@ -18,11 +18,13 @@ from typing import Any
 import can
 from can.interfaces.virtual import VirtualBus
 
+from gyrostand.devices.sim_nmea2000 import simulated_compass
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import BatchBLFWriter, raw_log_writer
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import BusPlan, Plan
 from gyrostand.stand.controller import StandController
+from gyrostand.stand.engine import HeadingTransmitter
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import simulator_config
 from gyrostand.stand.simulator import SimConfig, Simulator
@@ -32,6 +34,14 @@ def sim_config(bus: BusPlan) -> SimConfig:
     """The simulated stand for a plan: its `[bus.simulator]` overrides (validated with the plan)
     on the defaults, with the plan's speedup, seed and timing."""
     return simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
+
+
+def transmitter(plan: Plan) -> HeadingTransmitter | None:
+    """The simulated compass when it speaks another protocol than the stand's DBC."""
+    if plan.compass.protocol != "nmea2000":
+        return None
+    model, serial = plan.instrument.model, plan.instrument.serial
+    return simulated_compass(model, serial, plan.compass.name, plan.bus.seed)
 
 
 def open_bus(bus: BusPlan) -> can.BusABC:
@@ -173,7 +183,9 @@ class LiveBus:
         try:
             if config is not None:
                 self._sim_bus = SimulatorBus(channel=self._channel)
-                self.simulator = Simulator(self._sim_bus, config, codec=codec_for(plan))
+                self.simulator = Simulator(
+                    self._sim_bus, config, codec=codec_for(plan), transmitter=transmitter(plan)
+                )
             self.recorder = Recorder(plan.bus.queue_size, raw_log, log_rest=not self.virtual)
             # in virtual time the stand repeats each command in the stream at the stand time it
             # takes effect (stand.virtual_time); otherwise the stream records what we send

@@ -5,13 +5,14 @@ give equal frames, at any machine load (tests and benchmarks)."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import can
 
 from gyrostand.acquisition.engine import Command, Engine, Phase
+from gyrostand.devices.decoder import SourceDecoder
 from gyrostand.frames.batch import BatchDecoder, RawFrames
-from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.engine import HeadingTransmitter, StandEngine
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import SimConfig
 
@@ -19,9 +20,18 @@ from gyrostand.stand.simconfig import SimConfig
 class Lockstep:
     """The engine's commander (`issue`) and its stream of frames (`steps`, `run`)."""
 
-    def __init__(self, config: SimConfig, step_s: float = 5.0, codec: Codec | None = None) -> None:
+    def __init__(
+        self,
+        config: SimConfig,
+        step_s: float = 5.0,
+        codec: Codec | None = None,
+        compass: tuple[HeadingTransmitter, Callable[[], SourceDecoder]] | None = None,
+    ) -> None:
+        """`compass`: a compass speaking another protocol (`devices`) and the decoder of its
+        stream (a new one per run)."""
         self.codec = codec or Codec()
-        self.stand = StandEngine(config, self.codec)
+        transmitter, self._decoder = compass if compass is not None else (None, None)
+        self.stand = StandEngine(config, self.codec, transmitter)
         self.step_s = step_s
         self.stream: list[can.Message] = []  # what `run` fed the engine
         self._pending: list[can.Message] = []
@@ -36,7 +46,11 @@ class Lockstep:
     def steps(self, engine: Engine, max_stand_s: float = 200_000.0) -> Iterator[list[can.Message]]:
         """Feed the engine step by step until it is done (or `max_stand_s`); each step's frames
         after the engine has taken them."""
-        decoder = BatchDecoder(Codec(self.codec.dbc_path, self.codec.signal_map))
+        decoder: BatchDecoder | SourceDecoder = (
+            BatchDecoder(Codec(self.codec.dbc_path, self.codec.signal_map))
+            if self._decoder is None
+            else self._decoder()
+        )
         position, t = 0, 0.0
         while engine.phase is not Phase.DONE and t < max_stand_s:
             t += self.step_s

@@ -1,6 +1,7 @@
 """Run a campaign live on the bus, resume one, or re-derive one offline from its raw log.
 
-Live and replay share everything downstream of the frames: `BatchDecoder` -> `Engine` ->
+Live and replay share everything downstream of the frames: `BatchDecoder` (with the plan's heading
+source, `devices.decoder.frame_decoder`) -> `Engine` ->
 `CampaignStore`. Live adds the bus, the stand controller, signals and the wall-clock watchdog."""
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ from gyrostand.acquisition.store import CampaignStore
 from gyrostand.acquisition.virtual_time import Grants, StreamClock
 from gyrostand.db.models import Campaign, Observation, Series, Trial
 from gyrostand.db.queries import latest_attempt, live_file_of, raw_log_segments, stand_campaign
-from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.devices.decoder import frame_decoder, source_info
+from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import Plan, PlanError
@@ -174,8 +176,10 @@ def run_live(
     stream_clock = StreamClock()
     display = ProgressDisplay(quiet=quiet)
     operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)
-    engine = Engine(plan, store, LiveCommander(live.controller, grants), progress, operator)
-    decoder = BatchDecoder(codec)
+    commander = LiveCommander(live.controller, grants)
+    source = source_info(codec, plan.compass.protocol)
+    engine = Engine(plan, store, commander, progress, operator, source)
+    decoder = frame_decoder(codec, *plan.heading_source)
     if grants is None:
         silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
         silence = f"bus silence: no frame at all for {silence_wall_s:g} s (wall clock)"
@@ -386,8 +390,8 @@ def replay(
     codec = codec_for(plan)
     checked = checked or [check_replay_log(log) for log in logs]
     store = CampaignStore.create(sessions, plan, source="replay")
-    engine = Engine(plan, store, _NoCommands())
-    decoder = BatchDecoder(codec)
+    engine = Engine(plan, store, _NoCommands(), source=source_info(codec, plan.compass.protocol))
+    decoder = frame_decoder(codec, *plan.heading_source)
     position = 0
     try:
         with store.deferred():

@@ -27,6 +27,8 @@ from gyrostand.db.queries import (
     trial_progress,
 )
 from gyrostand.db.session import writer
+from gyrostand.devices.decoder import source_info
+from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import Plan
 
 P = ParamSpec("P")
@@ -109,6 +111,11 @@ class CampaignStore:
         )
         with writer(sessions).begin() as session:
             campaign = new_campaign(session, header, status="running", source=source, labels=labels)
+            virtual = plan.bus.simulated and plan.bus.timing == "virtual"
+            heading = source_info(codec_for(plan), plan.compass.protocol, virtual)
+            campaign.heading_source = heading.protocol
+            campaign.heading_time_base = heading.time_base
+            campaign.heading_resolution_deg = heading.resolution_deg
             for t in plan.trials:
                 session.add(
                     Trial(

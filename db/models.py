@@ -117,6 +117,14 @@ class Campaign(Base):
     engine_writes: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
     """How many of the acquisition engine's writes are committed (a resumed simulation in virtual
     time re-runs from the start and skips these: `acquisition.catchup`)."""
+    heading_source: Mapped[str | None] = mapped_column(String(16))
+    """The compass's protocol ([compass] protocol: gyrostand, dbc, nmea2000, ...); None for
+    imported measurements."""
+    heading_time_base: Mapped[str | None] = mapped_column(Text)
+    """How its headings were timed (the stand clock they carry, or their reception time put on
+    the stand clock, and how)."""
+    heading_resolution_deg: Mapped[float | None] = mapped_column(Float)
+    """One step of the transmitted heading, deg (None: not recorded, before schema 0010)."""
 
     instrument: Mapped[Instrument] = relationship(back_populates="campaigns")
     trials: Mapped[list[Trial]] = relationship(

@@ -71,14 +71,21 @@ def run_analysis(trials: list[TrialInput], settings: AnalysisSettings) -> Campai
         fail(str(exc))
 
 
-def emit(analysis: CampaignAnalysis, as_json: bool) -> None:
-    """Print the analysis as text sections, or as one JSON document (keys: analysis.campaign)."""
+def emit(analysis: CampaignAnalysis, as_json: bool, heading_source: str | None = None) -> None:
+    """Print the analysis as text sections, or as one JSON document (keys: analysis.campaign);
+    a stored campaign's heading source (protocol, resolution, time base) first."""
     from gyrostand.report.text import render_text
 
     if as_json:
-        typer.echo(json.dumps(analysis.to_dict(), indent=2, allow_nan=False))
+        document = analysis.to_dict()
+        if heading_source is not None:
+            document = {"heading_source": heading_source, **document}
+        typer.echo(json.dumps(document, indent=2, allow_nan=False))
     else:  # it may quote stored strings: control characters escaped
-        typer.echo(printable_lines(render_text(analysis)), nl=False)
+        text = render_text(analysis)
+        if heading_source is not None:
+            text = f"HEADING SOURCE\n{heading_source}\n\n{text}"
+        typer.echo(printable_lines(text), nl=False)
 
 
 def register(app: typer.Typer) -> None:
@@ -136,7 +143,8 @@ def register(app: typer.Typer) -> None:
         if campaign is not None:
             if csv is not None or plan is not None:
                 fail("give a CAMPAIGN id or --csv FILE [--plan PLAN], not both")
-            emit(analyze_stored_campaign(db, campaign), as_json)
+            analysis, heading = analyze_stored_campaign(db, campaign)
+            emit(analysis, as_json, heading)
             return
         if csv is None:
             fail("no source given: use --csv FILE (see examples/paper.csv) or a CAMPAIGN id")
@@ -157,18 +165,20 @@ def register(app: typer.Typer) -> None:
         emit(analysis, as_json)
 
 
-def analyze_stored_campaign(db: str, campaign_id: int) -> CampaignAnalysis:
+def analyze_stored_campaign(db: str, campaign_id: int) -> tuple[CampaignAnalysis, str]:
     """Analyse a campaign stored in the database (settings from its plan, constants from the
-    campaign) and record the analysis run; one-line CLI errors."""
+    campaign) and record the analysis run; with its heading source; one-line CLI errors."""
     from sqlalchemy.exc import OperationalError
 
+    from gyrostand.db.models import Campaign
     from gyrostand.db.queries import CampaignNotFound
-    from gyrostand.report.stored import analyze_stored
+    from gyrostand.report.stored import analyze_stored, heading_source
 
     sessions = open_db(db, must_exist=True)
     try:
         with sessions.begin() as session:
             stored = analyze_stored(session, campaign_id)
+            heading = heading_source(session.get_one(Campaign, campaign_id))
     except (AnalysisError, CampaignNotFound) as exc:
         fail(str(exc))
     except OperationalError as exc:
@@ -179,7 +189,7 @@ def analyze_stored_campaign(db: str, campaign_id: int) -> CampaignAnalysis:
             typer.echo(printable(message), err=True)
     for note in stored.inputs.notes:
         typer.echo(printable(f"note: {note}"), err=True)
-    return stored.analysis
+    return stored.analysis, heading
 
 
 def signal_of(

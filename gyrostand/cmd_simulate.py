@@ -20,6 +20,7 @@ import typer
 from rich.console import Console
 
 from gyrostand.errors import fail
+from gyrostand.stand.engine import HeadingTransmitter
 from gyrostand.stand.protocol import Codec, ProtocolError
 from gyrostand.stand.schedule import LOG_SUFFIXES, ScheduleError, Step, load_schedule, run_schedule
 from gyrostand.stand.simconfig import (
@@ -153,6 +154,43 @@ _RUN_PARAMETERS = [
         ),
     ),
     inspect.Parameter(
+        "protocol",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=str,
+        default=typer.Option(
+            "gyrostand",
+            help="what the compass speaks: gyrostand (the DBC's heading frame) or nmea2000 "
+            "(PGN 127250/127251/127257, address claim, product information; docs/instruments.md)",
+            rich_help_panel="Compass protocol",
+        ),
+    ),
+    *(
+        inspect.Parameter(
+            name,
+            inspect.Parameter.KEYWORD_ONLY,
+            annotation=kind,
+            default=typer.Option(default, help=text, rich_help_panel="Compass protocol"),
+        )
+        for name, kind, default, text in (
+            ("model", str, "simulated compass", "nmea2000: model in the product information"),
+            ("serial", str, "SIM-1", "nmea2000: serial number in the product information"),
+            ("address", int, 35, "nmea2000: source address claimed at start (0-251)"),
+            (
+                "address_change_at_s",
+                float | None,
+                None,
+                "nmea2000 fault: claim --new-address at this stand time",
+            ),
+            ("new_address", int, 36, "nmea2000: the address claimed by --address-change-at-s"),
+            (
+                "not_available_rate",
+                float,
+                0.0,
+                "nmea2000 fault: probability that a heading is sent as not available",
+            ),
+        )
+    ),
+    inspect.Parameter(
         "start_epoch",
         inspect.Parameter.KEYWORD_ONLY,
         annotation=float | None,
@@ -180,16 +218,17 @@ def simulate(**options: Any) -> None:
     run = {name: options.pop(name) for name in _RUN_NAMES}
     config = _config(options)
     codec = _codec(run["dbc"], run["signals"])
+    transmitter = _transmitter(run, config.seed)
     standalone = run["schedule"] is not None or run["step"]
     if not standalone and run["interface"] is None:
         fail("give --interface/--channel to join a bus, or --schedule/--step to play a schedule")
     bus = _open_bus(run["interface"], run["channel"]) if run["interface"] else None
     try:
         if standalone:
-            _standalone(config, run, bus, codec)
+            _standalone(config, run, bus, codec, transmitter)
         else:
             assert bus is not None
-            _live(config, run, bus, codec)
+            _live(config, run, bus, codec, transmitter)
     finally:
         if bus is not None:
             bus.shutdown()
@@ -209,6 +248,27 @@ def _codec(dbc: Path | None, signals: Path | None) -> Codec | None:
         fail(str(exc))
 
 
+def _transmitter(run: dict[str, Any], seed: int) -> HeadingTransmitter | None:
+    """The compass's own protocol (None: the DBC's heading frame)."""
+    from gyrostand.devices.nmea2000 import Product
+    from gyrostand.devices.sim_nmea2000 import Nmea2000Compass, Nmea2000Device, Nmea2000Faults
+
+    if run["protocol"] == "gyrostand":
+        return None
+    if run["protocol"] != "nmea2000":
+        fail(f"--protocol: {run['protocol']!r} is not one of gyrostand, nmea2000")
+    for key in ("address", "new_address"):
+        if not 0 <= run[key] <= 251:
+            fail(f"--{key.replace('_', '-')}: {run[key]} is not a source address (0-251)")
+    if not 0.0 <= run["not_available_rate"] <= 1.0:
+        fail(f"--not-available-rate: {run['not_available_rate']} is not a probability in [0, 1]")
+    device = Nmea2000Device(Product(run["model"], run["serial"], "1.0"), address=run["address"])
+    faults = Nmea2000Faults(
+        run["address_change_at_s"], run["new_address"], run["not_available_rate"]
+    )
+    return Nmea2000Compass(device, faults, seed)
+
+
 def _open_bus(interface: str, channel: str | None) -> can.BusABC:
     try:
         return can.Bus(interface=interface, channel=channel)
@@ -217,7 +277,11 @@ def _open_bus(interface: str, channel: str | None) -> can.BusABC:
 
 
 def _standalone(
-    config: SimConfig, run: dict[str, Any], bus: can.BusABC | None, codec: Codec | None
+    config: SimConfig,
+    run: dict[str, Any],
+    bus: can.BusABC | None,
+    codec: Codec | None,
+    transmitter: HeadingTransmitter | None,
 ) -> None:
     log: Path | None = run["log"]
     if log is None or log.suffix.lower() not in LOG_SUFFIXES:
@@ -228,7 +292,13 @@ def _standalone(
         if not log.parent.is_dir():
             raise ScheduleError(f"folder {log.parent} does not exist")
         result = run_schedule(
-            config, steps, log, start_epoch_s=run["start_epoch"], bus=bus, codec=codec
+            config,
+            steps,
+            log,
+            start_epoch_s=run["start_epoch"],
+            bus=bus,
+            codec=codec,
+            transmitter=transmitter,
         )
     except ScheduleError as exc:
         fail(str(exc))
@@ -240,13 +310,24 @@ def _standalone(
     )
 
 
-def _live(config: SimConfig, run: dict[str, Any], bus: can.BusABC, codec: Codec | None) -> None:
+def _live(
+    config: SimConfig,
+    run: dict[str, Any],
+    bus: can.BusABC,
+    codec: Codec | None,
+    transmitter: HeadingTransmitter | None,
+) -> None:
     log: Path | None = run["log"]
     if log is not None and log.suffix.lower() not in LOG_SUFFIXES:
         fail(f"--log must end in {' or '.join(LOG_SUFFIXES)}")
     recorder = can.Logger(str(log)) if log is not None else None
     simulator = Simulator(
-        bus, config, codec=codec, recorder=recorder, start_epoch_s=run["start_epoch"]
+        bus,
+        config,
+        codec=codec,
+        recorder=recorder,
+        start_epoch_s=run["start_epoch"],
+        transmitter=transmitter,
     )
     pace = "in virtual time" if config.timing == "virtual" else f"at {config.speedup:g}x"
     _out.print(f"simulating on {run['interface']}:{run['channel']} {pace} (Ctrl-C to stop)")

@@ -35,7 +35,7 @@ _MARKERS = (
     f"{CHANNEL_ENV}); skipped with the reason where there is none",
     "gyro_stand(**knobs): the simulated stand of the gyro_stand fixture: compass={...}, "
     "noise={...}, faults={...}, stand={...}, seed, timing, speedup, heading_rate_hz, "
-    "status_rate_hz, dbc, signals",
+    "status_rate_hz, dbc, signals, protocol (gyrostand or nmea2000), nmea2000={...}",
 )
 
 
@@ -120,8 +120,10 @@ def gyro_stand_factory(pytestconfig: pytest.Config) -> Iterator[Callable[..., Si
     """`make(**knobs)`: a simulated gyrocompass + roll stand started on its bus, stopped after
     the test. Knobs: compass, noise, faults, stand (dicts of their fields), seed, timing
     ("virtual" or "realtime"), speedup, heading_rate_hz, status_rate_hz; dbc (path) and signals
-    (a [signals] mapping, or a TOML file holding one); interface ("virtual" or "socketcan") and
-    channel. The command line's --gyrostand-* options are the defaults."""
+    (a [signals] mapping, or a TOML file holding one); protocol, what the compass speaks
+    ("gyrostand" or "nmea2000", with nmea2000={model, serial, address, address_change_at_s,
+    new_address, not_available_rate}); interface ("virtual" or "socketcan") and channel. The
+    command line's --gyrostand-* options are the defaults."""
     closing = ExitStack()  # every stand stopped, even when one fails to stop
 
     def make(**knobs: Any) -> SimulatedStand:
@@ -142,6 +144,8 @@ def gyro_stand_factory(pytestconfig: pytest.Config) -> Iterator[Callable[..., Si
                 pytest.skip(reason)
         dbc = given.pop("dbc", None)
         signals = given.pop("signals", None) or {}
+        protocol = given.pop("protocol", "gyrostand")
+        n2k = given.pop("nmea2000", None) or {}
         try:
             if isinstance(signals, str | Path):
                 signals = read_signals(Path(signals))
@@ -151,6 +155,8 @@ def gyro_stand_factory(pytestconfig: pytest.Config) -> Iterator[Callable[..., Si
                 signals=signals,
                 interface=interface,
                 channel=channel,
+                protocol=protocol,
+                nmea2000=n2k,
             )
             stand = SimulatedStand(spec)
         except StandSetupError as exc:

@@ -20,7 +20,9 @@ from can.interfaces.virtual import VirtualBus, channels_lock
 from pydantic import ValidationError
 
 from gyrostand.acquisition.bus import SimulatorBus
-from gyrostand.stand.engine import ReceivedCommand
+from gyrostand.devices.nmea2000 import Product
+from gyrostand.devices.sim_nmea2000 import Nmea2000Compass, Nmea2000Device, Nmea2000Faults
+from gyrostand.stand.engine import HeadingTransmitter, ReceivedCommand
 from gyrostand.stand.protocol import Codec, ProtocolError
 from gyrostand.stand.simconfig import (
     FaultParams,
@@ -33,6 +35,14 @@ from gyrostand.stand.simulator import Simulator
 from gyrostand.stand.virtual_time import clock_message, encode_sync, sync_message
 
 INTERFACES = ("virtual", "socketcan")
+N2K_KNOBS: dict[str, Any] = {  # the simulated NMEA 2000 compass (`devices.sim_nmea2000`)
+    "model": "simulated compass",
+    "serial": "SIM-1",
+    "address": 35,
+    "address_change_at_s": None,
+    "new_address": 36,
+    "not_available_rate": 0.0,
+}
 _TABLES = ("compass", "noise", "faults", "stand")
 
 
@@ -51,6 +61,8 @@ class StandSpec:
     signals: Mapping[str, str] = field(default_factory=dict)
     interface: str = "virtual"
     channel: str | None = None
+    protocol: str = "gyrostand"  # what the compass speaks: "gyrostand" or "nmea2000"
+    nmea2000: Mapping[str, Any] = field(default_factory=dict)  # its `N2K_KNOBS`
 
     def config(self) -> SimConfig:
         """The SimConfig (StandSetupError naming every unknown or inconsistent knob)."""
@@ -64,6 +76,24 @@ class StandSpec:
         except SimConfigError as exc:
             problems = [f"{path}: {text}" for path, text in exc.problems]
             raise StandSetupError("simulated stand: " + "; ".join(problems)) from None
+
+    def transmitter(self) -> HeadingTransmitter | None:
+        """The compass's own protocol (None: the DBC's heading frame); StandSetupError naming
+        an unknown protocol or knob."""
+        if self.protocol == "gyrostand" and not self.nmea2000:
+            return None
+        if self.protocol != "nmea2000":
+            raise StandSetupError(
+                f"simulated stand: protocol {self.protocol!r} is not one of gyrostand, nmea2000"
+                + (" (nmea2000 knobs given)" if self.protocol == "gyrostand" else "")
+            )
+        unknown = sorted(set(self.nmea2000) - set(N2K_KNOBS))
+        if unknown:
+            raise StandSetupError(f"simulated stand: unknown nmea2000 knob(s) {', '.join(unknown)}")
+        k = {**N2K_KNOBS, **self.nmea2000}
+        device = Nmea2000Device(Product(k["model"], k["serial"], "1.0"), address=k["address"])
+        faults = Nmea2000Faults(k["address_change_at_s"], k["new_address"], k["not_available_rate"])
+        return Nmea2000Compass(device, faults, int(self.simulator.get("seed", 0)))
 
     def codec(self) -> Codec:
         try:
@@ -149,7 +179,12 @@ class SimulatedStand:
             )
             self._buses.append(self._control)
             self.simulator = Simulator(
-                sim_bus, self.config, codec=self.codec, recorder=self._counts, start_epoch_s=0.0
+                sim_bus,
+                self.config,
+                codec=self.codec,
+                recorder=self._counts,
+                start_epoch_s=0.0,
+                transmitter=spec.transmitter(),
             )
             self.simulator.start()
         except BaseException:

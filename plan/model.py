@@ -860,6 +860,13 @@ class Plan(_Table):
             errors.append(_error("compass", ("compass", "interface"), message))
         return errors
 
+    @property
+    def heading_source(self) -> tuple[str, str | None, tuple[str, str]]:
+        """The compass as `devices.decoder.frame_decoder` takes it: [compass] protocol and name,
+        [instrument] model and serial (NMEA 2000 product information)."""
+        instrument = (self.instrument.model, self.instrument.serial)
+        return self.compass.protocol, self.compass.name, instrument
+
     def prompts_before(self, before: str | int) -> tuple[PromptPlan, ...]:
         """The prompts asked before the campaign ("campaign") or before trial `before`."""
         return tuple(p for p in self.prompt if p.before == before)

@@ -41,6 +41,7 @@ class Identification:
     latitude_deg: float
     stand: str  # the stand (or the imported file) the data came from
     acquisition_software: str  # the software version stored with the campaign
+    heading_source: str  # the compass's protocol, resolution and time base, one line
     analysis_software: str  # the software that produced this analysis and report
     analysis_run: int | None  # id of the AnalysisRun row holding these results
     inputs_sha256: str | None  # hash of the analysed inputs (None: not analysed)

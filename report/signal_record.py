@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from gyrostand.analysis.errors import AnalysisError
+from gyrostand.devices.decoder import frame_decoder
 from gyrostand.frames.batch import BatchDecoder
 from gyrostand.frames.logfile import read_segments
 from gyrostand.plan.codec import codec_for
@@ -30,16 +31,21 @@ from gyrostand.report.signal import SignalSection, signal_section, uniform_recor
 from gyrostand.stand.protocol import Codec, SignalMap
 
 Span = tuple[float, float]  # stand ms, [start, end)
+HeadingSource = tuple[str, str | None, tuple[str, str]]  # `Plan.heading_source`
+GYROSTAND: HeadingSource = ("gyrostand", None, ("", ""))
 
 
 def headings_in(
-    logs: Sequence[Path], codec: Codec, spans: dict[int, Span]
+    logs: Sequence[Path],
+    codec: Codec,
+    spans: dict[int, Span],
+    source: HeadingSource = GYROSTAND,
 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Valid heading frames (stand ms, deg) inside each span of the logs read in order as one
-    stream (a campaign's raw log segments), in stream order."""
+    stream (a campaign's raw log segments), in stream order, from the plan's heading source."""
     stats = [(str(p), p.stat()) for p in logs]
     stamps = tuple((path, stat.st_size, stat.st_mtime_ns) for path, stat in stats)
-    t, h = _valid_headings(stamps, codec.dbc_path, codec.signal_map)
+    t, h = _valid_headings(stamps, codec.dbc_path, codec.signal_map, source)
     found = {}
     for key, (start, end) in spans.items():
         inside = (t >= start) & (t < end)
@@ -49,13 +55,16 @@ def headings_in(
 
 @functools.lru_cache(maxsize=1)
 def _valid_headings(
-    stamps: tuple[tuple[str, int, int], ...], dbc_path: Path, signal_map: SignalMap
+    stamps: tuple[tuple[str, int, int], ...],
+    dbc_path: Path,
+    signal_map: SignalMap,
+    source: HeadingSource,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Every valid heading frame of the logs (path, size, mtime) read in order as one stream.
     Kept for the next call with the same files: the analysis and the report's plots of one
     campaign read its log once (a changed file has another size or mtime; the report verifies
     each log's SHA-256 before reading it)."""
-    decoder = BatchDecoder(Codec(dbc_path, signal_map))
+    decoder = frame_decoder(Codec(dbc_path, signal_map), *source)
     times, values = [np.empty(0)], [np.empty(0)]
     for raw in read_segments([Path(path) for path, _, _ in stamps]):
         headings = decoder.decode(raw).headings
@@ -80,14 +89,17 @@ def _still_spans(records: tuple[TrialRecord, ...]) -> dict[int, Span]:
 
 
 def still_series_record(
-    logs: Sequence[Path], codec: Codec, records: tuple[TrialRecord, ...]
+    logs: Sequence[Path],
+    codec: Codec,
+    records: tuple[TrialRecord, ...],
+    source: HeadingSource = GYROSTAND,
 ) -> tuple[ReadingRecord | None, str]:
     """The longest still-series record of a campaign in its raw log segments (by heading
     frames), and a note saying what it is, or why there is none."""
     spans = _still_spans(records)
     if not spans:
         return None, "No still series with timed observation windows: no stationary record."
-    frames = headings_in(logs, codec, spans)
+    frames = headings_in(logs, codec, spans, source)
     index = max(sorted(frames), key=lambda i: frames[i][0].size)  # ties: the first trial
     t, h = frames[index]
     if t.size < 3:
@@ -135,7 +147,11 @@ def still_stretch(log: Path, codec: Codec) -> Span | None:
 
 
 def log_record(
-    log: Path, codec: Codec, start_s: float | None = None, end_s: float | None = None
+    log: Path,
+    codec: Codec,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    source: HeadingSource = GYROSTAND,
 ) -> ReadingRecord:
     """The record of a raw log alone: the stand-time span asked for (seconds), else the
     longest still stretch by the stand's status frames (the whole log when it has none).
@@ -152,7 +168,7 @@ def log_record(
         span, what = (stretch[0], stretch[1] + 1.0), "the longest still stretch"
     else:
         span, what = (-np.inf, np.inf), "the whole log (no stand status frames)"
-    t, h = headings_in([log], codec, {0: span})[0]
+    t, h = headings_in([log], codec, {0: span}, source)[0]
     if t.size < 3:
         raise AnalysisError(f"{log.name}: {t.size} valid heading frames in {what}")
     source = f"raw log {log.name}, {what}: stand time {t[0] / 1000:.1f}-{t[-1] / 1000:.1f} s"
@@ -165,7 +181,9 @@ def log_signal(
     """Section 10 for a raw log alone: its record (`log_record`), decoded with the plan's
     protocol and judged by the plan's [acceptance] when a plan is given."""
     codec = Codec() if plan is None else codec_for(plan)
-    record = log_record(log, codec, start_s, end_s)
+    record = log_record(
+        log, codec, start_s, end_s, GYROSTAND if plan is None else plan.heading_source
+    )
     note = "A raw log without its campaign: no series, no settle points."
     return signal_section(record, note, (), acceptance_of(plan))
 

@@ -261,6 +261,18 @@ def analyze_stored(session: Session, campaign_id: int) -> StoredAnalysis:
 # -------------------------------------------------------------------------- report inputs
 
 
+def heading_source(campaign: Campaign) -> str:
+    """How the compass's headings came: its protocol, their resolution and time base."""
+    if campaign.heading_source is None:
+        return "not stated (measurements imported from a file)"
+    resolution = campaign.heading_resolution_deg
+    step = "not recorded" if resolution is None else f"{resolution:.2g} deg"
+    return (
+        f"{campaign.heading_source}, heading resolution {step}; time base: "
+        f"{campaign.heading_time_base or 'not recorded'}"
+    )
+
+
 def _when(value: datetime | None) -> str | None:
     return None if value is None else value.isoformat(sep=" ", timespec="seconds")
 
@@ -505,7 +517,7 @@ def heading_traces(
     """Binned valid heading frames of each trial's stand-time span [start, end], from the raw
     log (`headings_in`)."""
     closed = {index: (t0, np.nextafter(t1, np.inf)) for index, (t0, t1) in spans.items()}
-    found = headings_in(logs, codec_for(plan), closed)
+    found = headings_in(logs, codec_for(plan), closed, plan.heading_source)
     return {index: _binned(spans[index], *found[index], bins) for index in spans}
 
 
@@ -568,7 +580,7 @@ def _reading(
         )
     if not logs:
         return None, f"No usable raw CAN log ({check}): no reading record.", acceptance
-    reading, note = still_series_record(logs, codec_for(plan), records)
+    reading, note = still_series_record(logs, codec_for(plan), records, plan.heading_source)
     return reading, note, acceptance
 
 
@@ -619,6 +631,7 @@ def report_inputs(
         latitude_deg=campaign.latitude_deg,
         stand=_stand(campaign, plan),
         acquisition_software=campaign.software_version,
+        heading_source=heading_source(campaign),
         analysis_software=SOFTWARE_VERSION,
         analysis_run=None if stored is None else stored.run_id,
         inputs_sha256=None if stored is None else stored.inputs.sha256(),

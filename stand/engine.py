@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import can
 import numpy as np
@@ -37,10 +38,25 @@ class ReceivedCommand:
     answer: str
 
 
+class HeadingTransmitter(Protocol):
+    """A compass that speaks another protocol than the stand's DBC (`devices.sim_nmea2000`):
+    it sends the readings of heading samples `index` (stand times `t_s`) as its own frames."""
+
+    def frames(
+        self, t_s: np.ndarray, reading_deg: np.ndarray, index: np.ndarray
+    ) -> list[can.Message]: ...
+
+
 class StandEngine:
-    def __init__(self, config: SimConfig, codec: Codec | None = None) -> None:
+    def __init__(
+        self,
+        config: SimConfig,
+        codec: Codec | None = None,
+        transmitter: HeadingTransmitter | None = None,
+    ) -> None:
         self.config = config
         self.codec = codec or Codec()
+        self.transmitter = transmitter  # None: the compass sends the DBC's heading frame
         compass = config.compass
         noise_seed, white_seed, fault_seed = np.random.SeedSequence(config.seed).spawn(3)
         self._dt = 1.0 / config.heading_rate_hz
@@ -157,6 +173,9 @@ class StandEngine:
         t = index * self._dt
         readings = self._stick(t, self._readings_deg(t))
         u = self._fault_rng.random((n, _N_FAULT_DRAWS))
+        if self.transmitter is not None:  # its own frames: the stand's DBC faults do not apply
+            sent = (u[:, _DROP] >= f.drop_rate) & ~self._silent(t)
+            return self.transmitter.frames(t[sent], readings[sent], index[sent])
         jumps = np.where(u[:, _JUMP] < f.counter_jump_rate, 1 + (u[:, _JUMP_SIZE] * 14), 0)
         counter = (self._counter + np.arange(n) + np.cumsum(jumps.astype(np.int64))) % 16
         self._counter = int(counter[-1] + 1) % 16

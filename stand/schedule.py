@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Literal
 
 import can
 
-from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.engine import HeadingTransmitter, StandEngine
 from gyrostand.stand.protocol import AckFrame, Codec
 from gyrostand.stand.simconfig import SimConfig
 
@@ -122,6 +122,7 @@ def run_schedule(
     start_epoch_s: float | None = None,
     bus: can.BusABC | None = None,
     codec: Codec | None = None,
+    transmitter: HeadingTransmitter | None = None,
 ) -> ScheduleResult:
     """Play `steps` on a fresh simulated unit, writing every frame to `log_path` (.blf / .asc)
     and, when given, sending it on `bus` too. Frame timestamps are start epoch + stand time."""
@@ -129,7 +130,7 @@ def run_schedule(
         raise ScheduleError(f"log file must end in {' or '.join(LOG_SUFFIXES)}: {log_path}")
     wall0 = time.perf_counter()
     codec = codec or Codec()
-    engine = StandEngine(config, codec)
+    engine = StandEngine(config, codec, transmitter)
     epoch = time.time() if start_epoch_s is None else start_epoch_s
     frames = 0
     refusals: list[AckFrame] = []

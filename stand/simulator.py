@@ -21,7 +21,7 @@ from types import TracebackType
 
 import can
 
-from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.engine import HeadingTransmitter, StandEngine
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import (
     CompassParams,
@@ -60,10 +60,11 @@ class Simulator:
         codec: Codec | None = None,
         recorder: can.Listener | None = None,
         start_epoch_s: float | None = None,
+        transmitter: HeadingTransmitter | None = None,
     ) -> None:
         self.bus = bus
         self.config = config
-        self.engine = StandEngine(config, codec)
+        self.engine = StandEngine(config, codec, transmitter)
         self._recorder = recorder
         self._epoch_s = time.time() if start_epoch_s is None else start_epoch_s
         self._stop = threading.Event()

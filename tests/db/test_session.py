@@ -233,3 +233,31 @@ def test_0003_moves_the_raw_log_into_segments_and_keeps_every_row(db_path: Path)
     assert after == before
     assert segments == [(1, 1, "/x/campaign-1.blf", "new", 0, "ab" * 32, "closed")]
     assert engine_writes == (0,)
+
+
+def test_0010_states_the_heading_source_of_earlier_campaigns(db_path: Path) -> None:
+    """Campaigns acquired before 0010 read gyrostand's heading frame and its stand clock; an
+    import has no heading source. The downgrade keeps every row."""
+    sessions = open_database(sqlite_url(db_path))
+    with sessions.begin() as session:
+        make_campaign(session, n_trials=2)
+        make_campaign(session, n_trials=1).source = "import"
+    engine = create_engine(sqlite_url(db_path))
+    config = alembic_config()
+    with engine.begin() as connection:
+        config.attributes["connection"] = connection
+        command.downgrade(config, "0008")
+    engine.dispose()
+    open_database(sqlite_url(db_path))  # upgrades to head
+    query = "SELECT id, heading_source, heading_time_base, heading_resolution_deg FROM campaign"
+    with sqlite3.connect(db_path) as conn:
+        rows = conn.execute(query).fetchall()
+    base = "stand clock carried in every heading frame"
+    assert rows == [(1, "gyrostand", base, None), (2, None, None, None)]
+    engine = create_engine(sqlite_url(db_path))
+    with engine.begin() as connection:
+        config.attributes["connection"] = connection
+        command.downgrade(config, "0008")
+    engine.dispose()
+    with sqlite3.connect(db_path) as conn:
+        assert conn.execute("SELECT count(*) FROM trial").fetchone() == (3,)

@@ -168,3 +168,51 @@ def test_the_entry_point_is_the_plugin() -> None:
         check=True,
     ).stdout
     assert out.strip() == "['gyrostand.pytest_plugin']"
+
+
+N2K = """
+from collections import Counter
+
+import numpy as np
+import pytest
+
+from gyrostand.devices.nmea2000 import ReferenceDecoder, split_id
+
+
+@pytest.mark.gyro_stand(protocol="nmea2000", nmea2000={"model": "GX-1", "serial": "S-7"})
+def test_nmea2000(gyro_stand):
+    bus = gyro_stand.open_bus()
+    gyro_stand.advance(2.0)
+    frames = []
+    while (msg := bus.recv(0.5)) is not None:
+        frames.append(msg)
+    n2k = [m for m in frames if m.is_extended_id]
+    pgn, source = split_id(np.array([m.arbitration_id for m in n2k]))
+    counts = Counter(pgn.tolist())
+    assert counts[127250] == counts[127251] == counts[127257] == 21
+    assert counts[60928] == 1 and set(source.tolist()) == {35}
+    reference = ReferenceDecoder()
+    told = [reference.decode(m) for m, p in zip(n2k, pgn) if p in (60928, 126996)]
+    assert told[-1].model == "GX-1" and told[-1].serial == "S-7"
+
+@pytest.mark.gyro_stand(protocol="nmea2001")
+def test_unknown(gyro_stand):
+    pass
+
+@pytest.mark.gyro_stand(protocol="nmea2000", nmea2000={"adress": 3})
+def test_typo(gyro_stand):
+    pass
+"""
+
+
+def test_the_stand_speaks_nmea2000_when_asked(pytester: pytest.Pytester) -> None:
+    pytester.makepyfile(test_n2k=N2K)
+    result = pytester.runpytest()
+    result.assert_outcomes(passed=1, errors=2)
+    result.stdout.fnmatch_lines(
+        [
+            "*simulated stand: protocol 'nmea2001' is not one of gyrostand, nmea2000",
+            "*simulated stand: unknown nmea2000 knob(s) adress",
+        ],
+        consecutive=False,
+    )

@@ -154,6 +154,17 @@ def test_refused_step_is_reported_as_a_warning(tmp_path: Path) -> None:
         (["--step", "still 1", "--log", "{tmp}/x.blf", "--speedup", "5"], "only with timing"),
         (["--step", "still 1", "--log", "{tmp}/x.blf", "--timing", "fast"], "timing must be"),
         (["--step", "still 1", "--log", "{tmp}/x.blf", "--drop-rate", "2"], "drop_rate must be"),
+        (["--step", "still 1", "--log", "{tmp}/x.blf", "--protocol", "n2k"], "not one of"),
+        (
+            ["--step", "still 1", "--log", "{tmp}/x.blf", "--protocol", "nmea2000", "--address"]
+            + ["252"],
+            "--address: 252 is not a source address (0-251)",
+        ),
+        (
+            ["--step", "still 1", "--log", "{tmp}/x.blf", "--protocol", "nmea2000"]
+            + ["--not-available-rate", "1.5"],
+            "--not-available-rate: 1.5 is not a probability in [0, 1]",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, args: list[str], message: str) -> None:
@@ -201,3 +212,33 @@ def test_a_labs_dbc_on_the_bus(tmp_path: Path) -> None:
     assert not any(m.arbitration_id == 0x100 for m in frames)  # gyrostand's heading message
     bad = invoke("--step", "still 1", "--log", str(log), "--signals", str(tmp_path / "no.toml"))
     assert bad.exit_code == 2 and "no.toml" in bad.output and "Traceback" not in bad.output
+
+
+def test_standalone_nmea2000_compass(tmp_path: Path) -> None:
+    """The compass speaks NMEA 2000 beside the stand's DBC frames: read back by the heading
+    source, the headings equal those of the gyrostand frame within the PGN's resolution, at the
+    same stand times (its frames' timestamps, Unix time, put on the stand clock)."""
+    import numpy as np
+
+    from gyrostand.devices.decoder import frame_decoder
+    from gyrostand.frames.batch import BatchDecoder
+    from gyrostand.frames.logfile import read_raw_frames
+    from gyrostand.stand.protocol import Codec
+
+    logs = {}
+    for protocol, epoch in (("gyrostand", "0"), ("nmea2000", "1795000000.25")):
+        logs[protocol] = tmp_path / f"{protocol}.blf"
+        args = ["--step", "still 30", "--log", str(logs[protocol]), "--protocol", protocol]
+        result = invoke(*args, "--address-change-at-s", "10", "--start-epoch", epoch)
+        assert result.exit_code == 0, result.output
+    (raw,) = read_raw_frames(logs["gyrostand"])
+    plain = BatchDecoder(Codec()).decode(raw).headings
+    (raw,) = read_raw_frames(logs["nmea2000"])
+    decoder = frame_decoder(Codec(), "nmea2000", None, ("simulated compass", "SIM-1"))
+    batch = decoder.decode(raw)
+    n2k = batch.headings
+    assert len(plain) == 301 and len(n2k) == 300  # the first: before the stand's first status
+    assert np.array_equal(n2k.t_ms, plain.t_ms[1:])
+    assert np.abs(n2k.heading_deg - plain.heading_deg[1:]).max() <= np.degrees(1e-4) / 2 + 1e-9
+    events = [frame.message for _, frame in batch.others if hasattr(frame, "message")]
+    assert any("claimed address 36 (was 35)" in e for e in events)

@@ -1,0 +1,167 @@
+"""A campaign whose compass speaks NMEA 2000, on the lockstep simulated stand (virtual time): the
+same observations as with gyrostand's heading frame (the same physics; the PGN's resolution is
+1e-4 rad), byte-reproducible, an address change and not-available values losing nothing, another
+heading sensor on the bus left out, an unidentified compass failing the trial with the reason."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import can
+import numpy as np
+import pytest
+
+from gyrostand.acquisition.engine import Engine, ObservationResult
+from gyrostand.acquisition.lockstep import Lockstep
+from gyrostand.devices.decoder import SourceDecoder
+from gyrostand.devices.n2k_heading import Nmea2000Heading
+from gyrostand.devices.nmea2000 import (
+    RESOLUTION_DEG,
+    VESSEL_HEADING,
+    Product,
+    decode_vessel_heading,
+    iso_name,
+    split_id,
+)
+from gyrostand.devices.sim_nmea2000 import Nmea2000Compass, Nmea2000Device, Nmea2000Faults
+from gyrostand.stand.protocol import Codec
+from tests.acquisition.harness import Recorder, quick_config, small_plan
+
+PLAN = small_plan(n_obs=3)
+PRODUCT = Product("test compass", "T-1", "1.0")  # the plan's [instrument]
+WANTED = ("test compass", "T-1")
+
+
+def run(
+    transmitter: object | None = None,
+    source: Callable[[], Nmea2000Heading] | None = None,
+) -> tuple[Recorder, Lockstep]:
+    sink = Recorder()
+    if transmitter is None:
+        stand = Lockstep(quick_config(seed=1), 5.0)
+        engine = Engine(PLAN, sink, stand)
+    else:
+        codec = Codec()
+        make = source or (lambda: Nmea2000Heading(None, WANTED))
+        stand = Lockstep(
+            quick_config(seed=1), 5.0, codec, (transmitter, lambda: SourceDecoder(codec, make()))
+        )  # type: ignore[arg-type]
+        engine = Engine(PLAN, sink, stand, source=Nmea2000Heading.info)
+    stand.run(engine)
+    return sink, stand
+
+
+def compass(**faults: object) -> Nmea2000Compass:
+    return Nmea2000Compass(Nmea2000Device(PRODUCT), Nmea2000Faults(**faults))  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def gyrostand_run() -> list[ObservationResult]:
+    return run()[0].observations
+
+
+@pytest.fixture(scope="module")
+def n2k_run() -> tuple[Recorder, Lockstep]:
+    return run(compass())
+
+
+def test_observations_as_with_the_gyrostand_heading_frame(
+    gyrostand_run: list[ObservationResult], n2k_run: tuple[Recorder, Lockstep]
+) -> None:
+    """The same samples, rounded to 1e-4 rad instead of 0.001 deg: each window mean within a
+    resolution step's worth of rounding error (the mean of ~300 rounding errors is far smaller)."""
+    ours = n2k_run[0].observations
+    assert [(o.trial, o.j, o.k) for o in ours] == [(o.trial, o.j, o.k) for o in gyrostand_run]
+    assert len(ours) == 12
+    for a, b in zip(ours, gyrostand_run, strict=True):
+        assert (a.window_start_ms, a.window_end_ms) == (b.window_start_ms, b.window_end_ms)
+        assert abs(a.frames_used - b.frames_used) <= 1  # (the first heading: before any status)
+        assert abs(a.value_deg - b.value_deg) < RESOLUTION_DEG / 2
+        assert a.frames_lost == 0 and "stuck" not in a.flags  # a still compass is not stuck
+
+
+def test_window_means_are_those_of_the_frames_sent(n2k_run: tuple[Recorder, Lockstep]) -> None:
+    """Independently of the engine: the PGN 127250 frames of the stream in each window."""
+    sink, stand = n2k_run
+    frames = [m for m in stand.stream if m.is_extended_id]
+    pgn, _ = split_id(np.array([m.arbitration_id for m in frames]))
+    heading = [m for m, p in zip(frames, pgn.tolist(), strict=True) if p == VESSEL_HEADING]
+    t_ms = np.round(np.array([m.timestamp for m in heading]) * 1000)
+    deg = np.degrees(
+        decode_vessel_heading(np.array([list(m.data) for m in heading], np.uint8)).heading_rad()
+    )
+    for obs in sink.observations:
+        inside = (t_ms >= obs.window_start_ms) & (t_ms < obs.window_end_ms)
+        assert obs.frames_used == inside.sum()
+        ref = deg[inside][0]  # deviations from one of them: no wrap at 360 inside a window
+        assert obs.value_deg == pytest.approx(ref + np.mean(deg[inside] - ref), abs=1e-9)
+
+
+def test_byte_reproducible(n2k_run: tuple[Recorder, Lockstep]) -> None:
+    again = run(compass())[1].stream
+    key: Callable[[can.Message], tuple[object, ...]] = lambda m: (  # noqa: E731
+        m.timestamp,
+        m.arbitration_id,
+        bytes(m.data),
+    )
+    assert [key(m) for m in again] == [key(m) for m in n2k_run[1].stream]
+
+
+def test_an_address_change_and_not_available_values_lose_nothing(
+    n2k_run: tuple[Recorder, Lockstep],
+) -> None:
+    sink, stand = run(compass(address_change_at_s=500.0, not_available_rate=0.02))
+    plain = n2k_run[0].observations
+    assert len(sink.observations) == len(plain) and sink.of("trial_failed") == []
+    unavailable = 0
+    for obs, ref in zip(sink.observations, plain, strict=True):
+        assert obs.frames_lost == 0
+        flags = dict(f.split("=") for f in obs.flags.split(",") if f)
+        assert set(flags) <= {"not_available"}
+        unavailable += int(flags.get("not_available", 0))
+        assert obs.frames_used + int(flags.get("not_available", 0)) == ref.frames_used
+    assert unavailable > 20
+    claims = [a for a in sink.of("event") if a[0] == "address claim"]
+    assert len(claims) == 1 and "claimed address 36 (was 35)" in claims[0][2]
+    sources = {
+        split_id(np.array([m.arbitration_id]))[1][0] for m in stand.stream if m.is_extended_id
+    }
+    assert sources == {35, 36}
+
+
+class TwoSensors:
+    """The compass and another heading sensor (its own NAME, address and product) on one bus."""
+
+    def __init__(self) -> None:
+        self.compass = compass()
+        other = Nmea2000Device(Product("other sensor", "X-9", "3.0"), iso_name(77), address=40)
+        self.other = Nmea2000Compass(other, seed=5)
+
+    def frames(self, t_s: np.ndarray, reading: np.ndarray, index: np.ndarray) -> list[can.Message]:
+        out = self.compass.frames(t_s, reading, index) + self.other.frames(
+            t_s, (reading + 10.0) % 360.0, index
+        )
+        return sorted(out, key=lambda m: m.timestamp)
+
+
+def test_another_heading_sensor_is_told_and_left_out(n2k_run: tuple[Recorder, Lockstep]) -> None:
+    sink, _ = run(TwoSensors())
+    ours = [(o.value_deg, o.frames_used, o.flags) for o in sink.observations]
+    assert ours == [(o.value_deg, o.frames_used, o.flags) for o in n2k_run[0].observations]
+    told = [a for a in sink.of("event") if a[0] == "other device"]
+    assert len(told) == 1 and "from address 40 (NAME 0x" in told[0][2]
+
+
+def test_a_compass_never_identified_fails_the_trial_with_the_reason() -> None:
+    """The plan names a NAME no device claims: every heading is invalid, with why."""
+    sink, _ = run(compass(), lambda: Nmea2000Heading(name=0x1234, product=None))
+    assert sink.observations == []
+    failed = sink.of("trial_failed")
+    assert failed and all("before the compass is identified" in f[2] for f in failed)
+
+
+def test_a_product_other_than_the_plans_instrument_is_an_error_event() -> None:
+    name = Nmea2000Device(PRODUCT).name
+    sink, _ = run(compass(), lambda: Nmea2000Heading(name=name, product=("GX-2", "S-7")))
+    (event,) = [a for a in sink.of("event") if a[0] == "product information"]
+    assert event[1] == "error" and "the plan's instrument is 'GX-2', serial 'S-7'" in event[2]
