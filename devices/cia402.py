@@ -29,7 +29,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import canopen
 import numpy as np
@@ -37,6 +37,9 @@ from canopen.emcy import EmcyError
 from canopen.profiles.p402 import State402
 
 from gyrostand.devices.roll_trajectory import RollTrajectory
+
+if TYPE_CHECKING:
+    from gyrostand.devices.cia410 import Cia410Inclinometer
 
 CSP, PP = 8, 1
 _SUPPORTS = {CSP: 1 << 7, PP: 1 << 0}  # 0x6502 bits
@@ -82,6 +85,7 @@ class RollRecord:
     t_s: np.ndarray
     target_counts: np.ndarray
     actual_counts: np.ndarray
+    slope_deg: np.ndarray  # the inclinometer's slope at each SYNC (empty without one)
     events: tuple[AxisEvent, ...]
     failure: str | None  # why the rocking failed (the drive's error named), None if it did not
     stopped_by: str | None  # what started the stop ramp early, None for the planned end
@@ -100,8 +104,16 @@ class _Inbox:
 class Cia402Axis:
     """The roll axis: a drive on `network` (connected), commanded in stand-time cycles."""
 
-    def __init__(self, network: canopen.Network, config: AxisConfig):
+    def __init__(
+        self,
+        network: canopen.Network,
+        config: AxisConfig,
+        inclinometer: Cia410Inclinometer | None = None,
+    ):
+        """`inclinometer`: on the same bus and SYNC, started before the axis."""
         self.network = network
+        self.inclinometer = inclinometer
+        self.slope_deg = float("nan")
         self.config = config
         self.node = canopen.RemoteNode(config.node_id, str(config.eds))
         network.add_node(self.node)
@@ -232,6 +244,8 @@ class Cia402Axis:
             raise DriveError(
                 f"drive {c.node_id} sent no TPDO within {ANSWER_TIMEOUT_S:g} s of a SYNC"
             ) from None
+        if self.inclinometer is not None:
+            self.slope_deg = self.inclinometer.take()
         self.cycle += 1
         self._supervise()
 
@@ -273,7 +287,7 @@ class Cia402Axis:
         cycle, then disable the axis at rest. `stop_check(t)` (the station's stop request) gives
         a reason to stop, or None; signals set `stop_requested`."""
         t0 = self.t_s
-        ts, targets, actuals = [], [], []
+        ts, targets, actuals, slopes = [], [], [], []
         failure: str | None = None
         stopped_by: str | None = None
         cw = State402.CW_OPERATION_ENABLED
@@ -303,6 +317,7 @@ class Cia402Axis:
             ts.append(self.t_s)
             targets.append(target)
             actuals.append(self.actual)
+            slopes.append(self.slope_deg)
             if failure is None:
                 failure = self._failure()
             if power_state(self.statusword) in ("FAULT", "FAULT REACTION ACTIVE"):
@@ -314,6 +329,7 @@ class Cia402Axis:
             np.asarray(ts),
             np.asarray(targets, dtype=np.int64),
             np.asarray(actuals, dtype=np.int64),
+            np.asarray(slopes if self.inclinometer is not None else []),
             tuple(self._events),
             failure,
             stopped_by,

@@ -98,6 +98,7 @@ class SimDrive:
         self._lock = threading.RLock()
         self.t_s = 0.0
         self.x = 0.0  # actual position, counts (float; reported rounded)
+        self.sampled_x = 0.0  # the position at the last SYNC
         self.v = 0.0  # counts/s
         self.demand = 0.0  # position demand, counts
         self.demand_v = 0.0
@@ -168,6 +169,7 @@ class SimDrive:
                     if self.status == OPERATION_ENABLED and self.mode == CSP:
                         self.demand = float(target)
                 # TPDO1: the state after this SYNC's command, the position sampled at the SYNC
+                self.sampled_x = self.x
                 self._publish()
                 self.node.tpdo[1].transmit()
             self.advance(self._od(0x1006) * 1e-6)
@@ -368,7 +370,7 @@ class SimDrive:
         return self.demand_v == 0.0 and abs(self.v) < 1.0
 
     def platform_deg(self, counts_per_degree: float) -> float:
-        """The platform's true roll (what an inclinometer on it sees), for the plan's
-        counts per degree: the encoder's angle times the kinematics error."""
+        """The platform's true roll at the last SYNC (what an inclinometer on it sees), for the
+        plan's counts per degree: the encoder's angle times the kinematics error."""
         with self._lock:
-            return self.x / counts_per_degree * self.faults.platform_scale
+            return self.sampled_x / counts_per_degree * self.faults.platform_scale
