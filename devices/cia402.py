@@ -42,6 +42,7 @@ if TYPE_CHECKING:
     from gyrostand.devices.cia410 import Cia410Inclinometer
 
 CSP, PP = 8, 1
+SDO_ERRORS = (canopen.SdoAbortedError, canopen.SdoCommunicationError)
 _SUPPORTS = {CSP: 1 << 7, PP: 1 << 0}  # 0x6502 bits
 SW_FOLLOWING_ERROR = 1 << 13
 ANSWER_TIMEOUT_S = 2.0  # wall-clock bound on a drive's answer (a dead drive, not a timing)
@@ -155,7 +156,7 @@ class Cia402Axis:
             sdo[0x1016][1].raw = (c.master_node_id << 16) | c.drive_timeout_ms
             sdo[0x6007].raw = 3  # abort connection: quick stop
             self.node.pdo.read()  # the drive's own mapping, by SDO
-        except canopen.SdoError as exc:
+        except SDO_ERRORS as exc:
             raise DriveError(f"drive {c.node_id} refused its configuration: {exc}") from None
         self._check_mapping()
         rpdo, tpdo = self.node.rpdo[1], self.node.tpdo[1]
@@ -207,7 +208,7 @@ class Cia402Axis:
     def _error_code(self) -> int:
         try:
             return int(self.node.sdo[0x603F].raw)
-        except (canopen.SdoError, KeyError):
+        except (*SDO_ERRORS, KeyError):
             return 0
 
     # -- notifier thread ------------------------------------------------------------------

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import canopen
 
-from gyrostand.devices.cia402 import ANSWER_TIMEOUT_S, DriveError
+from gyrostand.devices.cia402 import ANSWER_TIMEOUT_S, SDO_ERRORS, DriveError
 
 
 class Cia410Inclinometer:
@@ -24,7 +24,7 @@ class Cia410Inclinometer:
         try:
             self.step_deg = self.node.sdo[0x6000].raw / 1000.0
             self.node.tpdo.read()
-        except canopen.SdoError as exc:
+        except SDO_ERRORS as exc:
             raise DriveError(f"inclinometer {self.node.id}: {exc}") from None
         self.node.tpdo[1].add_callback(self._on_tpdo)
         self.node.nmt.state = "OPERATIONAL"

@@ -14,7 +14,13 @@ import pytest
 
 from gyrostand.analysis.measured_roll import measure_roll
 from gyrostand.devices import sim_drive
-from gyrostand.devices.cia402 import AxisConfig, Cia402Axis, power_state, stop_on_signals
+from gyrostand.devices.cia402 import (
+    AxisConfig,
+    Cia402Axis,
+    DriveError,
+    power_state,
+    stop_on_signals,
+)
 from gyrostand.devices.cia410 import Cia410Inclinometer
 from gyrostand.devices.roll_trajectory import RollTrajectory
 from gyrostand.devices.sim_drive import SIM_DRIVE_EDS, DriveFaults, ServoModel, SimDrive
@@ -220,3 +226,22 @@ def test_an_inclinometer_sees_the_amplitude_the_encoder_cannot(stand):
     assert abs(platform.amplitude - 1.03 * encoder.amplitude) < 3 * platform.amplitude_se
     assert abs(platform.amplitude - 3.0) > 20 * platform.amplitude_se
     assert platform.period_s == pytest.approx(2.0, abs=3 * platform.period_se_s + 1e-4)
+
+
+def test_a_drive_refusing_its_configuration_is_one_line(stand):
+    axis, drive = stand
+
+    def refuse(index, subindex, od, data):
+        if index == 0x1016:
+            raise canopen.SdoAbortedError(0x06010002)  # attempt to write a read-only object
+
+    drive.node.add_write_callback(refuse)
+    with pytest.raises(DriveError, match=r"^drive 3 refused its configuration: .*0x06010002"):
+        axis.start()
+
+
+def test_a_drive_without_csp_or_pp_is_one_line(stand):
+    axis, drive = stand
+    drive.node.set_data(0x6502, 0, (1 << 2).to_bytes(4, "little"))  # profile velocity only
+    with pytest.raises(DriveError, match="offers neither cyclic synchronous nor profile"):
+        axis.start()
