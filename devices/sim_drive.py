@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
@@ -114,6 +115,7 @@ class SimDrive:
         self._consumer_ms = 0
         self._consumer_stale = True
         self.emcy_sent: list[int] = []
+        self.syncs = 0
 
     # -- bus ----------------------------------------------------------------------------------
 
@@ -158,6 +160,7 @@ class SimDrive:
     def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
         """A SYNC: apply RPDO1, send TPDO1, run one communication cycle."""
         with self._lock:
+            self.syncs += 1
             if self._operational():
                 rpdo = self.node.rpdo[1]
                 if rpdo.is_received:  # a synchronous RPDO: applied on this SYNC
@@ -374,3 +377,22 @@ class SimDrive:
         plan's counts per degree: the encoder's angle times the kinematics error."""
         with self._lock:
             return self.sampled_x / counts_per_degree * self.faults.platform_scale
+
+
+def serve(
+    drive: SimDrive, stop: threading.Event, poll_s: float = 0.02, grace_s: float = 1.0
+) -> None:
+    """Run a drive in a process of its own until `stop`: stand time follows the master's SYNC;
+    once no SYNC has come for `grace_s` of wall time (the master stopped or died, not merely
+    late on a loaded host) it follows the wall clock from the last SYNC, so the heartbeat
+    consumer notices a dead master as a real drive would."""
+    seen, last_sync, advanced_s = drive.syncs, time.monotonic(), 0.0
+    while not stop.wait(poll_s):
+        now = time.monotonic()
+        if drive.syncs != seen:
+            seen, last_sync, advanced_s = drive.syncs, now, 0.0
+            continue
+        silent_s = now - last_sync
+        if silent_s >= grace_s:
+            drive.advance(silent_s - advanced_s)
+            advanced_s = silent_s

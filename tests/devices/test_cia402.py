@@ -7,6 +7,8 @@ import cmath
 import itertools
 import math
 import signal
+import threading
+import time
 
 import canopen
 import numpy as np
@@ -245,3 +247,30 @@ def test_a_drive_without_csp_or_pp_is_one_line(stand):
     drive.node.set_data(0x6502, 0, (1 << 2).to_bytes(4, "little"))  # profile velocity only
     with pytest.raises(DriveError, match="offers neither cyclic synchronous nor profile"):
         axis.start()
+
+
+def test_a_served_drive_quick_stops_when_its_master_dies():
+    """`gyrostand simulate-drive` in another process: stand time follows SYNC, then (the master
+    gone) the wall clock, so the heartbeat consumer stops the axis as on a real stand."""
+    drive_net, master_net = _networks(f"cia402-{next(_channels)}")
+    stop = threading.Event()
+    try:
+        drive = SimDrive(drive_net, 3)
+        drive.boot()
+        server = threading.Thread(target=sim_drive.serve, args=(drive, stop))
+        server.start()
+        axis = Cia402Axis(master_net, AxisConfig(3, SIM_DRIVE_EDS, cycle_ms=CYCLE_MS))
+        axis.start()
+        roll = RollTrajectory(3.0, 2.0, 1.0)
+        for k in range(150):
+            axis.step(0x0F, round(CPD * float(roll.position_deg(k * CYCLE_MS / 1000))))
+        assert abs(drive.v) > 1000  # rocking when gyrostand dies
+        deadline = time.monotonic() + 30.0  # a guard: the stop takes ~1.5 s of wall time
+        while not (drive.status == sim_drive.QUICK_STOP_ACTIVE and drive.at_rest):
+            assert time.monotonic() < deadline, "the drive did not stop"
+            time.sleep(0.02)
+        assert drive.emcy_sent == [sim_drive.EMCY_HEARTBEAT]
+    finally:
+        stop.set()
+        master_net.disconnect()
+        drive_net.disconnect()
