@@ -3,8 +3,11 @@ VM suite): the lockstep cycle's latency (RPDO + SYNC -> the drive's TPDO, wall t
 and with the periodic SYNC producer (python-can's thread-timed sender here; kernel timed on
 SocketCAN) the SYNC period's jitter as the drive receives it.
 
-Run: .venv/bin/python bench/bench_cia402.py"""
+Run: .venv/bin/python bench/bench_cia402.py [INTERFACE CHANNEL]   (default: virtual)
+e.g. bench/bench_cia402.py socketcan vcan0 (the drive and the master in this process, each with
+its own socket)."""
 
+import sys
 import time
 
 import canopen
@@ -17,11 +20,14 @@ from gyrostand.devices.sim_drive import SIM_DRIVE_EDS, SimDrive
 CPD = 10_000.0
 
 
+INTERFACE, CHANNEL = (sys.argv[1], sys.argv[2]) if len(sys.argv) > 2 else ("virtual", None)
+
+
 def _stand(channel: str, sync: str) -> tuple[Cia402Axis, SimDrive, list[canopen.Network]]:
     nets = [canopen.Network(), canopen.Network()]
     for net in nets:
         net.NOTIFIER_CYCLE = 0.05
-        net.connect(interface="virtual", channel=channel)
+        net.connect(interface=INTERFACE, channel=CHANNEL or channel)
     drive = SimDrive(nets[0], 2)
     axis = Cia402Axis(nets[1], AxisConfig(2, SIM_DRIVE_EDS, cycle_ms=10, sync=sync))
     drive.boot()
