@@ -117,6 +117,8 @@ class Cia402Axis:
         self.slope_deg = float("nan")
         self.config = config
         self.node = canopen.RemoteNode(config.node_id, str(config.eds))
+        # canopen waits 0.3 s for an SDO answer: too short for a simulated drive on a loaded host
+        self.node.sdo.RESPONSE_TIMEOUT = ANSWER_TIMEOUT_S
         network.add_node(self.node)
         self.cycle_s = config.cycle_ms / 1000.0
         self.cycle = 0  # SYNCs sent (lockstep) or received
