@@ -190,8 +190,10 @@ class Cia402Axis:
             state = power_state(self.statusword)
             if state == "OPERATION ENABLED":
                 return
-            if state == "FAULT" and not fault_reset:  # one reset: 0 then bit 7 (rising edge)
-                fault_reset = True
+            if state == "FAULT":
+                if fault_reset:
+                    break  # it faults again: the drive's error code says why
+                fault_reset = True  # one reset: 0, then bit 7 (a rising edge)
                 self.step(State402.CW_DISABLE_VOLTAGE, self.actual)
                 self.step(State402.CW_SWITCH_ON_DISABLED, self.actual)
                 continue

@@ -274,3 +274,19 @@ def test_a_served_drive_quick_stops_when_its_master_dies():
         stop.set()
         master_net.disconnect()
         drive_net.disconnect()
+
+
+def test_a_drive_starting_in_fault_is_reset_once(stand):
+    axis, drive = stand
+    drive._fault(sim_drive.EMCY_OVERCURRENT)  # left in FAULT by a previous run
+    assert drive.status == sim_drive.FAULT
+    axis.start()
+    assert power_state(axis.statusword) == "OPERATION ENABLED" and drive.error_code == 0
+
+
+@pytest.mark.parametrize("stand", [DriveFaults(overcurrent_at_s=0.0)], indirect=True)
+def test_a_drive_that_cannot_be_enabled_is_one_line(stand):
+    axis, _ = stand
+    message = r"drive 3 did not reach OPERATION ENABLED \(state FAULT, error code 0x2310\)"
+    with pytest.raises(DriveError, match=message):
+        axis.start()
