@@ -30,6 +30,7 @@ from gyrostand import (
     cmd_plan,
     cmd_report,
     cmd_simulate,
+    cmd_simulate_drive,
     cmd_station,
 )
 from gyrostand.errors import unexpected, usage_error
@@ -177,6 +178,7 @@ def main(
 for module in (
     cmd_plan,
     cmd_simulate,
+    cmd_simulate_drive,
     cmd_campaign,
     cmd_analyze,
     cmd_report,

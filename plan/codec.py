@@ -33,6 +33,11 @@ def prepare(plan: Plan) -> None:
             codec.encode_command_set(t.direction_deg, t.amplitude_cm, t.period_s)
         except ProtocolError as exc:
             problems.append(f"[[trials]] {t.index}: the stand command cannot carry it: {exc}")
+    if plan.stand.protocol == "cia402":
+        problems.append(
+            '[stand] protocol: "cia402" stands are not runnable yet (the acquisition commands a '
+            '"gyrostand" stand controller only)'
+        )
     compass = plan.compass
     if compass.protocol in ("iec61162", "cia406"):
         problems.append(

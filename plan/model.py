@@ -585,24 +585,56 @@ class CompassPlan(_Table):
         return self.interface is not None
 
 
-class StandPlan(_Table):
-    """[stand]: the limits of the real stand, outside which it refuses a command; every trial
-    must lie within them. With the simulated stand the simulator's limits ([bus.simulator.stand],
-    default 50 cm, 2 to 20 s) apply as well: a key left out here is the simulator's
-    (`Plan.stand_limits`)."""
+StandProtocol = Literal["gyrostand", "cia402"]
+_CIA402_KEYS = ("eds", "node_id", "counts_per_degree", "arm_length_cm", "cycle_ms", "ramp_s")
 
+
+class StandPlan(_Table):
+    """[stand]: how the stand is commanded, and its limits, outside which it refuses a command;
+    every trial must lie within them. With the simulated stand the simulator's limits
+    ([bus.simulator.stand], default 50 cm, 2 to 20 s) apply as well: a key left out here is the
+    simulator's (`Plan.stand_limits`). "gyrostand": a stand controller speaking gyrostand's
+    STAND_COMMAND/STAND_MOTION frames; "cia402": a servo drive on CANopen (CiA 402) that
+    gyrostand commands itself (docs/instruments.md)."""
+
+    protocol: StandProtocol = "gyrostand"
+    """How the stand is commanded."""
     max_amplitude_cm: float | None = Field(None, gt=0)
     """Largest amplitude A the stand accepts, cm."""
     min_period_s: float | None = Field(None, gt=0)
     """Shortest rocking period tau the stand accepts, s."""
     max_period_s: float | None = Field(None, gt=0)
     """Longest rocking period tau the stand accepts, s."""
+    eds: Text | None = None
+    """cia402: the drive's EDS file (the lab's, from the drive's maker)."""
+    node_id: int | None = Field(None, ge=1, le=127)
+    """cia402: the drive's CANopen node id."""
+    counts_per_degree: float | None = Field(None, gt=0)
+    """cia402: drive position units (0x607A/0x6064) per degree of roll of the platform."""
+    arm_length_cm: float | None = Field(None, gt=0)
+    """cia402: the arm at which the amplitude A is measured (A = arm x roll angle, rad), cm."""
+    cycle_ms: int = Field(10, ge=1, le=100)
+    """cia402: the SYNC cycle (cyclic synchronous position: one target per cycle), ms."""
+    ramp_s: float = Field(10.0, gt=0)
+    """cia402: the smooth start and stop ramps of the roll's amplitude, s."""
 
     @model_validator(mode="after")
     def _consistent(self) -> StandPlan:
         low, high = self.min_period_s, self.max_period_s
+        problems = []
         if low is not None and high is not None and high < low:
-            check([("max_period_s", "must be >= min_period_s")])
+            problems.append(("max_period_s", "must be >= min_period_s"))
+        given = self.model_fields_set
+        if self.protocol == "cia402":
+            needed = ("eds", "node_id", "counts_per_degree", "arm_length_cm")
+            problems += [(k, 'missing (protocol = "cia402")') for k in needed if k not in given]
+        else:
+            problems += [
+                (k, f'not with protocol = "{self.protocol}" (a CiA 402 drive\'s)')
+                for k in _CIA402_KEYS
+                if k in given
+            ]
+        check(problems)
         return self
 
 

@@ -401,6 +401,39 @@ VALUES = [
         ("simulated = true", 'simulated = false\ninterface = "virtual"\ntiming = "virtual"'),
         append='\n[compass]\nprotocol = "nmea2000"\n',
     ),
+    # the stand's protocol ([stand], docs/instruments.md)
+    *(
+        plan_case(f"stand {what}", message, append=f"\n[stand]\n{table}\n")
+        for what, table, message in (
+            (
+                "protocol unknown",
+                'protocol = "ethercat"',
+                "[stand] protocol: must be one of 'gyrostand', 'cia402', not 'ethercat'",
+            ),
+            (
+                "cia402 without its drive",
+                'protocol = "cia402"\neds = "drive.eds"\nnode_id = 2\narm_length_cm = 50',
+                '[stand] counts_per_degree: missing (protocol = "cia402")',
+            ),
+            (
+                "cia402 node id out of range",
+                'protocol = "cia402"\neds = "d.eds"\nnode_id = 128\n'
+                "counts_per_degree = 1e4\narm_length_cm = 50",
+                "[stand] node_id: must be <= 127",
+            ),
+            (
+                "drive keys on a gyrostand stand",
+                "node_id = 2",
+                '[stand] node_id: not with protocol = "gyrostand" (a CiA 402 drive\'s)',
+            ),
+            (
+                "cia402 not runnable yet",
+                'protocol = "cia402"\neds = "drive.eds"\nnode_id = 2\n'
+                "counts_per_degree = 10000\narm_length_cm = 50",
+                '[stand] protocol: "cia402" stands are not runnable yet',
+            ),
+        )
+    ),
     Case(
         "dbc garbage",
         ("campaign", "run", "{file}", "--db", "{db}"),

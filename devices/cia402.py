@@ -1,0 +1,410 @@
+"""gyrostand as the CANopen master of a CiA 402 roll axis (canopen's RemoteNode).
+
+Setup (SDO, PRE-OPERATIONAL): the communication cycle 0x1006 and interpolation period 0x60C2,
+the drive's heartbeat producer 0x1017, its consumer 0x1016 of gyrostand's heartbeat with the
+abort connection option code 0x6007 = 3 (quick stop when gyrostand falls silent), the mode 0x6060
+(8 cyclic synchronous position if 0x6502 offers it, else 1 profile position), the PDO mapping read
+back from the drive. Then NMT start and the power state machine to OPERATION ENABLED.
+
+Every cycle: RPDO1 (controlword, target, mode), gyrostand's heartbeat when due, SYNC, and the
+drive's TPDO1 (statusword, actual position) of that SYNC. With `sync="lockstep"` gyrostand sends
+each SYNC itself after the RPDO (virtual time: a simulated drive runs one cycle of stand time per
+SYNC, so a run is deterministic); with `sync="periodic"` the bus's periodic sender produces SYNC
+every `cycle_ms` (kernel timed on SocketCAN) and each RPDO is written after the TPDO of the
+previous SYNC.
+
+Supervision: the drive's heartbeat (lost after 3 producer periods without one), EMCY, statusword
+bit 13 (following error) and the FAULT state are events; a fault or a lost drive fails the
+rocking. A stop request (Ctrl-C, SIGTERM, the station, a failed trial) starts the trajectory's
+stop ramp; at rest the axis is disabled (shutdown, then disable voltage).
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
+
+import canopen
+import numpy as np
+from canopen.emcy import EmcyError
+from canopen.profiles.p402 import State402
+
+from gyrostand.devices.roll_trajectory import RollTrajectory
+
+if TYPE_CHECKING:
+    from gyrostand.devices.cia410 import Cia410Inclinometer
+
+CSP, PP = 8, 1
+SDO_ERRORS = (canopen.SdoAbortedError, canopen.SdoCommunicationError)
+_SUPPORTS = {CSP: 1 << 7, PP: 1 << 0}  # 0x6502 bits
+SW_FOLLOWING_ERROR = 1 << 13
+ANSWER_TIMEOUT_S = 2.0  # wall-clock bound on a drive's answer (a dead drive, not a timing)
+HEARTBEAT_MISSES = 3  # a heartbeat is lost after this many producer periods
+
+
+class DriveError(RuntimeError):
+    """The drive refused or could not do what the master needs (one line)."""
+
+
+def power_state(statusword: int) -> str:
+    """The CiA 402 power state a statusword shows."""
+    for state, (mask, value) in State402.SW_MASK.items():
+        if statusword & mask == value:
+            return state
+    return "UNKNOWN"
+
+
+@dataclass(frozen=True)
+class AxisConfig:
+    node_id: int
+    eds: Path
+    cycle_ms: int = 10
+    master_node_id: int = 127  # the node id of gyrostand's heartbeat (the drive consumes it)
+    heartbeat_ms: int = 100  # gyrostand's and the drive's heartbeat producer period
+    drive_timeout_ms: int = 300  # the drive's consumer time of gyrostand's heartbeat
+    sync: Literal["lockstep", "periodic"] = "lockstep"
+
+
+@dataclass(frozen=True)
+class AxisEvent:
+    t_s: float  # stand time (cycles since the axis was started)
+    kind: Literal["emcy", "following_error", "fault", "heartbeat_lost", "stop"]
+    detail: str
+
+
+@dataclass(frozen=True)
+class RollRecord:
+    """One rocking on the axis: per SYNC, the stand time, commanded and actual position."""
+
+    t_s: np.ndarray
+    target_counts: np.ndarray
+    actual_counts: np.ndarray
+    slope_deg: np.ndarray  # the inclinometer's slope at each SYNC (empty without one)
+    events: tuple[AxisEvent, ...]
+    failure: str | None  # why the rocking failed (the drive's error named), None if it did not
+    stopped_by: str | None  # what started the stop ramp early, None for the planned end
+
+
+@dataclass
+class _Inbox:
+    """What the notifier thread hands to the master loop."""
+
+    tpdo: queue.Queue[tuple[int, int]] = field(default_factory=queue.Queue)
+    emcy: list[EmcyError] = field(default_factory=list)
+    heartbeats: int = 0
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+
+class Cia402Axis:
+    """The roll axis: a drive on `network` (connected), commanded in stand-time cycles."""
+
+    def __init__(
+        self,
+        network: canopen.Network,
+        config: AxisConfig,
+        inclinometer: Cia410Inclinometer | None = None,
+    ):
+        """`inclinometer`: on the same bus and SYNC, started before the axis."""
+        self.network = network
+        self.inclinometer = inclinometer
+        self.slope_deg = float("nan")
+        self.config = config
+        self.node = canopen.RemoteNode(config.node_id, str(config.eds))
+        # canopen waits 0.3 s for an SDO answer: too short for a simulated drive on a loaded host
+        self.node.sdo.RESPONSE_TIMEOUT = ANSWER_TIMEOUT_S
+        network.add_node(self.node)
+        self.cycle_s = config.cycle_ms / 1000.0
+        self.cycle = 0  # SYNCs sent (lockstep) or received
+        self.mode = CSP
+        self.statusword = 0
+        self.actual = 0
+        self.stop_requested: str | None = None
+        self._inbox = _Inbox()
+        self._events: list[AxisEvent] = []
+        self._heartbeat_cycle = 0
+        self._drive_heard_cycle = 0
+        self._target = 0
+
+    @property
+    def t_s(self) -> float:
+        return self.cycle * self.cycle_s
+
+    # -- setup ----------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Configure the drive, NMT start, OPERATION ENABLED. DriveError names what failed."""
+        c, sdo = self.config, self.node.sdo
+        self.node.nmt.state = "PRE-OPERATIONAL"
+        try:
+            supported = int(sdo[0x6502].raw)
+            modes = [m for m in (CSP, PP) if supported & _SUPPORTS[m]]
+            if not modes:
+                raise DriveError(
+                    f"drive {c.node_id} offers neither cyclic synchronous nor profile position "
+                    f"(0x6502 = 0x{supported:08X})"
+                )
+            self.mode = modes[0]
+            sdo[0x1006].raw = c.cycle_ms * 1000
+            sdo[0x60C2][1].raw = c.cycle_ms
+            sdo[0x60C2][2].raw = -3  # 10^-3 s
+            sdo[0x1017].raw = c.heartbeat_ms
+            sdo[0x1016][1].raw = (c.master_node_id << 16) | c.drive_timeout_ms
+            sdo[0x6007].raw = 3  # abort connection: quick stop
+            self.node.pdo.read()  # the drive's own mapping, by SDO
+        except SDO_ERRORS as exc:
+            raise DriveError(f"drive {c.node_id} refused its configuration: {exc}") from None
+        self._check_mapping()
+        rpdo, tpdo = self.node.rpdo[1], self.node.tpdo[1]
+        tpdo.add_callback(self._on_tpdo)
+        self.node.emcy.add_callback(self._on_emcy)
+        self.node.nmt.add_heartbeat_callback(self._on_heartbeat)
+        rpdo["Modes of operation"].raw = self.mode
+        self.node.nmt.state = "OPERATIONAL"
+        if c.sync == "periodic":
+            self.network.sync.start(self.cycle_s)
+        self._enable()
+
+    def _check_mapping(self) -> None:
+        need = {"RPDO1": (self.node.rpdo[1], (0x6040, 0x607A, 0x6060))}
+        need["TPDO1"] = (self.node.tpdo[1], (0x6041, 0x6064))
+        for name, (pdo, indexes) in need.items():
+            mapped = {var.index for var in pdo}
+            missing = [f"0x{i:04X}" for i in indexes if i not in mapped]
+            if missing or not pdo.enabled or not 1 <= (pdo.trans_type or 0) <= 240:
+                raise DriveError(
+                    f"drive {self.config.node_id}: {name} must be synchronous and map "
+                    f"{', '.join(f'0x{i:04X}' for i in indexes)} (missing: {', '.join(missing)})"
+                )
+
+    def _enable(self, max_cycles: int = 200) -> None:
+        self.step(0, 0)
+        fault_reset = False
+        for _ in range(max_cycles):
+            state = power_state(self.statusword)
+            if state == "OPERATION ENABLED":
+                return
+            if state == "FAULT":
+                if fault_reset:
+                    break  # it faults again: the drive's error code says why
+                fault_reset = True  # one reset: 0, then bit 7 (a rising edge)
+                self.step(State402.CW_DISABLE_VOLTAGE, self.actual)
+                self.step(State402.CW_SWITCH_ON_DISABLED, self.actual)
+                continue
+            nxt = State402.next_state_indirect(state)
+            if (state, "OPERATION ENABLED") in State402.TRANSITIONTABLE:
+                nxt = "OPERATION ENABLED"
+            code = State402.TRANSITIONTABLE.get((state, nxt))
+            if code is None:
+                break
+            self.step(code, self.actual)
+        raise DriveError(
+            f"drive {self.config.node_id} did not reach OPERATION ENABLED "
+            f"(state {power_state(self.statusword)}, error code 0x{self._error_code():04X})"
+        )
+
+    def _error_code(self) -> int:
+        try:
+            return int(self.node.sdo[0x603F].raw)
+        except (*SDO_ERRORS, KeyError):
+            return 0
+
+    # -- notifier thread ------------------------------------------------------------------
+
+    def _on_tpdo(self, pdo: canopen.pdo.PdoMap) -> None:
+        self._inbox.tpdo.put((int(pdo["Statusword"].raw), int(pdo["Position actual value"].raw)))
+
+    def _on_emcy(self, error: EmcyError) -> None:
+        with self._inbox.lock:
+            self._inbox.emcy.append(error)
+
+    def _on_heartbeat(self, state: int) -> None:
+        with self._inbox.lock:
+            self._inbox.heartbeats += 1
+
+    # -- one cycle ------------------------------------------------------------------------
+
+    def step(self, controlword: int, target_counts: int) -> None:
+        """One SYNC cycle: send the RPDO, (lockstep) the SYNC, take the drive's TPDO."""
+        rpdo = self.node.rpdo[1]
+        rpdo["Controlword"].raw = controlword
+        rpdo["Target position"].raw = target_counts
+        self._target = target_counts
+        rpdo.transmit()
+        c = self.config
+        if self.cycle >= self._heartbeat_cycle:
+            self.network.send_message(0x700 + c.master_node_id, bytes([5]))  # OPERATIONAL
+            self._heartbeat_cycle = self.cycle + max(1, round(c.heartbeat_ms / c.cycle_ms))
+        if c.sync == "lockstep":
+            self.network.sync.transmit()
+        try:
+            self.statusword, self.actual = self._inbox.tpdo.get(timeout=ANSWER_TIMEOUT_S)
+        except queue.Empty:
+            raise DriveError(
+                f"drive {c.node_id} sent no TPDO within {ANSWER_TIMEOUT_S:g} s of a SYNC"
+            ) from None
+        if self.inclinometer is not None:
+            self.slope_deg = self.inclinometer.take()
+        self.cycle += 1
+        self._supervise()
+
+    def _supervise(self) -> None:
+        with self._inbox.lock:
+            emcys, self._inbox.emcy = self._inbox.emcy, []
+            heard, self._inbox.heartbeats = self._inbox.heartbeats, 0
+        for e in emcys:
+            if e.code:
+                self._event("emcy", f"EMCY 0x{e.code:04X} ({e.get_desc()})")
+        if heard:
+            self._drive_heard_cycle = self.cycle
+        silent_s = (self.cycle - self._drive_heard_cycle) * self.cycle_s
+        limit_s = HEARTBEAT_MISSES * self.config.heartbeat_ms / 1000.0
+        if silent_s > limit_s and not self._has("heartbeat_lost"):
+            self._event("heartbeat_lost", f"no heartbeat from drive for {silent_s:.2f} s")
+        if self.statusword & SW_FOLLOWING_ERROR and not self._has("following_error"):
+            self._event("following_error", "statusword bit 13 (following error)")
+        faulted = power_state(self.statusword) in ("FAULT", "FAULT REACTION ACTIVE")
+        if faulted and not self._has("fault"):
+            self._event("fault", f"drive fault, error code 0x{self._error_code():04X}")
+
+    def _event(self, kind: str, detail: str) -> None:
+        self._events.append(AxisEvent(self.t_s, kind, detail))  # type: ignore[arg-type]
+
+    def _has(self, kind: str) -> bool:
+        return any(e.kind == kind for e in self._events)
+
+    # -- rocking ----------------------------------------------------------------------------
+
+    def rock(
+        self,
+        trajectory: RollTrajectory,
+        counts_per_degree: float,
+        zero_counts: int = 0,
+        stop_check: Callable[[float], str | None] | None = None,
+    ) -> RollRecord:
+        """Run `trajectory` (its stop ramp set, or set by a stop request) from the axis's current
+        cycle, then disable the axis at rest. `stop_check(t)` (the station's stop request) gives
+        a reason to stop, or None; signals set `stop_requested`."""
+        t0 = self.t_s
+        ts, targets, actuals, slopes = [], [], [], []
+        failure: str | None = None
+        stopped_by: str | None = None
+        cw = State402.CW_OPERATION_ENABLED
+        set_point, due = zero_counts, 0.0  # profile position: the current set-point
+        while True:
+            t = self.t_s - t0
+            if stop_check is not None and self.stop_requested is None:
+                self.stop_requested = stop_check(t)
+            reason = self.stop_requested or failure
+            if reason and t < trajectory.stop_at_s:
+                trajectory = trajectory.stopped_at(t)
+                stopped_by = reason
+                self._event("stop", f"stop ramp: {reason}")
+            if t >= trajectory.end_s:
+                break
+            if self.mode == CSP:
+                target = zero_counts + round(counts_per_degree * float(trajectory.position_deg(t)))
+                self.step(cw, target)
+            else:
+                new = t >= due - 1e-9
+                if new:
+                    due, peak_deg = _next_peak(trajectory, t)
+                    start, set_point = set_point, zero_counts + round(counts_per_degree * peak_deg)
+                    self._load_profile(abs(set_point - start), due - t)
+                target = set_point
+                self.step(cw | (0x10 if new else 0), target)  # bit 4: new set-point
+            ts.append(self.t_s)
+            targets.append(target)
+            actuals.append(self.actual)
+            slopes.append(self.slope_deg)
+            if failure is None:
+                failure = self._failure()
+            if power_state(self.statusword) in ("FAULT", "FAULT REACTION ACTIVE"):
+                self._await_fault_reaction()
+                break
+        self._settle(cw)
+        self._disable()
+        return RollRecord(
+            np.asarray(ts),
+            np.asarray(targets, dtype=np.int64),
+            np.asarray(actuals, dtype=np.int64),
+            np.asarray(slopes if self.inclinometer is not None else []),
+            tuple(self._events),
+            failure,
+            stopped_by,
+        )
+
+    def _failure(self) -> str | None:
+        for e in self._events:
+            if e.kind in ("fault", "heartbeat_lost"):
+                emcy = next((x.detail for x in self._events if x.kind == "emcy"), None)
+                return f"{e.detail}" + (f": {emcy}" if emcy and e.kind == "fault" else "")
+        return None
+
+    def _load_profile(self, distance: float, duration_s: float) -> None:
+        """Profile position: the triangular velocity profile that covers `distance` in
+        `duration_s`, a = 4 d / T^2, v = a T / 2 = 2 d / T."""
+        a = max(1, math.ceil(4.0 * distance / duration_s**2))
+        self.node.sdo[0x6081].raw = max(1, math.ceil(a * duration_s / 2.0))
+        self.node.sdo[0x6083].raw = a
+        self.node.sdo[0x6084].raw = a
+
+    def _await_fault_reaction(self, max_cycles: int = 3000) -> None:
+        """The drive stops the axis itself (its fault reaction) and switches it off."""
+        for _ in range(max_cycles):
+            if power_state(self.statusword) == "FAULT":
+                return
+            self.step(State402.CW_OPERATION_ENABLED, self.actual)
+
+    def _settle(self, controlword: int, max_cycles: int = 200) -> None:
+        """Hold the last target until the axis has stopped moving (the servo's lag settled)."""
+        if power_state(self.statusword) != "OPERATION ENABLED":
+            return
+        target, previous = self._target, None
+        for _ in range(max_cycles):
+            if self.actual == previous:
+                return
+            previous = self.actual
+            self.step(controlword, target)
+
+    def _disable(self) -> None:
+        """At rest: shutdown (power stage off), then disable voltage."""
+        if power_state(self.statusword) not in ("FAULT", "FAULT REACTION ACTIVE"):
+            self.step(State402.CW_SHUTDOWN, self.actual)
+            self.step(State402.CW_DISABLE_VOLTAGE, self.actual)
+
+    def close(self) -> None:
+        if self.config.sync == "periodic":
+            self.network.sync.stop()
+
+
+def _next_peak(trajectory: RollTrajectory, t: float) -> tuple[float, float]:
+    """Profile position's next set-point after `t`: the sinusoid's next peak (t = tau/4 +
+    k tau/2) and its angle, or the rest position at the trajectory's end."""
+    quarter = trajectory.period_s / 4.0
+    k = max(0, math.floor((t - quarter) / (2.0 * quarter) + 1e-9) + 1)
+    peak = quarter + 2.0 * quarter * k
+    if peak + quarter > trajectory.end_s:  # the last segment: back to rest at the end
+        return trajectory.end_s, 0.0
+    return peak, float(trajectory.position_deg(peak))
+
+
+@contextmanager
+def stop_on_signals(axis: Cia402Axis) -> Iterator[None]:
+    """Ctrl-C and SIGTERM start the axis's stop ramp instead of killing gyrostand mid-roll."""
+
+    def handler(signum: int, frame: object) -> None:
+        axis.stop_requested = signal.Signals(signum).name
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
