@@ -28,6 +28,8 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
   iteration, theta, step, rss, s2, f_p = s2 / S^2_e);
 - ``adequacy``: s2_r, dof_r, s2_e, dof_e, f_p, f_critical, p_value, adequate, s2_e_mean, f_p_mean,
   p_value_mean, adequate_mean_basis, q (see `analysis.adequacy`);
+- ``error_agreement``: f_p (S^2_r over S^2_e/N), dof_r, dof_e, p_low (its lower tail), q,
+  too_small (the residual variance implausibly small: a warning says so);
 - ``controls``: per control trial index, direction_deg, amplitude_cm, period_s, observed_deg,
   predicted_deg, residual_deg, residual_over_s_e, s_e_bound_deg, within_s_e_bound,
   half_width_deg, within_interval;
@@ -56,7 +58,14 @@ from typing import Any
 import numpy as np
 from scipy.stats import t as student_t
 
-from gyrostand.analysis.adequacy import Adequacy, ControlResult, adequacy_test, judge_controls
+from gyrostand.analysis.adequacy import (
+    Adequacy,
+    ControlResult,
+    ErrorAgreement,
+    adequacy_test,
+    error_agreement,
+    judge_controls,
+)
 from gyrostand.analysis.assumptions import (
     AssumptionCheck,
     homogeneity_check,
@@ -124,6 +133,7 @@ class CampaignAnalysis:
     fit_indices: tuple[int, ...]
     iteration_f_p: tuple[float, ...]
     adequacy: Adequacy
+    error_agreement: ErrorAgreement
     controls: tuple[ControlResult, ...]
     assumptions: tuple[AssumptionCheck, ...]
     predictor: Predictor
@@ -186,6 +196,7 @@ class CampaignAnalysis:
                 "log": log,
             },
             "adequacy": asdict(self.adequacy),
+            "error_agreement": asdict(self.error_agreement),
             "controls": [asdict(c) for c in self.controls],
             "assumptions": [{**asdict(a), "verdict": a.verdict} for a in self.assumptions],
             "predictor": self.predictor.to_dict(),
@@ -364,6 +375,7 @@ def analyze_campaign(
         ships: Sequence[ShipConditions] = ()
     else:
         ships = (forecast,) if isinstance(forecast, ShipConditions) else forecast
+    agreement = error_agreement(adequacy)
     return CampaignAnalysis(
         q=q,
         constants=constants,
@@ -374,12 +386,13 @@ def analyze_campaign(
         fit_indices=tuple(labels),
         iteration_f_p=tuple(r.s2 / s2_e for r in fit.log),
         adequacy=adequacy,
+        error_agreement=agreement,
         controls=controls,
         assumptions=assumptions,
         predictor=predictor,
         forecasts=tuple(forecast_ship(predictor, ship) for ship in ships),
         admissible=admissible,
-        warnings=_warnings(fit, cochran, adequacy, assumptions, admissible),
+        warnings=_warnings(fit, cochran, adequacy, agreement, assumptions, admissible),
     )
 
 
@@ -387,6 +400,7 @@ def _warnings(
     fit: FitResult,
     cochran: CochranResult,
     adequacy: Adequacy,
+    agreement: ErrorAgreement,
     assumptions: tuple[AssumptionCheck, ...],
     admissible: AdmissibleRegion | None,
 ) -> tuple[str, ...]:
@@ -414,6 +428,15 @@ def _warnings(
             f"adequacy depends on the error basis: F_p = {adequacy.f_p:.3g} on the paper's "
             f"single-observation basis, {adequacy.f_p_mean:.3g} on the trial-mean basis "
             f"(F_T = {adequacy.f_critical:.3g})"
+        )
+    if cochran.homogeneous and agreement.too_small:
+        found.append(
+            f"the residual variance is implausibly small: S^2_r = {adequacy.s2_r:.3g} is "
+            f"{agreement.f_p:.3g} times the error of the trial means S^2_e/N = "
+            f"{adequacy.s2_e_mean:.3g} deg^2 (P(F({agreement.dof_r}, {agreement.dof_e}) <= "
+            f"{agreement.f_p:.3g}) = {agreement.p_low:.2g} < q = {agreement.q:g}): the two "
+            f"estimates of error disagree, and the t({agreement.dof_r}) intervals, which rest "
+            "on S^2_r, may be too narrow"
         )
     for check in assumptions:
         if check.holds is False and check.name != "homogeneity":
