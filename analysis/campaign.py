@@ -19,7 +19,9 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
 - ``constants``: lP_gcm2s2, H1_gcm2s, earth_rate_rad_s, gravity_cm_s2, latitude_deg;
 - ``trials``: per trial index, role, direction_deg, amplitude_cm, period_s, delta_deg,
   var_deg2 (eq 2.3), var_mean_deg2 (variance of the mean difference), dof (2.4), n_before,
-  n_under, before / under ({mean_deg, var_deg2, n} or null), source;
+  n_under, before / under ({mean_deg, var_deg2, n} or null), source, n_eff_before, n_eff_under
+  and paper_var_mean_deg2 (S1^2/N1 + S2^2/N2; all three null unless the observations are
+  correlated, when var_deg2, var_mean_deg2 and dof use N_eff: `analysis.effective`);
 - ``cochran``: g_ex, g_critical, q, nu, k, homogeneous, largest (trial index), pooled_variance
   (S^2_e of 2.6, deg^2), s_e (deg);
 - ``fit``: parameters, start, estimates, std_errors, covariance, correlation, xtx_inv,
@@ -51,7 +53,7 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
 """
 
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields, is_dataclass
 from typing import Any
 
@@ -95,7 +97,9 @@ from gyrostand.analysis.trials import TrialInput, TrialStats, trial_statistics
 
 VARIANCE_BASIS = (
     "S^2{<delta_i>} = S1^2 + S2^2 (eq 2.3, single-observation variances) for Cochran, S_e and "
-    "F_p; var_mean = S1^2/N1 + S2^2/N2 (variance of <delta_i>) for the trial-mean basis"
+    "F_p; var_mean = S1^2/N1 + S2^2/N2 (variance of <delta_i>) for the trial-mean basis; with "
+    "correlated observations N_eff = N/f for N and S^2 corrected for its bias (Sveshnikov "
+    "section 8.3), the paper's S1^2/N1 + S2^2/N2 kept as paper_var_mean_deg2"
 )
 PHYSICAL_BOUNDS = {"C_gcm2s2": (0.0, np.inf), "T_s": (0.0, np.inf)}
 
@@ -296,12 +300,16 @@ def analyze_campaign(
     eps_se: float = 1e-3,
     n_repeat: int | None = None,
     independence: AssumptionCheck | None = None,
+    inflation: Mapping[int, tuple[float, float]] | None = None,
 ) -> CampaignAnalysis:
     """Run the seed-000 method on a campaign.
 
     independence: the check of independent observations when the caller has better evidence
     than the N observations themselves (the reading's correlation function, report.signal);
     default the lag-1 Ljung-Box test on the series.
+    inflation: per trial index, the variance inflation f of its series before and under rocking
+    (`analysis.effective`, from the reading's correlation function): each mean's variance, S_e,
+    Cochran's and Fisher's tests then take N_eff = N/f observations per series.
     q: significance level of every test; start: (C0 in g cm^2 s^-2, T0 in s); eps: absolute
     thresholds of eq 1.8 per parameter (default: eps_se x the standard error at the iterate, i.e.
     steps below 0.1 % of a standard error); n_repeat: N of the mean-of-N prediction variant
@@ -312,12 +320,14 @@ def analyze_campaign(
     if not (theta0["C_gcm2s2"] > 0 and theta0["T_s"] > 0):
         # at T = 0 the model is flat in T (dalpha/dT = 0): Gauss-Newton could never move T
         raise AnalysisError(f"start values must have C > 0 and T > 0, got {theta0}")
-    stats = tuple(trial_statistics(t) for t in trials)
+    inflation = inflation or {}
+    stats = tuple(trial_statistics(t, inflation.get(t.index)) for t in trials)
     fit_stats = _fit_trials(stats)
     labels = [s.index for s in fit_stats]
-    cochran = cochran_test(
-        [s.var_deg2 for s in fit_stats], [s.dof for s in fit_stats], q=q, labels=labels
-    )
+    dofs = [s.dof for s in fit_stats]
+    if any(s.n_eff_before is not None for s in fit_stats):
+        dofs = [min(dofs)] * len(dofs)  # effective dof differ a little: the smallest, for all
+    cochran = cochran_test([s.var_deg2 for s in fit_stats], dofs, q=q, labels=labels)
     model = RollingErrorModel(constants)
     x = _conditions(fit_stats)
     _check_design(model, x, theta0)
@@ -337,7 +347,7 @@ def analyze_campaign(
         raise error(f"the fit of C and T failed: {fit.reason}")
 
     s2_e = cochran.pooled_variance  # eq 2.6
-    dof_e = sum(s.dof for s in fit_stats) // 2  # n (N - 1), as the paper's example
+    dof_e = sum(dofs) // 2  # n (N - 1), as the paper's example (N_eff for N when correlated)
     adequacy = adequacy_test(
         fit.s2,  # eq 2.7 = eq 1.9 at the solution
         fit.dof,
