@@ -8,25 +8,17 @@ from gyrostand.analysis import paper_example as paper
 from gyrostand.analysis.campaign import analyze_campaign
 from gyrostand.analysis.effective import correlated_series, variance_inflation
 from gyrostand.analysis.errors import AnalysisError
-from gyrostand.analysis.gyro_model import Conditions, RollingErrorModel
+from gyrostand.analysis.gyro_model import RollingErrorModel
+from gyrostand.analysis.synthetic import Design, ar1, synthetic_trials
 from gyrostand.analysis.trials import TrialInput
 
 RHO, N = 0.5, 12
 TRUE = {"C_gcm2s2": 6e7, "T_s": 1.15}
-DESIGN = Conditions(  # the paper's periods and directions, six fit trials
+DESIGN = Design(  # six fit trials
     direction_deg=np.array([30.0, 60, 120, 150, 45, 135]),
     amplitude_cm=np.array([20.0, 24, 22, 18, 21, 23]),
     period_s=np.array([3.5, 4.5, 5.5, 6.5, 6.0, 7.0]),
 )
-
-
-def ar1(rho: float, shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
-    """Stationary AR(1) series of unit variance along the last axis: correlation rho^k."""
-    x = np.empty(shape)
-    x[..., 0] = rng.standard_normal(shape[:-1])
-    for t in range(1, shape[-1]):
-        x[..., t] = rho * x[..., t - 1] + np.sqrt(1 - rho**2) * rng.standard_normal(shape[:-1])
-    return x
 
 
 def ar1_inflation(rho: float, n: int) -> float:
@@ -63,24 +55,13 @@ def test_too_correlated_series_is_refused_in_one_line() -> None:
         correlated_series(1.0, 5, 5.0, "trial 3, series 2")
 
 
-def correlated_campaign(seed: int, sigma: float = 0.05) -> list[TrialInput]:
-    """The paper's design with AR(1) reading noise (rho = 0.5) in every series of N = 12."""
+def correlated_campaign(seed: int) -> list[TrialInput]:
+    """The design with AR(1) reading noise (rho = 0.5, sigma 0.05 deg) in every series of N."""
     rng = np.random.default_rng(seed)
-    x = DESIGN
-    alpha = RollingErrorModel(paper.CONSTANTS)(x, **TRUE)
-    noise = sigma * ar1(RHO, (alpha.size, 2, N), rng)
-    return [
-        TrialInput(
-            index=i + 1,
-            role="fit",
-            direction_deg=float(x.direction_deg[i]),
-            amplitude_cm=float(x.amplitude_cm[i]),
-            period_s=float(x.period_s[i]),
-            before_deg=tuple(10.0 + noise[i, 0]),
-            under_deg=tuple(10.0 + alpha[i] + noise[i, 1]),
-        )
-        for i in range(alpha.size)
-    ]
+    roles = ["fit"] * 6
+    return synthetic_trials(
+        paper.CONSTANTS, DESIGN, roles, **TRUE, sigma_deg=0.05, n_obs=N, rng=rng, rho=RHO
+    )
 
 
 def test_campaign_reports_the_standard_error_the_trial_means_have() -> None:
@@ -89,7 +70,7 @@ def test_campaign_reports_the_standard_error_the_trial_means_have() -> None:
     paper's S^2/N; S_e and each trial's dof follow."""
     f = variance_inflation(RHO ** np.arange(1, N), N)
     inflation = {i: (f, f) for i in range(1, 7)}
-    alpha = RollingErrorModel(paper.CONSTANTS)(DESIGN, **TRUE)
+    alpha = RollingErrorModel(paper.CONSTANTS)(DESIGN.conditions, **TRUE)
     z_new, z_old = [], []
     for seed in range(40):
         trials = correlated_campaign(seed)
