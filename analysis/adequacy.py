@@ -85,6 +85,30 @@ def adequacy_test(
 
 
 @dataclass(frozen=True)
+class ErrorAgreement:
+    """Whether the residual variance S^2_r (2.7) is implausibly small against the error of the
+    trial means S^2_e/N: the lower tail of F = S^2_r / (S^2_e/N) ~ F(n - m, nu_e) (eq 2.8 read
+    the other way). ``p_low`` = P(F <= F_p); ``too_small`` when below q (the two estimates of
+    error disagree: the t(n - m) intervals, which rest on S^2_r, may be too narrow)."""
+
+    f_p: float
+    dof_r: int
+    dof_e: int
+    p_low: float
+    q: float
+    too_small: bool
+
+
+def error_agreement(adequacy: Adequacy) -> ErrorAgreement:
+    """The lower-tail F test of S^2_r against the trial-mean error S^2_e/N of ``adequacy``."""
+    f_p = adequacy.f_p_mean  # eq 2.8 on the trial-mean basis
+    p_low = float(stats.f.cdf(f_p, adequacy.dof_r, adequacy.dof_e))
+    return ErrorAgreement(
+        f_p, adequacy.dof_r, adequacy.dof_e, p_low, adequacy.q, p_low < adequacy.q
+    )
+
+
+@dataclass(frozen=True)
 class ControlResult:
     """A control trial (not fitted): observed <delta>, the model's prediction, residual
     v = <delta> - alpha, judged against S_e (bound t(1 - q/2; nu_e) S_e) and against the

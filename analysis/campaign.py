@@ -19,7 +19,9 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
 - ``constants``: lP_gcm2s2, H1_gcm2s, earth_rate_rad_s, gravity_cm_s2, latitude_deg;
 - ``trials``: per trial index, role, direction_deg, amplitude_cm, period_s, delta_deg,
   var_deg2 (eq 2.3), var_mean_deg2 (variance of the mean difference), dof (2.4), n_before,
-  n_under, before / under ({mean_deg, var_deg2, n} or null), source;
+  n_under, before / under ({mean_deg, var_deg2, n} or null), source, n_eff_before, n_eff_under
+  and paper_var_mean_deg2 (S1^2/N1 + S2^2/N2; all three null unless the observations are
+  correlated, when var_deg2, var_mean_deg2 and dof use N_eff: `analysis.effective`);
 - ``cochran``: g_ex, g_critical, q, nu, k, homogeneous, largest (trial index), pooled_variance
   (S^2_e of 2.6, deg^2), s_e (deg);
 - ``fit``: parameters, start, estimates, std_errors, covariance, correlation, xtx_inv,
@@ -28,6 +30,8 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
   iteration, theta, step, rss, s2, f_p = s2 / S^2_e);
 - ``adequacy``: s2_r, dof_r, s2_e, dof_e, f_p, f_critical, p_value, adequate, s2_e_mean, f_p_mean,
   p_value_mean, adequate_mean_basis, q (see `analysis.adequacy`);
+- ``error_agreement``: f_p (S^2_r over S^2_e/N), dof_r, dof_e, p_low (its lower tail), q,
+  too_small (the residual variance implausibly small: a warning says so);
 - ``controls``: per control trial index, direction_deg, amplitude_cm, period_s, observed_deg,
   predicted_deg, residual_deg, residual_over_s_e, s_e_bound_deg, within_s_e_bound,
   half_width_deg, within_interval;
@@ -49,7 +53,7 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
 """
 
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields, is_dataclass
 from typing import Any
 
@@ -60,7 +64,9 @@ from gyrostand.analysis.adequacy import (
     ADEQUACY_BASIS,
     Adequacy,
     ControlResult,
+    ErrorAgreement,
     adequacy_test,
+    error_agreement,
     judge_controls,
 )
 from gyrostand.analysis.assumptions import (
@@ -94,7 +100,9 @@ from gyrostand.analysis.trials import TrialInput, TrialStats, trial_statistics
 
 VARIANCE_BASIS = (
     "S^2{<delta_i>} = S1^2 + S2^2 (eq 2.3, single-observation variances) for Cochran, S_e and "
-    "F_p; var_mean = S1^2/N1 + S2^2/N2 (variance of <delta_i>) for the trial-mean basis"
+    "F_p; var_mean = S1^2/N1 + S2^2/N2 (variance of <delta_i>) for the trial-mean basis; with "
+    "correlated observations N_eff = N/f for N and S^2 corrected for its bias (Sveshnikov "
+    "section 8.3), the paper's S1^2/N1 + S2^2/N2 kept as paper_var_mean_deg2"
 )
 PHYSICAL_BOUNDS = {"C_gcm2s2": (0.0, np.inf), "T_s": (0.0, np.inf)}
 
@@ -134,6 +142,7 @@ class CampaignAnalysis:
     fit_indices: tuple[int, ...]
     iteration_f_p: tuple[float, ...]
     adequacy: Adequacy
+    error_agreement: ErrorAgreement
     controls: tuple[ControlResult, ...]
     assumptions: tuple[AssumptionCheck, ...]
     predictor: Predictor
@@ -208,6 +217,7 @@ class CampaignAnalysis:
                 "basis": ADEQUACY_BASIS,
                 "decision": self.adequacy.decision,
             },
+            "error_agreement": asdict(self.error_agreement),
             "controls": [asdict(c) for c in self.controls],
             "assumptions": [{**asdict(a), "verdict": a.verdict} for a in self.assumptions],
             "predictor": self.predictor.to_dict(),
@@ -307,12 +317,16 @@ def analyze_campaign(
     eps_se: float = 1e-3,
     n_repeat: int | None = None,
     independence: AssumptionCheck | None = None,
+    inflation: Mapping[int, tuple[float, float]] | None = None,
 ) -> CampaignAnalysis:
     """Run the seed-000 method on a campaign.
 
     independence: the check of independent observations when the caller has better evidence
     than the N observations themselves (the reading's correlation function, report.signal);
     default the lag-1 Ljung-Box test on the series.
+    inflation: per trial index, the variance inflation f of its series before and under rocking
+    (`analysis.effective`, from the reading's correlation function): each mean's variance, S_e,
+    Cochran's and Fisher's tests then take N_eff = N/f observations per series.
     q: significance level of every test; start: (C0 in g cm^2 s^-2, T0 in s); eps: absolute
     thresholds of eq 1.8 per parameter (default: eps_se x the standard error at the iterate, i.e.
     steps below 0.1 % of a standard error); n_repeat: N of the mean-of-N prediction variant
@@ -323,12 +337,14 @@ def analyze_campaign(
     if not (theta0["C_gcm2s2"] > 0 and theta0["T_s"] > 0):
         # at T = 0 the model is flat in T (dalpha/dT = 0): Gauss-Newton could never move T
         raise AnalysisError(f"start values must have C > 0 and T > 0, got {theta0}")
-    stats = tuple(trial_statistics(t) for t in trials)
+    inflation = inflation or {}
+    stats = tuple(trial_statistics(t, inflation.get(t.index)) for t in trials)
     fit_stats = _fit_trials(stats)
     labels = [s.index for s in fit_stats]
-    cochran = cochran_test(
-        [s.var_deg2 for s in fit_stats], [s.dof for s in fit_stats], q=q, labels=labels
-    )
+    dofs = [s.dof for s in fit_stats]
+    if any(s.n_eff_before is not None for s in fit_stats):
+        dofs = [min(dofs)] * len(dofs)  # effective dof differ a little: the smallest, for all
+    cochran = cochran_test([s.var_deg2 for s in fit_stats], dofs, q=q, labels=labels)
     model = RollingErrorModel(constants)
     x = _conditions(fit_stats)
     _check_design(model, x, theta0)
@@ -348,7 +364,7 @@ def analyze_campaign(
         raise error(f"the fit of C and T failed: {fit.reason}")
 
     s2_e = cochran.pooled_variance  # eq 2.6
-    dof_e = sum(s.dof for s in fit_stats) // 2  # n (N - 1), as the paper's example
+    dof_e = sum(dofs) // 2  # n (N - 1), as the paper's example (N_eff for N when correlated)
     adequacy = adequacy_test(
         fit.s2,  # eq 2.7 = eq 1.9 at the solution
         fit.dof,
@@ -386,6 +402,7 @@ def analyze_campaign(
         ships: Sequence[ShipConditions] = ()
     else:
         ships = (forecast,) if isinstance(forecast, ShipConditions) else forecast
+    agreement = error_agreement(adequacy)
     return CampaignAnalysis(
         q=q,
         constants=constants,
@@ -396,12 +413,13 @@ def analyze_campaign(
         fit_indices=tuple(labels),
         iteration_f_p=tuple(r.s2 / s2_e for r in fit.log),
         adequacy=adequacy,
+        error_agreement=agreement,
         controls=controls,
         assumptions=assumptions,
         predictor=predictor,
         forecasts=tuple(forecast_ship(predictor, ship) for ship in ships),
         admissible=admissible,
-        warnings=_warnings(fit, cochran, adequacy, assumptions, admissible),
+        warnings=_warnings(fit, cochran, adequacy, agreement, assumptions, admissible),
     )
 
 
@@ -409,6 +427,7 @@ def _warnings(
     fit: FitResult,
     cochran: CochranResult,
     adequacy: Adequacy,
+    agreement: ErrorAgreement,
     assumptions: tuple[AssumptionCheck, ...],
     admissible: AdmissibleRegion | None,
 ) -> tuple[str, ...]:
@@ -440,6 +459,15 @@ def _warnings(
                 if adequacy.adequate
                 else ""
             )
+        )
+    if cochran.homogeneous and agreement.too_small:
+        found.append(
+            f"the residual variance is implausibly small: S^2_r = {adequacy.s2_r:.3g} is "
+            f"{agreement.f_p:.3g} times the error of the trial means S^2_e/N = "
+            f"{adequacy.s2_e_mean:.3g} deg^2 (P(F({agreement.dof_r}, {agreement.dof_e}) <= "
+            f"{agreement.f_p:.3g}) = {agreement.p_low:.2g} < q = {agreement.q:g}): the two "
+            f"estimates of error disagree, and the t({agreement.dof_r}) intervals, which rest "
+            "on S^2_r, may be too narrow"
         )
     for check in assumptions:
         if check.holds is False and check.name != "homogeneity":

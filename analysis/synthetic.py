@@ -37,13 +37,27 @@ def synthetic_readings(
     n_obs: tuple[int, int],
     rng: np.random.Generator,
     bias_sd_deg: float = 0.5,
+    rho: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Readings before and under rocking, arrays (k, N1) and (k, N2), in degrees."""
+    """Readings before and under rocking, arrays (k, N1) and (k, N2), in degrees; ``rho``: the
+    correlation of successive readings of a series (AR(1), rho^k at lag k)."""
     alpha = RollingErrorModel(constants)(design.conditions, C_gcm2s2, T_s)
     bias = rng.normal(0.0, bias_sd_deg, alpha.shape)[:, None]
-    before = bias + rng.normal(0.0, sigma_deg, (alpha.size, n_obs[0]))
-    under = bias + alpha[:, None] + rng.normal(0.0, sigma_deg, (alpha.size, n_obs[1]))
-    return before, under
+    if rho == 0.0:
+        before = bias + rng.normal(0.0, sigma_deg, (alpha.size, n_obs[0]))
+        under = bias + alpha[:, None] + rng.normal(0.0, sigma_deg, (alpha.size, n_obs[1]))
+        return before, under
+    before = bias + sigma_deg * ar1(rho, (alpha.size, n_obs[0]), rng)
+    return before, bias + alpha[:, None] + sigma_deg * ar1(rho, (alpha.size, n_obs[1]), rng)
+
+
+def ar1(rho: float, shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
+    """Stationary AR(1) series of unit variance along the last axis: correlation rho^k."""
+    x = np.empty(shape)
+    x[..., 0] = rng.standard_normal(shape[:-1])
+    for k in range(1, shape[-1]):
+        x[..., k] = rho * x[..., k - 1] + np.sqrt(1 - rho**2) * rng.standard_normal(shape[:-1])
+    return x
 
 
 def synthetic_trials(
@@ -56,8 +70,10 @@ def synthetic_trials(
     sigma_deg: float,
     n_obs: int,
     rng: np.random.Generator,
+    rho: float = 0.0,
 ) -> list[TrialInput]:
-    """Trials with raw readings (N per series), numbered from 1."""
+    """Trials with raw readings (N per series, successive ones correlated by ``rho``), numbered
+    from 1."""
     before, under = synthetic_readings(
         constants,
         design,
@@ -66,6 +82,7 @@ def synthetic_trials(
         sigma_deg=sigma_deg,
         n_obs=(n_obs, n_obs),
         rng=rng,
+        rho=rho,
     )
     return [
         TrialInput(

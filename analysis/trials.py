@@ -11,6 +11,11 @@ is given in exactly one of three forms:
 Variance basis: ``var_deg2`` is the paper's eq 2.3, the sum of the two single-observation
 variances (what Cochran's test and S_e use); ``var_mean_deg2`` = S1^2/N1 + S2^2/N2 is the variance
 of the mean difference <delta_i> itself. Both are kept so a report can show both.
+
+Correlated observations: given each series' variance inflation f (`analysis.effective`, from the
+reading's fitted correlation function), S^2 is corrected for its bias, var_mean_deg2 =
+sigma1^2 f1/N1 + sigma2^2 f2/N2 (N_eff = N/f in place of N) and dof = N_eff1 + N_eff2 - 2
+(rounded down); ``paper_var_mean_deg2`` keeps S1^2/N1 + S2^2/N2 beside it.
 """
 
 from dataclasses import dataclass, replace
@@ -19,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from gyrostand.analysis.angles import about, wrap180
+from gyrostand.analysis.effective import correlated_series
 from gyrostand.analysis.errors import (
     AnalysisError,
     MissingDataError,
@@ -185,14 +191,22 @@ class TrialStats:
     before: SeriesSummary | None
     under: SeriesSummary | None
     source: str
+    n_eff_before: float | None = None  # N/f when the observations are correlated, else None
+    n_eff_under: float | None = None
+    paper_var_mean_deg2: float | None = None  # S1^2/N1 + S2^2/N2 (eq 2.3 / N) when corrected
 
 
-def _from_summaries(common: dict, s1: SeriesSummary, s2: SeriesSummary) -> TrialStats:
-    """Trial statistics from the two series' summaries."""
+def _from_summaries(
+    common: dict,
+    s1: SeriesSummary,
+    s2: SeriesSummary,
+    inflation: tuple[float, float] | None = None,
+) -> TrialStats:
+    """Trial statistics from the two series' summaries (and their variance inflations)."""
     delta, var, var_mean, dof = combine_series(
         s1.mean_deg, s1.var_deg2, s1.n, s2.mean_deg, s2.var_deg2, s2.n
     )
-    return TrialStats(
+    stats = TrialStats(
         **common,
         delta_deg=delta,
         var_deg2=var,
@@ -204,10 +218,27 @@ def _from_summaries(common: dict, s1: SeriesSummary, s2: SeriesSummary) -> Trial
         under=s2,
         source="series",
     )
+    if inflation is None:
+        return stats
+    name = f"trial {common['index']}"
+    c1, c2 = (
+        correlated_series(s.var_deg2, s.n, f, f"{name}, series {j}")
+        for j, s, f in ((1, s1, inflation[0]), (2, s2, inflation[1]))
+    )
+    return replace(
+        stats,
+        var_deg2=c1.var_deg2 + c2.var_deg2,  # eq 2.3 with sigma^2 for S^2
+        var_mean_deg2=c1.var_mean_deg2 + c2.var_mean_deg2,  # eq 2.3 / N with N_eff for N
+        dof=max(int(np.floor(c1.n_eff + c2.n_eff - 2)), 1),  # eq 2.4 with N_eff for N
+        n_eff_before=c1.n_eff,
+        n_eff_under=c2.n_eff,
+        paper_var_mean_deg2=var_mean,
+    )
 
 
-def trial_statistics(trial: TrialInput) -> TrialStats:
-    """Eqs 2.1-2.4 for one trial, whatever its input form."""
+def trial_statistics(trial: TrialInput, inflation: tuple[float, float] | None = None) -> TrialStats:
+    """Eqs 2.1-2.4 for one trial, whatever its input form; ``inflation`` (f of the series before
+    and under rocking) makes a series' N its N_eff = N/f (raw or summarised series only)."""
     common = {
         "index": trial.index,
         "role": trial.role,
@@ -219,9 +250,9 @@ def trial_statistics(trial: TrialInput) -> TrialStats:
         before, under = np.array(trial.before_deg), np.array(trial.under_deg)
         s1 = SeriesSummary(*map(float, series_moments(before)), before.size)
         s2 = SeriesSummary(*map(float, series_moments(under)), under.size)
-        return replace(_from_summaries(common, s1, s2), source="observations")
+        return replace(_from_summaries(common, s1, s2, inflation), source="observations")
     if trial.before is not None:
-        return _from_summaries(common, trial.before, trial.under)
+        return _from_summaries(common, trial.before, trial.under, inflation)
     n = trial.n_obs
     has_var = trial.delta_var_deg2 is not None
     return TrialStats(

@@ -1,7 +1,8 @@
 """CLI: plan check|schema -- validate a campaign plan file; the plan's JSON Schema for editors.
 
-`gyrostand plan check PLAN` prints one summary line, or every problem one per line with its
-path in the plan (exit code 1). `gyrostand plan schema [--out FILE]` prints the JSON Schema of a
+`gyrostand plan check PLAN` prints one summary line (with the fit's residual degrees of freedom,
+and a warning line when they are few), or every problem one per line with its path in the plan
+(exit code 1). `gyrostand plan schema [--out FILE]` prints the JSON Schema of a
 plan file, generated from the plan model (docs/plan.md).
 """
 
@@ -21,9 +22,12 @@ if TYPE_CHECKING:
 
 
 def summary(plan: Plan) -> str:
-    """The plan in one line: design, N, settle, bus, database."""
+    """The plan in one line: design with the fit's residual degrees of freedom, N, settle, bus,
+    database."""
     fit = sum(t.role == "fit" for t in plan.trials)
     design = f"{len(plan.trials)} trials ({fit} fit, {len(plan.trials) - fit} control)"
+    if not plan.campaign.acquisition_only:
+        design += f", {plan.residual_dof} residual degrees of freedom"
     bus = plan.bus
     if bus.simulated:
         where = f"simulated stand in {bus.timing} time"
@@ -35,6 +39,20 @@ def summary(plan: Plan) -> str:
     return (
         f"{design}, N = {plan.n_obs}, settle by {plan.settle.method}{acceptance}, {where}, "
         f"database {shown_url(plan.database)}"
+    )
+
+
+def design_warning(plan: Plan) -> str | None:
+    """Why the design is fragile when it leaves few residual degrees of freedom (None if not)."""
+    from gyrostand.plan.model import FEW_RESIDUAL_DOF, FIT_PARAMETERS
+
+    dof = plan.residual_dof
+    if plan.campaign.acquisition_only or dof > FEW_RESIDUAL_DOF:
+        return None
+    return (
+        f"the fit of C and T leaves {dof} residual degree{'s' if dof != 1 else ''} of freedom "
+        f"(fit trials minus the {FIT_PARAMETERS} parameters): its t({dof}) intervals are wide, "
+        "and a residual variance near 0 by chance goes unnoticed in them; add fit trials"
     )
 
 
@@ -61,6 +79,8 @@ def register(app: typer.Typer) -> None:
                 typer.echo(f"{plan}: {problem}")
             raise typer.Exit(EXIT_FAILED) from None
         typer.echo(f"{plan}: ok — {summary(checked)}")
+        if warning := design_warning(checked):
+            typer.echo(f"{plan}: warning — {warning}")
 
     @plan_app.command("schema")
     def schema(

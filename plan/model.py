@@ -70,6 +70,9 @@ FIT_PARAMETERS = 2
 MIN_FIT_TRIALS = FIT_PARAMETERS + 1
 """n >= m + 1 fit trials: the adequacy test (Potemkin 1982, eq 2.8) needs n - m >= 1 degrees of
 freedom."""
+FEW_RESIDUAL_DOF = 2
+"""At most this many residual degrees of freedom n - m is a fragile design: t(n - m) intervals
+are wide, and a residual variance near 0 by chance (F_p near 0) goes unnoticed in them."""
 
 
 class PlanError(ValueError):
@@ -907,6 +910,11 @@ class Plan(_Table):
     @property
     def n_obs(self) -> int:
         return self.campaign.n_obs
+
+    @property
+    def residual_dof(self) -> int:
+        """n - m: the fit trials less the parameters C and T (the dof of S^2_r, eq 2.7)."""
+        return sum(t.role == "fit" for t in self.trials) - FIT_PARAMETERS
 
     @property
     def database(self) -> str:

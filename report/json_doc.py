@@ -74,7 +74,8 @@ extrapolation of every forecast beyond the trials' motion (``forecast.tested``, 
   ``acceptance`` {criterion {tolerance_deg, duration_s, max_risk}, excursions
   (`analysis.excursions.ExcursionAcceptance.to_dict`: lower, upper, mean, duration_s, sigma,
   p_start_inside, p_no_excursion, method ("kolmogorov": exact; "vanmarcke": approximation
-  within 10 % of simulation; "poisson", "rice": lower bounds), is_bound, risk, method_note,
+  within 10 % of simulation; "poisson": the same within 10 %, or a lower bound when is_bound;
+  "poisson-estimate": best estimate within 17 %; "rice": lower bound), is_bound, risk, method_note,
   ``rice`` {sigma_dot, upcrossings_upper, downcrossings_lower, mean_excursions, bandwidth,
   p_poisson, p_vanmarcke} or null), risk (an upper bound when is_bound),
   tolerance_for_max_risk_deg, verdict, detail} or null, acceptance_note;

@@ -220,6 +220,7 @@ def analyze_stored(session: Session, campaign_id: int) -> StoredAnalysis:
         admissible=s.admissible,
         forecast=s.forecast,
         independence=signal.independence(),
+        inflation=signal.inflation(),
     )
     analysis = replace(analysis, left_out=inputs.left_out)
     missing = [t for t in inputs.left_out if t.superseded_by is None]

@@ -38,6 +38,15 @@ def trials_section(a: CampaignAnalysis) -> list[str]:
         for t in a.trials
     ]
     headers = ["i", "role", "K deg", "A cm", "tau s", "<delta> deg", "S2 e-4", "S2/N e-4", "nu"]
+    if any(t.n_eff_under is not None for t in a.trials):  # correlated: N_eff beside eq 2.3
+        headers[6:8] = ["sigma2 e-4", "var mean e-4"]
+        headers += ["N_eff 1/2", "paper S2/N e-4"]
+        for row, t in zip(rows, a.trials, strict=True):
+            if t.n_eff_under is None:
+                row += ["", ""]
+                continue
+            paper = _opt(t.paper_var_mean_deg2 * 1e4, ".3f")
+            row += [f"{t.n_eff_before:.1f}/{t.n_eff_under:.1f}", paper]
     return [
         "TRIALS (eqs 2.1-2.4)",
         *_table(headers, rows),

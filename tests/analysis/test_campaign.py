@@ -1,9 +1,11 @@
 """analyze_campaign on simulated campaigns with raw readings, and its typed errors (section 8)."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.stats import f as f_distribution
 
 from gyrostand.analysis import paper_example as paper
 from gyrostand.analysis.campaign import analyze_campaign
@@ -18,6 +20,7 @@ from gyrostand.analysis.errors import (
     UnequalDegreesOfFreedomError,
     ZeroVarianceError,
 )
+from gyrostand.analysis.gyro_model import Conditions, RollingErrorModel
 from gyrostand.analysis.synthetic import Design, synthetic_trials
 from gyrostand.analysis.trials import TrialInput
 
@@ -138,3 +141,32 @@ def test_errors_share_one_root() -> None:
         ZeroVarianceError,
     ):
         assert issubclass(error, AnalysisError)
+
+
+def test_residual_variance_implausibly_small_is_warned() -> None:
+    """Trial means placed on the model (S^2_r ~ 0) while every observation keeps its noise: the
+    lower tail of F = S^2_r / (S^2_e/N) flags that the two estimates of error disagree."""
+    model = RollingErrorModel(paper.CONSTANTS)
+    trials = []
+    for t in simulated(11, sigma_deg=0.05):
+        alpha = float(model(_conditions_of(t), **TRUE)[0])
+        under = np.array(t.under_deg)
+        shift = alpha - (under.mean() - np.mean(t.before_deg))  # <delta_i> = alpha_i exactly
+        trials.append(replace(t, under_deg=tuple(under + shift)))
+    a = analyze_campaign(trials, paper.CONSTANTS, start=paper.START)
+    var_means = [s.var_mean_deg2 for s in a.trials if s.role == "fit"]
+    ratio = a.fit.s2 / np.mean(var_means)
+    assert ratio < 1e-6
+    p_low = f_distribution.cdf(ratio, a.fit.dof, a.adequacy.dof_e)
+    assert a.error_agreement.p_low == pytest.approx(p_low, rel=1e-6)
+    assert a.error_agreement.too_small and a.error_agreement.dof_r == 6
+    assert any("implausibly small" in w and "t(6)" in w for w in a.warnings)
+    plain = analyze_campaign(simulated(11, sigma_deg=0.05), paper.CONSTANTS, start=paper.START)
+    assert plain.error_agreement.p_low > 0.05 and not plain.error_agreement.too_small
+    assert not any("implausibly small" in w for w in plain.warnings)
+
+
+def _conditions_of(t: TrialInput) -> Conditions:
+    return Conditions(
+        np.array([t.direction_deg]), np.array([t.amplitude_cm]), np.array([t.period_s])
+    )

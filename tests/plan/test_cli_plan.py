@@ -29,9 +29,40 @@ def gyrostand(*args: str | Path) -> tuple[int, str]:
 def test_every_shipped_plan_passes(plan: Path) -> None:
     code, out = gyrostand("plan", "check", plan)
     assert code == 0, out
+    name = re.escape(str(plan))
     assert re.fullmatch(
-        rf"{re.escape(str(plan))}: ok — 6 trials \(4 fit, 2 control\), N = 5, .*\n", out
+        rf"{name}: ok — 6 trials \(4 fit, 2 control\), 2 residual degrees of freedom, N = 5, .*\n"
+        rf"{name}: warning — the fit of C and T leaves 2 residual degrees of freedom .* add fit "
+        r"trials\n",
+        out,
     )
+
+
+@pytest.mark.parametrize(("fit", "warned"), [(3, True), (5, False)])
+def test_residual_degrees_of_freedom_are_stated_and_few_warned(
+    tmp_path: Path, fit: int, warned: bool
+) -> None:
+    """n - m = fit trials - 2: stated in the summary, a warning at 2 or fewer."""
+    text = PAPER.read_text()
+    if fit == 3:  # the last fit trial becomes a control
+        text = _replace_nth(text, 'role = "fit"', 'role = "control"', 4)
+    else:  # a fifth fit trial: the first control becomes one
+        text = text.replace('role = "control"', 'role = "fit"', 1)
+    plan = tmp_path / "plan.toml"
+    plan.write_text(text)
+    code, out = gyrostand("plan", "check", plan)
+    dof = fit - 2
+    assert code == 0, out
+    assert f"({fit} fit, {6 - fit} control), {dof} residual degree" in out.splitlines()[0]
+    assert ("warning — " in out) == warned
+    if warned:
+        assert f"leaves {dof} residual degree of freedom " in out and f"t({dof})" in out
+
+
+def _replace_nth(text: str, old: str, new: str, n: int) -> str:
+    """text with the n-th occurrence (1-based) of old replaced by new."""
+    parts = text.split(old)
+    return old.join(parts[:n]) + new + old.join(parts[n:])
 
 
 def test_bad_plan_lists_every_problem_with_its_path(tmp_path: Path) -> None:

@@ -82,6 +82,16 @@ def test_observation_correlations_follow_the_closed_form(simulated_report: Repor
         covariance = s2 * math.exp(-model.decay_per_s * o.step_s) * (2 * math.cosh(x) - 2) / x**2
         assert o.correlation == pytest.approx(covariance / variance, rel=1e-6)
         assert o.correlated == (abs(o.correlation) > 0.1)
+        # at lag k the covariance decays by e^(-mu D) per step: the mean's inflation over all lags
+        k = np.arange(1, o.n)
+        rho = o.correlation * np.exp(-model.decay_per_s * o.step_s * (k - 1))
+        assert o.inflation == pytest.approx(1 + 2 * np.sum((1 - k / o.n) * rho), rel=1e-6)
+    # and the analysis takes each series' N_eff = N / f for its trial means
+    analysed = {t.index: t for t in simulated_report.analysis.trials}
+    for o in section.observations:
+        t = analysed[o.trial]
+        assert (t.n_eff_before if o.j == 1 else t.n_eff_under) == pytest.approx(o.n_eff)
+        assert t.var_mean_deg2 > t.paper_var_mean_deg2
 
 
 def test_settle_rows_are_the_stored_series(simulated: Simulated, simulated_report: Report) -> None:
