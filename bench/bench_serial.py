@@ -20,7 +20,8 @@ from pynmeagps import NMEAReader
 
 from gyrostand.devices.framing import byte_time_s
 from gyrostand.devices.iec61162 import Iec61162Source
-from gyrostand.devices.serial_sim import LineFaults, SerialCompass, SerialCompassConfig
+from gyrostand.devices.serial_config import LineFaults
+from gyrostand.devices.serial_sim import SerialCompass, SerialCompassConfig
 from gyrostand.devices.source import ByteChunks
 from gyrostand.devices.tagblock import TagBlockWriter, read_tag_log
 from gyrostand.stand.simconfig import SimConfig

@@ -94,11 +94,15 @@ def stand_wal(stand: str) -> None:
     """Warn when a stand's SQLite file has commits in its write-ahead log beside it: merged from
     there, but a copy of the file alone lacks them (db.wal)."""
     from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError
 
     from gyrostand.db.session import database_url
     from gyrostand.db.wal import unmerged_wal
 
-    url = make_url(database_url(stand))
+    try:
+        url = make_url(database_url(stand))
+    except (ArgumentError, ValueError):  # a URL it cannot read: open_stand says so
+        return
     if url.get_backend_name() != "sqlite" or not url.database:
         return
     path = Path(url.database)

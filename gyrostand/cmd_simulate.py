@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import typer
 
 from gyrostand import cmd_simulate_serial
-from gyrostand.errors import fail
+from gyrostand.errors import fail, say
 from gyrostand.stand.simconfig import (
     CompassParams,
     FaultParams,
@@ -32,13 +32,6 @@ if TYPE_CHECKING:  # the simulator and the bus are imported when the command run
 
     from gyrostand.stand.engine import HeadingTransmitter
     from gyrostand.stand.protocol import Codec
-
-
-def _say(text: str) -> None:
-    """A line of plain text on stderr."""
-    from rich.console import Console
-
-    Console(stderr=True, highlight=False, markup=False, emoji=False).print(text)
 
 
 # (SimConfig field or None for its top-level fields, dataclass, help panel)
@@ -326,8 +319,8 @@ def _standalone(
     except ScheduleError as exc:
         fail(str(exc))
     for ack in result.refusals:
-        _say(f"warning: stand refused {ack.command!r}: {ack.reason}")
-    _say(
+        say(f"warning: stand refused {ack.command!r}: {ack.reason}")
+    say(
         f"{result.frames} frames, {result.stand_duration_s:g} s of stand time in "
         f"{result.wall_s:.2f} s -> {log}"
     )
@@ -358,7 +351,7 @@ def _live(
         transmitter=transmitter,
     )
     pace = "in virtual time" if config.timing == "virtual" else f"at {config.speedup:g}x"
-    _say(f"simulating on {run['interface']}:{run['channel']} {pace} (Ctrl-C to stop)")
+    say(f"simulating on {run['interface']}:{run['channel']} {pace} (Ctrl-C to stop)")
     deadline = None if run["duration_s"] is None else time.monotonic() + run["duration_s"]
     simulator.start()
     try:
@@ -378,7 +371,7 @@ def _live(
         finally:
             if recorder is not None:
                 recorder.stop()
-    _say(
+    say(
         f"sent {simulator.frames_sent} frames ({simulator.frames_failed} failed, "
         f"{simulator.receive_errors} receive errors), "
         f"stand time {simulator.stand_time_s:.1f} s"

@@ -5,18 +5,9 @@ it follows the wall clock (docs/instruments.md, "A CiA 402 roll stand")."""
 
 from __future__ import annotations
 
-import threading
-
-import can
-import canopen
 import typer
-from rich.console import Console
 
-from gyrostand.devices.sim_drive import DriveFaults, SimDrive, serve
-from gyrostand.devices.sim_inclinometer import SimInclinometer
 from gyrostand.errors import fail
-
-_out = Console(stderr=True, highlight=False, markup=False, emoji=False)
 
 
 def simulate_drive(
@@ -45,6 +36,15 @@ def simulate_drive(
     bias_deg: float = typer.Option(0.0, help="Inclinometer bias, deg."),
 ) -> None:
     """Run a simulated CiA 402 drive until Ctrl-C."""
+    import threading
+
+    import can
+    import canopen
+
+    from gyrostand.devices.sim_drive import DriveFaults, SimDrive, serve
+    from gyrostand.devices.sim_inclinometer import SimInclinometer
+    from gyrostand.errors import say
+
     faults = DriveFaults(
         overcurrent_at_s=overcurrent_at_s,
         jam_at_s=jam_at_s,
@@ -66,9 +66,7 @@ def simulate_drive(
         drive.boot()
         if sensor is not None:
             sensor.boot()
-        _out.print(
-            f"simulated CiA 402 drive, node {node_id}, on {interface} {channel}; Ctrl-C ends"
-        )
+        say(f"simulated CiA 402 drive, node {node_id}, on {interface} {channel}; Ctrl-C ends")
         stop = threading.Event()
         try:
             serve(drive, stop)

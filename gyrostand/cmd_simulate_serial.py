@@ -7,34 +7,34 @@ byte-reproducible for a seed."""
 
 from __future__ import annotations
 
+import functools
 import inspect
 import time
 import typing
 from collections.abc import Callable
 from dataclasses import fields, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
-from rich.console import Console
 
-from gyrostand.devices.framing import Framer, byte_time_s
-from gyrostand.devices.serial_sim import (
-    LineFaults,
-    PtyLine,
-    SerialCompass,
-    SerialCompassConfig,
-    SerialSimError,
-    write_realtime,
-)
-from gyrostand.devices.tagblock import SUFFIX, TagBlockWriter
+from gyrostand.devices.serial_config import LineFaults, SerialCompassConfig, SerialSimError
 from gyrostand.errors import fail
-from gyrostand.stand.protocol import Codec
-from gyrostand.stand.schedule import ScheduleError, Step, load_schedule, play
 from gyrostand.stand.simconfig import SimConfig
 
+if TYPE_CHECKING:  # the simulation, the line and the log are imported when the command runs
+    from rich.console import Console
+
+    from gyrostand.stand.protocol import Codec
+
 PANEL = "Serial compass (--protocol iec61162)"
-_out = Console(stderr=True, highlight=False, markup=False, emoji=False)
+
+
+@functools.cache
+def _out() -> Console:
+    from rich.console import Console
+
+    return Console(stderr=True, highlight=False, markup=False, emoji=False)
 
 
 def _options() -> list[inspect.Parameter]:
@@ -112,6 +112,11 @@ def simulate_serial(
 def _standalone(
     config: SimConfig, serial: SerialCompassConfig, run: dict[str, Any], codec: Codec | None
 ) -> None:
+    from gyrostand.devices.framing import Framer, byte_time_s
+    from gyrostand.devices.serial_sim import SerialCompass
+    from gyrostand.devices.tagblock import SUFFIX, TagBlockWriter
+    from gyrostand.stand.schedule import ScheduleError, Step, load_schedule, play
+
     log: Path | None = run["log"]
     if log is None or log.suffix.lower() != SUFFIX:
         fail(f"standalone mode with --protocol iec61162 needs --log FILE{SUFFIX}")
@@ -136,7 +141,7 @@ def _standalone(
                 writer.write(framer.feed(epoch + t + len(data) * byte_s, data))
         writer.write(framer.close())
         lines = writer.lines
-    _out.print(
+    _out().print(
         f"{lines} lines (sentences and junk), {engine.stand_time_s:g} s of stand time in "
         f"{time.perf_counter() - wall0:.2f} s -> {log}"
     )
@@ -149,6 +154,8 @@ def _live(
     duration_s: float | None,
     codec: Codec | None,
 ) -> None:
+    from gyrostand.devices.serial_sim import PtyLine, SerialCompass, write_realtime
+
     write: Callable[[bytes], object]
     if port is None:
         line = PtyLine(serial.baud)
@@ -165,7 +172,7 @@ def _live(
     compass = SerialCompass(serial)
     engine = compass.stand(config, codec)
     what = "+".join(serial.sentences)
-    _out.print(
+    _out().print(
         f"serial compass on {where} at {serial.baud} baud: {what} at "
         f"{serial.rate_hz:g} Hz in real time (Ctrl-C to stop)"
     )
@@ -179,4 +186,4 @@ def _live(
         fail(f"serial port {where}: write failed ({exc.strerror or exc})", code=1)
     finally:
         close()
-    _out.print(f"sent {written} bytes, stand time {engine.stand_time_s:.1f} s")
+    _out().print(f"sent {written} bytes, stand time {engine.stand_time_s:.1f} s")

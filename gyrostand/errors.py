@@ -56,9 +56,14 @@ def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
     raise typer.Exit(code)
 
 
+def say(text: str) -> None:
+    """A line of plain text on stderr (what a command reports while it runs)."""
+    _err().print(text)
+
+
 def warn(message: str) -> None:
     """Print `gyrostand: warning: <message>` (one line) to stderr; the command goes on."""
-    _err.print(f"gyrostand: warning: {printable(message)}")
+    _err().print(f"gyrostand: warning: {printable(message)}")
 
 
 def usage_error(message: str, help_hint: str | None, code: int = EXIT_BAD_INPUT) -> NoReturn:

@@ -191,8 +191,8 @@ def gyro_serial_compass() -> Iterator[Callable[..., str]]:
     after the test."""
     import threading
 
+    from gyrostand.devices.serial_config import LineFaults
     from gyrostand.devices.serial_sim import (
-        LineFaults,
         PtyLine,
         SerialCompass,
         SerialCompassConfig,

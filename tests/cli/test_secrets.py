@@ -94,7 +94,7 @@ def test_no_command_prints_or_writes_the_password(postgres_server: Server, tmp_p
     gyrostand("campaign", "list", "--db", url)
     failing = tmp_path / "failing.toml"
     failing.write_text(plan.read_text().replace("[bus.simulator]", SILENT + "[bus.simulator]", 1))
-    said = gyrostand("campaign", "run", str(failing), "--db", url, "--quiet")
+    said = gyrostand("campaign", "run", str(failing), "--db", url, "--quiet", code=1)
     assert "retry the failed trials with" in said and "postgres:***@" in said
     gyrostand("db", "upgrade", url)
     lab = tmp_path / "lab.sqlite"

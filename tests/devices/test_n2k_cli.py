@@ -76,7 +76,7 @@ def test_analyze_and_report_state_it(campaign: Path, tmp_path: Path) -> None:
 
 def test_replay_derives_the_same_observations(campaign: Path) -> None:
     db = campaign.with_name("db.sqlite")
-    log = campaign.with_name("campaign-1.blf")
+    (log,) = campaign.parent.glob("*campaign-1.blf")  # (named after the database)
     result = runner.invoke(app, ["replay", str(log), "--plan", str(campaign)])
     assert result.exit_code == 0, result.output
     with sqlite3.connect(db) as conn:

@@ -13,10 +13,10 @@ from gyrostand.acquisition.engine import Engine, ObservationResult
 from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.devices.framing import byte_time_s
 from gyrostand.devices.iec61162 import Iec61162Source
+from gyrostand.devices.serial_config import LineFaults
 from gyrostand.devices.serial_decoder import SerialSourceDecoder
 from gyrostand.devices.serial_port import SerialReader
 from gyrostand.devices.serial_sim import (
-    LineFaults,
     SerialCompass,
     SerialCompassConfig,
     VirtualLine,

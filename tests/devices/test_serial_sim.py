@@ -9,9 +9,9 @@ import pytest
 
 from gyrostand.devices.framing import byte_time_s
 from gyrostand.devices.iec61162 import WRONG_BAUD_KIND, Iec61162Source
+from gyrostand.devices.serial_config import LineFaults
 from gyrostand.devices.serial_port import SerialReader
 from gyrostand.devices.serial_sim import (
-    LineFaults,
     SerialCompass,
     SerialCompassConfig,
     SerialSimError,

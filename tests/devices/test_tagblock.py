@@ -8,7 +8,8 @@ import pytest
 from gyrostand.devices.framing import GARBAGE, Received
 from gyrostand.devices.iec61162 import Iec61162Source
 from gyrostand.devices.nmea0183 import checksum
-from gyrostand.devices.serial_sim import LineFaults, SerialCompass, SerialCompassConfig
+from gyrostand.devices.serial_config import LineFaults
+from gyrostand.devices.serial_sim import SerialCompass, SerialCompassConfig
 from gyrostand.devices.source import ByteChunks
 from gyrostand.devices.tagblock import TagBlockWriter, read_tag_log, tag_line
 from gyrostand.frames.logfile import LogFileError, sha256_of

@@ -39,7 +39,10 @@ def test_the_pdf_carries_the_report_json_the_trial_csv_and_the_plan(
     # the same analysis again: the database keeps its one run (same inputs, same results)
     analysed = runner.invoke(app, ["analyze", "1", "--db", paper.url, "--json"])
     assert analysed.exit_code == 0, analysed.output
-    assert carried["analysis"] == json.loads(analysed.stdout)
+    analysis = json.loads(analysed.stdout)
+    # the heading source stands in the report's identification
+    assert analysis.pop("heading_source") == carried["identification"]["heading_source"]
+    assert carried["analysis"] == analysis
     csv = (tmp_path / "campaign-1-trials.csv").read_text(encoding="utf-8")
     assert csv == paper_files.files["csv"].read_text(encoding="utf-8")
     rows = [r.split(",") for r in csv.splitlines()]
