@@ -21,7 +21,12 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
-	$(VENV)/bin/pytest -n auto  # pytest-xdist: one worker per core
+	$(VENV)/bin/pytest -n auto -m "not slow"  # pytest-xdist: one worker per core
+
+# The long end-to-end tests (tests/conftest.py SLOW_FILES): CI's second stage
+.PHONY: test-slow
+test-slow: $(STAMP)
+	$(VENV)/bin/pytest -n auto -m slow
 
 bench: $(STAMP)
 	@for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

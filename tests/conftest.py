@@ -57,3 +57,32 @@ def new_db_url(request: pytest.FixtureRequest, tmp_path: Path) -> NewDatabase:
 def db_url(new_db_url: NewDatabase) -> str:
     """The URL of a fresh, empty database, on each back end."""
     return new_db_url()
+
+
+# Whole campaigns in real time, processes killed and resumed, servers, a browser: the test files
+# that take most of the suite's time run in CI's second stage (`make test-slow`, marker `slow`),
+# so that `make test` stays under 4 minutes on a loaded 2-core machine.
+SLOW_FILES = frozenset(
+    {
+        "acquisition/test_cli_campaign.py",
+        "acquisition/test_kill_resume.py",
+        "acquisition/test_raw_log_names.py",
+        "acquisition/test_stop_resume_report.py",
+        "cli/test_fleet_commands.py",
+        "cli/test_raw_log_full.py",
+        "cli/test_secrets.py",
+        "db/test_concurrency.py",
+        "db/test_merge.py",
+        "db/test_wal.py",
+        "devices/test_n2k_cli.py",
+        "station/test_browser.py",
+        "station/test_security.py",
+    }
+)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    here = Path(__file__).parent
+    for item in items:
+        if item.path.relative_to(here).as_posix() in SLOW_FILES:
+            item.add_marker(pytest.mark.slow)
