@@ -82,7 +82,9 @@ def test_nmea2000_campaign_over_socketcan(tmp_path, channel) -> None:
         plan.write_text(text + '\n[compass]\nprotocol = "nmea2000"\n')
         command = [*gyrostand_command(), "campaign", "run", str(plan), "--quiet"]
         campaign = Process.start(command, tmp_path, "campaign")
-        assert campaign.popen.wait(TIMEOUT_S) == 0, campaign.output()
+        code = campaign.popen.wait(TIMEOUT_S)
+        trials = 'SELECT "index", status, failure_reason FROM trial'
+        assert code == 0, f"{campaign.output()}{query(tmp_path / 'campaign.sqlite', trials)}"
     finally:
         other.close()
         stand.interrupt()
