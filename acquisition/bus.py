@@ -18,6 +18,7 @@ from typing import Any
 import can
 from can.interfaces.virtual import VirtualBus
 
+from gyrostand.devices.nmea2000 import iso_requests
 from gyrostand.devices.sim_nmea2000 import simulated_compass
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import BatchBLFWriter, raw_log_writer
@@ -199,6 +200,15 @@ class RecordedSend:
         return getattr(self._bus, name)
 
 
+def request_identity(bus: can.BusABC) -> None:
+    """Ask the NMEA 2000 devices for their address claim and product information, so that the
+    campaign knows a compass that claimed its address before it started. Sent before the
+    simulated stand starts: in virtual time it answers at its current stand time, before
+    anything else it sends (it echoes the request into the stream, as it does commands)."""
+    for msg in iso_requests():
+        bus.send(msg)
+
+
 class LiveBus:
     """Opens everything a live campaign needs on the bus; `close()` releases it in order."""
 
@@ -230,6 +240,8 @@ class LiveBus:
             )
             # the campaign judges acks from the stream: the controller only sends
             self.notifier = can.Notifier(self.bus, [self.recorder], timeout=0.05)
+            if plan.compass.protocol == "nmea2000":
+                request_identity(sender)  # type: ignore[arg-type]
             if self.simulator is not None:
                 self.simulator.start()
         except BaseException:

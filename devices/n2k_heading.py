@@ -2,7 +2,10 @@
 information, never by its source address (ISO 11783-5: a device may claim another address after
 power-up; its NAME stays).
 
-Listen-only: the compass is known from what it sends, its address claim (PGN 60928: address ->
+Listen-only but for one request: at the start of a run gyrostand asks every device for its
+address claim and product information (`nmea2000.iso_requests`, `n2k_identify`), so that a
+compass that claimed its address before the run is known too. The compass is known from its
+address claim (PGN 60928: address ->
 NAME) and its product information (PGN 126996: model, serial number). The plan names it by NAME
 (`[compass] name`), or else it is the device whose product information gives `[instrument]`
 model and serial number. Before it is known its 127250 frames count as invalid (with the reason);
@@ -19,6 +22,7 @@ from gyrostand.devices.clock import NO_CLOCK, TIME_BASE
 from gyrostand.devices.nmea2000 import (
     ADDRESS_CLAIM,
     ATTITUDE,
+    ISO_REQUEST,
     PRODUCT_INFORMATION,
     RATE_OF_TURN,
     RESOLUTION_DEG,
@@ -32,7 +36,15 @@ from gyrostand.devices.source import SID, CampaignClock, SourceInfo, SourceOutpu
 from gyrostand.frames.batch import DeviceEvent, Headings, RawFrames
 from gyrostand.stand.protocol import InvalidFrame
 
-HANDLED = (VESSEL_HEADING, RATE_OF_TURN, ATTITUDE, ADDRESS_CLAIM, PRODUCT_INFORMATION)
+# (ISO requests: gyrostand's own at the start of a run, other devices'; nothing to learn)
+HANDLED = (
+    VESSEL_HEADING,
+    RATE_OF_TURN,
+    ATTITUDE,
+    ADDRESS_CLAIM,
+    PRODUCT_INFORMATION,
+    ISO_REQUEST,
+)
 INFO = SourceInfo("nmea2000", RESOLUTION_DEG, TIME_BASE, SID)
 
 

@@ -8,7 +8,8 @@ reference codec our bulk reading is tested against. Layouts (canboat's PGN datab
 - 127250 Vessel Heading: SID u8, heading u16 x 1e-4 rad, deviation s16 x 1e-4 rad, variation
   s16 x 1e-4 rad, reference 2 bits (0 true, 1 magnetic), 6 reserved bits;
 - 127251 Rate of Turn: SID u8, rate s32 x 3.125e-8 rad/s, 3 reserved bytes;
-- 127257 Attitude: SID u8, yaw, pitch, roll s16 x 1e-4 rad, 1 reserved byte.
+- 127257 Attitude: SID u8, yaw, pitch, roll s16 x 1e-4 rad, 1 reserved byte;
+- 59904 ISO Request (ISO 11783-3): the requested PGN, u24, to one address or to all (255).
 
 "Not available" is a field's all-ones value; canboat reads the top three values of an unsigned
 field (0xFFFD error, 0xFFFE reserved, 0xFFFF no data), and of a signed one (0x7FFD..0x7FFF),
@@ -30,6 +31,8 @@ RATE_OF_TURN = 127251
 ATTITUDE = 127257
 ADDRESS_CLAIM = 60928
 PRODUCT_INFORMATION = 126996
+ISO_REQUEST = 59904
+NULL_ADDRESS = 254  # ISO 11783-5: a device without an address may send a request for claims
 ANGLE_RAD = 1e-4  # 127250 / 127257 angle fields, rad per bit
 RATE_RAD_S = 3.125e-8  # 127251 rate, rad/s per bit
 RESOLUTION_DEG = math.degrees(ANGLE_RAD)  # 0.0057 deg
@@ -53,6 +56,30 @@ def can_id(pgn: int, source: int, priority: int, destination: int = BROADCAST) -
     """The 29-bit identifier of a PGN sent by `source` (to `destination` when PDU1)."""
     ps = pgn & 0xFF if (pgn >> 8) & 0xFF >= 240 else destination
     return priority << 26 | (pgn >> 8) << 16 | ps << 8 | source
+
+
+def iso_requests(pgns: tuple[int, ...] = (ADDRESS_CLAIM, PRODUCT_INFORMATION)) -> list[can.Message]:
+    """ISO Requests (PGN 59904, 3 bytes: the PGN) from the null address to every device: the
+    one transmission gyrostand makes on an NMEA 2000 bus (ISO 11783-5 lets a device that has
+    claimed no address request the address claims)."""
+    return [
+        can.Message(
+            arbitration_id=can_id(ISO_REQUEST, NULL_ADDRESS, 6),
+            is_extended_id=True,
+            data=pgn.to_bytes(3, "little"),
+        )
+        for pgn in pgns
+    ]
+
+
+def requested_pgn(msg: can.Message, address: int) -> int | None:
+    """The PGN an ISO Request to `address` (or to all) asks for; None for any other frame."""
+    ident = msg.arbitration_id
+    if not msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame or len(msg.data) < 3:
+        return None
+    if (ident >> 8) & 0x3FF00 != ISO_REQUEST or (ident >> 8) & 0xFF not in (address, BROADCAST):
+        return None
+    return int.from_bytes(bytes(msg.data[:3]), "little")
 
 
 def _u16(data: np.ndarray, at: int) -> np.ndarray:

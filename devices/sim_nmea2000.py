@@ -1,7 +1,8 @@
 """The simulated compass speaking NMEA 2000: the stand simulator's heading samples (the same
 physics, `stand.physics`) sent as PGN 127250 Vessel Heading, 127251 Rate of Turn and 127257
 Attitude at the heading rate, after an ISO address claim (PGN 60928) and the product information
-(PGN 126996, fast-packet). Frames carry the stand time of their sample as their timestamp: in
+(PGN 126996, fast-packet), which it sends again when an ISO Request (PGN 59904) asks for it, as
+a real device does. Frames carry the stand time of their sample as their timestamp: in
 virtual time that is their reception time, so runs are byte-reproducible.
 
 Fault knobs (`Nmea2000Faults`): an address change at a stand time (a new claim, then the same
@@ -18,7 +19,9 @@ import can
 import numpy as np
 
 from gyrostand.devices.nmea2000 import (
+    ADDRESS_CLAIM,
     ATTITUDE,
+    PRODUCT_INFORMATION,
     RATE_OF_TURN,
     SID_MODULO,
     VESSEL_HEADING,
@@ -29,6 +32,7 @@ from gyrostand.devices.nmea2000 import (
     encode_rate_of_turn,
     encode_vessel_heading,
     iso_name,
+    requested_pgn,
 )
 
 PRIORITY = {VESSEL_HEADING: 2, RATE_OF_TURN: 2, ATTITUDE: 3}  # canboat's default priorities
@@ -80,6 +84,20 @@ class Nmea2000Compass:
         """Address claim and product information from the current address."""
         frames = self._reference.address_claim(self.device.name, self.address, t_s)
         return frames + self._reference.product_information(self.device.product, self.address, t_s)
+
+    def answers(self, msg: can.Message) -> bool:
+        """Whether `msg` is a request this device answers (address claim, product information,
+        to its address or to all)."""
+        return requested_pgn(msg, self.address) in (ADDRESS_CLAIM, PRODUCT_INFORMATION)
+
+    def answer(self, msg: can.Message, t_s: float) -> list[can.Message]:
+        """The answer to a request (`answers`) at stand time `t_s`."""
+        pgn = requested_pgn(msg, self.address)
+        if pgn == ADDRESS_CLAIM:
+            return self._reference.address_claim(self.device.name, self.address, t_s)
+        if pgn == PRODUCT_INFORMATION:
+            return self._reference.product_information(self.device.product, self.address, t_s)
+        return []
 
     def frames(
         self, t_s: np.ndarray, reading_deg: np.ndarray, index: np.ndarray

@@ -141,22 +141,34 @@ def checked_answers(plan: Plan, given: Sequence[str], new: bool = True) -> dict[
 
 
 def preflight(plan: Plan) -> None:
-    """Before anything is written (a campaign row, an event): the raw log folder takes a file
-    and a real bus opens (one-line errors, exit code 1: the environment refuses)."""
+    """Before anything is written (a campaign row, an event): the raw log folder takes a file,
+    a real bus opens, and an NMEA 2000 compass on it is the plan's instrument (one-line errors,
+    exit code 1: the environment refuses)."""
     import can
 
     from gyrostand.acquisition.bus import check_raw_log_dir, open_bus
+    from gyrostand.devices.n2k_identify import IdentificationError, identify
 
     if not plan.bus.simulated:
         bus = plan.bus
         try:
-            open_bus(bus).shutdown()
+            opened = open_bus(bus)
         except (can.CanError, OSError, ValueError) as exc:
             fail(
                 f"cannot open the CAN bus (interface {bus.interface!r}, channel {bus.channel!r}):"
                 f" {exc}",
                 code=EXIT_FAILED,
             )
+        try:
+            if plan.compass.protocol == "nmea2000":
+                _, name, instrument = plan.heading_source
+                identify(opened, None if name is None else int(name, 16), instrument)
+        except IdentificationError as exc:
+            fail(str(exc), code=EXIT_FAILED)
+        except (can.CanError, OSError) as exc:
+            fail(f"cannot send on the CAN bus (channel {bus.channel!r}): {exc}", code=EXIT_FAILED)
+        finally:
+            opened.shutdown()
     try:
         check_raw_log_dir(plan)
     except OSError as exc:

@@ -40,7 +40,12 @@ class ReceivedCommand:
 
 class HeadingTransmitter(Protocol):
     """A compass that speaks another protocol than the stand's DBC (`devices.sim_nmea2000`):
-    it sends the readings of heading samples `index` (stand times `t_s`) as its own frames."""
+    it sends the readings of heading samples `index` (stand times `t_s`) as its own frames, and
+    answers the requests of its protocol (`answers`, `answer`)."""
+
+    def answers(self, msg: can.Message) -> bool: ...
+
+    def answer(self, msg: can.Message, t_s: float) -> list[can.Message]: ...
 
     def frames(
         self, t_s: np.ndarray, reading_deg: np.ndarray, index: np.ndarray
@@ -256,8 +261,15 @@ class StandEngine:
         return frames
 
     # ------------------------------------------------------------------------------ commands
+    def for_compass(self, msg: can.Message) -> bool:
+        """Whether `msg` is a request the compass answers (its own protocol's)."""
+        return self.transmitter is not None and self.transmitter.answers(msg)
+
     def receive(self, msg: can.Message) -> list[can.Message]:
-        """Handle a frame from the bus at the current stand time; return the ack to send."""
+        """Handle a frame from the bus at the current stand time; return the ack (or the
+        compass's answer) to send."""
+        if self.transmitter is not None and self.transmitter.answers(msg):
+            return self.transmitter.answer(msg, self._time_s)
         frame = self.codec.decode(msg)
         if not isinstance(frame, CommandFrame):
             return []

@@ -212,9 +212,12 @@ class Simulator:
             self._horizon_ms = max(self._horizon_ms, horizon_ms)
             self._apply_ms = horizon_ms
             return
+        now_ms = round(self.engine.stand_time_s * 1000)
+        if self.engine.for_compass(msg):  # a request (NMEA 2000): answered now, echoed first
+            self._commands.append((now_ms, msg))
+            return
         if msg.is_error_frame or msg.arbitration_id != self.engine.codec.command_arbitration_id:
             return
-        now_ms = round(self.engine.stand_time_s * 1000)
         at_ms = self._apply_ms if self._apply_ms is not None else now_ms
         if at_ms < now_ms:  # no SIM_SYNC before it (another controller): as soon as possible
             self.late_commands += 1

@@ -143,6 +143,12 @@ class TwoSensors:
         )
         return sorted(out, key=lambda m: m.timestamp)
 
+    def answers(self, msg: can.Message) -> bool:
+        return self.compass.answers(msg) or self.other.answers(msg)
+
+    def answer(self, msg: can.Message, t_s: float) -> list[can.Message]:
+        return self.compass.answer(msg, t_s) + self.other.answer(msg, t_s)
+
 
 def test_another_heading_sensor_is_told_and_left_out(n2k_run: tuple[Recorder, Lockstep]) -> None:
     sink, _ = run(TwoSensors())
