@@ -1159,6 +1159,10 @@ class Engine:
         by_counter = (counted - unusable) % modulo if numbered else 0
         if by_time == 0:
             return 0, int(by_counter != 0)
+        if numbered and by_time > by_counter and slots < modulo - 1:
+            # the sequence cannot have wrapped within so few slots: it counts exactly, and the
+            # frame came late (a source timed by reception: jitter), nothing is missing beyond it
+            return by_counter, 0
         missing = max(by_counter, by_time)
         if by_time > by_counter:  # the counter cannot tell: never a silent gap
             sequence = self.source.sequence.description

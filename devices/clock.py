@@ -26,7 +26,11 @@ from __future__ import annotations
 import numpy as np
 
 WINDOW = 32  # stand statuses (16 s at the simulated stand's 2 Hz)
-MIN_SPAN_MS = 10_000.0  # stand time since the first status before a rate is estimated
+# stand time since the first status before a rate is estimated: short, as the headings before
+# it are timed at rate 1 (a sped-up stand's then look 1/speedup apart, and the engine learns the
+# heading interval from the first ones); the rate's error, latency jitter over this span, shrinks
+# as the span grows
+MIN_SPAN_MS = 2_000.0
 RATE_SNAP = 1e-3  # a rate this close to 1 is 1 (clocks drift by ppm; this is latency jitter)
 NO_CLOCK = -1  # campaign time of a frame received before the first stand status
 

@@ -47,6 +47,9 @@ def test_headings_on_the_stand_clock_within_the_latency(rate: float) -> None:
     assert abs(np.median(error[600:])) <= jitter_ms
     if rate < 2:  # a real stand (rate 1, drifting): from the start
         assert np.abs(error).max() <= jitter_ms + 1
+    else:  # sped up: from 2 s of stand time on (4 statuses) the rate is known, its error small
+        # beside the latency's (timed at rate 1, the headings would be up to 430 ms off)
+        assert np.abs(error[true >= 2_000]).max() <= 1.25 * jitter_ms
 
 
 def test_the_same_whatever_the_batches() -> None:

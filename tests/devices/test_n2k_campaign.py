@@ -158,6 +158,37 @@ def test_another_heading_sensor_is_told_and_left_out(n2k_run: tuple[Recorder, Lo
     assert len(told) == 1 and "from address 40 (NAME 0x" in told[0][2]
 
 
+class LateFrames:
+    """The compass with every 7th sample received 70 ms (0.7 of the 10 Hz interval) late, as a
+    loaded host or gateway delays frames: their SID runs on."""
+
+    def __init__(self) -> None:
+        self.compass = compass()
+
+    def frames(self, t_s: np.ndarray, reading: np.ndarray, index: np.ndarray) -> list[can.Message]:
+        out = self.compass.frames(t_s, reading, index)
+        late = {float(t) for t, i in zip(t_s, index, strict=True) if i % 7 == 3}
+        for m in out:
+            if m.timestamp in late:
+                m.timestamp += 0.07
+        return sorted(out, key=lambda m: m.timestamp)
+
+    def answers(self, msg: can.Message) -> bool:
+        return self.compass.answers(msg)
+
+    def answer(self, msg: can.Message, t_s: float) -> list[can.Message]:
+        return self.compass.answer(msg, t_s)
+
+
+def test_a_late_frame_whose_sid_runs_on_is_not_lost() -> None:
+    """Before: each late frame, 1.7 intervals after the previous one, counted one frame lost
+    (from time) although the SID showed none."""
+    sink, _ = run(LateFrames())
+    assert sink.observations and sink.of("trial_failed") == []
+    assert all(o.frames_lost == 0 and o.flags == "" for o in sink.observations)
+    assert [a for a in sink.of("event") if a[0] == "frame gap"] == []
+
+
 def test_a_compass_never_identified_fails_the_trial_with_the_reason() -> None:
     """The plan names a NAME no device claims: every heading is invalid, with why."""
     sink, _ = run(compass(), lambda: Nmea2000Heading(name=0x1234, product=None))
