@@ -68,6 +68,7 @@ class Nmea2000Heading:
         self._products: dict[int, Product] = {}  # NAME -> product information
         self._reference = ReferenceDecoder()
         self._foreign: set[tuple[int, int | None]] = set()  # (address, NAME) told
+        self._compass_at: int | None = None  # the compass's address in its last claim seen
 
     def claims(self, raw: RawFrames) -> np.ndarray:
         """Rows that are this source's business (NMEA 2000 PGNs of a heading sensor)."""
@@ -180,11 +181,14 @@ class Nmea2000Heading:
     def _claim(
         self, pos: int, address: int, name: int, events: list[tuple[int, DeviceEvent]]
     ) -> None:
-        before = self._address() if self.compass is not None else None
         for other in [a for a, n in self._names.items() if n == name and a != address]:
             del self._names[other]  # the NAME moved
         self._names[address] = name
-        if name != self.compass or before == address:
+        if name != self.compass:
+            return
+        # (its address as it last claimed it: another device may have taken it since)
+        before, self._compass_at = self._compass_at, address
+        if before == address:
             return
         text = f"compass NAME {name_text(name)} claimed address {address}"
         if before is not None:
@@ -200,7 +204,7 @@ class Nmea2000Heading:
         self._products[name] = product
         told = f"model {product.model!r}, serial {product.serial!r}, software {product.software!r}"
         if self.compass is None and (product.model, product.serial) == self.wanted_product:
-            self.compass = name
+            self.compass, self._compass_at = name, address
             text = f"compass identified by its product information: NAME {name_text(name)}, {told}"
             events.append((pos, DeviceEvent("compass identified", "info", text)))
         elif name == self.compass:

@@ -2,8 +2,9 @@
 physics, `stand.physics`) sent as PGN 127250 Vessel Heading, 127251 Rate of Turn and 127257
 Attitude at the heading rate, after an ISO address claim (PGN 60928) and the product information
 (PGN 126996, fast-packet), which it sends again when an ISO Request (PGN 59904) asks for it, as
-a real device does. Frames carry the stand time of their sample as their timestamp: in
-virtual time that is their reception time, so runs are byte-reproducible.
+a real device does; another device claiming its address with a lower NAME makes it claim
+`new_address` (ISO 11783-5 address arbitration). Frames carry the stand time of their sample as
+their timestamp: in virtual time that is their reception time, so runs are byte-reproducible.
 
 Fault knobs (`Nmea2000Faults`): an address change at a stand time (a new claim, then the same
 NAME sends from the new address), "not available" headings at a rate, no SID (255); silence and
@@ -33,6 +34,7 @@ from gyrostand.devices.nmea2000 import (
     encode_vessel_heading,
     iso_name,
     requested_pgn,
+    split_id,
 )
 
 PRIORITY = {VESSEL_HEADING: 2, RATE_OF_TURN: 2, ATTITUDE: 3}  # canboat's default priorities
@@ -41,7 +43,7 @@ PRIORITY = {VESSEL_HEADING: 2, RATE_OF_TURN: 2, ATTITUDE: 3}  # canboat's defaul
 @dataclass(frozen=True)
 class Nmea2000Faults:
     address_change_at_s: float | None = None  # stand time of a new address claim
-    new_address: int = 36
+    new_address: int = 36  # claimed then, or on losing its address to a lower NAME
     not_available_rate: float = 0.0  # probability that a 127250 heading is 0xFFFF
     no_sid: bool = False  # SID 255 in every frame
 
@@ -87,11 +89,29 @@ class Nmea2000Compass:
 
     def answers(self, msg: can.Message) -> bool:
         """Whether `msg` is a request this device answers (address claim, product information,
-        to its address or to all)."""
-        return requested_pgn(msg, self.address) in (ADDRESS_CLAIM, PRODUCT_INFORMATION)
+        to its address or to all) or another device's claim of its address."""
+        asked = requested_pgn(msg, self.address) in (ADDRESS_CLAIM, PRODUCT_INFORMATION)
+        return asked or self._contender(msg) is not None
+
+    def _contender(self, msg: can.Message) -> int | None:
+        """The NAME of another device claiming this device's address."""
+        if not msg.is_extended_id or msg.is_error_frame or len(msg.data) != 8:
+            return None
+        (pgn,), (source,) = split_id(np.array([msg.arbitration_id]))
+        name = int.from_bytes(bytes(msg.data), "little")
+        if pgn != ADDRESS_CLAIM or source != self.address or name == self.device.name:
+            return None
+        return name
 
     def answer(self, msg: can.Message, t_s: float) -> list[can.Message]:
-        """The answer to a request (`answers`) at stand time `t_s`."""
+        """The answer (`answers`) at stand time `t_s`: to a request, what it asks for; to a
+        claim of its address, its own claim (ISO 11783-5: the lower NAME keeps the address, the
+        other claims another one, here `Nmea2000Faults.new_address`)."""
+        other = self._contender(msg)
+        if other is not None:
+            if other < self.device.name:
+                self.address = self.faults.new_address
+            return self._reference.address_claim(self.device.name, self.address, t_s)
         pgn = requested_pgn(msg, self.address)
         if pgn == ADDRESS_CLAIM:
             return self._reference.address_claim(self.device.name, self.address, t_s)

@@ -262,7 +262,7 @@ class StandEngine:
 
     # ------------------------------------------------------------------------------ commands
     def for_compass(self, msg: can.Message) -> bool:
-        """Whether `msg` is a request the compass answers (its own protocol's)."""
+        """Whether the compass answers `msg` (a request or claim of its own protocol)."""
         return self.transmitter is not None and self.transmitter.answers(msg)
 
     def receive(self, msg: can.Message) -> list[can.Message]:

@@ -213,7 +213,7 @@ class Simulator:
             self._apply_ms = horizon_ms
             return
         now_ms = round(self.engine.stand_time_s * 1000)
-        if self.engine.for_compass(msg):  # a request (NMEA 2000): answered now, echoed first
+        if self.engine.for_compass(msg):  # (NMEA 2000: a request, a claim): answered now, echoed
             self._commands.append((now_ms, msg))
             return
         if msg.is_error_frame or msg.arbitration_id != self.engine.codec.command_arbitration_id:

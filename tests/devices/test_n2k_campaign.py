@@ -19,6 +19,7 @@ from gyrostand.devices.nmea2000 import (
     RESOLUTION_DEG,
     VESSEL_HEADING,
     Product,
+    ReferenceEncoder,
     decode_vessel_heading,
     iso_name,
     split_id,
@@ -187,6 +188,42 @@ def test_a_late_frame_whose_sid_runs_on_is_not_lost() -> None:
     assert sink.observations and sink.of("trial_failed") == []
     assert all(o.frames_lost == 0 and o.flags == "" for o in sink.observations)
     assert [a for a in sink.of("event") if a[0] == "frame gap"] == []
+
+
+class Intruder:
+    """The compass, and at stand time 500 s a device joining the bus that claims its address
+    with a lower NAME: the compass answers as ISO 11783-5 has it, by claiming another one."""
+
+    def __init__(self) -> None:
+        self.compass = compass()
+        self.joined = False
+
+    def frames(self, t_s: np.ndarray, reading: np.ndarray, index: np.ndarray) -> list[can.Message]:
+        cut = int(np.searchsorted(t_s, 500.0))
+        if self.joined or cut == len(t_s):
+            return self.compass.frames(t_s, reading, index)
+        self.joined = True
+        out = self.compass.frames(t_s[:cut], reading[:cut], index[:cut])
+        (claim,) = ReferenceEncoder().address_claim(iso_name(1), 35, float(t_s[cut]))
+        out += [claim, *self.compass.answer(claim, float(t_s[cut]))]
+        return out + self.compass.frames(t_s[cut:], reading[cut:], index[cut:])
+
+    def answers(self, msg: can.Message) -> bool:
+        return self.compass.answers(msg)
+
+    def answer(self, msg: can.Message, t_s: float) -> list[can.Message]:
+        return self.compass.answer(msg, t_s)
+
+
+def test_a_device_taking_the_compass_address_loses_nothing(
+    n2k_run: tuple[Recorder, Lockstep],
+) -> None:
+    sink, _ = run(Intruder())
+    assert [o.frames_lost for o in sink.observations] == [0] * len(n2k_run[0].observations)
+    claims = [a[2] for a in sink.of("event") if a[0] == "address claim"]
+    assert claims == [
+        f"compass NAME 0x{iso_name(4242):016X} claimed address 36 (was 35); its headings follow it"
+    ]
 
 
 def test_a_compass_never_identified_fails_the_trial_with_the_reason() -> None:

@@ -22,7 +22,9 @@ from gyrostand.devices.nmea2000 import (
     PRODUCT_INFORMATION,
     Product,
     ReferenceDecoder,
+    ReferenceEncoder,
     can_id,
+    iso_name,
     iso_requests,
     requested_pgn,
 )
@@ -69,6 +71,19 @@ def test_the_compass_answers_as_a_device_does() -> None:
     frames = compass.answer(product_request, 12.5)
     assert len(frames) > 1  # fast-packet
     assert [decoder.decode(f) for f in frames][-1] == PRODUCT
+
+
+@pytest.mark.parametrize(("unique", "address"), [(1, 36), (99999, 35)], ids=["loses", "wins"])
+def test_a_claim_of_its_address_is_arbitrated_by_name(unique: int, address: int) -> None:
+    """ISO 11783-5: the lower NAME keeps the address; the compass (NAME unique number 4242)
+    claims its new address (36) when it loses, claims its own again when it wins."""
+    compass = Nmea2000Compass(DEVICE)
+    intruder = ReferenceEncoder().address_claim(iso_name(unique), 35, 1.0)[0]
+    assert compass.answers(intruder)
+    (claim,) = compass.answer(intruder, 2.0)
+    assert claim.arbitration_id & 0xFF == address and compass.address == address
+    assert ReferenceDecoder().decode(claim) == DEVICE.name
+    assert not compass.answers(ReferenceEncoder().address_claim(iso_name(1), 41, 3.0)[0])
 
 
 @pytest.fixture
