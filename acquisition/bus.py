@@ -200,7 +200,7 @@ class RecordedSend:
         return getattr(self._bus, name)
 
 
-def request_identity(bus: can.BusABC) -> None:
+def request_identity(bus: can.BusABC | RecordedSend) -> None:
     """Ask the NMEA 2000 devices for their address claim and product information, so that the
     campaign knows a compass that claimed its address before it started. Sent before the
     simulated stand starts: in virtual time it answers at its current stand time, before
@@ -241,7 +241,7 @@ class LiveBus:
             # the campaign judges acks from the stream: the controller only sends
             self.notifier = can.Notifier(self.bus, [self.recorder], timeout=0.05)
             if plan.compass.protocol == "nmea2000":
-                request_identity(sender)  # type: ignore[arg-type]
+                request_identity(sender)
             if self.simulator is not None:
                 self.simulator.start()
         except BaseException:

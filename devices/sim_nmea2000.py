@@ -108,11 +108,9 @@ class Nmea2000Compass:
         claim of its address, its own claim (ISO 11783-5: the lower NAME keeps the address, the
         other claims another one, here `Nmea2000Faults.new_address`)."""
         other = self._contender(msg)
-        if other is not None:
-            if other < self.device.name:
-                self.address = self.faults.new_address
-            return self._reference.address_claim(self.device.name, self.address, t_s)
-        pgn = requested_pgn(msg, self.address)
+        pgn = ADDRESS_CLAIM if other is not None else requested_pgn(msg, self.address)
+        if other is not None and other < self.device.name:
+            self.address = self.faults.new_address
         if pgn == ADDRESS_CLAIM:
             return self._reference.address_claim(self.device.name, self.address, t_s)
         if pgn == PRODUCT_INFORMATION:
