@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import can
 import numpy as np
@@ -40,16 +40,20 @@ class ReceivedCommand:
 
 class HeadingTransmitter(Protocol):
     """A compass that speaks another protocol than the stand's DBC (`devices.sim_nmea2000`):
-    it sends the readings of heading samples `index` (stand times `t_s`) as its own frames, and
-    answers the requests of its protocol (`answers`, `answer`)."""
-
-    def answers(self, msg: can.Message) -> bool: ...
-
-    def answer(self, msg: can.Message, t_s: float) -> list[can.Message]: ...
+    it sends the readings of heading samples `index` (stand times `t_s`) as its own frames."""
 
     def frames(
         self, t_s: np.ndarray, reading_deg: np.ndarray, index: np.ndarray
     ) -> list[can.Message]: ...
+
+
+@runtime_checkable
+class Answering(Protocol):
+    """A compass that also answers frames of its protocol (NMEA 2000: requests, claims)."""
+
+    def answers(self, msg: can.Message) -> bool: ...
+
+    def answer(self, msg: can.Message, t_s: float) -> list[can.Message]: ...
 
 
 class StandEngine:
@@ -263,12 +267,12 @@ class StandEngine:
     # ------------------------------------------------------------------------------ commands
     def for_compass(self, msg: can.Message) -> bool:
         """Whether the compass answers `msg` (a request or claim of its own protocol)."""
-        return self.transmitter is not None and self.transmitter.answers(msg)
+        return isinstance(self.transmitter, Answering) and self.transmitter.answers(msg)
 
     def receive(self, msg: can.Message) -> list[can.Message]:
         """Handle a frame from the bus at the current stand time; return the ack (or the
         compass's answer) to send."""
-        if self.transmitter is not None and self.transmitter.answers(msg):
+        if isinstance(self.transmitter, Answering) and self.transmitter.answers(msg):
             return self.transmitter.answer(msg, self._time_s)
         frame = self.codec.decode(msg)
         if not isinstance(frame, CommandFrame):
