@@ -44,6 +44,7 @@ from gyrostand.db.models import (
     CampaignOrigin,
     Event,
     Instrument,
+    MeasuredMotionRow,
     Observation,
     RawLogSegment,
     Series,
@@ -53,7 +54,17 @@ from gyrostand.db.models import (
 from gyrostand.db.queries import as_utc, instrument_for
 from gyrostand.db.session import writer
 
-COPIED = (CampaignLabel, Trial, Series, Observation, Event, RawLogSegment, SignOff, AnalysisRun)
+COPIED = (
+    CampaignLabel,
+    Trial,
+    Series,
+    Observation,
+    MeasuredMotionRow,
+    Event,
+    RawLogSegment,
+    SignOff,
+    AnalysisRun,
+)
 """The tables of a campaign's rows, besides the campaign row: each has one non-nullable foreign
 key to the campaign or to another of them."""
 DERIVED = (AnalysisRun,)  # copied, but no part of the content
