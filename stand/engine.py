@@ -248,6 +248,8 @@ class StandEngine:
         cycles = np.zeros(n)
         if self._rocking_since_s is not None:
             direction, amplitude, period = self._actual_motion()
+            if self.config.faults.amplitude_unreported:
+                amplitude = self._setting[1] if self._setting else 0.0
             cycles = np.maximum(t - self._rocking_since_s, 0.0) / period
         values = {
             "status_time": np.round(index * (1000.0 / self.config.status_rate_hz)) + self.clock_ms,

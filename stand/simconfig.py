@@ -130,6 +130,9 @@ class FaultParams:
     amplitude_factor: float = param(
         1.0, "the stand rocks at this multiple of the commanded amplitude (and reports it)"
     )
+    amplitude_unreported: bool = param(
+        False, "the stand reports the commanded amplitude, not the one it makes (uncalibrated)"
+    )
     compass_fault_bits: int = param(0, "FAULT_BITS reported in GYRO_STATUS")
 
 
