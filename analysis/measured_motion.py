@@ -47,8 +47,8 @@ class MeasuredMotion:
             f"{self.n_cycles} cycles" if self.n_cycles is not None else f"{self.n_samples} reports"
         )
         return (
-            f"A = {self.amplitude_cm:.3f} ± {self.amplitude_se_cm:.3f} cm, tau = "
-            f"{self.period_s:.4f} ± {self.period_se_s:.4f} s ({self.source}, {count})"
+            f"A = {self.amplitude_cm:.3f} ± {self.amplitude_se_cm:.2g} cm, tau = "
+            f"{self.period_s:.4f} ± {self.period_se_s:.2g} s ({self.source}, {count})"
         )
 
 

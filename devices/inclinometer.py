@@ -6,8 +6,9 @@ slope long16 0x6010 (x) then slope lateral16 0x6020 (y), INTEGER16 in the plan's
 per count: the resolution 0x6000 the lab set); EMCY (0x80 + node id) an error event (code 0:
 error reset, an info event); its boot-up (0x700 + node id, state 0) an info event.
 "j1939" (SAE J1939-71): Slope Sensor Information 2, PGN 61481, from the source address: pitch
-(x) in bytes 1-2, roll (y) in bytes 3-4, 1/32768 deg per bit, offset -250 deg; a value in the
-error/not-available range (above 0xFAFF) is no sample, told once as a warning.
+(x) in bytes 1-3, roll (y) in bytes 4-6 (SPNs 5253, 5254: 24 bits, 1/32768 deg per bit, offset
+-250 deg); a value in the error/not-available range (above 0xFAFFFF) is no sample, told once as
+a warning.
 
 A silence longer than SILENCE_INTERVALS sample intervals (the shortest one seen) between two
 samples is a warning event; a silence that lasts to the end of a series is the engine's to tell
@@ -29,7 +30,7 @@ SOURCE = "inclinometer"  # its name in the measured-motion table
 SSI2 = 61481  # J1939 Slope Sensor Information 2
 J1939_STEP_DEG = 1.0 / 32768.0
 J1939_OFFSET_DEG = -250.0
-J1939_VALID_MAX = 0xFAFF  # above: error / not available (J1939-71)
+J1939_VALID_MAX = 0xFAFFFF  # above: error / not available (J1939-71, 3-byte parameters)
 HEARTBEAT = 0x700
 SILENCE_INTERVALS = 5
 MIN_SILENCE_MS = 500
@@ -96,13 +97,13 @@ class InclinometerDecoder:
         """The slope (deg) of a sample frame, an event, or None."""
         plan = self.plan
         if plan.protocol == "j1939":
-            at = 0 if plan.axis == "x" else 2
-            value = int(data[at]) | int(data[at + 1]) << 8
+            at = 0 if plan.axis == "x" else 3
+            value = int(data[at]) | int(data[at + 1]) << 8 | int(data[at + 2]) << 16
             if dlc < 8 or value > J1939_VALID_MAX:
                 if self._told_unavailable:
                     return None
                 self._told_unavailable = True
-                why = f"{dlc} bytes" if dlc < 8 else f"slope 0x{value:04X} (error/not available)"
+                why = f"{dlc} bytes" if dlc < 8 else f"slope 0x{value:06X} (error/not available)"
                 return DeviceEvent("inclinometer", "warning", f"{self.label}: SSI2 with {why}")
             return plan.scale * (value * J1939_STEP_DEG + J1939_OFFSET_DEG)
         base = can_id - plan.address

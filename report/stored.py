@@ -112,8 +112,8 @@ class AppliedMotion:
     def describe(self) -> str:
         k, a, tau = self.commanded
         mk, ma, mtau = self.applied
-        se = "" if self.amplitude_se_cm is None else f" ± {self.amplitude_se_cm:.3f}"
-        se_tau = "" if self.period_se_s is None else f" ± {self.period_se_s:.4f}"
+        se = "" if self.amplitude_se_cm is None else f" ± {self.amplitude_se_cm:.2g}"
+        se_tau = "" if self.period_se_s is None else f" ± {self.period_se_s:.2g}"
         cycles = "" if self.n_cycles is None else f", {self.n_cycles} cycles"
         return (
             f"trial {self.index}: commanded K {k:g} deg, A {a:g} cm, tau {tau:g} s; applied "
