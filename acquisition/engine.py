@@ -1393,8 +1393,6 @@ class Engine:
     def _series_motion(self, trial: TrialPlan) -> tuple[MeasuredMotion, ...]:
         """The rocking series' measured motion per source (and what the trial applies)."""
         found = self._motion.series(trial)
-        for m in found.motions:
-            self.sink.event("measured motion", "info", m.describe(), trial.index, 2, self.now_ms)
         for note in found.notes:
             self.sink.event("measured motion", "warning", note, trial.index, 2, self.now_ms)
         applied = preferred(found.motions)

@@ -41,16 +41,6 @@ class MeasuredMotion:
     n_cycles: int | None  # fitted cycles (None: reports)
     n_samples: int
 
-    def describe(self) -> str:
-        """One line: A and tau with their SEs, and where they come from."""
-        count = (
-            f"{self.n_cycles} cycles" if self.n_cycles is not None else f"{self.n_samples} reports"
-        )
-        return (
-            f"A = {self.amplitude_cm:.3f} ± {self.amplitude_se_cm:.2g} cm, tau = "
-            f"{self.period_s:.4f} ± {self.period_se_s:.2g} s ({self.source}, {count})"
-        )
-
 
 def from_roll(
     source: str,
