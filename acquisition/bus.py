@@ -22,7 +22,7 @@ from gyrostand.devices.nmea2000 import iso_requests
 from gyrostand.devices.sim_nmea2000 import simulated_compass
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import BatchBLFWriter, raw_log_writer
-from gyrostand.plan.codec import codec_for, sim_config
+from gyrostand.plan.codec import codec_for, stand_config
 from gyrostand.plan.model import BusPlan, Plan
 from gyrostand.stand.controller import StandController
 from gyrostand.stand.engine import HeadingTransmitter
@@ -217,7 +217,7 @@ class LiveBus:
         self.plan = plan
         self.virtual = plan.bus.timing == "virtual"
         self.simulator: Simulator | None = None
-        config = sim_config(plan.bus) if plan.bus.simulated else None
+        config = stand_config(plan) if plan.bus.simulated else None
         self.bus = self._open(plan.bus)
         try:
             if config is not None:

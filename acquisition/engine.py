@@ -49,11 +49,13 @@ from gyrostand.acquisition.early_settle import (
     describe,
     hold_blocks,
 )
+from gyrostand.acquisition.motion import MotionRecorder
 from gyrostand.analysis.angles import wrap180
+from gyrostand.analysis.measured_motion import MeasuredMotion, preferred
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.devices.source import SourceInfo
 from gyrostand.devices.stand_frames import GYROSTAND
-from gyrostand.frames.batch import DeviceEvent, FrameBatch, Headings, Statuses
+from gyrostand.frames.batch import DeviceEvent, FrameBatch, Headings, RollSample, Statuses
 from gyrostand.plan.model import Plan, TrialPlan
 from gyrostand.stand.protocol import (
     AckFrame,
@@ -134,9 +136,10 @@ class SeriesCompensation:
 
 @dataclass(frozen=True)
 class Measured:
-    """What the stand reported doing during series j = 2 (mean of its status frames)."""
+    """The motion trial i applies: A and tau of its preferred measuring source
+    (`analysis.measured_motion.PREFERENCE`), K of the stand's reports (None: not reported)."""
 
-    direction_deg: float
+    direction_deg: float | None
     amplitude_cm: float
     period_s: float
 
@@ -165,7 +168,11 @@ class Sink(Protocol):
     def series_settled(self, trial: int, j: int, t_ms: int, outcome: SettleOutcome) -> None: ...
     def observation(self, obs: ObservationResult) -> None: ...
     def series_completed(
-        self, trial: int, j: int, compensation: SeriesCompensation | None = None
+        self,
+        trial: int,
+        j: int,
+        compensation: SeriesCompensation | None = None,
+        motion: tuple[MeasuredMotion, ...] = (),
     ) -> None: ...
     def trial_completed(self, trial: int, measured: Measured | None) -> None: ...
     def trial_failed(self, trial: int, j: int | None, reason: str) -> None: ...
@@ -380,7 +387,8 @@ class Engine:
         self._step_ms: int | None = None  # the last start/stop that took effect (this run)
         self._windows: list[tuple[int, int]] = []  # the series' observation windows (ms)
         self._series_errors = 0
-        self._motion: list[tuple[float, float, float]] = []
+        self._motion = MotionRecorder(plan)  # the rocking series' measured motion
+        self._measured: Measured | None = None
         self._last_status_text = ""
         self._settle_durations: list[int] = []
         self._next_trial()
@@ -413,7 +421,8 @@ class Engine:
         self._quiet_reset()
         done = self.progress.get(self._trial.index, _NONE)
         self._ref = done.reference_deg
-        self._motion = []
+        self._motion.reset()
+        self._measured = None
         self.sink.trial_started(self._trial.index)
         self._j = 2 if 1 in done.series_done else 1
         self._k = done.committed.get(self._j, 0) + 1
@@ -804,8 +813,10 @@ class Engine:
                 kind="mis-tracking",
             )
 
-    def _on_other(self, pos: int, frame: Frame | DeviceEvent) -> None:
-        if isinstance(frame, DeviceEvent):
+    def _on_other(self, pos: int, frame: Frame | DeviceEvent | RollSample) -> None:
+        if isinstance(frame, RollSample):
+            self._on_roll(frame)
+        elif isinstance(frame, DeviceEvent):
             j = self._j if self.phase in (Phase.SETTLE, Phase.OBSERVE) else None
             self.sink.event(frame.kind, frame.severity, frame.message, self._tidx, j, self.now_ms)
         elif isinstance(frame, CommandFrame):
@@ -995,10 +1006,7 @@ class Engine:
         s = self._s
         stop = self._si + int(np.searchsorted(s.pos[self._si :], limit))
         if self._j == 2 and self.phase is Phase.OBSERVE:
-            for i in range(self._si, stop):
-                self._motion.append(
-                    (float(s.direction_deg[i]), float(s.amplitude_cm[i]), float(s.period_s[i]))
-                )
+            self._motion.reports(s, self._si, stop)
         if stop > self._si:
             self.now_ms = max(self.now_ms, int(s.t_ms[stop - 1]))
         self._si = stop
@@ -1009,7 +1017,7 @@ class Engine:
                 self._tell_gaps(pos)
             if isinstance(frame, CommandFrame):
                 self._foreign_command(frame)
-            if isinstance(frame, DeviceEvent):
+            if isinstance(frame, DeviceEvent | RollSample):
                 self._on_other(pos, frame)
             if isinstance(frame, ClockFrame):
                 self.now_ms = max(self.now_ms, frame.stand_time_ms)
@@ -1366,7 +1374,13 @@ class Engine:
             start = w.end_ms + round(self.plan.observation.spacing_s * 1000)
             self._window = _Window(start, start + (w.end_ms - w.start_ms))
             return
-        self.sink.series_completed(trial.index, self._j, self._compensation())
+        motion = self._series_motion(trial) if self._j == 2 else ()
+        self.sink.series_completed(trial.index, self._j, self._compensation(), motion)
+        applied = preferred(motion)
+        problem = self._motion.tracking_problem(trial, applied)
+        if problem is not None:
+            self.fail(problem, kind="mis-tracking")
+            return
         self._window = None
         self._windows = []
         if self._j == 1:
@@ -1374,6 +1388,23 @@ class Engine:
             self._send(self._rocking_commands(), Phase.TRACKING)
         else:
             self._send([Command("stop")], Phase.DONE)
+
+    def _on_roll(self, sample: RollSample) -> None:
+        """A measuring source's roll sample: kept while the rocking series is observed."""
+        if self._j == 2 and self.phase is Phase.OBSERVE:
+            self._motion.sample(sample)
+
+    def _series_motion(self, trial: TrialPlan) -> tuple[MeasuredMotion, ...]:
+        """The rocking series' measured motion per source (and what the trial applies)."""
+        found = self._motion.series(trial)
+        for note in found.notes:
+            self.sink.event("measured motion", "warning", note, trial.index, 2, self.now_ms)
+        applied = preferred(found.motions)
+        if applied is not None:
+            reported = next((m for m in found.motions if m.direction_deg is not None), None)
+            direction = None if reported is None else reported.direction_deg
+            self._measured = Measured(direction, applied.amplitude_cm, applied.period_s)
+        return found.motions
 
     def _compensation(self) -> SeriesCompensation | None:
         """Compensated series: the fitted transient over each observation window of this run
@@ -1395,17 +1426,9 @@ class Engine:
 
     def _trial_completed(self) -> None:
         assert self._trial is not None
-        self.sink.trial_completed(self._trial.index, self._measured())
+        self.sink.trial_completed(self._trial.index, self._measured)
         self._trial = None
         self._next_trial()
-
-    def _measured(self) -> Measured | None:
-        if not self._motion:
-            return None
-        d, a, p = np.array(self._motion).T
-        rad = np.radians(d)
-        direction = math.degrees(math.atan2(np.sin(rad).mean(), np.cos(rad).mean())) % 360.0
-        return Measured(round(direction, 6), float(a.mean()), float(p.mean()))
 
     # -------------------------------------------------------------------------------- progress
     def snapshot(self) -> Snapshot:

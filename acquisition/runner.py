@@ -173,7 +173,7 @@ def run_live(
     commander = LiveCommander(live.controller, grants)
     source = source_info(codec, plan.compass.protocol)
     engine = Engine(plan, store, commander, progress, operator, source, start_ms=clock_ms)
-    decoder = frame_decoder(codec, *plan.heading_source)
+    decoder = frame_decoder(codec, *plan.heading_source, plan.inclinometer_mount)
     if grants is None:
         silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
         silence = f"bus silence: no frame at all for {silence_wall_s:g} s (wall clock)"
@@ -444,7 +444,7 @@ def replay(
     checked = checked or [check_replay_log(log) for log in logs]
     store = CampaignStore.create(sessions, plan, source="replay")
     engine = Engine(plan, store, _NoCommands(), source=source_info(codec, plan.compass.protocol))
-    decoder = frame_decoder(codec, *plan.heading_source)
+    decoder = frame_decoder(codec, *plan.heading_source, plan.inclinometer_mount)
     position = 0
     try:
         with store.deferred():

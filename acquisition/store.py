@@ -3,21 +3,31 @@ durable the moment it completes and a killed process loses at most the one in pr
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from datetime import UTC, datetime
 from typing import Concatenate, ParamSpec
 
-from sqlalchemy import select
+from sqlalchemy import delete, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand import SOFTWARE_VERSION
 from gyrostand.acquisition.engine import Measured, ObservationResult, SeriesCompensation, TrialState
 from gyrostand.acquisition.retry import new_attempt
+from gyrostand.analysis.measured_motion import MeasuredMotion
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.db.lease import take_lease
-from gyrostand.db.models import Campaign, Event, Observation, RawLogSegment, Series, Trial
+from gyrostand.db.models import (
+    Campaign,
+    Event,
+    MeasuredMotionRow,
+    Observation,
+    RawLogSegment,
+    Series,
+    Trial,
+)
 from gyrostand.db.queries import (
     CampaignHeader,
     latest_attempt,
@@ -351,9 +361,17 @@ class CampaignStore:
         trial: int,
         j: int,
         compensation: SeriesCompensation | None = None,
+        motion: tuple[MeasuredMotion, ...] = (),
     ) -> None:
         series = self._series(session, trial, j)
         series.status = "completed"
+        for m in motion:  # (a resumed series' motion replaces the one measured before)
+            session.execute(
+                delete(MeasuredMotionRow).where(
+                    MeasuredMotionRow.series_id == series.id, MeasuredMotionRow.source == m.source
+                )
+            )
+            session.add(MeasuredMotionRow(series_id=series.id, **dataclasses.asdict(m)))
         if compensation is None:
             return
         series.compensation_se_deg = compensation.standard_error_deg

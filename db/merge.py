@@ -44,6 +44,7 @@ from gyrostand.db.models import (
     CampaignOrigin,
     Event,
     Instrument,
+    MeasuredMotionRow,
     Observation,
     RawLogSegment,
     Series,
@@ -53,7 +54,17 @@ from gyrostand.db.models import (
 from gyrostand.db.queries import as_utc, instrument_for
 from gyrostand.db.session import writer
 
-COPIED = (CampaignLabel, Trial, Series, Observation, Event, RawLogSegment, SignOff, AnalysisRun)
+COPIED = (
+    CampaignLabel,
+    Trial,
+    Series,
+    Observation,
+    MeasuredMotionRow,
+    Event,
+    RawLogSegment,
+    SignOff,
+    AnalysisRun,
+)
 """The tables of a campaign's rows, besides the campaign row: each has one non-nullable foreign
 key to the campaign or to another of them."""
 DERIVED = (AnalysisRun,)  # copied, but no part of the content
@@ -61,6 +72,8 @@ MATCHED = (Instrument,)  # the lab's own row of the same model, serial and const
 PER_DATABASE = (CampaignOrigin,)  # never copied
 MERGE_LOCK = 0x67796D7267  # PostgreSQL advisory lock key of merges ("gymrg")
 LOCATION = {"raw_log_segment": "path"}  # where a file is kept: no part of the content
+LATER = ("measured_motion",)  # tables added since content hashes were first recorded: in the
+# content only when they have rows, so a campaign merged before keeps its hash
 IDENTITIES = uuid.UUID("5a0c8f1e-9b7d-4c1e-8f2a-67796d657267")  # namespace of database_identity
 
 Values = dict[str, Any]  # a row: column -> value
@@ -155,7 +168,7 @@ def content_sha256(rows: CampaignRows) -> str:
     }
     derived = {model.__tablename__ for model in DERIVED}
     for table in _tables():
-        if table.name in derived:
+        if table.name in derived or (table.name in LATER and not rows.tables[table.name]):
             continue
         keys = _references(table)
         document[table.name] = [

@@ -35,6 +35,7 @@ SERIES_STATUSES = ("pending", "settling", "observing", "completed", "failed")
 EVENT_SEVERITIES = ("info", "warning", "error")
 SEGMENT_STARTS = ("new", "continued", "restarted")
 SEGMENT_ENDINGS = ("closed", "killed")
+MOTION_SOURCES = ("inclinometer", "drive position", "stand report")  # measured_motion.PREFERENCE
 
 NAMING = {
     "ix": "ix_%(column_0_label)s",
@@ -295,6 +296,49 @@ class Series(Base):
         cascade="all, delete-orphan",
         passive_deletes=True,
     )
+    motions: Mapped[list[MeasuredMotionRow]] = relationship(
+        back_populates="series",
+        order_by="MeasuredMotionRow.id",
+        cascade="all, delete-orphan",
+        passive_deletes=True,
+    )
+
+
+class MeasuredMotionRow(Base):
+    """The motion the stand really made during a rocking series, per measuring source
+    (`analysis.measured_motion`): Potemkin 1982 model 1.1's A (cm) and tau (s), K where the
+    source knows it, the phase, their scatter over the fitted cycles (or the stand's reports),
+    and how many. Written with the series' completion."""
+
+    __tablename__ = "measured_motion"
+    __table_args__ = (
+        UniqueConstraint("series_id", "source"),
+        CheckConstraint(one_of("source", MOTION_SOURCES), name="source"),
+        CheckConstraint("amplitude_cm >= 0", name="amplitude"),
+        CheckConstraint("period_s > 0", name="period"),
+        CheckConstraint("n_samples >= 1", name="n_samples"),
+        CheckConstraint("n_cycles IS NULL OR n_cycles >= 1", name="n_cycles"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    series_id: Mapped[int] = mapped_column(ForeignKey("series.id", ondelete="CASCADE"))
+    source: Mapped[str] = mapped_column(String(32))
+    amplitude_cm: Mapped[float] = mapped_column(Float)
+    amplitude_se_cm: Mapped[float] = mapped_column(Float)
+    amplitude_sd_cm: Mapped[float] = mapped_column(Float)
+    period_s: Mapped[float] = mapped_column(Float)
+    period_se_s: Mapped[float] = mapped_column(Float)
+    period_sd_s: Mapped[float] = mapped_column(Float)
+    direction_deg: Mapped[float | None] = mapped_column(Float)
+    phase_deg: Mapped[float | None] = mapped_column(Float)
+    """Of sin at the first fitted cycle's start (`first_cycle_ms`); NULL for reports."""
+    phase_sd_deg: Mapped[float | None] = mapped_column(Float)
+    first_cycle_ms: Mapped[int | None] = mapped_column(BigInteger)
+    n_cycles: Mapped[int | None] = mapped_column(Integer)
+    """Cycles fitted (NULL: the stand's reports, averaged)."""
+    n_samples: Mapped[int] = mapped_column(Integer)
+
+    series: Mapped[Series] = relationship(back_populates="motions")
 
 
 class Observation(Base):

@@ -64,8 +64,8 @@ def current_trials(trials: Iterable[Trial]) -> list[Trial]:
 
 def load_campaign(session: Session, campaign_id: int) -> Campaign:
     """The campaign with its instrument, trials (every attempt, by index and attempt), series
-    (by j) and observations (by k) loaded in a few SELECTs; events and analysis runs load lazily
-    when touched."""
+    (by j), observations (by k) and measured motion loaded in a few SELECTs; events and
+    analysis runs load lazily when touched."""
     campaign = session.scalar(
         select(Campaign)
         .where(Campaign.id == campaign_id)
@@ -74,6 +74,7 @@ def load_campaign(session: Session, campaign_id: int) -> Campaign:
             selectinload(Campaign.trials)
             .selectinload(Trial.series)
             .selectinload(Series.observations),
+            selectinload(Campaign.trials).selectinload(Trial.series).selectinload(Series.motions),
         )
     )
     if campaign is None:

@@ -1,11 +1,15 @@
-"""Frames -> `FrameBatch` for a campaign's heading source: the stand's frames by
-`frames.batch.BatchDecoder`, the headings by the source's adapter, on one campaign clock."""
+"""Frames -> `FrameBatch` for a campaign's heading source (and inclinometer): the stand's frames
+by `frames.batch.BatchDecoder`, the headings by the source's adapter, the inclinometer's roll
+samples by `devices.inclinometer`, on one campaign clock."""
 
 from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
+
 from gyrostand.devices.clock import VIRTUAL_TIME_BASE, ReceptionClock
+from gyrostand.devices.inclinometer import InclinometerDecoder, Mount
 from gyrostand.devices.n2k_heading import Nmea2000Heading
 from gyrostand.devices.source import SourceInfo
 from gyrostand.devices.stand_frames import stand_source_info
@@ -14,22 +18,38 @@ from gyrostand.stand.protocol import Codec
 
 
 class SourceDecoder:
-    """A CAN heading source beside the stand's frames (same stream: one bus, or the merged
-    stream of the stand's and the compass's buses)."""
+    """A CAN heading source and/or an inclinometer beside the stand's frames (same stream: one
+    bus, or the merged stream of the stand's and the compass's buses); without a heading
+    source the headings are the stand DBC's."""
 
-    def __init__(self, codec: Codec, source: Nmea2000Heading) -> None:
+    def __init__(
+        self,
+        codec: Codec,
+        source: Nmea2000Heading | None,
+        inclinometer: InclinometerDecoder | None = None,
+    ) -> None:
         self.stand = BatchDecoder(codec)
         self.source = source
+        self.inclinometer = inclinometer
         self.clock = ReceptionClock()
 
     def decode(self, raw: RawFrames) -> FrameBatch:
-        claimed = self.source.claims(raw)
+        claimed = np.zeros(len(raw), dtype=bool)
+        for device in (self.source, self.inclinometer):
+            if device is not None:
+                claimed |= device.claims(raw)
         stand = self.stand.decode(raw, skip=claimed)  # (its own heading frames, if any: unused)
         statuses = stand.statuses
         self.clock.observe(statuses.pos, statuses.t_ms, raw.timestamp[statuses.pos - raw.start])
-        out = self.source.decode(raw, self.clock)
-        others = sorted((*stand.others, *out.invalid, *out.events), key=lambda x: x[0])
-        return FrameBatch(out.headings, statuses, tuple(others), stand.end)
+        headings, others = stand.headings, list(stand.others)
+        if self.source is not None:
+            out = self.source.decode(raw, self.clock)
+            headings = out.headings
+            others += [*out.invalid, *out.events]
+        if self.inclinometer is not None:
+            others += self.inclinometer.decode(raw, self.clock)
+        others.sort(key=lambda x: x[0])
+        return FrameBatch(headings, statuses, tuple(others), stand.end)
 
 
 def frame_decoder(
@@ -37,14 +57,16 @@ def frame_decoder(
     protocol: str = "gyrostand",
     name: str | None = None,
     product: tuple[str, str] | None = None,
+    inclinometer: tuple[str, int, str, float] | None = None,
 ) -> BatchDecoder | SourceDecoder:
     """The decoder of a plan's [compass] (`name`: NMEA 2000 NAME in hexadecimal; `product`:
-    [instrument] model and serial)."""
+    [instrument] model and serial) and [inclinometer] (`Plan.inclinometer_mount`)."""
+    sensor = None if inclinometer is None else InclinometerDecoder(Mount(*inclinometer))
     if protocol in ("gyrostand", "dbc"):
-        return BatchDecoder(codec)
+        return BatchDecoder(codec) if sensor is None else SourceDecoder(codec, None, sensor)
     if protocol == "nmea2000":
         wanted = int(name, 16) if name is not None else None
-        return SourceDecoder(codec, Nmea2000Heading(wanted, None if wanted else product))
+        return SourceDecoder(codec, Nmea2000Heading(wanted, None if wanted else product), sensor)
     raise ValueError(f"heading source {protocol!r} is not runnable yet")
 
 

@@ -146,13 +146,23 @@ class DeviceEvent:
 
 
 @dataclass(frozen=True)
+class RollSample:
+    """One sample of the platform's roll angle from a measuring source ("inclinometer", later
+    "drive position"), on the campaign clock: what the measured motion is fitted to."""
+
+    source: str
+    t_ms: int
+    angle_deg: float
+
+
+@dataclass(frozen=True)
 class FrameBatch:
     """One decoded batch: heading and status arrays plus the other frames, each with its
     stream position so that consumers can keep the order of the stream."""
 
     headings: Headings
     statuses: Statuses
-    others: tuple[tuple[int, Frame | DeviceEvent], ...]
+    others: tuple[tuple[int, Frame | DeviceEvent | RollSample], ...]
     end: int  # stream position after the last frame
 
 

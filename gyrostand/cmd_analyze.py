@@ -27,10 +27,13 @@ from gyrostand.cmd_data import DEFAULT_DB, MAX_CAMPAIGN_ID, DbOption, JsonOption
 from gyrostand.errors import fail, printable, printable_lines
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from gyrostand.analysis.campaign import CampaignAnalysis
     from gyrostand.analysis.trials import TrialInput
     from gyrostand.report.settings import AnalysisSettings
     from gyrostand.report.signal import SignalSection
+    from gyrostand.report.stored import AppliedMotion
 
 PAPER_NOTE = (
     "note: no --plan given: using the example constants, start values and ship forecast of "
@@ -71,18 +74,29 @@ def run_analysis(trials: list[TrialInput], settings: AnalysisSettings) -> Campai
         fail(str(exc))
 
 
-def emit(analysis: CampaignAnalysis, as_json: bool, heading_source: str | None = None) -> None:
+def emit(
+    analysis: CampaignAnalysis,
+    as_json: bool,
+    heading_source: str | None = None,
+    motion: Sequence[AppliedMotion] = (),
+) -> None:
     """Print the analysis as text sections, or as one JSON document (keys: analysis.campaign);
-    a stored campaign's heading source (protocol, resolution, time base) first."""
+    a stored campaign's heading source (protocol, resolution, time base) and its trials'
+    commanded and applied motion (key "motion") first."""
     from gyrostand.report.text import render_text
 
     if as_json:
         document = analysis.to_dict()
+        if motion:
+            document = {"motion": [m.to_dict() for m in motion], **document}
         if heading_source is not None:
             document = {"heading_source": heading_source, **document}
         typer.echo(json.dumps(document, indent=2, allow_nan=False))
     else:  # it may quote stored strings: control characters escaped
         text = render_text(analysis)
+        if motion:
+            lines = "\n".join(m.describe() for m in motion)
+            text = f"MOTION (commanded; applied: measured A and tau, their SE)\n{lines}\n\n{text}"
         if heading_source is not None:
             text = f"HEADING SOURCE\n{heading_source}\n\n{text}"
         typer.echo(printable_lines(text), nl=False)
@@ -143,8 +157,8 @@ def register(app: typer.Typer) -> None:
         if campaign is not None:
             if csv is not None or plan is not None:
                 fail("give a CAMPAIGN id or --csv FILE [--plan PLAN], not both")
-            analysis, heading = analyze_stored_campaign(db, campaign)
-            emit(analysis, as_json, heading)
+            analysis, heading, motion = analyze_stored_campaign(db, campaign)
+            emit(analysis, as_json, heading, motion)
             return
         if csv is None:
             fail("no source given: use --csv FILE (see examples/paper.csv) or a CAMPAIGN id")
@@ -165,20 +179,24 @@ def register(app: typer.Typer) -> None:
         emit(analysis, as_json)
 
 
-def analyze_stored_campaign(db: str, campaign_id: int) -> tuple[CampaignAnalysis, str]:
+def analyze_stored_campaign(
+    db: str, campaign_id: int
+) -> tuple[CampaignAnalysis, str, tuple[AppliedMotion, ...]]:
     """Analyse a campaign stored in the database (settings from its plan, constants from the
-    campaign) and record the analysis run; with its heading source; one-line CLI errors."""
+    campaign) and record the analysis run; with its heading source and its trials' applied
+    motion; one-line CLI errors."""
     from sqlalchemy.exc import OperationalError
 
     from gyrostand.db.models import Campaign
     from gyrostand.db.queries import CampaignNotFound
-    from gyrostand.report.stored import analyze_stored, heading_source
+    from gyrostand.report.stored import analyze_stored, campaign_motion, heading_source
 
     sessions = open_db(db, must_exist=True)
     try:
         with sessions.begin() as session:
             stored = analyze_stored(session, campaign_id)
             heading = heading_source(session.get_one(Campaign, campaign_id))
+            motion = campaign_motion(session.get_one(Campaign, campaign_id))
     except (AnalysisError, CampaignNotFound) as exc:
         fail(str(exc))
     except OperationalError as exc:
@@ -189,7 +207,7 @@ def analyze_stored_campaign(db: str, campaign_id: int) -> tuple[CampaignAnalysis
             typer.echo(printable(message), err=True)
     for note in stored.inputs.notes:
         typer.echo(printable(f"note: {note}"), err=True)
-    return stored.analysis, heading
+    return stored.analysis, heading, motion
 
 
 def signal_of(

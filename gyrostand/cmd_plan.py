@@ -35,6 +35,9 @@ def summary(plan: Plan) -> str:
         where = f"python-can {bus.interface or '(configured)'} {bus.channel or ''}".rstrip()
     if plan.compass.protocol != "gyrostand":
         where += f", compass on {plan.compass.protocol}"
+    if plan.inclinometer_mount is not None:
+        protocol, address, axis, _ = plan.inclinometer_mount
+        where += f", roll measured by a {protocol} inclinometer ({address}, axis {axis})"
     acceptance = ", acceptance by excursions" if plan.acceptance is not None else ""
     return (
         f"{design}, N = {plan.n_obs}, settle by {plan.settle.method}{acceptance}, {where}, "

@@ -22,6 +22,7 @@ from gyrostand.errors import fail, say
 from gyrostand.stand.simconfig import (
     CompassParams,
     FaultParams,
+    InclinometerParams,
     NoiseParams,
     SimConfig,
     StandParams,
@@ -41,7 +42,13 @@ _GROUPS: tuple[tuple[str | None, type, str], ...] = (
     ("noise", NoiseParams, "Physics: sensor noise"),
     ("stand", StandParams, "Roll stand limits"),
     ("faults", FaultParams, "Faults"),
+    ("inclinometer", InclinometerParams, "CiA 410 inclinometer on the platform"),
 )
+PREFIXED = {"inclinometer"}  # groups whose options carry the group's name: --inclinometer-...
+
+
+def _parameter_name(group: str | None, field_name: str) -> str:
+    return f"{group}_{field_name}" if group in PREFIXED else field_name
 
 
 def _option_name(field_name: str) -> str:
@@ -51,12 +58,13 @@ def _option_name(field_name: str) -> str:
 def _config_parameters() -> list[inspect.Parameter]:
     """One keyword parameter (a typer option) per scalar config field."""
     params = []
-    for _, cls, panel in _GROUPS:
+    for group, cls, panel in _GROUPS:
         hints = typing.get_type_hints(cls)
         for f in fields(cls):
             if f.default is MISSING:  # the nested dataclasses of SimConfig
                 continue
-            name = _option_name(f.name)
+            parameter = _parameter_name(group, f.name)
+            name = _option_name(parameter)
             switch_off = hints[f.name] is bool and f.default  # --x/--no-x; else a plain flag
             decl = f"{name}/--no-{name[2:]}" if switch_off else name
             option = typer.Option(
@@ -64,7 +72,10 @@ def _config_parameters() -> list[inspect.Parameter]:
             )
             params.append(
                 inspect.Parameter(
-                    f.name, inspect.Parameter.KEYWORD_ONLY, default=option, annotation=hints[f.name]
+                    parameter,
+                    inspect.Parameter.KEYWORD_ONLY,
+                    default=option,
+                    annotation=hints[f.name],
                 )
             )
     return params
@@ -75,7 +86,11 @@ def _config(values: dict[str, Any]) -> SimConfig:
     nested = {}
     top = {}
     for group, cls, _ in _GROUPS:
-        chosen = {f.name: values[f.name] for f in fields(cls) if f.default is not MISSING}
+        chosen = {
+            f.name: values[_parameter_name(group, f.name)]
+            for f in fields(cls)
+            if f.default is not MISSING
+        }
         if group is None:
             top = chosen
         else:

@@ -119,9 +119,9 @@ def _defaults(config: pytest.Config) -> dict[str, Any]:
 @pytest.fixture
 def gyro_stand_factory(pytestconfig: pytest.Config) -> Iterator[Callable[..., SimulatedStand]]:
     """`make(**knobs)`: a simulated gyrocompass + roll stand started on its bus, stopped after
-    the test. Knobs: compass, noise, faults, stand (dicts of their fields), seed, timing
-    ("virtual" or "realtime"), speedup, heading_rate_hz, status_rate_hz; dbc (path) and signals
-    (a [signals] mapping, or a TOML file holding one); protocol, what the compass speaks
+    the test. Knobs: compass, noise, faults, stand, inclinometer (dicts of their fields), seed,
+    timing ("virtual" or "realtime"), speedup, heading_rate_hz, status_rate_hz; dbc (path) and
+    signals (a [signals] mapping, or a TOML file holding one); protocol, what the compass speaks
     ("gyrostand" or "nmea2000", with nmea2000={model, serial, address, address_change_at_s,
     new_address, not_available_rate}); interface ("virtual" or "socketcan") and channel. The
     command line's --gyrostand-* options are the defaults."""

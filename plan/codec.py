@@ -4,6 +4,8 @@ touched (`campaign run`, `plan check`)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 from gyrostand.plan.model import BusPlan, Plan, PlanError
 from gyrostand.stand.protocol import Codec, ProtocolError
 from gyrostand.stand.simconfig import SimConfig, simulator_config
@@ -21,6 +23,25 @@ def sim_config(bus: BusPlan) -> SimConfig:
     """The simulated stand for a plan: its `[bus.simulator]` overrides (validated with the plan)
     on the defaults, with the plan's speedup, seed and timing."""
     return simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
+
+
+def stand_config(plan: Plan) -> SimConfig:
+    """The plan's simulated stand (`sim_config`) carrying the plan's [inclinometer] as it is
+    mounted: node id, axis, scale, and the stand's arm (its noise, bias, rate and faults are
+    [bus.simulator.inclinometer]'s)."""
+    config = sim_config(plan.bus)
+    mounted = plan.inclinometer
+    if mounted is None or mounted.protocol != "cia410":
+        return config
+    assert plan.stand.arm_length_cm is not None  # (the plan requires it with an inclinometer)
+    inclinometer = dataclasses.replace(
+        config.inclinometer,
+        node_id=mounted.node_id,
+        axis=mounted.axis,
+        step_deg=mounted.scale,
+        arm_length_cm=plan.stand.arm_length_cm,
+    )
+    return dataclasses.replace(config, inclinometer=inclinometer)
 
 
 def prepare(plan: Plan) -> None:
@@ -49,7 +70,12 @@ def prepare(plan: Plan) -> None:
             "[compass] interface: a compass on a CAN bus of its own is not runnable yet (put it "
             "on the stand's bus: leave interface and channel out)"
         )
+    inclinometer = plan.inclinometer
+    if plan.bus.simulated and inclinometer is not None and inclinometer.protocol != "cia410":
+        problems.append(
+            '[inclinometer] protocol: the simulated stand carries a "cia410" inclinometer only'
+        )
     if problems:
         raise PlanError(problems)
     if plan.bus.simulated:
-        sim_config(plan.bus)
+        stand_config(plan)

@@ -446,7 +446,9 @@ class SettlePlan(_Table):
 
 
 class TrackingPlan(_Table):
-    """[tracking]: how closely the stand's measured rocking must follow the command."""
+    """[tracking]: how closely the stand's rocking must follow the command: its own reports while it
+    starts, and the motion measured over the rocking series ([inclinometer], else the stand's
+    reports), which fails the trial when outside."""
 
     amplitude_rel: float = Field(0.05, gt=0)
     """Largest relative amplitude error."""
@@ -588,8 +590,73 @@ class CompassPlan(_Table):
         return self.interface is not None
 
 
+InclinometerProtocol = Literal["cia410", "j1939"]
+CIA410_STEP_DEG = 0.01  # CiA 410 slope in 0.01 deg (resolution 0x6000 = 10, its usual setting)
+
+
+class InclinometerPlan(_Table):
+    """[inclinometer]: an inclinometer on the roll platform that measures the roll the stand
+    really makes (docs/instruments.md), on the stand's bus. "cia410": a CANopen CiA 410
+    inclinometer sending its slopes in TPDO1 (event timer or SYNC), heard without SDO access;
+    "j1939": a J1939 one sending Slope Sensor Information 2 (PGN 61481)."""
+
+    protocol: InclinometerProtocol
+    """How the inclinometer sends its slope."""
+    node_id: int | None = Field(None, ge=1, le=127)
+    """cia410: its CANopen node id (TPDO1 0x180 + node id, EMCY 0x80 + node id)."""
+    source_address: int | None = Field(None, ge=0, le=253)
+    """j1939: its source address."""
+    axis: Literal["x", "y"] = "x"
+    """The slope that follows the roll: "x" (cia410: slope long16, 0x6010, first in TPDO1;
+    j1939: pitch) or "y" (cia410: slope lateral16, 0x6020, second; j1939: roll)."""
+    scale: float = Field(CIA410_STEP_DEG, json_schema_extra=_no_default)
+    """cia410: degrees per count of the slope (its resolution 0x6000 in 0.001 deg: 10 = 0.01
+    deg), negative when mounted reversed; j1939: +1 or -1 times the standard 1/32768 deg."""
+    interface: Interface | None = None
+    """Its own CAN bus: not supported yet (the inclinometer sits on the stand's bus)."""
+    channel: Channel | None = None
+    """Its own bus's channel: not supported yet."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_scale(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "scale" not in data:
+            return {**data, "scale": 1.0 if data.get("protocol") == "j1939" else CIA410_STEP_DEG}
+        return data
+
+    @model_validator(mode="after")
+    def _consistent(self) -> InclinometerPlan:
+        given = self.model_fields_set
+        problems = []
+        if self.protocol == "cia410":
+            if "node_id" not in given:
+                problems.append(("node_id", 'missing (protocol = "cia410")'))
+            if "source_address" in given:
+                problems.append(("source_address", 'not with protocol = "cia410" (j1939\'s)'))
+        else:
+            if "source_address" not in given:
+                problems.append(("source_address", 'missing (protocol = "j1939")'))
+            if "node_id" in given:
+                problems.append(("node_id", 'not with protocol = "j1939" (cia410\'s)'))
+            if abs(self.scale) != 1.0:
+                problems.append(("scale", "j1939: +1 or -1 (the slope's unit is the standard's)"))
+        if self.scale == 0 or not math.isfinite(self.scale):
+            problems.append(("scale", "must be a non-zero number"))
+        for key in ("interface", "channel"):
+            if key in given:
+                problems.append(
+                    (
+                        key,
+                        "an inclinometer on a bus of its own is not supported yet: put it on "
+                        "the stand's bus",
+                    )
+                )
+        check(problems)
+        return self
+
+
 StandProtocol = Literal["gyrostand", "cia402"]
-_CIA402_KEYS = ("eds", "node_id", "counts_per_degree", "arm_length_cm", "cycle_ms", "ramp_s")
+_CIA402_KEYS = ("eds", "node_id", "counts_per_degree", "cycle_ms", "ramp_s")
 
 
 class StandPlan(_Table):
@@ -615,7 +682,8 @@ class StandPlan(_Table):
     counts_per_degree: float | None = Field(None, gt=0)
     """cia402: drive position units (0x607A/0x6064) per degree of roll of the platform."""
     arm_length_cm: float | None = Field(None, gt=0)
-    """cia402: the arm at which the amplitude A is measured (A = arm x roll angle, rad), cm."""
+    """The arm at which the amplitude A is measured (A = arm x roll angle, rad), cm: for a
+    cia402 stand, and for any stand with an [inclinometer] (which measures the roll angle)."""
     cycle_ms: int = Field(10, ge=1, le=100)
     """cia402: the SYNC cycle (cyclic synchronous position: one target per cycle), ms."""
     ramp_s: float = Field(10.0, gt=0)
@@ -738,6 +806,7 @@ class Plan(_Table):
     bus: BusPlan = Field(default_factory=BusPlan)
     compass: CompassPlan = Field(default_factory=CompassPlan)
     stand: StandPlan = Field(default_factory=StandPlan)
+    inclinometer: InclinometerPlan | None = None
     protocol: ProtocolPlan = Field(default_factory=ProtocolPlan)
     signals: Signals = Field(default_factory=dict, json_schema_extra=_SIGNALS_SCHEMA)
     """The lab's DBC signals, "MESSAGE.SIGNAL" per quantity (docs/protocol.md)."""
@@ -774,6 +843,7 @@ class Plan(_Table):
             + self._too_long()
             + self._bad_prompts()
             + self._bad_compass()
+            + self._bad_inclinometer()
         )
         if errors:
             raise ValidationError.from_exception_data(type(self).__name__, errors)
@@ -884,12 +954,29 @@ class Plan(_Table):
             errors.append(_error("compass", ("compass", "interface"), message))
         return errors
 
+    def _bad_inclinometer(self) -> list[InitErrorDetails]:
+        if self.inclinometer is None or self.stand.arm_length_cm is not None:
+            return []
+        message = "missing: the inclinometer measures the roll angle; A is arm x angle (rad)"
+        return [_error("inclinometer", ("stand", "arm_length_cm"), message)]
+
     @property
     def heading_source(self) -> tuple[str, str | None, tuple[str, str]]:
         """The compass as `devices.decoder.frame_decoder` takes it: [compass] protocol and name,
         [instrument] model and serial (NMEA 2000 product information)."""
         instrument = (self.instrument.model, self.instrument.serial)
         return self.compass.protocol, self.compass.name, instrument
+
+    @property
+    def inclinometer_mount(self) -> tuple[str, int, str, float] | None:
+        """The [inclinometer] as `devices.inclinometer.Mount` takes it: protocol, node id or
+        source address, axis, scale."""
+        incl = self.inclinometer
+        if incl is None:
+            return None
+        address = incl.node_id if incl.protocol == "cia410" else incl.source_address
+        assert address is not None
+        return incl.protocol, address, incl.axis, incl.scale
 
     def prompts_before(self, before: str | int) -> tuple[PromptPlan, ...]:
         """The prompts asked before the campaign ("campaign") or before trial `before`."""

@@ -22,7 +22,9 @@ extrapolation of every forecast beyond the trials' motion (``forecast.tested``, 
 - ``plan``: `PlanSummary` (n_obs, trials [index, role, direction_deg, amplitude_cm, period_s],
   windows, settle criterion, notes, plan_toml);
 - ``acquisition``: ``trials`` (`TrialAcquisition` each, the latest attempt of each trial:
-  commanded and measured K/A/tau, status, observations per series, frames used/lost, flagged
+  commanded and measured K/A/tau, motion_source and meas_amplitude_se_cm, meas_period_se_s
+  (whose measured A and tau the analysis applies: inclinometer, drive position, stand report,
+  stated or commanded), status, observations per series, frames used/lost, flagged
   observations, analysed, attempt), ``events`` (`EventRecord` each, trial_attempt set when the
   trial was retried), ``raw_log_note``, ``left_out`` (every trial attempt the analysis does not
   use: index, attempt, role, status, reason, superseded_by), ``records`` (per trial: series with

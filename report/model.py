@@ -90,7 +90,7 @@ class PlanSummary:
 
 @dataclass(frozen=True)
 class TrialAcquisition:
-    """Section 3, one trial: commanded vs stand-measured motion, what was stored, what went
+    """Section 3, one trial: commanded vs measured motion, what was stored, what went
     wrong. Frame counts are None when the observations carry none (manual readings)."""
 
     index: int
@@ -110,6 +110,9 @@ class TrialAcquisition:
     flagged_observations: int
     analysed: bool  # False: left out of the analysis (failed or incomplete)
     attempt: int = 1  # the trial's latest attempt (2, 3, ...: retried)
+    motion_source: str = "commanded"  # whose A and tau the analysis applies (`AppliedMotion`)
+    meas_amplitude_se_cm: float | None = None
+    meas_period_se_s: float | None = None
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,7 @@ from gyrostand.analysis.campaign import (
 )
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.gyro_model import KnownConstants
+from gyrostand.analysis.measured_motion import PREFERENCE
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.trials import SeriesSummary, TrialInput, series_moments
 from gyrostand.db.models import AnalysisRun, Campaign, Series, Trial
@@ -92,8 +93,72 @@ class StoredInputs:
         return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
 
 
+@dataclass(frozen=True)
+class AppliedMotion:
+    """A trial's commanded and applied K, A, tau and where the applied A and tau come from:
+    "inclinometer", "drive position" or "stand report" (`analysis.measured_motion`, the
+    rocking series' measured motion, with the SEs over its cycles or reports), "stated" (an
+    import's, or a campaign acquired before schema 0011: the stand's reports, SE unknown), or
+    "commanded" (nothing measured)."""
+
+    index: int
+    commanded: tuple[float, float, float]
+    applied: tuple[float, float, float]
+    source: str
+    amplitude_se_cm: float | None
+    period_se_s: float | None
+    n_cycles: int | None
+
+    def describe(self) -> str:
+        k, a, tau = self.commanded
+        mk, ma, mtau = self.applied
+        se = "" if self.amplitude_se_cm is None else f" ± {self.amplitude_se_cm:.2g}"
+        se_tau = "" if self.period_se_s is None else f" ± {self.period_se_s:.2g}"
+        cycles = "" if self.n_cycles is None else f", {self.n_cycles} cycles"
+        return (
+            f"trial {self.index}: commanded K {k:g} deg, A {a:g} cm, tau {tau:g} s; applied "
+            f"K {mk:g} deg, A {ma:.3f}{se} cm, tau {mtau:.4f}{se_tau} s ({self.source}{cycles})"
+        )
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "trial": self.index,
+            "commanded": dict(zip(_MOTION_KEYS, self.commanded, strict=True)),
+            "applied": dict(zip(_MOTION_KEYS, self.applied, strict=True)),
+            "source": self.source,
+            "amplitude_se_cm": self.amplitude_se_cm,
+            "period_se_s": self.period_se_s,
+            "n_cycles": self.n_cycles,
+        }
+
+
+_MOTION_KEYS = ("direction_deg", "amplitude_cm", "period_s")
+
+
+def applied_motion(trial: Trial) -> AppliedMotion:
+    """What the analysis applies for a trial, and its source (`AppliedMotion`)."""
+    rocking = [s for s in trial.series if s.j == 2]
+    rows = {m.source: m for s in rocking for m in s.motions}
+    row = next((rows[name] for name in PREFERENCE if name in rows), None)
+    commanded = (trial.cmd_direction_deg, trial.cmd_amplitude_cm, trial.cmd_period_s)
+    applied = (trial.direction_deg, trial.amplitude_cm, trial.period_s)
+    if row is not None:
+        se = (row.amplitude_se_cm, row.period_se_s, row.n_cycles)
+        return AppliedMotion(trial.index, commanded, applied, row.source, *se)
+    measured = trial.meas_amplitude_cm is not None or trial.meas_period_s is not None
+    source = "stated" if measured else "commanded"
+    return AppliedMotion(trial.index, commanded, applied, source, None, None, None)
+
+
+def campaign_motion(campaign: Campaign) -> tuple[AppliedMotion, ...]:
+    """The applied motion of every completed trial (its latest attempt) of a loaded campaign."""
+    return tuple(
+        applied_motion(t) for t in current_trials(campaign.trials) if t.status == "completed"
+    )
+
+
 def applied_conditions(trial: Trial) -> dict[str, object]:
-    """A trial's role and its applied K, A, tau (stand-measured, else commanded)."""
+    """A trial's role and its applied K, A, tau (measured, else commanded: `applied_motion`)."""
     return {
         "role": trial.role,
         "direction_deg": trial.direction_deg,
@@ -104,7 +169,7 @@ def applied_conditions(trial: Trial) -> dict[str, object]:
 
 def trial_input(trial: Trial) -> TrialInput | str:
     """The analysis input of one stored trial, or why it cannot be analysed. K, A and tau are
-    the applied values (stand-measured, else commanded)."""
+    the applied values (measured, else commanded: `applied_motion`)."""
     if trial.status == "failed":
         return f"trial failed: {trial.failure_reason}"
     if trial.status != "completed":
@@ -409,6 +474,7 @@ def _trial_acquisition(trial: Trial, analysed: bool) -> TrialAcquisition:
     observations = [o for s in trial.series for o in s.observations]
     used = [o.frames_used for o in observations if o.frames_used is not None]
     lost = [o.frames_lost for o in observations if o.frames_lost is not None]
+    motion = applied_motion(trial)
     return TrialAcquisition(
         index=trial.index,
         role=trial.role,
@@ -427,6 +493,9 @@ def _trial_acquisition(trial: Trial, analysed: bool) -> TrialAcquisition:
         flagged_observations=sum(bool(o.flags) for o in observations),
         analysed=analysed,
         attempt=trial.attempt,
+        motion_source=motion.source,
+        meas_amplitude_se_cm=motion.amplitude_se_cm,
+        meas_period_se_s=motion.period_se_s,
     )
 
 

@@ -16,6 +16,7 @@ from typing import Protocol, runtime_checkable
 import can
 import numpy as np
 
+from gyrostand.stand.inclinometer import SimInclinometerFrames
 from gyrostand.stand.packing import BatchEncoder
 from gyrostand.stand.physics import CorrelatedNoise, DampedPrecession
 from gyrostand.stand.protocol import HEADING_KEYS, STATUS_KEYS, Codec, CommandFrame, Reason
@@ -72,7 +73,8 @@ class StandEngine:
         self.codec = codec or Codec()
         self.transmitter = transmitter  # None: the compass sends the DBC's heading frame
         compass = config.compass
-        noise_seed, white_seed, fault_seed = np.random.SeedSequence(config.seed).spawn(3)
+        seeds = np.random.SeedSequence(config.seed).spawn(4)  # (a 4th leaves the 3 as they were)
+        noise_seed, white_seed, fault_seed, inclinometer_seed = seeds
         self._dt = 1.0 / config.heading_rate_hz
         self._corr = CorrelatedNoise(
             config.noise.corr_sigma_deg,
@@ -102,6 +104,10 @@ class StandEngine:
         self._rocking_since_s: float | None = None
         self._compass_status = self._compass_status_frame()
         self.received: list[ReceivedCommand] = []  # every command, in order
+        self._inclinometer: SimInclinometerFrames | None = None
+        if config.inclinometer.node_id is not None:
+            rng = np.random.default_rng(inclinometer_seed)
+            self._inclinometer = SimInclinometerFrames(config.inclinometer, rng)
 
     def _compass_status_frame(self) -> can.Message:
         """GYRO_STATUS: constant while the fault knobs stay as they are."""
@@ -146,11 +152,23 @@ class StandEngine:
         status_end = math.floor(t_s * self.config.status_rate_hz + _EPS) + 1
         frames = self._heading_frames(self._next_heading, heading_end)
         frames += self._status_frames(self._next_status, status_end)
+        if self._inclinometer is not None:
+            sensed = self._inclinometer.frames(t_s, self._roll_rad)
+            frames += [m for m in sensed if not self._silent(m.timestamp)]
         self._next_heading = max(self._next_heading, heading_end)
         self._next_status = max(self._next_status, status_end)
         self._time_s = max(self._time_s, t_s)
         frames.sort(key=lambda m: m.timestamp)  # stable: keeps the order within one instant
         return frames
+
+    def _roll_rad(self, t: np.ndarray) -> np.ndarray:
+        """The platform's true roll angle at stand times: A / arm (rad) at the rocking phase
+        the compass feels (`_readings_deg`); 0 at rest."""
+        if not self.rocking:
+            return np.zeros(len(t))
+        _, amplitude, period = self._actual_motion()
+        phase = 2.0 * math.pi / period * (t - self._rocking_since_s)
+        return amplitude / self.config.inclinometer.arm_length_cm * np.sin(phase)
 
     def _readings_deg(self, t: np.ndarray) -> np.ndarray:
         """The compass reading at the sample times, before sensor faults."""
@@ -239,6 +257,8 @@ class StandEngine:
         cycles = np.zeros(n)
         if self._rocking_since_s is not None:
             direction, amplitude, period = self._actual_motion()
+            if self.config.faults.amplitude_unreported:
+                amplitude = self._setting[1] if self._setting else 0.0
             cycles = np.maximum(t - self._rocking_since_s, 0.0) / period
         values = {
             "status_time": np.round(index * (1000.0 / self.config.status_rate_hz)) + self.clock_ms,

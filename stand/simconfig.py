@@ -130,7 +130,29 @@ class FaultParams:
     amplitude_factor: float = param(
         1.0, "the stand rocks at this multiple of the commanded amplitude (and reports it)"
     )
+    amplitude_unreported: bool = param(
+        False, "the stand reports the commanded amplitude, not the one it makes (uncalibrated)"
+    )
     compass_fault_bits: int = param(0, "FAULT_BITS reported in GYRO_STATUS")
+
+
+@dataclass(frozen=True)
+class InclinometerParams:
+    """A CiA 410 inclinometer on the platform (off unless `node_id` is set): its TPDO1 carries
+    the slopes 0x6010 (x) and 0x6020 (y) at its event timer's rate; the one on `axis` follows
+    the platform's true roll (the amplitude the stand really makes, amplitude_factor included),
+    plus the sensor's own bias and white noise."""
+
+    node_id: int | None = param(None, "CANopen node id (none: no inclinometer)")
+    axis: str = param("x", "the slope that follows the roll: x (0x6010) or y (0x6020)")
+    step_deg: float = param(0.01, "degrees per count of the slopes (resolution 0x6000)")
+    arm_length_cm: float = param(100.0, "arm of the stand: roll angle = A / arm (rad)")
+    rate_hz: float = param(10.0, "TPDO1 rate (event timer), Hz of stand time")
+    bias_deg: float = param(0.02, "the sensor's zero bias, deg")
+    noise_deg: float = param(0.01, "the sensor's white noise (standard deviation), deg")
+    silence_at_s: float | None = param(None, "stand time at which the inclinometer falls silent")
+    silence_for_s: float = param(0.0, "how long it stays silent, s")
+    emcy_at_s: float | None = param(None, "stand time of an EMCY (0x5000, device hardware)")
 
 
 @dataclass(frozen=True)
@@ -148,6 +170,7 @@ class SimConfig:
     status_rate_hz: float = param(2.0, "STAND_STATUS/STAND_MOTION/GYRO_STATUS rate, Hz")
     seed: int = param(0, "random seed: equal seeds and schedules give equal frames")
     stand: StandParams = field(default_factory=StandParams)
+    inclinometer: InclinometerParams = field(default_factory=InclinometerParams)
 
     def __post_init__(self) -> None:
         problems = self.problems()
@@ -176,6 +199,8 @@ class SimConfig:
             "stand.max_amplitude_cm": stand.max_amplitude_cm,
             "stand.min_period_s": stand.min_period_s,
             "stand.max_period_s": stand.max_period_s,
+            "inclinometer.arm_length_cm": self.inclinometer.arm_length_cm,
+            "inclinometer.rate_hz": self.inclinometer.rate_hz,
         }
         found = [
             (name, f"must be a positive number, got {value}")
@@ -193,6 +218,10 @@ class SimConfig:
             "faults.silence_at_s": faults.silence_at_s,
             "faults.silence_for_s": faults.silence_for_s,
             "faults.amplitude_factor": faults.amplitude_factor,
+            "inclinometer.noise_deg": self.inclinometer.noise_deg,
+            "inclinometer.silence_at_s": self.inclinometer.silence_at_s,
+            "inclinometer.silence_for_s": self.inclinometer.silence_for_s,
+            "inclinometer.emcy_at_s": self.inclinometer.emcy_at_s,
         }
         found += [
             (name, f"must be a number >= 0, got {value}")
@@ -208,6 +237,7 @@ class SimConfig:
                 found.append(
                     (name, f"must be <= {MAX_RATE_HZ:g} (frames carry stand time in whole ms)")
                 )
+        found += self.inclinometer_problems()
         if stand.max_period_s < stand.min_period_s:
             found.append(("stand.max_period_s", "must be >= min_period_s"))
         reported = {  # what the stand puts in its frames, the DBC signal carrying it, from what
@@ -248,6 +278,19 @@ class SimConfig:
                 found.append((f"faults.{f.name}", "must be a probability in [0, 1]"))
         return found
 
+    def inclinometer_problems(self) -> list[tuple[str, str]]:
+        incl = self.inclinometer
+        found = []
+        if incl.node_id is not None and not 1 <= incl.node_id <= 127:
+            found.append(("inclinometer.node_id", "must be a CANopen node id, 1 to 127"))
+        if incl.axis not in ("x", "y"):
+            found.append(("inclinometer.axis", f"must be x or y, got {incl.axis!r}"))
+        if not (incl.step_deg != 0 and math.isfinite(incl.step_deg)):
+            found.append(("inclinometer.step_deg", "must be a non-zero number"))
+        if incl.rate_hz > MAX_RATE_HZ:
+            found.append(("inclinometer.rate_hz", f"must be <= {MAX_RATE_HZ:g}"))
+        return found
+
 
 class SimConfigError(ValueError):
     """An inconsistent SimConfig; `problems` as (dotted field path, message), the text names
@@ -263,6 +306,7 @@ _TABLES = {
     "noise": NoiseParams,
     "faults": FaultParams,
     "stand": StandParams,
+    "inclinometer": InclinometerParams,
 }
 
 

@@ -67,6 +67,7 @@ SLOW_FILES = frozenset(
         "acquisition/test_cli_campaign.py",
         "acquisition/test_kill_resume.py",
         "acquisition/test_live.py",
+        "acquisition/test_measured_amplitude_campaign.py",
         "acquisition/test_raw_log_names.py",
         "acquisition/test_stop_resume_report.py",
         "cli/test_fleet_commands.py",

@@ -241,6 +241,9 @@ ROWS = [
         events=frozenset({("no ack", "error")}),
         series=frozenset(),
     ),
+    # a stand that reports the command whatever it rocks at goes unnoticed without an
+    # inclinometer (tests/acquisition/test_measured_motion.py: with one, it fails the trial)
+    Row("amplitude_unreported", {"amplitude_unreported": True, "amplitude_factor": 0.8}),
     Row(
         "amplitude_factor",
         {"amplitude_factor": 0.8},

@@ -63,7 +63,8 @@ def test_analyze_and_report_state_it(campaign: Path, tmp_path: Path) -> None:
     db = str(campaign.with_name("db.sqlite"))
     text = runner.invoke(app, ["analyze", "1", "--db", db])
     assert text.exit_code == 0, text.output
-    assert text.stdout.startswith(f"HEADING SOURCE\n{SOURCE}\n\nTRIALS")
+    assert text.stdout.startswith(f"HEADING SOURCE\n{SOURCE}\n\nMOTION (commanded; applied")
+    assert "(stand report)" in text.stdout and "\n\nTRIALS" in text.stdout
     doc = json.loads(runner.invoke(app, ["analyze", "1", "--db", db, "--json"]).stdout)
     assert doc["heading_source"] == SOURCE
     out = tmp_path / "out"

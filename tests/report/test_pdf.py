@@ -42,6 +42,9 @@ def test_the_pdf_carries_the_report_json_the_trial_csv_and_the_plan(
     analysis = json.loads(analysed.stdout)
     # the heading source stands in the report's identification
     assert analysis.pop("heading_source") == carried["identification"]["heading_source"]
+    # the applied motion's source per trial stands in the report's acquisition table
+    sources = {t["index"]: t["motion_source"] for t in carried["acquisition"]["trials"]}
+    assert {m["trial"]: m["source"] for m in analysis.pop("motion")} == sources
     assert carried["analysis"] == analysis
     csv = (tmp_path / "campaign-1-trials.csv").read_text(encoding="utf-8")
     assert csv == paper_files.files["csv"].read_text(encoding="utf-8")

@@ -1,0 +1,90 @@
+"""The measured amplitude against the commanded one, on the paper campaign as shipped
+(examples/paper.toml: N = 5, 8-period windows, the transient-model settle, the simulator's
+default reading noise), on a stand that rocks at 1.03 x the commanded amplitude while
+reporting the command, with a CiA 410 inclinometer on the platform (issue 32's done-when at the
+paper's scale; tests/acquisition/test_measured_amplitude_campaign.py is the short, low-noise
+version run by the slow test stage).
+
+Prints, per seed, C and T with their SE and (estimate - truth) / SE, analysed with the measured
+motion (as `gyrostand analyze` does) and with the commanded one. Run:
+    python validation/measured_amplitude.py [SEEDS ...]
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import tempfile
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from gyrostand.analysis.campaign import analyze_campaign
+from gyrostand.cli import app
+from gyrostand.db.queries import load_campaign
+from gyrostand.db.session import open_database
+from gyrostand.plan.overrides import with_keys
+from gyrostand.report.stored import stored_inputs
+from gyrostand.stand.simconfig import CompassParams
+
+ROOT = Path(__file__).resolve().parents[1]
+TRUTH = {"C_gcm2s2": CompassParams.C_gcm2s2, "T_s": CompassParams.T_s}
+
+
+def campaign(seed: int, folder: Path) -> Path:
+    """Run the paper campaign with the 3 % amplitude error and an inclinometer; its database."""
+    db = folder / "c.sqlite"
+    keys = {
+        "campaign": {"database": str(db)},
+        "bus": {"seed": seed},
+        "bus.simulator.faults": {"amplitude_factor": 1.03, "amplitude_unreported": True},
+        "stand": {"arm_length_cm": 100.0},
+        "inclinometer": {"protocol": "cia410", "node_id": 4},
+    }
+    plan = folder / "plan.toml"
+    plan.write_text(with_keys((ROOT / "examples" / "paper.toml").read_text(), keys))
+    result = CliRunner().invoke(app, ["campaign", "run", str(plan)])
+    if result.exit_code != 0:
+        raise SystemExit(f"seed {seed}: the campaign failed: {result.output.strip()}")
+    return db
+
+
+def fits(db: Path) -> dict[str, dict[str, tuple[float, float]]]:
+    """C and T (estimate, SE) with the measured and with the commanded motion."""
+    with open_database(f"sqlite:///{db}", upgrade=False, create=False)() as session:
+        stored = load_campaign(session, 1)
+        by_index = {t.index: t for t in stored.trials}
+        inputs = stored_inputs(stored)
+    commanded = tuple(
+        dataclasses.replace(
+            t,
+            direction_deg=by_index[t.index].cmd_direction_deg,
+            amplitude_cm=by_index[t.index].cmd_amplitude_cm,
+            period_s=by_index[t.index].cmd_period_s,
+        )
+        for t in inputs.trials
+    )
+    s = inputs.settings
+    out = {}
+    for name, trials in (("measured", inputs.trials), ("commanded", commanded)):
+        fit = analyze_campaign(
+            trials, s.constants, q=s.q, start=s.start, admissible=s.admissible, forecast=s.forecast
+        ).fit
+        out[name] = {k: (fit.estimates[k], fit.std_errors[k]) for k in TRUTH}
+    return out
+
+
+def main(seeds: list[int]) -> None:
+    print("seed  motion     C_gcm2s2 (SE)            z(C)   T_s (SE)          z(T)")
+    for seed in seeds:
+        with tempfile.TemporaryDirectory() as folder:
+            found = fits(campaign(seed, Path(folder)))
+        for name, values in found.items():
+            (c, c_se), (t, t_se) = values["C_gcm2s2"], values["T_s"]
+            zc, zt = (c - TRUTH["C_gcm2s2"]) / c_se, (t - TRUTH["T_s"]) / t_se
+            c_text, t_text = f"{c:.4g} ({c_se:.2g})", f"{t:.4f} ({t_se:.2g})"
+            print(f"{seed:>4}  {name:<9}  {c_text:<24} {zc:+6.2f}   {t_text:<17} {zt:+6.2f}")
+
+
+if __name__ == "__main__":
+    main([int(a) for a in sys.argv[1:]] or [1])
