@@ -132,6 +132,7 @@ class Cia402Axis:
         self._heartbeat_cycle = 0
         self._drive_heard_cycle = 0
         self._target = 0
+        self.on_cycle: Callable[[], None] = lambda: None  # after every cycle (a stand's status)
 
     @property
     def t_s(self) -> float:
@@ -254,6 +255,7 @@ class Cia402Axis:
             self.slope_deg = self.inclinometer.take()
         self.cycle += 1
         self._supervise()
+        self.on_cycle()
 
     def _supervise(self) -> None:
         with self._inbox.lock:
