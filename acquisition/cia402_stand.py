@@ -15,7 +15,8 @@ none of that: gyrostand is its master (`devices.cia402`). This adapter is that s
   commanded periods (`analysis.measured_roll`), "rocking" while a roll is under way.
 
 Clock: a drive has no clock to report. The campaign clock is the SYNC count x cycle_ms (stand
-time; `CIA402_TIME_BASE`): every ack and status carries it, and a compass timed by reception is
+time; stored with the campaign's time base, `devices.clock.CIA402_STAND_CLOCK`): every ack and
+status carries it, and a compass timed by reception is
 put on it by its statuses (`devices.clock.ReceptionClock`).
 
 The acks and statuses go into the campaign's stream (and raw log) in the encoding of the plan's
@@ -42,7 +43,6 @@ from gyrostand.stand.protocol import Codec, Reason
 
 STATUS_MS = 500  # a status every 500 ms of stand time, as a gyrostand stand controller sends
 MEASURE_PERIODS = 2  # the motion is fitted over the last two commanded periods
-CIA402_TIME_BASE = "CiA 402 stand: SYNC count x cycle_ms (the drive's communication cycle)"
 IDLE_CONTROLWORD = 0x00  # disable voltage: the axis off between rolls (SYNC goes on)
 
 
