@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from typing import IO
 
 from gyrostand.acquisition.bus import Recorder
-from gyrostand.acquisition.cia402_sim import Cia402Lockstep, SimulatedCia402
+from gyrostand.acquisition.cia402_sim import Cia402Lockstep, SimulatedCia402, feed
 from gyrostand.acquisition.engine import Engine, Phase
 from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
@@ -69,13 +69,9 @@ def run_cia402(
                     engine.interrupt(why)  # the stand is told to stop: its stop ramp begins
                     break
                 msgs = sim.advance_to(sim.stand.t_s + stand.step_s)
-                raw = RawFrames.from_messages(position, msgs)
-                batch = decoder.decode(raw)
-                engine.feed(batch)
-                for fault in sim.stand.take_faults():
-                    engine.fail(fault.reason, kind=fault.kind)
-                live_file.headings(batch.headings)
-                recorder.log(raw, msgs)
+                for batch in feed(engine, decoder, position, msgs, sim.stand.take_faults()):
+                    live_file.headings(batch.headings)
+                recorder.log(RawFrames.from_messages(position, msgs), msgs)
                 position += len(msgs)
                 _show(engine, display, live_file)
             _to_rest(sim, store)
@@ -98,10 +94,7 @@ def _to_rest(sim: SimulatedCia402, store: CampaignStore) -> None:
     """Run the axis on (SYNC in stand time) until the stop ramp has brought it to rest and it is
     disabled; an event says when."""
     stand = sim.stand
-    end = stand.t_s + REST_LIMIT_S
-    while stand.rocking and stand.t_s < end:
-        stand.advance_to(stand.t_s + 1.0)
-    if stand.rocking:
+    if not stand.to_rest(REST_LIMIT_S):
         store.run_event("stand", "error", f"the axis not at rest {REST_LIMIT_S:g} s after stopping")
     else:
         store.run_event(

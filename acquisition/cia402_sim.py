@@ -13,6 +13,7 @@ simulator's `faults.amplitude_factor`, which the drive's encoder does not see: i
 
 from __future__ import annotations
 
+import bisect
 import uuid
 from collections.abc import Iterator
 
@@ -20,13 +21,13 @@ import can
 import canopen
 
 from gyrostand.acquisition.bus import transmitter
-from gyrostand.acquisition.cia402_stand import Cia402Stand, Motion
+from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault, Motion
 from gyrostand.acquisition.engine import Command, Engine, Phase
 from gyrostand.devices.cia402 import AxisConfig, Cia402Axis
 from gyrostand.devices.decoder import SourceDecoder, frame_decoder
 from gyrostand.devices.roll_trajectory import Kinematics
 from gyrostand.devices.sim_drive import SIM_DRIVE_EDS, DriveFaults, ServoModel, SimDrive
-from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.frames.batch import BatchDecoder, FrameBatch, RawFrames
 from gyrostand.plan.codec import codec_for, sim_config
 from gyrostand.plan.model import Plan
 from gyrostand.stand.engine import StandEngine
@@ -102,6 +103,28 @@ class SimulatedCia402:
             net.disconnect()
 
 
+def feed(
+    engine: Engine,
+    decoder: BatchDecoder | SourceDecoder,
+    position: int,
+    frames: list[can.Message],
+    faults: list[DriveFault],
+) -> list[FrameBatch]:
+    """Feed `frames` (from stream position `position`) to the engine; a drive fault fails the
+    trial at its stand time, after the frames up to it. The batches fed."""
+    batches, start = [], 0
+    times_ms = [round(m.timestamp * 1000) for m in frames]
+    for fault in faults:
+        cut = bisect.bisect_right(times_ms, fault.t_ms, lo=start)
+        batches.append(decoder.decode(RawFrames.from_messages(position + start, frames[start:cut])))
+        engine.feed(batches[-1])
+        engine.fail(fault.reason, kind=fault.kind)
+        start = cut
+    batches.append(decoder.decode(RawFrames.from_messages(position + start, frames[start:])))
+    engine.feed(batches[-1])
+    return batches
+
+
 class Cia402Lockstep:
     """The engine's commander and its stream of frames from a simulated CiA 402 stand; a drive
     fault fails the trial it ends (one event naming the drive's error)."""
@@ -124,9 +147,7 @@ class Cia402Lockstep:
         position = 0
         while engine.phase is not Phase.DONE and self.sim.stand.t_s < max_stand_s:
             frames = self.sim.advance_to(self.sim.stand.t_s + self.step_s)
-            engine.feed(decoder.decode(RawFrames.from_messages(position, frames)))
-            for fault in self.sim.stand.take_faults():
-                engine.fail(fault.reason, kind=fault.kind)
+            feed(engine, decoder, position, frames, self.sim.stand.take_faults())
             position += len(frames)
             yield frames
 

@@ -165,6 +165,14 @@ class Cia402Stand:
         out, self._out = self._out, []
         return out
 
+    def to_rest(self, limit_s: float) -> bool:
+        """Run on (SYNC in stand time) until the roll under way, if any, has ended at rest and
+        the axis is disabled: whether it did within `limit_s` of stand time."""
+        end = self.t_s + limit_s
+        while self.rocking and self.t_s < end:
+            self._cycle()
+        return not self.rocking
+
     def take_faults(self) -> list[DriveFault]:
         faults, self._faults = self._faults, []
         return faults

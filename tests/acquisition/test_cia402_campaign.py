@@ -12,6 +12,7 @@ import pytest
 
 from gyrostand.acquisition.cia402_sim import Cia402Lockstep, SimulatedCia402
 from gyrostand.acquisition.engine import Engine
+from gyrostand.devices import sim_drive
 from gyrostand.devices.decoder import source_info
 from gyrostand.devices.sim_drive import DriveFaults, ServoModel
 from gyrostand.plan.model import Plan, parse_plan
@@ -114,3 +115,32 @@ def test_two_runs_are_the_same_frames(campaign):
     assert (
         ours == [(m.arbitration_id, bytes(m.data), m.timestamp) for m in first.stream][: len(ours)]
     )
+
+
+@pytest.mark.parametrize(
+    "faults, kind, cause",
+    [
+        (DriveFaults(overcurrent_at_s=150.0), "drive fault", "error code 0x2310"),
+        (DriveFaults(jam_at_s=150.0), "following error", "error code 0x8611"),
+        (DriveFaults(heartbeat_silent_at_s=150.0), "heartbeat lost", "no heartbeat from drive"),
+    ],
+    ids=["emcy", "following-error-trip", "heartbeat-lost"],
+)
+def test_a_drive_fault_is_one_event_a_failed_trial_and_a_stand_at_rest(faults, kind, cause):
+    plan = cia402_plan(on_failure="pause")
+    sim = SimulatedCia402(plan, faults, SERVO)
+    try:
+        sink = Recorder()
+        stand = Cia402Lockstep(sim, plan)
+        engine = Engine(plan, sink, stand, source=source_info(sim.codec, "nmea2000", virtual=True))
+        stand.run(engine, max_stand_s=600.0)
+        assert engine.outcome == "paused"
+        errors = [e for e in sink.of("event") if e[1] == "error"]
+        assert len(errors) == 1 and errors[0][0] == kind and cause in errors[0][2]
+        ((trial, j, reason),) = sink.of("trial_failed")
+        assert trial == 1 and j == 2 and reason == errors[0][2]  # (rocking at stand time 150 s)
+        assert sim.stand.to_rest(60.0)
+        assert sim.drive.at_rest and abs(sim.drive.v) < 1.0
+        assert sim.drive.status in (sim_drive.FAULT, sim_drive.SWITCH_ON_DISABLED)
+    finally:
+        sim.close()
