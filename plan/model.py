@@ -763,6 +763,25 @@ class Plan(_Table):
         return self
 
     @model_validator(mode="after")
+    def _direction_prompts(self) -> Plan:
+        """A CiA 402 stand rolls about one axis: the direction K is set by turning the compass
+        on the platform by hand. Before each trial whose K differs from the one before (and
+        the first), a prompt asks the operator to set it and confirm (`k_trialN`)."""
+        if self.stand.protocol != "cia402":
+            return self
+        asked, previous = [], None
+        for trial in self.trials:
+            if trial.direction_deg != previous:
+                text = (
+                    f"turn the compass on the platform to K = {trial.direction_deg:g} deg "
+                    "(the direction of roll) and confirm"
+                )
+                asked.append(PromptPlan(id=f"k_trial{trial.index}", text=text, before=trial.index))
+            previous = trial.direction_deg
+        object.__setattr__(self, "prompt", self.prompt + tuple(asked))  # (a frozen model)
+        return self
+
+    @model_validator(mode="after")
     def _feasible(self) -> Plan:
         """The rules across tables, once every table is valid: a design the analysis can fit
         (or an acquisition-only campaign), every trial within the stand's limits, every series
