@@ -22,7 +22,7 @@ import canopen
 
 from gyrostand.acquisition.bus import transmitter
 from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault, Motion
-from gyrostand.acquisition.engine import Command, Engine, Phase
+from gyrostand.acquisition.engine import DRIVE_POSITION, Command, Engine, Phase
 from gyrostand.devices.cia402 import AxisConfig, Cia402Axis
 from gyrostand.devices.decoder import SourceDecoder, frame_decoder
 from gyrostand.devices.roll_trajectory import Kinematics
@@ -127,7 +127,10 @@ def feed(
 
 class Cia402Lockstep:
     """The engine's commander and its stream of frames from a simulated CiA 402 stand; a drive
-    fault fails the trial it ends (one event naming the drive's error)."""
+    fault fails the trial it ends (one event naming the drive's error). The statuses' motion is
+    measured from the drive's actual position (`motion_source`)."""
+
+    motion_source = DRIVE_POSITION
 
     def __init__(self, sim: SimulatedCia402, plan: Plan, step_s: float = STEP_S) -> None:
         self.sim = sim

@@ -132,13 +132,19 @@ class SeriesCompensation:
     standard_error_deg: float
 
 
+STAND_REPORT, DRIVE_POSITION = "stand report", "drive position"  # `Measured.source`
+
+
 @dataclass(frozen=True)
 class Measured:
-    """What the stand reported doing during series j = 2 (mean of its status frames)."""
+    """What the stand reported doing during series j = 2 (mean of its status frames), and where
+    the statuses' motion comes from: the stand's own report, or (a CiA 402 stand) the drive's
+    actual position."""
 
     direction_deg: float
     amplitude_cm: float
     period_s: float
+    source: str = STAND_REPORT
 
 
 class Commander(Protocol):
@@ -330,6 +336,8 @@ class Engine:
         self.operator = operator  # live runs: prompts before a trial (replay: none)
         self.sink = sink
         self.commander = commander
+        # what the stand statuses' motion is measured by (a commander may say: `cia402_sim`)
+        self.motion_source: str = getattr(commander, "motion_source", STAND_REPORT)
         self.progress = progress or {}
         self.todo = [t for t in plan.trials if not self.progress.get(t.index, _NONE).completed]
         self.outcome: Literal["running", "completed", "paused", "stopped"] = "running"
@@ -1401,7 +1409,7 @@ class Engine:
         d, a, p = np.array(self._motion).T
         rad = np.radians(d)
         direction = math.degrees(math.atan2(np.sin(rad).mean(), np.cos(rad).mean())) % 360.0
-        return Measured(round(direction, 6), float(a.mean()), float(p.mean()))
+        return Measured(round(direction, 6), float(a.mean()), float(p.mean()), self.motion_source)
 
     # -------------------------------------------------------------------------------- progress
     def snapshot(self) -> Snapshot:

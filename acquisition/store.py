@@ -372,6 +372,7 @@ class CampaignStore:
             row.meas_direction_deg = measured.direction_deg
             row.meas_amplitude_cm = measured.amplitude_cm
             row.meas_period_s = measured.period_s
+            row.meas_source = measured.source
 
     @_engine_write
     def trial_failed(self, session: Session, trial: int, j: int | None, reason: str) -> None:

@@ -80,6 +80,7 @@ def test_three_fit_trials_complete_with_the_motion_measured_on_the_drive(campaig
     assert len(sink.observations) == 3 * 2 * 2 and not sink.of("trial_failed")
     for measured, (K, A, tau, _) in zip(sink.measured, TRIALS, strict=True):
         assert measured is not None and measured.direction_deg == K  # the operator's K
+        assert measured.source == "drive position"
         # the encoder's roll: the commanded one through the servo's lag (0.7 to 1 % less),
         # within the statuses' 0.01 cm and the drive's 5 ms Euler steps
         assert measured.amplitude_cm == pytest.approx(A * _gain(tau), abs=0.006 + 3e-4 * A)
