@@ -589,6 +589,7 @@ class CompassPlan(_Table):
 
 
 StandProtocol = Literal["gyrostand", "cia402"]
+K_PROMPT = "k_trial"  # the id of the prompt to set K by hand before trial N: k_trialN
 _CIA402_KEYS = ("eds", "node_id", "counts_per_degree", "arm_length_cm", "cycle_ms", "ramp_s")
 
 
@@ -776,7 +777,8 @@ class Plan(_Table):
                     f"turn the compass on the platform to K = {trial.direction_deg:g} deg "
                     "(the direction of roll) and confirm"
                 )
-                asked.append(PromptPlan(id=f"k_trial{trial.index}", text=text, before=trial.index))
+                prompt = PromptPlan(id=f"{K_PROMPT}{trial.index}", text=text, before=trial.index)
+                asked.append(prompt)
             previous = trial.direction_deg
         object.__setattr__(self, "prompt", self.prompt + tuple(asked))  # (a frozen model)
         return self
