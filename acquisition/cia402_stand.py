@@ -195,6 +195,10 @@ class Cia402Stand:
             self._finish()
 
     def _status_due(self) -> None:
+        """After every cycle, also those the axis runs itself (enabling, a fault reaction,
+        settling at rest): a failure is told at once, a status when one is due."""
+        if self._rocking is not None:
+            self._check_failure()
         if self.t_ms >= self._next_status_ms:
             self._status()
             self._next_status_ms += STATUS_MS
