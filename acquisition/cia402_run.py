@@ -27,6 +27,7 @@ from gyrostand.acquisition.runner import (
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.queries import live_file_of, raw_log_segments
 from gyrostand.db.wal import checkpoint
+from gyrostand.devices.cia402 import DriveError
 from gyrostand.devices.decoder import source_info
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import sha256_of
@@ -46,6 +47,10 @@ def run_cia402(
 ) -> RunResult:
     """Acquire a new campaign on the plan's simulated CiA 402 stand (virtual time)."""
     stop = stop or threading.Event()
+    try:
+        sim = SimulatedCia402(plan)
+    except DriveError as exc:  # one line (the campaign stays as stored: nothing acquired)
+        raise ValueError(f"the CiA 402 drive could not be started: {exc}") from None
     with store.sessions() as session:
         segments = raw_log_segments(session, store.campaign_id)
     raw_log = raw_log_path(store, plan, segments)
@@ -53,7 +58,6 @@ def run_cia402(
     store.set_status("running")
     display = ProgressDisplay(quiet=quiet)
     operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)
-    sim = SimulatedCia402(plan)
     stand = Cia402Lockstep(sim, plan)
     source = source_info(sim.codec, plan.compass.protocol, True, plan.stand.protocol)
     engine = Engine(plan, store, stand, store.progress(), operator, source)

@@ -95,7 +95,6 @@ class Cia402Stand:
         self._reported = False  # this roll's failure was reported
         self._next_status_ms = (self.t_ms // STATUS_MS + 1) * STATUS_MS
         axis.on_cycle = self._status_due  # also in the cycles of enabling and stopping
-        self.measured_amplitude_deg = math.nan
 
     @property
     def t_s(self) -> float:
@@ -148,10 +147,10 @@ class Cia402Stand:
             msg.timestamp = self.t_s
         self._out += msgs
 
-    def _begin_stop(self, reason: str | None = None) -> None:
+    def _begin_stop(self) -> None:
         assert self._rocking is not None and self._setting is not None
         before = self._rocking.trajectory.stop_at_s
-        self._rocking.stop(reason)
+        self._rocking.stop()
         if self._rocking.trajectory.stop_at_s < before:
             self.on_motion(Motion(self.t_s, "stop", *self._setting))
 
@@ -208,9 +207,8 @@ class Cia402Stand:
         K, A, tau = self._setting
         try:
             self.axis.enable()
-        except DriveError as exc:
+        except DriveError as exc:  # (no ack: the fault fails the trial, naming the drive's error)
             self._faults.append(DriveFault("drive fault", str(exc), self.t_ms))
-            self._ack("start", Reason.FAULT)
             return
         roll = RollTrajectory(self.kinematics.amplitude_deg(A), tau, self.ramp_s)
         self._rocking = Rocking(
@@ -278,5 +276,4 @@ class Cia402Stand:
             fit = measure_roll(t, deg, tau)
         except RollFitError:
             return 0.0, 0.0
-        self.measured_amplitude_deg = fit.amplitude
         return self.kinematics.amplitude_cm(fit.amplitude), fit.period_s

@@ -70,3 +70,19 @@ def test_a_stop_is_acknowledged_at_once_and_the_axis_rests_before_still_is_repor
         assert rocking and all(abs(s.amplitude_cm - 48.0) < 1.0 for s in rocking[-4:])
     finally:
         sim.close()
+
+
+def test_a_drive_that_cannot_be_enabled_again_is_a_fault_not_an_ack():
+    sim, _ = _rock(DriveFaults(overcurrent_at_s=3.0), 10.0)
+    try:
+        assert len(sim.stand.take_faults()) == 1
+        for command in (Command("stop"), Command("set", 135.0, 24.0, 4.0), Command("start")):
+            sim.stand.issue(command)
+        frames = sim.stand.advance_to(15.0)
+        (fault,) = sim.stand.take_faults()
+        assert fault.kind == "drive fault"
+        assert "did not reach OPERATION ENABLED (state FAULT, error code 0x2310)" in fault.reason
+        acks = [f.command for f in _decoded(frames) if isinstance(f, AckFrame)]
+        assert "start" not in acks and not sim.stand.rocking
+    finally:
+        sim.close()
