@@ -51,7 +51,7 @@ from gyrostand.acquisition.early_settle import (
 )
 from gyrostand.acquisition.motion import MotionRecorder
 from gyrostand.analysis.angles import wrap180
-from gyrostand.analysis.measured_motion import MeasuredMotion, preferred
+from gyrostand.analysis.measured_motion import STAND_REPORT, MeasuredMotion, preferred
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.devices.source import SourceInfo
 from gyrostand.devices.stand_frames import GYROSTAND
@@ -137,11 +137,13 @@ class SeriesCompensation:
 @dataclass(frozen=True)
 class Measured:
     """The motion trial i applies: A and tau of its preferred measuring source
-    (`analysis.measured_motion.PREFERENCE`), K of the stand's reports (None: not reported)."""
+    (`analysis.measured_motion.PREFERENCE`, named in `source`), K of the stand's reports (None:
+    not reported)."""
 
     direction_deg: float | None
     amplitude_cm: float
     period_s: float
+    source: str = STAND_REPORT
 
 
 class Commander(Protocol):
@@ -337,6 +339,8 @@ class Engine:
         self.operator = operator  # live runs: prompts before a trial (replay: none)
         self.sink = sink
         self.commander = commander
+        # what the stand statuses' motion is measured by (a commander may say: `cia402_sim`)
+        self.motion_source: str = getattr(commander, "motion_source", STAND_REPORT)
         self.progress = progress or {}
         self.todo = [t for t in plan.trials if not self.progress.get(t.index, _NONE).completed]
         self.outcome: Literal["running", "completed", "paused", "stopped"] = "running"
@@ -387,7 +391,7 @@ class Engine:
         self._step_ms: int | None = None  # the last start/stop that took effect (this run)
         self._windows: list[tuple[int, int]] = []  # the series' observation windows (ms)
         self._series_errors = 0
-        self._motion = MotionRecorder(plan)  # the rocking series' measured motion
+        self._motion = MotionRecorder(plan, self.motion_source)  # the rocking series' motion
         self._measured: Measured | None = None
         self._last_status_text = ""
         self._settle_durations: list[int] = []
@@ -1403,7 +1407,9 @@ class Engine:
         if applied is not None:
             reported = next((m for m in found.motions if m.direction_deg is not None), None)
             direction = None if reported is None else reported.direction_deg
-            self._measured = Measured(direction, applied.amplitude_cm, applied.period_s)
+            self._measured = Measured(
+                direction, applied.amplitude_cm, applied.period_s, applied.source
+            )
         return found.motions
 
     def _compensation(self) -> SeriesCompensation | None:

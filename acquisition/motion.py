@@ -27,8 +27,9 @@ class SeriesMotion:
 
 
 class MotionRecorder:
-    def __init__(self, plan: Plan) -> None:
+    def __init__(self, plan: Plan, report_source: str) -> None:
         self.plan = plan
+        self.report_source = report_source  # whose the statuses' K, A, tau are
         self._samples: dict[str, list[tuple[int, float]]] = {}
         self._reports: list[tuple[float, float, float]] = []
 
@@ -62,7 +63,7 @@ class MotionRecorder:
             notes.append("inclinometer: no slope received during the rocking series")
         if self._reports:
             d, a, p = (np.array(x) for x in zip(*self._reports, strict=True))
-            motions.append(from_reports(d, a, p))
+            motions.append(from_reports(d, a, p, self.report_source))
         return SeriesMotion(tuple(motions), tuple(notes))
 
     def tracking_problem(self, trial: TrialPlan, motion: MeasuredMotion | None) -> str | None:

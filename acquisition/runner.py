@@ -145,6 +145,12 @@ def run_live(
     prompts before a trial are answered from `answers`, the station or `terminal`
     (`OperatorLink`), which also sees the station's stop requests."""
     stop = stop or threading.Event()
+    if plan.stand.protocol == "cia402":
+        from gyrostand.acquisition.cia402_run import run_cia402
+
+        if start != "new":
+            raise ValueError("resuming a campaign on a CiA 402 stand is not runnable yet")
+        return run_cia402(plan, store, quiet=quiet, stop=stop, answers=answers, terminal=terminal)
     codec = codec_for(plan)
     with store.sessions() as session:
         segments = raw_log_segments(session, store.campaign_id)

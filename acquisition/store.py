@@ -122,7 +122,9 @@ class CampaignStore:
         with writer(sessions).begin() as session:
             campaign = new_campaign(session, header, status="running", source=source, labels=labels)
             virtual = plan.bus.simulated and plan.bus.timing == "virtual"
-            heading = source_info(codec_for(plan), plan.compass.protocol, virtual)
+            heading = source_info(
+                codec_for(plan), plan.compass.protocol, virtual, plan.stand.protocol
+            )
             campaign.heading_source = heading.protocol
             campaign.heading_time_base = heading.time_base
             campaign.heading_resolution_deg = heading.resolution_deg
@@ -388,6 +390,7 @@ class CampaignStore:
             row.meas_direction_deg = measured.direction_deg
             row.meas_amplitude_cm = measured.amplitude_cm
             row.meas_period_s = measured.period_s
+            row.meas_source = measured.source
 
     @_engine_write
     def trial_failed(self, session: Session, trial: int, j: int | None, reason: str) -> None:

@@ -75,10 +75,14 @@ def from_roll(
 
 
 def from_reports(
-    direction_deg: np.ndarray, amplitude_cm: np.ndarray, period_s: np.ndarray
+    direction_deg: np.ndarray,
+    amplitude_cm: np.ndarray,
+    period_s: np.ndarray,
+    source: str = STAND_REPORT,
 ) -> MeasuredMotion:
-    """A smart stand's reports of its own K, A, tau: their means (K circular), the SEs
-    s / sqrt(n) (the reports are not independent measurements: a stand repeating one value
+    """A stand's statuses of its K, A, tau (a smart stand's own reports; a CiA 402 stand's
+    fitted to the drive's actual position, `source` DRIVE_POSITION): their means (K circular),
+    the SEs s / sqrt(n) (the reports are not independent measurements: a stand repeating one value
     gives SE 0)."""
     n = len(amplitude_cm)
     rad = np.radians(direction_deg)
@@ -88,7 +92,7 @@ def from_reports(
         return float(np.std(x, ddof=1)) if n > 1 else 0.0
 
     return MeasuredMotion(
-        STAND_REPORT,
+        source,
         float(np.mean(amplitude_cm)),
         sd(amplitude_cm) / math.sqrt(n),
         sd(amplitude_cm),

@@ -184,8 +184,9 @@ class Trial(Base):
     latest attempt is "trial i" (`db.queries.latest_attempt`), earlier ones keep their data.
 
     `cmd_*` is what was commanded (or, for imports, what the file states); `meas_*` what the
-    stand reported doing. `summary_*` hold the per-trial values of the paper's table when they
-    were imported pre-averaged: <delta_i> (eq 2.1 difference), S^2{<delta_i>} (eq 2.3), N."""
+    stand did, as measured (`meas_source`). `summary_*` hold the per-trial values of the
+    paper's table when they were imported pre-averaged: <delta_i> (eq 2.1 difference),
+    S^2{<delta_i>} (eq 2.3), N."""
 
     __tablename__ = "trial"
     __table_args__ = (
@@ -220,6 +221,9 @@ class Trial(Base):
     meas_direction_deg: Mapped[float | None] = mapped_column(Float)
     meas_amplitude_cm: Mapped[float | None] = mapped_column(Float)
     meas_period_s: Mapped[float | None] = mapped_column(Float)
+    meas_source: Mapped[str | None] = mapped_column(String(32))
+    """Where meas_* come from: "stand report" (the stand controller's own motion reports) or
+    "drive position" (a CiA 402 drive's actual position, fitted per period by gyrostand)."""
     status: Mapped[str] = mapped_column(String(16), default="pending")
     failure_reason: Mapped[str | None] = mapped_column(Text)
     summary_delta_mean_deg: Mapped[float | None] = mapped_column(Float)

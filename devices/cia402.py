@@ -128,9 +128,11 @@ class Cia402Axis:
         self.stop_requested: str | None = None
         self._inbox = _Inbox()
         self._events: list[AxisEvent] = []
+        self._since = 0  # the events of the current rocking start here
         self._heartbeat_cycle = 0
         self._drive_heard_cycle = 0
         self._target = 0
+        self.on_cycle: Callable[[], None] = lambda: None  # after every cycle (a stand's status)
 
     @property
     def t_s(self) -> float:
@@ -253,6 +255,7 @@ class Cia402Axis:
             self.slope_deg = self.inclinometer.take()
         self.cycle += 1
         self._supervise()
+        self.on_cycle()
 
     def _supervise(self) -> None:
         with self._inbox.lock:
@@ -277,7 +280,7 @@ class Cia402Axis:
         self._events.append(AxisEvent(self.t_s, kind, detail))  # type: ignore[arg-type]
 
     def _has(self, kind: str) -> bool:
-        return any(e.kind == kind for e in self._events)
+        return any(e.kind == kind for e in self._events[self._since :])
 
     # -- rocking ----------------------------------------------------------------------------
 
@@ -291,59 +294,20 @@ class Cia402Axis:
         """Run `trajectory` (its stop ramp set, or set by a stop request) from the axis's current
         cycle, then disable the axis at rest. `stop_check(t)` (the station's stop request) gives
         a reason to stop, or None; signals set `stop_requested`."""
-        t0 = self.t_s
-        ts, targets, actuals, slopes = [], [], [], []
-        failure: str | None = None
-        stopped_by: str | None = None
-        cw = State402.CW_OPERATION_ENABLED
-        set_point, due = zero_counts, 0.0  # profile position: the current set-point
-        while True:
-            t = self.t_s - t0
-            if stop_check is not None and self.stop_requested is None:
-                self.stop_requested = stop_check(t)
-            reason = self.stop_requested or failure
-            if reason and t < trajectory.stop_at_s:
-                trajectory = trajectory.stopped_at(t)
-                stopped_by = reason
-                self._event("stop", f"stop ramp: {reason}")
-            if t >= trajectory.end_s:
-                break
-            if self.mode == CSP:
-                target = zero_counts + round(counts_per_degree * float(trajectory.position_deg(t)))
-                self.step(cw, target)
-            else:
-                new = t >= due - 1e-9
-                if new:
-                    due, peak_deg = _next_peak(trajectory, t)
-                    start, set_point = set_point, zero_counts + round(counts_per_degree * peak_deg)
-                    self._load_profile(abs(set_point - start), due - t)
-                target = set_point
-                self.step(cw | (0x10 if new else 0), target)  # bit 4: new set-point
-            ts.append(self.t_s)
-            targets.append(target)
-            actuals.append(self.actual)
-            slopes.append(self.slope_deg)
-            if failure is None:
-                failure = self._failure()
-            if power_state(self.statusword) in ("FAULT", "FAULT REACTION ACTIVE"):
-                self._await_fault_reaction()
-                break
-        self._settle(cw)
-        self._disable()
-        return RollRecord(
-            np.asarray(ts),
-            np.asarray(targets, dtype=np.int64),
-            np.asarray(actuals, dtype=np.int64),
-            np.asarray(slopes if self.inclinometer is not None else []),
-            tuple(self._events),
-            failure,
-            stopped_by,
-        )
+        rocking = Rocking(self, trajectory, counts_per_degree, zero_counts, stop_check)
+        while rocking.cycle():
+            pass
+        return rocking.finish()
+
+    def enable(self) -> None:
+        """To OPERATION ENABLED (a fault reset once if needed); DriveError names why not."""
+        self._enable()
 
     def _failure(self) -> str | None:
-        for e in self._events:
+        events = self._events[self._since :]
+        for e in events:
             if e.kind in ("fault", "heartbeat_lost"):
-                emcy = next((x.detail for x in self._events if x.kind == "emcy"), None)
+                emcy = next((x.detail for x in events if x.kind == "emcy"), None)
                 return f"{e.detail}" + (f": {emcy}" if emcy and e.kind == "fault" else "")
         return None
 
@@ -382,6 +346,88 @@ class Cia402Axis:
     def close(self) -> None:
         if self.config.sync == "periodic":
             self.network.sync.stop()
+
+
+class Rocking:
+    """One rocking of the axis in progress, one SYNC cycle per `cycle()`, then `finish()`."""
+
+    def __init__(
+        self,
+        axis: Cia402Axis,
+        trajectory: RollTrajectory,
+        counts_per_degree: float,
+        zero_counts: int = 0,
+        stop_check: Callable[[float], str | None] | None = None,
+    ):
+        self.axis = axis
+        self.trajectory = trajectory
+        self.counts_per_degree = counts_per_degree
+        self.zero_counts = zero_counts
+        self.stop_check = stop_check
+        self.t0 = axis.t_s
+        axis._since = len(axis._events)
+        self.failure: str | None = None
+        self.stopped_by: str | None = None
+        self._rows: list[tuple[float, int, int, float]] = []  # t, target, actual, slope
+        self._set_point, self._due = zero_counts, 0.0  # profile position: the current set-point
+
+    def stop(self, reason: str | None = None) -> None:
+        """Begin the stop ramp now: the planned end (None) or early, for `reason` (an event)."""
+        t = self.axis.t_s - self.t0
+        if t < self.trajectory.stop_at_s:
+            self.trajectory = self.trajectory.stopped_at(t)
+            if reason is not None:
+                self.stopped_by = reason
+                self.axis._event("stop", f"stop ramp: {reason}")
+
+    def cycle(self) -> bool:
+        """One SYNC cycle of the roll; False (nothing sent) once the roll has ended, or the
+        drive faulted (its fault reaction then ran to the end)."""
+        axis = self.axis
+        t = axis.t_s - self.t0
+        if self.stop_check is not None and axis.stop_requested is None:
+            axis.stop_requested = self.stop_check(t)
+        reason = axis.stop_requested or self.failure
+        if reason:
+            self.stop(reason)
+        if t >= self.trajectory.end_s:
+            return False
+        cw = State402.CW_OPERATION_ENABLED
+        cpd, zero = self.counts_per_degree, self.zero_counts
+        if axis.mode == CSP:
+            target = zero + round(cpd * float(self.trajectory.position_deg(t)))
+            axis.step(cw, target)
+        else:
+            new = t >= self._due - 1e-9
+            if new:
+                self._due, peak_deg = _next_peak(self.trajectory, t)
+                start, self._set_point = self._set_point, zero + round(cpd * peak_deg)
+                axis._load_profile(abs(self._set_point - start), self._due - t)
+            target = self._set_point
+            axis.step(cw | (0x10 if new else 0), target)  # bit 4: new set-point
+        self._rows.append((axis.t_s, target, axis.actual, axis.slope_deg))
+        if self.failure is None:
+            self.failure = axis._failure()
+        if power_state(axis.statusword) in ("FAULT", "FAULT REACTION ACTIVE"):
+            axis._await_fault_reaction()
+            return False
+        return True
+
+    def finish(self) -> RollRecord:
+        """The axis brought to rest and disabled; what the rocking did."""
+        axis = self.axis
+        axis._settle(State402.CW_OPERATION_ENABLED)
+        axis._disable()
+        t, target, actual, slope = zip(*self._rows, strict=True) if self._rows else ((), (), (), ())
+        return RollRecord(
+            np.asarray(t, dtype=float),
+            np.asarray(target, dtype=np.int64),
+            np.asarray(actual, dtype=np.int64),
+            np.asarray(slope if axis.inclinometer is not None else [], dtype=float),
+            tuple(axis._events[axis._since :]),
+            self.failure,
+            self.stopped_by,
+        )
 
 
 def _next_peak(trajectory: RollTrajectory, t: float) -> tuple[float, float]:

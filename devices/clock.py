@@ -38,6 +38,10 @@ TIME_BASE = (
     "reception time (CAN: SocketCAN kernel timestamps) on the stand clock: rate and offset "
     f"(minimum of reception - stand time) over the last {WINDOW} stand statuses"
 )
+CIA402_STAND_CLOCK = (
+    "the stand clock of a CiA 402 stand, which has none of its own: the master's SYNC count x "
+    "cycle_ms (the drive's communication cycle)"
+)
 VIRTUAL_TIME_BASE = (
     "reception time on the stand clock; virtual time: the simulated compass's frames are "
     "received at their stand time"

@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from gyrostand.devices.clock import VIRTUAL_TIME_BASE, ReceptionClock
+from gyrostand.devices.clock import CIA402_STAND_CLOCK, VIRTUAL_TIME_BASE, ReceptionClock
 from gyrostand.devices.inclinometer import InclinometerDecoder, Mount
 from gyrostand.devices.n2k_heading import Nmea2000Heading
 from gyrostand.devices.source import SourceInfo
@@ -70,12 +70,18 @@ def frame_decoder(
     raise ValueError(f"heading source {protocol!r} is not runnable yet")
 
 
-def source_info(codec: Codec, protocol: str = "gyrostand", virtual: bool = False) -> SourceInfo:
+def source_info(
+    codec: Codec, protocol: str = "gyrostand", virtual: bool = False, stand: str = "gyrostand"
+) -> SourceInfo:
     """What the engine and the campaign record need of the source (`virtual`: a simulated
-    stand in virtual time, whose time base is the simulation's)."""
+    stand in virtual time, whose time base is the simulation's; `stand`: the plan's [stand]
+    protocol, whose clock is the campaign's)."""
     if protocol in ("gyrostand", "dbc"):
         return stand_source_info(codec, protocol)
     if protocol == "nmea2000":
         info = Nmea2000Heading.info
-        return replace(info, time_base=VIRTUAL_TIME_BASE) if virtual else info
+        base = VIRTUAL_TIME_BASE if virtual else info.time_base
+        if stand == "cia402":
+            base = f"{base}; {CIA402_STAND_CLOCK}"
+        return replace(info, time_base=base)
     raise ValueError(f"heading source {protocol!r} is not runnable yet")

@@ -33,6 +33,11 @@ def summary(plan: Plan) -> str:
         where = f"simulated stand in {bus.timing} time"
     else:
         where = f"python-can {bus.interface or '(configured)'} {bus.channel or ''}".rstrip()
+    if plan.stand.protocol == "cia402":
+        from gyrostand.plan.model import K_PROMPT
+
+        k_prompts = sum(p.id.startswith(K_PROMPT) for p in plan.prompt)
+        where += f", CiA 402 drive node {plan.stand.node_id} (K set by hand: {k_prompts} prompts)"
     if plan.compass.protocol != "gyrostand":
         where += f", compass on {plan.compass.protocol}"
     if plan.inclinometer_mount is not None:

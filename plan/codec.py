@@ -55,10 +55,7 @@ def prepare(plan: Plan) -> None:
         except ProtocolError as exc:
             problems.append(f"[[trials]] {t.index}: the stand command cannot carry it: {exc}")
     if plan.stand.protocol == "cia402":
-        problems.append(
-            '[stand] protocol: "cia402" stands are not runnable yet (the acquisition commands a '
-            '"gyrostand" stand controller only)'
-        )
+        problems += _cia402_problems(plan)
     compass = plan.compass
     if compass.protocol in ("iec61162", "cia406"):
         problems.append(
@@ -79,3 +76,19 @@ def prepare(plan: Plan) -> None:
         raise PlanError(problems)
     if plan.bus.simulated:
         stand_config(plan)
+
+
+def _cia402_problems(plan: Plan) -> list[str]:
+    """What a CiA 402 stand cannot run with yet, or at all."""
+    problems = []
+    if not plan.bus.simulated or plan.bus.timing != "virtual":
+        problems.append(
+            '[stand] protocol: "cia402" runs on the simulated stand in virtual time only so far '
+            '([bus] simulated = true, timing = "virtual"); a real drive is not runnable yet'
+        )
+    if plan.compass.protocol != "nmea2000":
+        problems.append(
+            '[compass] protocol: a "cia402" stand has no clock to put in a heading frame: its '
+            'compass must be timed by reception (protocol = "nmea2000")'
+        )
+    return problems

@@ -656,6 +656,7 @@ class InclinometerPlan(_Table):
 
 
 StandProtocol = Literal["gyrostand", "cia402"]
+K_PROMPT = "k_trial"  # the id of the prompt to set K by hand before trial N: k_trialN
 _CIA402_KEYS = ("eds", "node_id", "counts_per_degree", "cycle_ms", "ramp_s")
 
 
@@ -829,6 +830,26 @@ class Plan(_Table):
     def _number_trials(self) -> Plan:
         for number, trial in enumerate(self.trials, start=1):
             trial._index = number
+        return self
+
+    @model_validator(mode="after")
+    def _direction_prompts(self) -> Plan:
+        """A CiA 402 stand rolls about one axis: the direction K is set by turning the compass
+        on the platform by hand. Before each trial whose K differs from the one before (and
+        the first), a prompt asks the operator to set it and confirm (`k_trialN`)."""
+        if self.stand.protocol != "cia402":
+            return self
+        asked, previous = [], None
+        for trial in self.trials:
+            if trial.direction_deg != previous:
+                text = (
+                    f"turn the compass on the platform to K = {trial.direction_deg:g} deg "
+                    "(the direction of roll) and confirm"
+                )
+                prompt = PromptPlan(id=f"{K_PROMPT}{trial.index}", text=text, before=trial.index)
+                asked.append(prompt)
+            previous = trial.direction_deg
+        object.__setattr__(self, "prompt", self.prompt + tuple(asked))  # (a frozen model)
         return self
 
     @model_validator(mode="after")

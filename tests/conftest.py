@@ -64,6 +64,8 @@ def db_url(new_db_url: NewDatabase) -> str:
 # so that `make test` stays under 4 minutes on a loaded 2-core machine.
 SLOW_FILES = frozenset(
     {
+        "acquisition/test_cia402_campaign.py",
+        "acquisition/test_cia402_run.py",
         "acquisition/test_cli_campaign.py",
         "acquisition/test_kill_resume.py",
         "acquisition/test_live.py",

@@ -427,10 +427,10 @@ VALUES = [
                 '[stand] node_id: not with protocol = "gyrostand" (a CiA 402 drive\'s)',
             ),
             (
-                "cia402 not runnable yet",
+                "cia402 with the stand's heading frame",
                 'protocol = "cia402"\neds = "drive.eds"\nnode_id = 2\n'
                 "counts_per_degree = 10000\narm_length_cm = 50",
-                '[stand] protocol: "cia402" stands are not runnable yet',
+                '[compass] protocol: a "cia402" stand has no clock to put in a heading frame',
             ),
         )
     ),

@@ -1,0 +1,106 @@
+"""`campaign run` on a CiA 402 stand: the simulated one in virtual time (`acquisition.cia402_sim`).
+
+The same engine, store, operator link (prompts, stop requests) and raw log as `runner.run_live`;
+the stream is the stand adapter's acks and statuses and the compass's frames, fed in stand-time
+steps. A stop (Ctrl-C, SIGTERM, the station's stop request, the end of the campaign) brings the
+axis to rest by the roll's stop ramp, then disables it, before the run ends."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Mapping
+from typing import IO
+
+from gyrostand.acquisition.bus import Recorder
+from gyrostand.acquisition.cia402_sim import Cia402Lockstep, SimulatedCia402, feed
+from gyrostand.acquisition.engine import Engine, Phase
+from gyrostand.acquisition.operator import OperatorLink
+from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
+from gyrostand.acquisition.runner import (
+    RunResult,
+    _judged,
+    _show,
+    _stop_on_signals,
+    raw_log_path,
+    result,
+)
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.db.queries import live_file_of, raw_log_segments
+from gyrostand.db.wal import checkpoint
+from gyrostand.devices.cia402 import DriveError
+from gyrostand.devices.decoder import source_info
+from gyrostand.frames.batch import RawFrames
+from gyrostand.frames.logfile import sha256_of
+from gyrostand.plan.model import Plan
+
+REST_LIMIT_S = 600.0  # stand time allowed for the last stop ramp (a guard: it takes ramp_s)
+
+
+def run_cia402(
+    plan: Plan,
+    store: CampaignStore,
+    *,
+    quiet: bool = False,
+    stop: threading.Event | None = None,
+    answers: Mapping[str, str] | None = None,
+    terminal: IO[str] | None = None,
+) -> RunResult:
+    """Acquire a new campaign on the plan's simulated CiA 402 stand (virtual time)."""
+    stop = stop or threading.Event()
+    try:
+        sim = SimulatedCia402(plan)
+    except DriveError as exc:  # one line (the campaign stays as stored: nothing acquired)
+        raise ValueError(f"the CiA 402 drive could not be started: {exc}") from None
+    with store.sessions() as session:
+        segments = raw_log_segments(session, store.campaign_id)
+    raw_log = raw_log_path(store, plan, segments)
+    segment = store.open_segment(str(raw_log), "new")
+    store.set_status("running")
+    display = ProgressDisplay(quiet=quiet)
+    operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)
+    stand = Cia402Lockstep(sim, plan)
+    source = source_info(sim.codec, plan.compass.protocol, True, plan.stand.protocol)
+    engine = Engine(plan, store, stand, store.progress(), operator, source)
+    decoder = stand.decoder()
+    recorder = Recorder(plan.bus.queue_size, raw_log, log_rest=False)
+    live_file = LiveFile(live_file_of(raw_log))
+    position = 0
+    try:
+        with _stop_on_signals(stop), display:
+            operator.waiting = lambda: _show(engine, display, live_file)
+            while engine.phase is not Phase.DONE:
+                if (why := operator.stop_requested()) is not None:
+                    engine.interrupt(why)  # the stand is told to stop: its stop ramp begins
+                    break
+                msgs = sim.advance_to(sim.stand.t_s + stand.step_s)
+                for batch in feed(engine, decoder, position, msgs, sim.stand.take_faults()):
+                    live_file.headings(batch.headings)
+                recorder.log(RawFrames.from_messages(position, msgs), msgs)
+                position += len(msgs)
+                _show(engine, display, live_file)
+            _to_rest(sim, store)
+    finally:
+        sim.close()
+        live_file.close()
+        recorder.stop()
+        sha = sha256_of(raw_log)
+        store.close_segment(segment, recorder.logged, sha)
+        store.run_event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
+        outcome = engine.outcome if engine.outcome != "running" else "stopped"
+        if outcome == "completed":
+            outcome = _judged(store, plan)
+        store.set_status(outcome)
+        checkpoint(store.sessions.kw["bind"])
+    return result(store, outcome, raw_log, sha)
+
+
+def _to_rest(sim: SimulatedCia402, store: CampaignStore) -> None:
+    """Run the axis on (SYNC in stand time) until the stop ramp has brought it to rest and it is
+    disabled; an event says when."""
+    stand = sim.stand
+    if not stand.to_rest(REST_LIMIT_S):
+        store.run_event("stand", "error", f"the axis not at rest {REST_LIMIT_S:g} s after stopping")
+    else:
+        store.run_event(
+            "stand", "info", f"the axis at rest and disabled at stand time {stand.t_s:g} s"
+        )

@@ -1,0 +1,160 @@
+"""The simulated CiA 402 stand in virtual time, and the engine fed from it in lockstep.
+
+On an in-process virtual CAN bus: the simulated drive (`devices.sim_drive`, its own canopen
+network) and gyrostand's master (`devices.cia402`, another one), the master sending every SYNC
+itself (`sync="lockstep"`): each SYNC is one communication cycle of stand time for the drive, so
+the roll is the same whatever the host's load. The compass on the platform is the stand
+simulator's compass physics (`stand.engine.StandEngine`, the plan's [bus.simulator]) speaking a
+real protocol timed by reception (NMEA 2000: a CiA 402 stand has no clock to put in a compass
+frame); its rolling error follows the platform's motion as the master commands it (the roll
+begins, the stop ramp begins), at the platform's true amplitude (the commanded one times the
+simulator's `faults.amplitude_factor`, which the drive's encoder does not see: its
+`platform_scale`)."""
+
+from __future__ import annotations
+
+import bisect
+import uuid
+from collections.abc import Iterator
+
+import can
+import canopen
+
+from gyrostand.acquisition.bus import transmitter
+from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault, Motion
+from gyrostand.acquisition.engine import Command, Engine, Phase
+from gyrostand.analysis.measured_motion import DRIVE_POSITION
+from gyrostand.devices.cia402 import AxisConfig, Cia402Axis
+from gyrostand.devices.decoder import SourceDecoder, frame_decoder
+from gyrostand.devices.roll_trajectory import Kinematics
+from gyrostand.devices.sim_drive import SIM_DRIVE_EDS, DriveFaults, ServoModel, SimDrive
+from gyrostand.frames.batch import BatchDecoder, FrameBatch, RawFrames
+from gyrostand.plan.codec import codec_for, sim_config
+from gyrostand.plan.model import Plan
+from gyrostand.stand.engine import StandEngine
+
+STEP_S = 5.0  # stand time per batch fed to the engine
+
+
+class SimulatedCia402:
+    """The simulated drive and compass with gyrostand's master and the stand adapter."""
+
+    def __init__(
+        self,
+        plan: Plan,
+        drive_faults: DriveFaults = DriveFaults(),
+        servo: ServoModel = ServoModel(),
+    ) -> None:
+        s = plan.stand
+        assert s.node_id is not None and s.counts_per_degree and s.arm_length_cm
+        config = sim_config(plan.bus)
+        channel = f"gyrostand-cia402-{uuid.uuid4().hex}-sim"
+        self._networks = (canopen.Network(), canopen.Network())
+        for net in self._networks:
+            net.NOTIFIER_CYCLE = 0.05  # a quick disconnect
+            net.connect(interface="virtual", channel=channel)
+        drive_net, master_net = self._networks
+        try:
+            scale = drive_faults.platform_scale * config.faults.amplitude_factor
+            self.drive = SimDrive(
+                drive_net,
+                s.node_id,
+                servo=servo,
+                faults=DriveFaults(
+                    drive_faults.overcurrent_at_s,
+                    drive_faults.jam_at_s,
+                    drive_faults.heartbeat_silent_at_s,
+                    scale,
+                ),
+            )
+            self.drive.boot()
+            self.axis = Cia402Axis(master_net, AxisConfig(s.node_id, SIM_DRIVE_EDS, s.cycle_ms))
+            self.axis.start()
+        except BaseException:
+            self.close()
+            raise
+        self.codec = codec_for(plan)
+        self.compass = StandEngine(config, self.codec, transmitter=transmitter(plan))
+        kinematics = Kinematics(s.counts_per_degree, s.arm_length_cm)
+        self.stand = Cia402Stand(self.axis, kinematics, s.ramp_s, self.codec, self._motion)
+        self._compass_frames: list[can.Message] = []
+
+    def _motion(self, m: Motion) -> None:
+        """The compass's rolling error follows the platform: its simulation runs up to the
+        change, which then takes effect (its own acks and stand frames are not sent)."""
+        self._compass_frames += self._compass_only(self.compass.advance_to(m.t_s))
+        self.compass.receive(
+            self.codec.encode_command(m.kind, m.direction_deg, m.amplitude_cm, m.period_s)
+        )
+
+    @staticmethod
+    def _compass_only(msgs: list[can.Message]) -> list[can.Message]:
+        """The compass's own frames (29-bit NMEA 2000), not the simulator's stand frames."""
+        return [m for m in msgs if m.is_extended_id]
+
+    def advance_to(self, t_s: float) -> list[can.Message]:
+        """Every frame of the stand and the compass up to stand time `t_s`, in time order."""
+        frames = self.stand.advance_to(t_s)
+        compass = self._compass_frames + self._compass_only(self.compass.advance_to(t_s))
+        self._compass_frames = []
+        return sorted(frames + compass, key=lambda m: m.timestamp)
+
+    def close(self) -> None:
+        for net in self._networks:
+            net.disconnect()
+
+
+def feed(
+    engine: Engine,
+    decoder: BatchDecoder | SourceDecoder,
+    position: int,
+    frames: list[can.Message],
+    faults: list[DriveFault],
+) -> list[FrameBatch]:
+    """Feed `frames` (from stream position `position`) to the engine; a drive fault fails the
+    trial at its stand time, after the frames up to it. The batches fed."""
+    batches, start = [], 0
+    times_ms = [round(m.timestamp * 1000) for m in frames]
+    for fault in faults:
+        cut = bisect.bisect_right(times_ms, fault.t_ms, lo=start)
+        batches.append(decoder.decode(RawFrames.from_messages(position + start, frames[start:cut])))
+        engine.feed(batches[-1])
+        engine.fail(fault.reason, kind=fault.kind)
+        start = cut
+    batches.append(decoder.decode(RawFrames.from_messages(position + start, frames[start:])))
+    engine.feed(batches[-1])
+    return batches
+
+
+class Cia402Lockstep:
+    """The engine's commander and its stream of frames from a simulated CiA 402 stand; a drive
+    fault fails the trial it ends (one event naming the drive's error). The statuses' motion is
+    measured from the drive's actual position (`motion_source`)."""
+
+    motion_source = DRIVE_POSITION
+
+    def __init__(self, sim: SimulatedCia402, plan: Plan, step_s: float = STEP_S) -> None:
+        self.sim = sim
+        self.plan = plan
+        self.step_s = step_s
+        self.stream: list[can.Message] = []  # what `run` fed the engine
+
+    def issue(self, command: Command, now_ms: int = 0) -> None:
+        self.sim.stand.issue(command, now_ms)
+
+    def decoder(self) -> BatchDecoder | SourceDecoder:
+        return frame_decoder(self.sim.codec, *self.plan.heading_source)
+
+    def steps(self, engine: Engine, max_stand_s: float = 200_000.0) -> Iterator[list[can.Message]]:
+        """Feed the engine step by step until it is done (or `max_stand_s`)."""
+        decoder = self.decoder()
+        position = 0
+        while engine.phase is not Phase.DONE and self.sim.stand.t_s < max_stand_s:
+            frames = self.sim.advance_to(self.sim.stand.t_s + self.step_s)
+            feed(engine, decoder, position, frames, self.sim.stand.take_faults())
+            position += len(frames)
+            yield frames
+
+    def run(self, engine: Engine, max_stand_s: float = 200_000.0) -> None:
+        for frames in self.steps(engine, max_stand_s):
+            self.stream += frames

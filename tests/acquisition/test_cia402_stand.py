@@ -1,0 +1,88 @@
+"""The CiA 402 stand adapter on the simulated drive, without the engine: a drive fault, a lost
+drive heartbeat and a following-error trip are each one `DriveFault` naming the cause, and the
+axis ends at rest; a stop is acknowledged at once and the statuses say "rocking" until the axis
+is at rest and disabled."""
+
+from __future__ import annotations
+
+import pytest
+
+from gyrostand.acquisition.cia402_sim import SimulatedCia402
+from gyrostand.acquisition.engine import Command
+from gyrostand.devices import sim_drive
+from gyrostand.devices.sim_drive import DriveFaults
+from gyrostand.stand.protocol import AckFrame, Codec, StandStatusFrame
+from tests.acquisition.test_cia402_campaign import SERVO, cia402_plan
+
+
+def _rock(faults: DriveFaults, seconds: float) -> tuple[SimulatedCia402, list]:
+    sim = SimulatedCia402(cia402_plan(), faults, SERVO)
+    sim.stand.issue(Command("set", 45.0, 48.0, 4.0))  # 3.7 deg: 36 700 counts
+    sim.stand.issue(Command("start"))
+    frames = sim.stand.advance_to(seconds)
+    return sim, frames
+
+
+def _decoded(frames: list) -> list:
+    codec = Codec()
+    return [f for f in map(codec.decode, frames) if f is not None]
+
+
+@pytest.mark.parametrize(
+    "faults, kind, cause",
+    [
+        (DriveFaults(overcurrent_at_s=3.0), "drive fault", "error code 0x2310: EMCY 0x2310"),
+        # (the axis seizes; the target goes on beyond the window of 20 000 counts)
+        (DriveFaults(jam_at_s=3.0), "following error", "error code 0x8611"),
+        (DriveFaults(heartbeat_silent_at_s=3.0), "heartbeat lost", "no heartbeat from drive"),
+    ],
+    ids=["emcy", "following-error-trip", "heartbeat-lost"],
+)
+def test_a_drive_fault_is_one_fault_naming_the_cause_and_the_axis_at_rest(faults, kind, cause):
+    sim, _ = _rock(faults, 20.0)
+    try:
+        (fault,) = sim.stand.take_faults()
+        assert fault.kind == kind and cause in fault.reason
+        assert fault.reason.startswith("CiA 402 drive: ")
+        assert 3000 < fault.t_ms < 4000  # noticed within a second of stand time
+        assert not sim.stand.rocking  # the roll ended: the fault reaction or the stop ramp
+        assert sim.drive.at_rest and abs(sim.drive.v) < 1.0
+        assert sim.drive.status in (sim_drive.FAULT, sim_drive.SWITCH_ON_DISABLED)
+        assert sim.stand.take_faults() == []  # one, not one per cycle
+    finally:
+        sim.close()
+
+
+def test_a_stop_is_acknowledged_at_once_and_the_axis_rests_before_still_is_reported():
+    sim, frames = _rock(DriveFaults(), 12.0)
+    try:
+        sim.stand.issue(Command("stop"))
+        frames += sim.stand.advance_to(40.0)
+        decoded = _decoded(frames)
+        (ack,) = [f for f in decoded if isinstance(f, AckFrame) and f.command == "stop"]
+        assert ack.accepted and ack.stand_time_ms == pytest.approx(12_000, abs=100)
+        statuses = [f for f in decoded if isinstance(f, StandStatusFrame)]
+        still = [s.stand_time_ms for s in statuses if not s.rocking and s.stand_time_ms > 1000]
+        # the stop ramp (5 s) and the servo settling: still only once at rest and disabled
+        assert still and 17_000 <= still[0] < 40_000
+        assert sim.drive.at_rest and sim.drive.status == sim_drive.SWITCH_ON_DISABLED
+        rocking = [s for s in statuses if s.rocking and s.amplitude_cm > 0]
+        assert rocking and all(abs(s.amplitude_cm - 48.0) < 1.0 for s in rocking[-4:])
+    finally:
+        sim.close()
+
+
+def test_a_drive_that_cannot_be_enabled_again_is_a_fault_not_an_ack():
+    sim, _ = _rock(DriveFaults(overcurrent_at_s=3.0), 10.0)
+    try:
+        assert len(sim.stand.take_faults()) == 1
+        for command in (Command("stop"), Command("set", 135.0, 24.0, 4.0), Command("start")):
+            sim.stand.issue(command)
+        frames = sim.stand.advance_to(15.0)
+        (fault,) = sim.stand.take_faults()
+        assert fault.kind == "drive fault"
+        assert "did not reach OPERATION ENABLED (state FAULT, error code 0x2310)" in fault.reason
+        acks = [f.command for f in _decoded(frames) if isinstance(f, AckFrame)]
+        assert "start" not in acks and not sim.stand.rocking
+    finally:
+        sim.close()
