@@ -112,7 +112,9 @@ class CampaignStore:
         with writer(sessions).begin() as session:
             campaign = new_campaign(session, header, status="running", source=source, labels=labels)
             virtual = plan.bus.simulated and plan.bus.timing == "virtual"
-            heading = source_info(codec_for(plan), plan.compass.protocol, virtual)
+            heading = source_info(
+                codec_for(plan), plan.compass.protocol, virtual, plan.compass.encoder()
+            )
             campaign.heading_source = heading.protocol
             campaign.heading_time_base = heading.time_base
             campaign.heading_resolution_deg = heading.resolution_deg
