@@ -11,14 +11,15 @@ time; dropped samples come from the stand's own fault knobs.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import can
 import numpy as np
 
+from gyrostand.devices.encoder_knobs import KNOBS
 from gyrostand.stand.encoder import OPERATIONAL, Encoder
-
-SYNC_ID = 0x080  # CiA 301 default COB-ID of SYNC
 
 
 @dataclass(frozen=True)
@@ -73,3 +74,37 @@ class Cia406Encoder:
                 out.append(self._message(t, self.sync_id, b""))
             out.append(self._message(t, tpdo, int(word).to_bytes(8, "little")[:size]))
         return out
+
+
+def simulated_encoder(knobs: Mapping[str, Any]) -> Cia406Encoder:
+    """The simulated encoder from `KNOBS` (the defaults for those not given); ValueError naming
+    each knob it cannot take, one line."""
+    k = {name: default for name, (_, default, _) in KNOBS.items()} | dict(knobs)
+    problems = [f"unknown cia406 knob {name!r}" for name in k if name not in KNOBS]
+    for name, (kind, _, _) in KNOBS.items():
+        number = isinstance(k[name], int | float) and kind in (float, float | None)
+        if not (isinstance(k[name], kind) or number):
+            problems.append(f"{name} {k[name]!r} is not {getattr(kind, '__name__', kind)}")
+    if problems:
+        raise ValueError("; ".join(problems))
+    if not 1 <= k["node_id"] <= 127:
+        problems.append(f"node_id {k['node_id']} is not a CANopen node id (1-127)")
+    if k["counts_per_revolution"] < 2:
+        problems.append(f"counts_per_revolution {k['counts_per_revolution']} is below 2")
+    if k["direction"] not in ("clockwise", "counterclockwise"):
+        problems.append(f"direction {k['direction']!r} is not clockwise or counterclockwise")
+    if k["sync_id"] is not None and not 0 < k["sync_id"] < 0x800:
+        problems.append(f"sync_id {k['sync_id']} is not an 11-bit COB-ID")
+    if problems:
+        raise ValueError("; ".join(problems))
+    sign = 1 if k["direction"] == "clockwise" else -1
+    encoder = Encoder(
+        k["node_id"],
+        k["counts_per_revolution"],
+        zero_counts=k["zero_counts"],
+        sign=sign,
+        on_sync=k["sync_id"] is not None,
+        heartbeat_ms=k["heartbeat_ms"],
+    )
+    faults = Cia406Faults(k["encoder_silence_at_s"], k["encoder_silence_for_s"], k["emcy_at_s"])
+    return Cia406Encoder(encoder, faults, k["sync_id"])
