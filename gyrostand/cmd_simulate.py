@@ -192,16 +192,8 @@ _RUN_PARAMETERS = [
                 0.0,
                 "nmea2000 fault: probability that a heading is sent as not available",
             ),
+            *((name, *knob) for name, knob in ENCODER_KNOBS.items()),
         )
-    ),
-    *(
-        inspect.Parameter(
-            name,
-            inspect.Parameter.KEYWORD_ONLY,
-            annotation=kind,
-            default=typer.Option(default, help=text, rich_help_panel="Compass protocol"),
-        )
-        for name, (kind, default, text) in ENCODER_KNOBS.items()
     ),
     inspect.Parameter(
         "start_epoch",
