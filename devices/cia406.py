@@ -1,20 +1,12 @@
 """The heading source "cia406": a CiA 406 absolute encoder (CANopen encoder profile) reading the
-compass card or a repeater, listened to, never configured.
+compass card or a repeater, listened to, never configured (the encoder: `stand.encoder`).
 
-The encoder sends its position value (object 0x6004, counts) in a TPDO (by default TPDO1,
-COB-ID 0x180 + node id, 32 bits from byte 0), on an event timer or on SYNC, its heartbeat
-(0x700 + node id: its NMT state) and its EMCY (0x80 + node id). gyrostand turns the position into
-a heading with the encoder's resolution (0x6001 measuring units per revolution) and the plan's
-zero and direction:
-
-    heading = sign x (counts - zero) x 360 / cpr  mod 360        (CiA 406 eq: 0x6004 / 0x6001)
-
-timed by reception on the campaign clock (`devices.clock`). The PDO carries no sequence number
-(a gap shows from time only). EMCY, heartbeat state changes and a heartbeat missing for
-HEARTBEAT_MISSES producer periods are events; short frames, a position beyond the total
-measuring range 0x6002 and positions before the campaign clock is known are invalid with their
-reason. Frames of other nodes are not the source's. The PDO mapping, cpr, total range and
-heartbeat period can come from the encoder's EDS (`encoder_from_eds`, canopen's parser).
+Its position value (0x6004) in its TPDO becomes the heading (`Encoder.heading_deg`), timed by
+reception on the campaign clock (`devices.clock`). The PDO carries no sequence number (a gap
+shows from time only). EMCY (0x80 + node id), heartbeat (0x700 + node id) state changes and a
+heartbeat missing for HEARTBEAT_MISSES producer periods are events; short frames, a position
+beyond the total measuring range 0x6002 and positions before the campaign clock is known are
+invalid with their reason. Frames of other nodes are not the source's.
 """
 
 from __future__ import annotations
@@ -64,10 +56,10 @@ class Cia406Heading:
         rows = np.flatnonzero(claimed & (raw.arbitration_id == tpdo))
         headings = self._headings(raw, rows, clock, invalid)
         beats = np.flatnonzero(claimed & (raw.arbitration_id == heartbeat)).tolist()
-        for row in [*beats, None]:
-            self._supervise(raw, row, events)
-            if row is not None:
-                self._heartbeat(raw, row, invalid, events)
+        for start, stop in zip([0, *beats], [*beats, len(raw)], strict=True):
+            self._supervise(raw, start, stop, events)
+            if stop < len(raw):
+                self._heartbeat(raw, stop, invalid, events)
         for row in np.flatnonzero(claimed & (raw.arbitration_id == emcy)).tolist():
             self._emcy(raw, row, invalid, events)
         return SourceOutput(
@@ -90,7 +82,8 @@ class Cia406Heading:
     ) -> Headings:
         """The TPDO frames: usable ones as headings, the rest invalid. Vectorised over the
         batch (the (n, 8) payloads as little-endian 64-bit words, shifted and masked): canopen's
-        PdoMap decodes one frame per call through its object dictionary, ~100x slower."""
+        PdoMap decodes one frame per call through its object dictionary, 60x slower (5,600 vs
+        360,000 TPDOs/s on this machine, loaded); tests check the two agree."""
         enc, node = self.encoder, self.encoder.node_id
         words = raw.data[rows].copy().view("<u8")[:, 0]
         counts = (words >> np.uint64(enc.offset_bits)) & np.uint64((1 << enc.length_bits) - 1)
@@ -119,25 +112,25 @@ class Cia406Heading:
             counter=np.full(int(good.sum()), -1, dtype=np.int64),
         )
 
-    def _supervise(self, raw: RawFrames, row: int | None, events: list) -> None:
+    def _supervise(self, raw: RawFrames, start: int, stop: int, events: list) -> None:
         """A missing heartbeat: told at the first frame of the stream received more than
-        HEARTBEAT_MISSES periods after the last heartbeat (up to `row`, a heartbeat, or the
-        batch's end), so replay tells it where live did."""
+        HEARTBEAT_MISSES periods after the last heartbeat (rows start..stop-1: up to the next
+        heartbeat or the batch's end), so replay tells it where live did."""
         period_s = self.encoder.heartbeat_ms / 1000.0
         if period_s <= 0 or self._missing or len(raw) == 0:
             return
         if self._heartbeat_s is None:
             self._heartbeat_s = float(raw.timestamp[0])  # supervised from the first frame heard
-        stop = len(raw) if row is None else row
         deadline = self._heartbeat_s + HEARTBEAT_MISSES * period_s
-        late = np.flatnonzero(raw.timestamp[:stop] > deadline)
+        late = np.flatnonzero(raw.timestamp[start:stop] > deadline)
         if len(late):
             self._missing = True
             text = (
                 f"encoder node {self.encoder.node_id}: no heartbeat for {HEARTBEAT_MISSES} "
                 f"producer periods ({self.encoder.heartbeat_ms} ms each)"
             )
-            events.append((raw.start + int(late[0]), DeviceEvent("heartbeat lost", "error", text)))
+            pos = raw.start + start + int(late[0])
+            events.append((pos, DeviceEvent("heartbeat lost", "error", text)))
 
     def _heartbeat(self, raw: RawFrames, row: int, invalid: list, events: list) -> None:
         node, state = self.encoder.node_id, int(raw.data[row, 0]) & 0x7F
