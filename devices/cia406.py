@@ -17,17 +17,19 @@ import numpy as np
 from canopen.emcy import EmcyError
 from canopen.nmt import NMT_STATES
 
-from gyrostand.devices.clock import NO_CLOCK, TIME_BASE
+from gyrostand.devices.clock import NO_CLOCK, TIME_BASE, VIRTUAL_TIME_BASE
 from gyrostand.devices.source import UNNUMBERED, CampaignClock, SourceInfo, SourceOutput
 from gyrostand.frames.batch import DeviceEvent, Headings, RawFrames
 from gyrostand.stand.encoder import HEARTBEAT_MISSES, OPERATIONAL, Encoder
 from gyrostand.stand.protocol import InvalidFrame
 
 
-def encoder_info(encoder: Encoder) -> SourceInfo:
-    """What the analysis and the campaign record state about the encoder as heading source."""
+def encoder_info(encoder: Encoder, virtual: bool = False) -> SourceInfo:
+    """What the analysis and the campaign record state about the encoder as heading source
+    (`virtual`: simulated in virtual time, `devices.decoder.source_info`)."""
     trigger = "on SYNC" if encoder.on_sync else "on its event timer"
-    base = f"{TIME_BASE}; CiA 406 TPDO 0x{encoder.tpdo_id:03X} sent {trigger}"
+    clock = VIRTUAL_TIME_BASE if virtual else TIME_BASE
+    base = f"{clock}; CiA 406 TPDO 0x{encoder.tpdo_id:03X} sent {trigger}"
     return SourceInfo("cia406", encoder.resolution_deg, base, UNNUMBERED)
 
 

@@ -65,6 +65,5 @@ def source_info(
         info = Nmea2000Heading.info
         return replace(info, time_base=VIRTUAL_TIME_BASE) if virtual else info
     if protocol == "cia406" and encoder is not None:
-        info = encoder_info(encoder)
-        return replace(info, time_base=VIRTUAL_TIME_BASE) if virtual else info
+        return encoder_info(encoder, virtual)
     raise ValueError(f"heading source {protocol!r} is not runnable yet")

@@ -23,13 +23,18 @@ TIME_BASE = (
     "time base: reception time on the stand clock; virtual time: the simulated compass's frames "
     "are received at their stand time"
 )
-SOURCES = {  # protocol: (the rest of its [compass] table, resolution deg, analysis's first line)
-    "nmea2000": ("", 1e-4 * 180 / 3.141592653589793, "nmea2000, heading resolution 0.0057 deg"),
+SOURCES = {  # protocol: (the rest of its [compass] table, resolution deg, the source stated)
+    "nmea2000": (
+        "",
+        1e-4 * 180 / 3.141592653589793,
+        f"nmea2000, heading resolution 0.0057 deg; {TIME_BASE}",
+    ),
     "cia406": (
         "node_id = 5\ncounts_per_revolution = 65536\nzero_counts = 300\n"
         'direction = "counterclockwise"\n',
         360 / 65536,
-        "cia406, heading resolution 0.0055 deg",
+        f"cia406, heading resolution 0.0055 deg; {TIME_BASE}; CiA 406 TPDO 0x185 sent on its "
+        "event timer",
     ),
 }
 OBSERVATIONS = """SELECT t."index", s.j, o.k, o.value_deg, o.frames_used, o.frames_lost, o.flags
@@ -73,7 +78,7 @@ def test_the_campaign_records_its_heading_source(campaign: Path) -> None:
 
 def test_analyze_and_report_state_it(campaign: Path, tmp_path: Path) -> None:
     db = str(campaign.with_name("db.sqlite"))
-    source = f"{SOURCES[campaign.stem][2]}; {TIME_BASE}"
+    source = SOURCES[campaign.stem][2]
     text = runner.invoke(app, ["analyze", "1", "--db", db])
     assert text.exit_code == 0, text.output
     assert text.stdout.startswith(f"HEADING SOURCE\n{source}\n\nTRIALS")
