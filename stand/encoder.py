@@ -22,7 +22,7 @@ HEARTBEAT_TIME = 0x1017  # producer heartbeat time, ms
 EMCY_BASE, TPDO1_BASE, HEARTBEAT_BASE = 0x80, 0x180, 0x700
 HEARTBEAT_MISSES = 3  # a heartbeat is missing after this many producer periods
 OPERATIONAL = 5
-SYNC_TYPES = range(0, 241)  # transmission types 0-240: on SYNC (CiA 301 table 70)
+SYNC_TYPES = range(0, 241)  # CiA 301 transmission types 0 (acyclic) and 1-240: on SYNC
 
 
 class EncoderError(ValueError):
@@ -90,7 +90,7 @@ def encoder_from_eds(path: Path, node_id: int, **plan: int | None) -> Encoder:
     ]
     if not mapped:
         raise EncoderError(f"EDS {path}: no TPDO maps the position value 0x6004")
-    pdo, var = mapped[0]
+    pdo, var = max(mapped, key=lambda m: m[0].enabled)  # (the first valid one, if any)
 
     def default(index: int) -> int | None:
         entry = node.object_dictionary.get(index)
