@@ -19,6 +19,7 @@ import can
 from can.interfaces.virtual import VirtualBus
 
 from gyrostand.devices.nmea2000 import iso_requests
+from gyrostand.devices.sim_cia406 import Cia406Encoder
 from gyrostand.devices.sim_nmea2000 import simulated_compass
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import BatchBLFWriter, raw_log_writer
@@ -32,6 +33,9 @@ from gyrostand.stand.simulator import Simulator
 
 def transmitter(plan: Plan) -> HeadingTransmitter | None:
     """The simulated compass when it speaks another protocol than the stand's DBC."""
+    encoder = plan.compass.encoder()
+    if encoder is not None:
+        return Cia406Encoder(encoder)
     if plan.compass.protocol != "nmea2000":
         return None
     model, serial = plan.instrument.model, plan.instrument.serial

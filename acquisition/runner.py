@@ -177,7 +177,7 @@ def run_live(
     display = ProgressDisplay(quiet=quiet)
     operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)
     commander = LiveCommander(live.controller, grants)
-    source = source_info(codec, plan.compass.protocol)
+    source = source_info(codec, plan.compass.protocol, encoder=plan.compass.encoder())
     engine = Engine(plan, store, commander, progress, operator, source, start_ms=clock_ms)
     decoder = frame_decoder(codec, *plan.heading_source, plan.inclinometer_mount)
     if grants is None:
@@ -449,7 +449,8 @@ def replay(
     codec = codec_for(plan)
     checked = checked or [check_replay_log(log) for log in logs]
     store = CampaignStore.create(sessions, plan, source="replay")
-    engine = Engine(plan, store, _NoCommands(), source=source_info(codec, plan.compass.protocol))
+    source = source_info(codec, plan.compass.protocol, encoder=plan.compass.encoder())
+    engine = Engine(plan, store, _NoCommands(), source=source)
     decoder = frame_decoder(codec, *plan.heading_source, plan.inclinometer_mount)
     position = 0
     try:

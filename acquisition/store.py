@@ -123,7 +123,11 @@ class CampaignStore:
             campaign = new_campaign(session, header, status="running", source=source, labels=labels)
             virtual = plan.bus.simulated and plan.bus.timing == "virtual"
             heading = source_info(
-                codec_for(plan), plan.compass.protocol, virtual, plan.stand.protocol
+                codec_for(plan),
+                plan.compass.protocol,
+                virtual,
+                plan.stand.protocol,
+                plan.compass.encoder(),
             )
             campaign.heading_source = heading.protocol
             campaign.heading_time_base = heading.time_base

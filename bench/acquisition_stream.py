@@ -9,15 +9,16 @@ from pathlib import Path
 
 import can
 
+from gyrostand.acquisition.bus import transmitter
 from gyrostand.acquisition.engine import Engine
 from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.devices.decoder import frame_decoder, source_info
-from gyrostand.devices.sim_nmea2000 import simulated_compass
 from gyrostand.plan.model import Plan, parse_plan
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import SimConfig
 
 ROOT = Path(__file__).resolve().parents[1]
+ENCODER = {"cia406": "node_id = 5\ncounts_per_revolution = 65536\n"}  # the rest of [compass]
 
 
 def paper_plan(
@@ -29,7 +30,7 @@ def paper_plan(
     text = text.replace('database = "runs/gyrostand.sqlite"', f'database = "{database}"')
     text = text.replace("n_obs = 5", f"n_obs = {n_obs}")
     head, sep, trials = text.partition("[[trials]]")
-    compass = f'\n[compass]\nprotocol = "{protocol}"\n'
+    compass = f'\n[compass]\nprotocol = "{protocol}"\n' + ENCODER.get(protocol, "")
     return parse_plan(head + (sep + trials) * trial_repeats + compass)
 
 
@@ -44,10 +45,9 @@ def campaign_frames(plan: Plan, seed: int = 1, step_s: float = 20.0) -> Iterator
     compass = None
     if plan.compass.protocol != "gyrostand":
         codec = Codec()
-        transmitter = simulated_compass(plan.instrument.model, plan.instrument.serial, seed=seed)
-        compass = (transmitter, lambda: frame_decoder(codec, *plan.heading_source))
+        compass = (transmitter(plan), lambda: frame_decoder(codec, *plan.heading_source))
     stand = Lockstep(SimConfig(seed=seed), step_s, compass=compass)  # type: ignore[arg-type]
-    source = source_info(Codec(), plan.compass.protocol, virtual=True)
+    source = source_info(Codec(), plan.compass.protocol, True, encoder=plan.compass.encoder())
     engine = Engine(plan, _Null(), stand, source=source)
     for frames in stand.steps(engine, max_stand_s=math.inf):
         yield from frames

@@ -7,8 +7,9 @@ consumer they are first queued on a python-can `virtual` bus (untimed), then the
 The process is pinned to one CPU. Targets: >= 87 000 frames/s (ten times a saturated 1 Mbit/s
 bus), zero loss, at least twice `can.Logger`. Last, the raw BLF writers alone (ours, python-can's)
 on the same frames, without a bus; and the same campaign with its compass speaking NMEA 2000
-(PGN 127250/127251/127257 decoded by the heading source, `devices`): frames/s beside gyrostand's
-own heading frame (target: at least its rate, in frames and in headings).
+(PGN 127250/127251/127257 decoded by the heading source, `devices`), then read by a CiA 406
+encoder (TPDO1, heartbeat): frames/s beside gyrostand's own heading frame (target: at least its
+rate, in frames and in headings).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from gyrostand.frames.logfile import BatchBLFWriter
 from gyrostand.stand.protocol import Codec
 
 DRAIN = 50_000  # frames drained (and logged) at a time
+TPDO = 0x185  # the CiA 406 encoder's TPDO1 (node 5, acquisition_stream.ENCODER)
 
 
 def loaded_bus(frames: list[can.Message]) -> tuple[can.BusABC, can.BusABC]:
@@ -56,7 +58,7 @@ def ours(
     db = tmp / f"ours-{raw_log}-{protocol}.sqlite"
     plan = paper_plan(str(db), protocol=protocol)
     store = CampaignStore.create(open_database(sqlite_url(db)), plan)
-    source = source_info(Codec(), protocol, virtual=True)
+    source = source_info(Codec(), protocol, True, encoder=plan.compass.encoder())
     engine = Engine(plan, store, _NoCommands(), source=source)  # commands: in the stream
     decoder = frame_decoder(Codec(), *plan.heading_source)
     rx, tx = loaded_bus(frames)
@@ -115,13 +117,13 @@ def writers_alone(frames: list[can.Message], tmp: Path) -> tuple[float, float]:
 
 
 def _headings(frames: list[can.Message]) -> int:
-    """Heading frames among them (gyrostand's GYRO_HEADING or PGN 127250)."""
+    """Heading frames among them (gyrostand's GYRO_HEADING, PGN 127250 or the encoder's TPDO)."""
     from gyrostand.devices.nmea2000 import VESSEL_HEADING, split_id
 
-    heading_id = Codec().database.get_message_by_name("GYRO_HEADING").frame_id
+    ids = {Codec().database.get_message_by_name("GYRO_HEADING").frame_id, TPDO}
     ext = [m.arbitration_id for m in frames if m.is_extended_id]
     n2k = int((split_id(np.array(ext, dtype=np.int64))[0] == VESSEL_HEADING).sum()) if ext else 0
-    return n2k + sum(1 for m in frames if not m.is_extended_id and m.arbitration_id == heading_id)
+    return n2k + sum(1 for m in frames if not m.is_extended_id and m.arbitration_id in ids)
 
 
 def main() -> None:
@@ -152,17 +154,18 @@ def main() -> None:
     ours_rate = rows["gyrostand (decode, check, aggregate, SQLite + raw BLF)"]
     rate = ours_rate[1] / ours_rate[0]
     best_logger = max(done / s for s, done, _ in list(rows.values())[2:])
-    n2k_plan = paper_plan(":memory:", protocol="nmea2000")
-    n2k_frames = list(itertools.islice(campaign_frames(n2k_plan), args.frames))
-    with tempfile.TemporaryDirectory() as folder:
-        n2k = ours(n2k_frames, Path(folder), True, "nmea2000")
-    n2k_rate = n2k[1] / n2k[0]
-    per_heading = _headings(n2k_frames) / n2k[0], _headings(frames) / ours_rate[0]
-    print(
-        f"NMEA 2000 compass ({len(n2k_frames):,} frames, SQLite + raw BLF): {n2k_rate:,.0f} "
-        f"frames/s, {n2k[2]:,} lost; headings/s {per_heading[0]:,.0f} vs gyrostand's frame "
-        f"{per_heading[1]:,.0f}: {'OK' if n2k_rate >= rate else 'BELOW'} gyrostand's rate"
-    )
+    per_heading = _headings(frames) / ours_rate[0]
+    for protocol, name in (("nmea2000", "NMEA 2000 compass"), ("cia406", "CiA 406 encoder")):
+        source_plan = paper_plan(":memory:", protocol=protocol)
+        source_frames = list(itertools.islice(campaign_frames(source_plan), args.frames))
+        with tempfile.TemporaryDirectory() as folder:
+            seconds, done, lost = ours(source_frames, Path(folder), True, protocol)
+        print(
+            f"{name} ({len(source_frames):,} frames, SQLite + raw BLF): {done / seconds:,.0f} "
+            f"frames/s, {lost:,} lost; headings/s {_headings(source_frames) / seconds:,.0f} vs "
+            f"gyrostand's frame {per_heading:,.0f}: "
+            f"{'OK' if done / seconds >= rate else 'BELOW'} gyrostand's rate"
+        )
     print(
         f"target >= 87,000 frames/s: {'OK' if rate >= 87_000 else 'BELOW TARGET'}; "
         f"zero loss: {'OK' if ours_rate[2] == 0 else 'FRAMES LOST'}; "

@@ -8,12 +8,14 @@ from dataclasses import replace
 
 import numpy as np
 
+from gyrostand.devices.cia406 import Cia406Heading, encoder_info
 from gyrostand.devices.clock import CIA402_STAND_CLOCK, VIRTUAL_TIME_BASE, ReceptionClock
 from gyrostand.devices.inclinometer import InclinometerDecoder, Mount
 from gyrostand.devices.n2k_heading import Nmea2000Heading
 from gyrostand.devices.source import SourceInfo
 from gyrostand.devices.stand_frames import stand_source_info
 from gyrostand.frames.batch import BatchDecoder, FrameBatch, RawFrames
+from gyrostand.stand.encoder import Encoder
 from gyrostand.stand.protocol import Codec
 
 
@@ -25,7 +27,7 @@ class SourceDecoder:
     def __init__(
         self,
         codec: Codec,
-        source: Nmea2000Heading | None,
+        source: Nmea2000Heading | Cia406Heading | None,
         inclinometer: InclinometerDecoder | None = None,
     ) -> None:
         self.stand = BatchDecoder(codec)
@@ -57,25 +59,34 @@ def frame_decoder(
     protocol: str = "gyrostand",
     name: str | None = None,
     product: tuple[str, str] | None = None,
+    encoder: Encoder | None = None,
     inclinometer: tuple[str, int, str, float] | None = None,
 ) -> BatchDecoder | SourceDecoder:
-    """The decoder of a plan's [compass] (`name`: NMEA 2000 NAME in hexadecimal; `product`:
-    [instrument] model and serial) and [inclinometer] (`Plan.inclinometer_mount`)."""
+    """The decoder of a plan's [compass] (`Plan.heading_source`: `name`, NMEA 2000 NAME in
+    hexadecimal; `product`, [instrument] model and serial; `encoder`, the CiA 406 encoder) and
+    [inclinometer] (`Plan.inclinometer_mount`)."""
     sensor = None if inclinometer is None else InclinometerDecoder(Mount(*inclinometer))
     if protocol in ("gyrostand", "dbc"):
         return BatchDecoder(codec) if sensor is None else SourceDecoder(codec, None, sensor)
     if protocol == "nmea2000":
         wanted = int(name, 16) if name is not None else None
         return SourceDecoder(codec, Nmea2000Heading(wanted, None if wanted else product), sensor)
+    if protocol == "cia406" and encoder is not None:
+        return SourceDecoder(codec, Cia406Heading(encoder), sensor)
     raise ValueError(f"heading source {protocol!r} is not runnable yet")
 
 
 def source_info(
-    codec: Codec, protocol: str = "gyrostand", virtual: bool = False, stand: str = "gyrostand"
+    codec: Codec,
+    protocol: str = "gyrostand",
+    virtual: bool = False,
+    stand: str = "gyrostand",
+    encoder: Encoder | None = None,
 ) -> SourceInfo:
     """What the engine and the campaign record need of the source (`virtual`: a simulated
     stand in virtual time, whose time base is the simulation's; `stand`: the plan's [stand]
-    protocol, whose clock is the campaign's)."""
+    protocol, whose clock is the campaign's; `encoder`: the CiA 406 encoder,
+    `CompassPlan.encoder()`)."""
     if protocol in ("gyrostand", "dbc"):
         return stand_source_info(codec, protocol)
     if protocol == "nmea2000":
@@ -84,4 +95,6 @@ def source_info(
         if stand == "cia402":
             base = f"{base}; {CIA402_STAND_CLOCK}"
         return replace(info, time_base=base)
+    if protocol == "cia406" and encoder is not None:
+        return encoder_info(encoder, virtual)
     raise ValueError(f"heading source {protocol!r} is not runnable yet")

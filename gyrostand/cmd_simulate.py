@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import typer
 
 from gyrostand import cmd_simulate_serial
+from gyrostand.devices.encoder_knobs import KNOBS as ENCODER_KNOBS
 from gyrostand.errors import fail, say
 from gyrostand.stand.simconfig import (
     CompassParams,
@@ -175,8 +176,10 @@ _RUN_PARAMETERS = [
         default=typer.Option(
             "gyrostand",
             help="what the compass speaks: gyrostand (the DBC's heading frame), nmea2000 "
-            "(PGN 127250/127251/127257, address claim, product information) or iec61162 (HDT/THS/"
-            "ROT sentences on a serial port: the Serial compass options); docs/instruments.md",
+            "(PGN 127250/127251/127257, address claim, product information), cia406 (a CiA 406 "
+            "encoder on the compass card: position 0x6004 in TPDO1, heartbeat, EMCY) or "
+            "iec61162 (HDT/THS/ROT sentences on a serial port: the Serial compass options); "
+            "docs/instruments.md",
             rich_help_panel="Compass protocol",
         ),
     ),
@@ -204,6 +207,7 @@ _RUN_PARAMETERS = [
                 0.0,
                 "nmea2000 fault: probability that a heading is sent as not available",
             ),
+            *((name, *knob) for name, knob in ENCODER_KNOBS.items()),
         )
     ),
     inspect.Parameter(
@@ -276,8 +280,15 @@ def _transmitter(run: dict[str, Any], seed: int) -> HeadingTransmitter | None:
 
     if run["protocol"] == "gyrostand":
         return None
+    if run["protocol"] == "cia406":
+        from gyrostand.devices.sim_cia406 import simulated_encoder
+
+        try:
+            return simulated_encoder({name: run[name] for name in ENCODER_KNOBS})
+        except ValueError as exc:
+            fail(f"--protocol cia406: {exc}")
     if run["protocol"] != "nmea2000":
-        fail(f"--protocol: {run['protocol']!r} is not one of gyrostand, nmea2000, iec61162")
+        fail(f"--protocol: {run['protocol']!r} is not one of gyrostand, nmea2000, cia406, iec61162")
     for key in ("address", "new_address"):
         if not 0 <= run[key] <= 251:
             fail(f"--{key.replace('_', '-')}: {run[key]} is not a source address (0-251)")

@@ -36,7 +36,8 @@ _MARKERS = (
     f"{CHANNEL_ENV}); skipped with the reason where there is none",
     "gyro_stand(**knobs): the simulated stand of the gyro_stand fixture: compass={...}, "
     "noise={...}, faults={...}, stand={...}, seed, timing, speedup, heading_rate_hz, "
-    "status_rate_hz, dbc, signals, protocol (gyrostand or nmea2000), nmea2000={...}",
+    "status_rate_hz, dbc, signals, protocol (gyrostand, nmea2000 or cia406), nmea2000={...}, "
+    "cia406={...}",
 )
 
 
@@ -122,8 +123,10 @@ def gyro_stand_factory(pytestconfig: pytest.Config) -> Iterator[Callable[..., Si
     the test. Knobs: compass, noise, faults, stand, inclinometer (dicts of their fields), seed,
     timing ("virtual" or "realtime"), speedup, heading_rate_hz, status_rate_hz; dbc (path) and
     signals (a [signals] mapping, or a TOML file holding one); protocol, what the compass speaks
-    ("gyrostand" or "nmea2000", with nmea2000={model, serial, address, address_change_at_s,
-    new_address, not_available_rate}); interface ("virtual" or "socketcan") and channel. The
+    ("gyrostand"; "nmea2000", with nmea2000={model, serial, address, address_change_at_s,
+    new_address, not_available_rate}; "cia406", with cia406={node_id, counts_per_revolution,
+    zero_counts, direction, heartbeat_ms, sync_id, encoder_silence_at_s, encoder_silence_for_s,
+    emcy_at_s}); interface ("virtual" or "socketcan") and channel. The
     command line's --gyrostand-* options are the defaults."""
     closing = ExitStack()  # every stand stopped, even when one fails to stop
 
@@ -147,6 +150,7 @@ def gyro_stand_factory(pytestconfig: pytest.Config) -> Iterator[Callable[..., Si
         signals = given.pop("signals", None) or {}
         protocol = given.pop("protocol", "gyrostand")
         n2k = given.pop("nmea2000", None) or {}
+        encoder = given.pop("cia406", None) or {}
         try:
             if isinstance(signals, str | Path):
                 signals = read_signals(Path(signals))
@@ -158,6 +162,7 @@ def gyro_stand_factory(pytestconfig: pytest.Config) -> Iterator[Callable[..., Si
                 channel=channel,
                 protocol=protocol,
                 nmea2000=n2k,
+                cia406=encoder,
             )
             stand = SimulatedStand(spec)
         except StandSetupError as exc:

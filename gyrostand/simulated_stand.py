@@ -21,6 +21,7 @@ from pydantic import ValidationError
 
 from gyrostand.acquisition.bus import SimulatorBus
 from gyrostand.devices.nmea2000 import Product
+from gyrostand.devices.sim_cia406 import simulated_encoder
 from gyrostand.devices.sim_nmea2000 import Nmea2000Compass, Nmea2000Device, Nmea2000Faults
 from gyrostand.stand.engine import HeadingTransmitter, ReceivedCommand
 from gyrostand.stand.protocol import Codec, ProtocolError
@@ -61,8 +62,9 @@ class StandSpec:
     signals: Mapping[str, str] = field(default_factory=dict)
     interface: str = "virtual"
     channel: str | None = None
-    protocol: str = "gyrostand"  # what the compass speaks: "gyrostand" or "nmea2000"
+    protocol: str = "gyrostand"  # what the compass speaks: "gyrostand", "nmea2000", "cia406"
     nmea2000: Mapping[str, Any] = field(default_factory=dict)  # its `N2K_KNOBS`
+    cia406: Mapping[str, Any] = field(default_factory=dict)  # `devices.encoder_knobs.KNOBS`
 
     def config(self) -> SimConfig:
         """The SimConfig (StandSetupError naming every unknown or inconsistent knob)."""
@@ -80,12 +82,17 @@ class StandSpec:
     def transmitter(self) -> HeadingTransmitter | None:
         """The compass's own protocol (None: the DBC's heading frame); StandSetupError naming
         an unknown protocol or knob."""
-        if self.protocol == "gyrostand" and not self.nmea2000:
+        if self.protocol == "gyrostand" and not (self.nmea2000 or self.cia406):
             return None
-        if self.protocol != "nmea2000":
+        if self.protocol == "cia406" and not self.nmea2000:
+            try:
+                return simulated_encoder(self.cia406)
+            except ValueError as exc:
+                raise StandSetupError(f"simulated stand: {exc}") from None
+        if self.protocol != "nmea2000" or self.cia406:
             raise StandSetupError(
-                f"simulated stand: protocol {self.protocol!r} is not one of gyrostand, nmea2000"
-                + (" (nmea2000 knobs given)" if self.protocol == "gyrostand" else "")
+                f"simulated stand: protocol {self.protocol!r} is not one of gyrostand, nmea2000, "
+                "cia406, or has the knobs of another"
             )
         unknown = sorted(set(self.nmea2000) - set(N2K_KNOBS))
         if unknown:

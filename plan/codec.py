@@ -57,10 +57,10 @@ def prepare(plan: Plan) -> None:
     if plan.stand.protocol == "cia402":
         problems += _cia402_problems(plan)
     compass = plan.compass
-    if compass.protocol in ("iec61162", "cia406"):
+    if compass.protocol == "iec61162":
         problems.append(
-            f'[compass] protocol: "{compass.protocol}" is not runnable yet (gyrostand, dbc and '
-            "nmea2000 are)"
+            '[compass] protocol: "iec61162" is not runnable yet (gyrostand, dbc, nmea2000 and '
+            "cia406 are)"
         )
     elif compass.own_bus:
         problems.append(
@@ -72,10 +72,33 @@ def prepare(plan: Plan) -> None:
         problems.append(
             '[inclinometer] protocol: the simulated stand carries a "cia410" inclinometer only'
         )
+    try:
+        problems += _encoder_ids_taken(plan, codec)
+    except PlanError as exc:
+        problems += exc.problems
     if problems:
         raise PlanError(problems)
     if plan.bus.simulated:
         stand_config(plan)
+
+
+def _encoder_ids_taken(plan: Plan, codec: Codec) -> list[str]:
+    """A CiA 406 encoder on the stand's bus: its COB-IDs (TPDO, EMCY, heartbeat) must not be
+    frames of the stand's DBC (PlanError for an EDS gyrostand cannot use)."""
+    encoder = plan.compass.encoder()
+    if encoder is None or plan.compass.own_bus:
+        return []
+    problems = []
+    for what, cob_id in zip(("TPDO", "EMCY", "heartbeat"), encoder.ids, strict=True):
+        try:
+            taken = codec.database.get_message_by_frame_id(cob_id)
+        except KeyError:
+            continue
+        problems.append(
+            f"[compass] node_id: the encoder's {what} 0x{cob_id:03X} is the stand's frame "
+            f"{taken.name} (DBC): give the encoder another node id"
+        )
+    return problems
 
 
 def _cia402_problems(plan: Plan) -> list[str]:

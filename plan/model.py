@@ -38,6 +38,7 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
+from gyrostand.stand.encoder import Encoder, EncoderError, encoder_from_eds
 from gyrostand.stand.protocol import SignalMap
 from gyrostand.stand.simconfig import SimConfigError, simulator_config, simulator_tables
 from gyrostand.stand.tables import TABLE_CONFIG, check, problems
@@ -532,6 +533,14 @@ class BusPlan(_Table):
 HeadingProtocol = Literal["gyrostand", "dbc", "nmea2000", "iec61162", "cia406"]
 _CAN_KEYS = ("interface", "channel", "bitrate")
 _SERIAL_KEYS = ("port", "baud")
+_CIA406_KEYS = (
+    "node_id",
+    "counts_per_revolution",
+    "zero_counts",
+    "direction",
+    "heartbeat_ms",
+    "eds",
+)
 
 
 def _iso_name(value: Any) -> str:
@@ -562,11 +571,27 @@ class CompassPlan(_Table):
     name: Annotated[str, BeforeValidator(_iso_name)] | None = None
     """NMEA 2000: the compass's NAME (address claim, hexadecimal); default: the device whose
     product information (PGN 126996) gives [instrument] model and serial."""
+    node_id: int | None = Field(None, ge=1, le=127)
+    """cia406: the encoder's CANopen node id (its TPDO1 0x180 + id, EMCY, heartbeat)."""
+    counts_per_revolution: int | None = Field(None, ge=2)
+    """cia406: measuring units per revolution, the encoder's 0x6001 (default: its EDS's)."""
+    zero_counts: int = Field(0, ge=0)
+    """cia406: the position value (counts) the encoder reads at heading 0."""
+    direction: Literal["clockwise", "counterclockwise"] = "clockwise"
+    """cia406: how the counts run as the heading increases (seen from above the card)."""
+    heartbeat_ms: int | None = Field(None, ge=0)
+    """cia406: the encoder's producer heartbeat time 0x1017, ms; a heartbeat missing for three
+    periods is an event (default: its EDS's, else 0: not supervised)."""
+    eds: Text | None = None
+    """cia406: the encoder's EDS (the maker's): the TPDO that maps the position 0x6004, its
+    resolution 0x6001 and total range 0x6002 (default: TPDO1, 32 bits from byte 0)."""
 
     @model_validator(mode="after")
     def _consistent(self) -> CompassPlan:
         given = self.model_fields_set
         problems = []
+        encoder = [k for k in _CIA406_KEYS if k in given] if self.protocol != "cia406" else []
+        problems += [(k, f'not with protocol = "{self.protocol}" (cia406)') for k in encoder]
         if self.protocol in ("gyrostand", "dbc"):
             unused = [k for k in (*_CAN_KEYS, *_SERIAL_KEYS, "name") if k in given]
             why = "the heading frame is in the stand's DBC, on the stand's bus"
@@ -581,8 +606,39 @@ class CompassPlan(_Table):
             problems += [(k, f'not with protocol = "{self.protocol}" (CAN)') for k in unused]
             if self.channel is not None and self.interface is None:
                 problems.append(("interface", "missing (the compass's own bus needs one)"))
+        if self.protocol == "cia406":
+            if self.node_id is None:
+                problems.append(("node_id", 'missing (protocol = "cia406")'))
+            if self.counts_per_revolution is None and self.eds is None:
+                why = 'missing (protocol = "cia406" without an eds: the encoder\'s 0x6001)'
+                problems.append(("counts_per_revolution", why))
         check(problems)
         return self
+
+    def encoder(self) -> Encoder | None:
+        """The CiA 406 encoder (None for other protocols): the plan's keys over its EDS's
+        defaults (PlanError naming an EDS gyrostand cannot use)."""
+        if self.protocol != "cia406" or self.node_id is None:
+            return None
+        sign = 1 if self.direction == "clockwise" else -1
+        if self.eds is None:
+            assert self.counts_per_revolution is not None  # (validated)
+            heartbeat_ms = self.heartbeat_ms or 0
+            return Encoder(
+                self.node_id, self.counts_per_revolution, None, self.zero_counts, sign,
+                heartbeat_ms=heartbeat_ms,
+            )  # fmt: skip
+        try:
+            return encoder_from_eds(
+                Path(self.eds),
+                self.node_id,
+                counts_per_revolution=self.counts_per_revolution,
+                zero_counts=self.zero_counts,
+                sign=sign,
+                heartbeat_ms=self.heartbeat_ms,
+            )
+        except EncoderError as exc:
+            raise PlanError([f"[compass] eds: {exc}"]) from None
 
     @property
     def own_bus(self) -> bool:
@@ -961,7 +1017,7 @@ class Plan(_Table):
             message = 'protocol = "dbc" needs the lab\'s DBC ([protocol] dbc_path)'
             errors.append(_error("compass", ("compass", "protocol"), message))
         if (
-            compass.protocol == "nmea2000"
+            compass.protocol in ("nmea2000", "cia406")
             and not self.bus.simulated
             and self.bus.timing == "virtual"
         ):
@@ -982,11 +1038,11 @@ class Plan(_Table):
         return [_error("inclinometer", ("stand", "arm_length_cm"), message)]
 
     @property
-    def heading_source(self) -> tuple[str, str | None, tuple[str, str]]:
+    def heading_source(self) -> tuple[str, str | None, tuple[str, str], Encoder | None]:
         """The compass as `devices.decoder.frame_decoder` takes it: [compass] protocol and name,
-        [instrument] model and serial (NMEA 2000 product information)."""
+        [instrument] model and serial (NMEA 2000 product information), the CiA 406 encoder."""
         instrument = (self.instrument.model, self.instrument.serial)
-        return self.compass.protocol, self.compass.name, instrument
+        return self.compass.protocol, self.compass.name, instrument, self.compass.encoder()
 
     @property
     def inclinometer_mount(self) -> tuple[str, int, str, float] | None:

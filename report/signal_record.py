@@ -28,11 +28,12 @@ from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import Plan
 from gyrostand.report.model import ExcursionCriterion, ReadingRecord, TrialRecord
 from gyrostand.report.signal import SignalSection, signal_section, uniform_record
+from gyrostand.stand.encoder import Encoder
 from gyrostand.stand.protocol import Codec, SignalMap
 
 Span = tuple[float, float]  # stand ms, [start, end)
-HeadingSource = tuple[str, str | None, tuple[str, str]]  # `Plan.heading_source`
-GYROSTAND: HeadingSource = ("gyrostand", None, ("", ""))
+HeadingSource = tuple[str, str | None, tuple[str, str], Encoder | None]  # `Plan.heading_source`
+GYROSTAND: HeadingSource = ("gyrostand", None, ("", ""), None)
 
 
 def headings_in(

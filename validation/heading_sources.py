@@ -5,7 +5,9 @@ Runs examples/paper.toml (the campaign of Potemkin 1982 on the simulated stand, 
 simulator seed, i.e. the same compass physics and noise; analyses each as `gyrostand analyze`
 does, and prints C and T with their standard errors and the difference to the gyrostand-protocol
 run in units of that run's SE. Target: |difference| < 1 SE (the sources differ only in the
-heading's resolution, 0.001 deg vs 1e-4 rad = 0.0057 deg, and NMEA 2000's timing by reception).
+heading's resolution, 0.001 deg vs 1e-4 rad = 0.0057 deg for NMEA 2000 and 360/65536 = 0.0055 deg
+for the CiA 406 encoder (its EDS, devices/data/sim-encoder.eds, read counter-clockwise from a
+zero), and their timing by reception).
 
 Run: .venv/bin/python validation/heading_sources.py [--seeds 1,2,3]
 A paper campaign takes ~20 s of one core per source (stand time ~15 h, virtual time).
@@ -24,7 +26,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PLAN = ROOT / "examples" / "paper.toml"
-SOURCES = ("gyrostand", "nmea2000")
+EDS = ROOT / "devices" / "data" / "sim-encoder.eds"
+SOURCES = {  # protocol -> the rest of its [compass] table
+    "gyrostand": "",
+    "nmea2000": "",
+    "cia406": f'node_id = 5\neds = "{EDS}"\nzero_counts = 1200\ndirection = "counterclockwise"\n',
+}
 
 
 def campaign(folder: Path, protocol: str, seed: int) -> dict[str, dict[str, float]]:
@@ -32,7 +39,7 @@ def campaign(folder: Path, protocol: str, seed: int) -> dict[str, dict[str, floa
     standard errors."""
     text = re.sub(r"(?m)^seed = \d+", f"seed = {seed}", PLAN.read_text(), count=1)
     plan = folder / f"{protocol}.toml"
-    plan.write_text(text + f'\n[compass]\nprotocol = "{protocol}"\n')
+    plan.write_text(text + f'\n[compass]\nprotocol = "{protocol}"\n{SOURCES[protocol]}')
     db = folder / f"{protocol}.sqlite"
     gyrostand = [sys.executable, "-m", "gyrostand"]
     run = [*gyrostand, "campaign", "run", str(plan), "--db", str(db), "--quiet"]

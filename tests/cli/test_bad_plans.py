@@ -10,6 +10,7 @@ import random
 import re
 import typing
 from collections.abc import Iterator
+from importlib.resources import files
 from pathlib import Path
 
 import pytest
@@ -19,6 +20,8 @@ from gyrostand.plan.model import Plan
 
 from .cases import Case, Make, check, ids
 from .conftest import Stand
+
+INCLINOMETER_EDS = Path(str(files("gyrostand.devices") / "data" / "sim-inclinometer.eds"))
 
 BOGUS = 'bogus_key = "x"\n'
 
@@ -389,9 +392,46 @@ VALUES = [
                 '[compass] protocol: "iec61162" is not runnable yet',
             ),
             (
-                "cia406 not runnable yet",
-                'protocol = "cia406"',
-                '[compass] protocol: "cia406" is not runnable yet',
+                "cia406 without its node id",
+                'protocol = "cia406"\ncounts_per_revolution = 8192',
+                '[compass] node_id: missing (protocol = "cia406")',
+            ),
+            (
+                "cia406 without a resolution or an EDS",
+                'protocol = "cia406"\nnode_id = 5',
+                '[compass] counts_per_revolution: missing (protocol = "cia406" without an eds: '
+                "the encoder's 0x6001)",
+            ),
+            (
+                "cia406 node id beyond CANopen's",
+                'protocol = "cia406"\nnode_id = 128\ncounts_per_revolution = 8192',
+                "[compass] node_id: must be <= 127",
+            ),
+            (
+                "cia406 direction unknown",
+                'protocol = "cia406"\nnode_id = 5\ncounts_per_revolution = 8192\ndirection = "cw"',
+                "[compass] direction: must be one of 'clockwise', 'counterclockwise', not 'cw'",
+            ),
+            (
+                "encoder keys with another protocol",
+                'protocol = "nmea2000"\nnode_id = 5',
+                '[compass] node_id: not with protocol = "nmea2000" (cia406)',
+            ),
+            (
+                "cia406 EDS missing",
+                'protocol = "cia406"\nnode_id = 5\neds = "none.eds"',
+                "[compass] eds: EDS none.eds: [Errno 2] No such file or directory",
+            ),
+            (
+                "cia406 EDS without the position in a TPDO",
+                f'protocol = "cia406"\nnode_id = 5\neds = "{INCLINOMETER_EDS}"',
+                f"[compass] eds: EDS {INCLINOMETER_EDS}: no TPDO maps the position value 0x6004",
+            ),
+            (
+                "cia406 node id whose EMCY is a stand frame",
+                'protocol = "cia406"\nnode_id = 1\ncounts_per_revolution = 8192',
+                "[compass] node_id: the encoder's EMCY 0x081 is the stand's frame STAND_ACK (DBC): "
+                "give the encoder another node id",
             ),
         )
     ),

@@ -211,8 +211,41 @@ def test_the_stand_speaks_nmea2000_when_asked(pytester: pytest.Pytester) -> None
     result.assert_outcomes(passed=1, errors=2)
     result.stdout.fnmatch_lines(
         [
-            "*simulated stand: protocol 'nmea2001' is not one of gyrostand, nmea2000",
+            "*simulated stand: protocol 'nmea2001' is not one of gyrostand, nmea2000, cia406*",
             "*simulated stand: unknown nmea2000 knob(s) adress",
         ],
         consecutive=False,
     )
+
+
+CIA406 = """
+import struct
+
+import pytest
+
+
+@pytest.mark.gyro_stand(protocol="cia406", cia406={"node_id": 7, "heartbeat_ms": 500})
+def test_cia406(gyro_stand):
+    bus = gyro_stand.open_bus()
+    gyro_stand.advance(2.0)
+    frames = []
+    while (msg := bus.recv(0.5)) is not None:
+        frames.append(msg)
+    tpdo = [m for m in frames if m.arbitration_id == 0x187]
+    beats = [m.data[0] for m in frames if m.arbitration_id == 0x707]
+    assert len(tpdo) == 21 and all(len(m.data) == 4 for m in tpdo)
+    assert beats == [0, 5, 5, 5, 5, 5]  # boot-up, then OPERATIONAL every 500 ms
+    counts = [struct.unpack("<I", bytes(m.data))[0] for m in tpdo]
+    assert all(0 <= c < 65536 for c in counts)
+
+@pytest.mark.gyro_stand(protocol="cia406", cia406={"node": 3})
+def test_typo(gyro_stand):
+    pass
+"""
+
+
+def test_the_stand_speaks_cia406_when_asked(pytester: pytest.Pytester) -> None:
+    pytester.makepyfile(test_cia406=CIA406)
+    result = pytester.runpytest()
+    result.assert_outcomes(passed=1, errors=1)
+    result.stdout.fnmatch_lines(["*simulated stand: unknown cia406 knob 'node'"])
