@@ -229,7 +229,7 @@ def render_fleet_html(report: FleetReport) -> str:
     from gyrostand.report import fleet_plots
     from gyrostand.report.html import TEMPLATES, environment
 
-    template = environment().from_string((TEMPLATES / "fleet.html.j2").read_text(encoding="utf-8"))
+    template = environment().get_template("fleet.html.j2")
     order = [u.serial for u in report.ordered_units]
     return template.render(
         r=report,
