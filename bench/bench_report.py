@@ -34,10 +34,9 @@ from gyrostand.report.stored import campaign_report
 from gyrostand.report.writer import write_report
 t.append((time.process_time(), time.perf_counter()))
 sessions = open_db(sys.argv[1], must_exist=True)
-with sessions.begin() as session:
-    report = campaign_report(
-        session, 1, database=sys.argv[1], profile=load_profile(), generated_at="bench"
-    )
+report = campaign_report(
+    sessions, 1, database=sys.argv[1], profile=load_profile(), generated_at="bench"
+)
 t.append((time.process_time(), time.perf_counter()))
 out = Path(sys.argv[2])
 write_report(report, out, ("json", "csv"))
