@@ -5,8 +5,10 @@ with the HTML, the PDF laid out by Typst from that HTML), then the command itsel
 the target of issue 33 (OK or NOT), and the PDF's pages.
 
 Target (issue 33): <= 3 s of CPU for all formats. Not reached. On this 2-core machine shared
-with other jobs (load 6) the stages took imports 3.7-4.0, analysis 2.0-2.2, JSON + CSV 0.1,
-figures + HTML 2.7-3.1 and the PDF 1.0-1.5 s of CPU. Where the time goes (cProfile and
+with other jobs (wall time 10 times the CPU time; contention inflates CPU time too) the stages
+took imports 4.6-5.9, analysis 2.3-2.6, JSON + CSV 0.1, figures + HTML 3.0-3.3 and the PDF
+laid out by Typst from that HTML 1.1-1.3 s of CPU: 11.4-12.7 s in all (13.3 s before the
+template cache and with the figures drawn twice). Where the time goes (cProfile and
 per-import CPU, fresh process):
 - imports: scipy.signal 1.4 s and scipy.stats 1.2 s (the analysis: welch, shapiro,
   combine_pvalues), the plan's pydantic models 0.6 s, matplotlib 0.6 s, SQLAlchemy's ORM 0.5 s;
