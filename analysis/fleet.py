@@ -160,6 +160,16 @@ class ParameterAnalysis:
     def outliers(self) -> tuple[UnitCheck, ...]:
         return tuple(u for u in self.units if u.outside)
 
+    def smirnov_verdict(self, test: SmirnovTest) -> str:
+        """A group's Smirnov test read beside the analysis of variance: not rejecting for a
+        group the analysis of variance sets apart is inconclusive (with few units D has
+        little power), not evidence of no difference."""
+        if test.differs:
+            return "differs from the rest"
+        if any(g.differs for g in self.groups if g.group == test.group):
+            return "inconclusive: the analysis of variance sets it apart"
+        return "no difference found"
+
 
 @dataclass(frozen=True)
 class FleetAnalysis:

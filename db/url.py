@@ -6,6 +6,11 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING
 
+DB_ENV = "GYROSTAND_DB"
+"""The environment variable the commands' --db default is read from: the station hands its
+database to the commands it starts this way, so that a URL's password never shows in the
+process list (`ps` lists every process's arguments to every user)."""
+
 if TYPE_CHECKING:
     from sqlalchemy.engine import URL
 

@@ -193,8 +193,8 @@ def analyze_stored_campaign(
 
     sessions = open_db(db, must_exist=True)
     try:
-        with sessions.begin() as session:
-            stored = analyze_stored(session, campaign_id)
+        stored = analyze_stored(sessions, campaign_id)  # a read, the computation, a short write
+        with sessions() as session:
             heading = heading_source(session.get_one(Campaign, campaign_id))
             motion = campaign_motion(session.get_one(Campaign, campaign_id))
     except (AnalysisError, CampaignNotFound) as exc:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Literal
 import typer
 
 from gyrostand.cmd_data import DEFAULT_DB, CampaignId, JsonOption, TagOption, open_db, parse_tags
-from gyrostand.db.url import shown_url
+from gyrostand.db.url import DB_ENV, shown_url
 from gyrostand.errors import EXIT_FAILED, fail, printable
 from gyrostand.stand.simconfig import TIMINGS
 
@@ -473,7 +473,8 @@ def register(app: typer.Typer) -> None:
         interface: Interface = None,
         channel: Channel = None,
         db: Annotated[
-            str | None, typer.Option(help="Database (file or URL); default: the plan's.")
+            str | None,
+            typer.Option(envvar=DB_ENV, help="Database (file or URL); default: the plan's."),
         ] = None,
         speedup: Speedup = None,
         seed: Seed = None,
@@ -492,7 +493,9 @@ def register(app: typer.Typer) -> None:
     @campaign_app.command("resume")
     def campaign_resume(
         campaign_id: CampaignId,
-        db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
+        db: Annotated[
+            str, typer.Option(envvar=DB_ENV, help="Database (file or URL).")
+        ] = DEFAULT_DB,
         interface: Interface = None,
         channel: Channel = None,
         speedup: Speedup = None,
@@ -521,7 +524,9 @@ def register(app: typer.Typer) -> None:
             list[int],
             typer.Option("--trial", help="Index of a failed trial to retry (repeatable)."),
         ],
-        db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
+        db: Annotated[
+            str, typer.Option(envvar=DB_ENV, help="Database (file or URL).")
+        ] = DEFAULT_DB,
         interface: Interface = None,
         channel: Channel = None,
         speedup: Speedup = None,
@@ -537,7 +542,9 @@ def register(app: typer.Typer) -> None:
     @campaign_app.command("status")
     def campaign_status(
         campaign_id: CampaignId,
-        db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
+        db: Annotated[
+            str, typer.Option(envvar=DB_ENV, help="Database (file or URL).")
+        ] = DEFAULT_DB,
     ) -> None:
         """Show where a campaign stands."""
         from sqlalchemy import select
@@ -635,7 +642,9 @@ def register(app: typer.Typer) -> None:
             ),
         ] = None,
         as_json: JsonOption = False,
-        db: Annotated[str, typer.Option(help="Database (file or URL).")] = DEFAULT_DB,
+        db: Annotated[
+            str, typer.Option(envvar=DB_ENV, help="Database (file or URL).")
+        ] = DEFAULT_DB,
     ) -> None:
         """List the campaigns of a database, with filters."""
         import json
@@ -713,7 +722,8 @@ def register(app: typer.Typer) -> None:
         ],
         plan: Annotated[Path, typer.Option("--plan", help="The campaign's plan (TOML).")],
         db: Annotated[
-            str | None, typer.Option(help="Database (file or URL); default: the plan's.")
+            str | None,
+            typer.Option(envvar=DB_ENV, help="Database (file or URL); default: the plan's."),
         ] = None,
     ) -> None:
         """Re-derive observations offline from raw CAN logs into a new campaign. The logs are

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from gyrostand import SOFTWARE_VERSION
+from gyrostand.db.url import DB_ENV
 from gyrostand.errors import EXIT_BAD_INPUT, EXIT_FAILED, fail
 
 if TYPE_CHECKING:
@@ -17,7 +18,8 @@ if TYPE_CHECKING:
 DEFAULT_DB = "runs/gyrostand.sqlite"
 
 DbOption = Annotated[
-    str, typer.Option("--db", help="Database: a SQLite file path or any SQLAlchemy URL.")
+    str,
+    typer.Option("--db", envvar=DB_ENV, help="Database: a SQLite file path or any SQLAlchemy URL."),
 ]
 JsonOption = Annotated[bool, typer.Option("--json", help="Print one JSON document.")]
 MAX_CAMPAIGN_ID = 2**31 - 1

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, JsonOption, open_db
-from gyrostand.db.url import shown_url
+from gyrostand.db.url import DB_ENV, shown_url
 from gyrostand.errors import fail, printable_lines
 
 if TYPE_CHECKING:
@@ -142,7 +142,10 @@ def register(app: typer.Typer) -> None:
     @fleet_app.command("simulate")
     def fleet_simulate(
         db: Annotated[
-            str, typer.Option("--db", help="Database to add the fleet to: a SQLite file or URL.")
+            str,
+            typer.Option(
+                "--db", envvar=DB_ENV, help="Database to add the fleet to: a SQLite file or URL."
+            ),
         ],
         units_per_group: Annotated[int, typer.Option(help="Units per group.", min=2)] = 4,
         groups: Annotated[

@@ -64,25 +64,20 @@ def write_campaign_report(
 
     from gyrostand.db.queries import CampaignNotFound
     from gyrostand.frames.logfile import LogFileError
-    from gyrostand.report.stored import campaign_report
+    from gyrostand.report.stored import NotFinal, campaign_report
     from gyrostand.report.writer import write_report
 
     try:
         generated = datetime.now(UTC).isoformat(sep=" ", timespec="seconds")
-        with sessions.begin() as session:  # the analysis run is recorded with the report
-            report = campaign_report(
-                session,
-                campaign_id,
-                database=shown_url(db),
-                profile=limits,
-                generated_at=generated,
-                report_number=number,
-            )
-            if final and report.missing:  # raised inside the transaction: no run recorded
-                fail(
-                    f"report --final: campaign {campaign_id} lacks "
-                    f"{', '.join(report.missing)} (ISO/IEC 17025 7.8.2); it can only be a DRAFT"
-                )
+        report = campaign_report(
+            sessions,
+            campaign_id,
+            database=shown_url(db),
+            profile=limits,
+            generated_at=generated,
+            report_number=number,
+            final=final,
+        )
         report = replace(report, draft=report.draft or draft)
         if report.missing:
             stage(f"a DRAFT: it lacks {', '.join(report.missing)}")
@@ -95,6 +90,11 @@ def write_campaign_report(
             )
         stage(f"writing {', '.join(dict.fromkeys(formats))} to {out}")
         return write_report(report, out, formats, stage)
+    except NotFinal as error:  # raised before the analysis run is recorded
+        fail(
+            f"report --final: campaign {campaign_id} lacks {error} (ISO/IEC 17025 7.8.2); "
+            "it can only be a DRAFT"
+        )
     except (AnalysisError, CampaignNotFound) as error:
         fail(str(error))
     except LogFileError as error:

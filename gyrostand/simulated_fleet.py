@@ -112,8 +112,7 @@ def simulate_fleet(
             sessions = open_db(database, must_exist=True)
             try:
                 take_lease(sessions, result.campaign_id).release()  # as the command's exit does
-                with sessions.begin() as session:
-                    analyze_stored(session, result.campaign_id)
+                analyze_stored(sessions, result.campaign_id)
             finally:
                 sessions.kw["bind"].dispose()
             units.append(SimulatedUnit(result.campaign_id, serial, group, float(c), float(t)))

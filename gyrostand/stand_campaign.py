@@ -63,8 +63,7 @@ def run_plan(stand: SimulatedStand, plan: Path | Plan, folder: Path) -> Campaign
         take_lease(sessions, result.campaign_id).release()  # as the command's exit does
         analysis = None
         if not parsed.campaign.acquisition_only:
-            with sessions.begin() as session:
-                analysis = analyze_stored(session, result.campaign_id).analysis
+            analysis = analyze_stored(sessions, result.campaign_id).analysis
     finally:
         sessions.kw["bind"].dispose()
     return CampaignRun(

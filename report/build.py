@@ -36,7 +36,8 @@ TABLE_COURSE_STEP_DEG = 15.0  # forecast table
 @dataclass(frozen=True)
 class TrialRow:
     """Section 4, one trial in the paper's form: i, K, A, tau, p = 2 pi / tau (eq 1.1), <delta_i>
-    (2.1), S^2{<delta_i>} (2.3) and the variance of the mean, nu (2.4); alpha_i is the fitted
+    (2.1), S^2{<delta_i>} (2.3), the variance of the mean S^2/N_eff with each series' N_eff =
+    N/f (Sveshnikov 8.3; N for independent observations), nu (2.4); alpha_i is the fitted
     value (fit trials) or the prediction (control trials), v_i = <delta_i> - alpha_i."""
 
     index: int
@@ -50,6 +51,8 @@ class TrialRow:
     var_mean_deg2: float | None
     dof: int | None
     n_obs: int | None
+    n_eff_before: float | None  # N_eff = N/f of each series (correlated observations), else N
+    n_eff_under: float | None
     alpha_deg: float
     residual_deg: float
 
@@ -328,6 +331,8 @@ def trial_rows(analysis: CampaignAnalysis) -> tuple[TrialRow, ...]:
             var_mean_deg2=t.var_mean_deg2,
             dof=t.dof,
             n_obs=t.n_under,
+            n_eff_before=t.n_before if t.n_eff_before is None else t.n_eff_before,
+            n_eff_under=t.n_under if t.n_eff_under is None else t.n_eff_under,
             alpha_deg=float(fitted[t.index]),
             residual_deg=float(residual[t.index]),
         )

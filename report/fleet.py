@@ -154,10 +154,9 @@ def fleet_text(inputs: FleetInputs, analysis: FleetAnalysis) -> str:
             f"  {a.verdict} (q = {a.q:g}, p = {a.p_value:.3g})",
         ]
         for s in p.smirnov:
-            verdict = "differs from the rest" if s.differs else "no difference"
             lines.append(
                 f"  Smirnov {s.group} ({s.n}) vs rest ({s.n_rest}): D = {s.statistic:.3f}, "
-                f"p = {s.p_value:.3g} (level {s.q_each:.3g}): {verdict}"
+                f"p = {s.p_value:.3g} (level {s.q_each:.3g}): {p.smirnov_verdict(s)}"
             )
         outside = [
             f"{u.serial} ({u.group}, campaign {u.campaign_id}: {_number(u.value, p.symbol)}, "
@@ -229,7 +228,7 @@ def render_fleet_html(report: FleetReport) -> str:
     from gyrostand.report import fleet_plots
     from gyrostand.report.html import TEMPLATES, environment
 
-    template = environment().from_string((TEMPLATES / "fleet.html.j2").read_text(encoding="utf-8"))
+    template = environment().get_template("fleet.html.j2")
     order = [u.serial for u in report.ordered_units]
     return template.render(
         r=report,

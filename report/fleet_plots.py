@@ -9,7 +9,7 @@ from matplotlib.figure import Figure
 from gyrostand.analysis.fleet import ParameterAnalysis
 from gyrostand.report.plots import _figure, _styled
 
-SCALE = {"C": (1e7, "C, 10$^7$ g·cm$^2$·s$^{-2}$"), "T": (1.0, "T, s")}
+SCALE = {"C": (1e7, "C, 10⁷ g·cm²·s⁻²"), "T": (1.0, "T, s")}
 """How each parameter is plotted: the divisor and the axis label with the unit."""
 OUTSIDE = "#d62728"
 

@@ -212,9 +212,9 @@ def measured_vs_model(rows: Sequence[TrialRow]) -> Figure:
     ax.plot(
         [lo - pad, hi + pad], [lo - pad, hi + pad], color="0.4", lw=0.8, label="measured = model"
     )
-    ax.set_xlabel(r"model $\alpha_i$, deg (eq 1.1)")
-    ax.set_ylabel(r"measured $\langle\delta_i\rangle$, deg (eq 2.1)")
-    ax.set_title(r"Measured against model (bars: $\pm$ S of $\langle\delta_i\rangle$)", loc="left")
+    ax.set_xlabel("model αᵢ, deg (eq 1.1)")
+    ax.set_ylabel("measured ⟨δᵢ⟩, deg (eq 2.1)")
+    ax.set_title("Measured against model (bars: ± S of ⟨δᵢ⟩)", loc="left")
     ax.legend(loc="upper left")
     return fig
 
@@ -232,18 +232,18 @@ def residuals_plot(rows: Sequence[TrialRow], s_e_deg: float, bound_deg: float | 
             ax.plot(x, v, marker, color=colour, label=f"{role} trials")
     ax.axhline(0, color="0.3", lw=0.8)
     if bound_deg is not None:
-        ax.axhspan(-bound_deg, bound_deg, color="#2ca02c", alpha=0.12, lw=0, label=r"$\pm t\,S_e$")
+        ax.axhspan(-bound_deg, bound_deg, color="#2ca02c", alpha=0.12, lw=0, label="± t Sₑ")
     for sign in (-1, 1):
         ax.axhline(
             sign * s_e_deg,
             color="#2ca02c",
             ls="--",
             lw=0.8,
-            label=r"$\pm S_e$" if sign > 0 else None,
+            label="± Sₑ" if sign > 0 else None,
         )
     ax.set_xticks([r.index for r in rows])
     ax.set_xlabel("trial i")
-    ax.set_ylabel(r"$v_i = \langle\delta_i\rangle - \alpha_i$, deg")
+    ax.set_ylabel("vᵢ = ⟨δᵢ⟩ − αᵢ, deg")
     ax.set_title("Residuals", loc="left")
     ax.legend(loc="best", ncols=2)
     return fig
@@ -274,10 +274,10 @@ def forecast_plot(section: ForecastSection, limit_deg: float | None) -> Figure:
                 alpha,
                 color="#1f77b4",
                 lw=1.8,
-                label=rf"$\alpha_p$, $\tau$ = {period:g} s (plan)",
+                label=f"αₚ, τ = {period:g} s (plan)",
             )
         else:
-            ax.plot(grid.course_deg, alpha, lw=0.8, ls=":", label=rf"$\tau$ = {period:g} s")
+            ax.plot(grid.course_deg, alpha, lw=0.8, ls=":", label=f"τ = {period:g} s")
     if limit_deg is not None:
         for sign in (-1, 1):
             ax.axhline(
@@ -342,10 +342,10 @@ def iteration_path_plot(analysis: CampaignAnalysis) -> Figure:
         )
         ax.annotate("start", path[0], xytext=(5, 4), textcoords="offset points", fontsize=7)
     ax.plot(*final, marker="*", color="black", ms=10, ls="none", label="estimate")
-    ax.set_xlabel(r"C, $10^7$ g cm$^2$ s$^{-2}$")
+    ax.set_xlabel("C, 10⁷ g cm² s⁻²")
     ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / 1e7:g}"))
     ax.set_ylabel("T, s")
-    ax.set_title(r"Fit: iteration path over $S^2(C, T)$, deg$^2$ (eq 1.9)", loc="left")
+    ax.set_title("Fit: iteration path over S²(C, T), deg² (eq 1.9)", loc="left")
     ax.legend(loc="best")
     return fig
 
@@ -375,15 +375,15 @@ def correlation_plot(noise: NoiseCharacterisation) -> Figure:
         (exp_model(tau) + periodic) / K_UNIT,
         color="#1f77b4",
         lw=1.2,
-        label=rf"$\sigma^2 e^{{-\mu\tau}}$, $\mu$ = {exp_model.decay_per_s:.3g} s$^{{-1}}$",
+        label=f"σ² exp(−μτ), μ = {exp_model.decay_per_s:.3g} s⁻¹",
     )
     ax.plot(
         tau, (smooth(tau) + periodic) / K_UNIT, color="#d95f02", lw=1.0, ls="--", label="smooth"
     )
-    ax.axvline(tau_k, color="0.5", lw=0.8, ls=":", label=rf"$\tau_k$ = {tau_k:.3g} s")
+    ax.axvline(tau_k, color="0.5", lw=0.8, ls=":", label=f"τₖ = {tau_k:.3g} s")
     ax.axhline(0, color="0.3", lw=0.6)
-    ax.set_xlabel(r"lag $\tau$, s")
-    ax.set_ylabel(r"$K(\tau)$, $10^{-4}$ deg$^2$")
+    ax.set_xlabel("lag τ, s")
+    ax.set_ylabel("K(τ), 10⁻⁴ deg²")
     ax.set_title("Correlation function (eqs 8.92, 8.89)", loc="left")
     ax.legend(loc="upper right")
     return fig
@@ -426,7 +426,7 @@ def spectrum_plot(noise: NoiseCharacterisation) -> Figure:
             fontsize=6.5,
         )
     ax.set_xlabel("frequency, Hz")
-    ax.set_ylabel(r"spectral density, deg$^2$/Hz")
+    ax.set_ylabel("spectral density, deg²/Hz")
     ax.set_title("Spectrum and hidden harmonics", loc="left")
     _legend_below(fig, ncols=3, fontsize=6)
     return fig
@@ -439,8 +439,8 @@ def allan_plot(noise: NoiseCharacterisation) -> Figure:
     fig = _figure(2.5, HALF_IN)
     ax = fig.axes[0]
     ax.loglog(allan.tau_s, allan.deviation, "o-", color="#1f77b4", ms=3, lw=1.0)
-    ax.set_xlabel(r"averaging time $\tau$, s")
-    ax.set_ylabel(r"Allan deviation $\sigma(\tau)$, deg")
+    ax.set_xlabel("averaging time τ, s")
+    ax.set_ylabel("Allan deviation σ(τ), deg")
     ax.set_title("Allan deviation", loc="left")
     ax.grid(True, which="both", alpha=0.3)
     return fig

@@ -3,15 +3,18 @@ holds (raw observations, series summaries or the paper's per-trial summaries), t
 settings from the stored plan, the analysis itself (recorded as an `AnalysisRun`), and every
 other fact the report shows, from the database and the raw CAN log.
 
-    analyze_stored(session, campaign_id) -> StoredAnalysis
+    analyze_stored(sessions, campaign_id) -> StoredAnalysis
+        = record_run(sessions, id, compute_stored(read_campaign(sessions, id)))
     report_inputs(session, campaign_id, database=...) -> ReportInputs
-    campaign_report(session, campaign_id, database=..., profile=..., generated_at=...) -> Report
+    campaign_report(sessions, campaign_id, database=..., profile=..., generated_at=...) -> Report
     campaign_signal(session, campaign_id) -> SignalSection   (report section 10 alone)
     trial_stand_spans(campaign) -> {trial index: (first, last) stand ms}
 
 An analysis run is recorded once per distinct result: analysing an unchanged campaign again with
 the same software reuses the run already stored, so the database (and the report's JSON) does not
-change from one report to the next.
+change from one report to the next. The database is read in short read transactions, the
+analysis computed outside any, and the run recorded in one short write transaction: a campaign
+acquiring into the same SQLite file meanwhile only delays the write (the busy timeout).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from typing import Any
 
 import numpy as np
 from sqlalchemy import select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand import SOFTWARE_VERSION
 from gyrostand.analysis.angles import about
@@ -44,10 +47,11 @@ from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.trials import SeriesSummary, TrialInput, series_moments
 from gyrostand.db.models import AnalysisRun, Campaign, Series, Trial
 from gyrostand.db.queries import campaign_constants, current_trials, load_campaign, sign_offs
+from gyrostand.db.session import writer
 from gyrostand.frames.logfile import sha256_of
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import PartialPlan, Plan, PlanError, ReportPlan, parse_any_plan
-from gyrostand.report.build import Report, build_report
+from gyrostand.report.build import Report, build_report, missing_items
 from gyrostand.report.compliance import Profile
 from gyrostand.report.model import (
     NOT_STATED,
@@ -260,22 +264,31 @@ def stored_inputs(campaign: Campaign) -> StoredInputs:
 
 @dataclass(frozen=True)
 class StoredAnalysis:
-    """The analysis of a stored campaign, its inputs, the recorded run, and the signal analysis
-    of its reading (section 10), whose independence check the analysis uses."""
+    """The analysis of a stored campaign, its inputs, the recorded run (None: not recorded
+    yet), and the signal analysis of its reading (section 10), whose independence check the
+    analysis uses."""
 
     analysis: CampaignAnalysis
     inputs: StoredInputs
-    run_id: int
+    run_id: int | None
     signal: SignalSection
 
 
-def analyze_stored(session: Session, campaign_id: int) -> StoredAnalysis:
-    """Analyse a stored campaign and record the run (AnalysisError for unusable data,
-    CampaignNotFound for a wrong id, LogFileError for a raw log that verifies but cannot be
-    read). The caller commits."""
-    campaign = load_campaign(session, campaign_id)
+def read_campaign(sessions: sessionmaker[Session], campaign_id: int) -> Campaign:
+    """The campaign as `load_campaign` loads it, with its events and raw log segments, read in
+    one short read transaction: what is computed from it afterwards holds no transaction."""
+    with sessions() as session:
+        campaign = load_campaign(session, campaign_id)
+        _ = campaign.events, campaign.raw_logs  # loaded now, not lazily later
+        session.commit()  # ends the read (expire_on_commit=False keeps the objects loaded)
+    return campaign
+
+
+def compute_stored(campaign: Campaign) -> StoredAnalysis:
+    """Analyse a campaign read by `read_campaign` (AnalysisError for unusable data,
+    LogFileError for a raw log that verifies but cannot be read); nothing is recorded."""
     inputs = stored_inputs(campaign)
-    signal = campaign_signal(session, campaign_id)
+    signal = _signal(campaign)
     s = inputs.settings
     analysis = analyze_campaign(
         inputs.trials,
@@ -303,26 +316,43 @@ def analyze_stored(session: Session, campaign_id: int) -> StoredAnalysis:
     if not isinstance(check, str):
         warnings = analysis.warnings + check.warnings(analysis.cochran.s_e)
         analysis = replace(analysis, transient=check, warnings=warnings)
-    results, digest, version = analysis.to_dict(), inputs.sha256(), SOFTWARE_VERSION
-    run = session.scalars(
-        select(AnalysisRun)
-        .where(
-            AnalysisRun.campaign_id == campaign_id,
-            AnalysisRun.inputs_hash == digest,
-            AnalysisRun.software_version == version,
-        )
-        .order_by(AnalysisRun.id.desc())
-    ).first()
-    if run is None or run.results_json != results:
-        run = AnalysisRun(
-            campaign_id=campaign_id,
-            inputs_hash=digest,
-            results_json=results,
-            software_version=version,
-        )
-        session.add(run)
-        session.flush()
-    return StoredAnalysis(analysis, inputs, run.id, signal)
+    return StoredAnalysis(analysis, inputs, None, signal)
+
+
+def record_run(
+    sessions: sessionmaker[Session], campaign_id: int, stored: StoredAnalysis
+) -> StoredAnalysis:
+    """Record the analysis run in one short write transaction (on SQLite BEGIN IMMEDIATE: it
+    waits the store's busy timeout for a campaign acquiring into the same file); an unchanged
+    result of the same inputs and software reuses the run already stored."""
+    results, digest, version = stored.analysis.to_dict(), stored.inputs.sha256(), SOFTWARE_VERSION
+    with writer(sessions).begin() as session:
+        run = session.scalars(
+            select(AnalysisRun)
+            .where(
+                AnalysisRun.campaign_id == campaign_id,
+                AnalysisRun.inputs_hash == digest,
+                AnalysisRun.software_version == version,
+            )
+            .order_by(AnalysisRun.id.desc())
+        ).first()
+        if run is None or run.results_json != results:
+            run = AnalysisRun(
+                campaign_id=campaign_id,
+                inputs_hash=digest,
+                results_json=results,
+                software_version=version,
+            )
+            session.add(run)
+            session.flush()
+        return replace(stored, run_id=run.id)
+
+
+def analyze_stored(sessions: sessionmaker[Session], campaign_id: int) -> StoredAnalysis:
+    """Analyse a stored campaign and record the run (AnalysisError for unusable data,
+    CampaignNotFound for a wrong id, LogFileError for a raw log that verifies but cannot be
+    read): a read, the computation outside any transaction, then one short write."""
+    return record_run(sessions, campaign_id, compute_stored(read_campaign(sessions, campaign_id)))
 
 
 # -------------------------------------------------------------------------- report inputs
@@ -666,7 +696,10 @@ def _reading(
 
 def campaign_signal(session: Session, campaign_id: int) -> SignalSection:
     """Section 10 of a stored campaign's report alone (no analysis run, no heading traces)."""
-    campaign = load_campaign(session, campaign_id)
+    return _signal(load_campaign(session, campaign_id))
+
+
+def _signal(campaign: Campaign) -> SignalSection:
     check, logs = _raw_log_check(campaign)
     plan = _plan(campaign)
     records = tuple(
@@ -750,27 +783,47 @@ def _signatures(session: Session, campaign: Campaign) -> Signatures:
     return Signatures(campaign.operator, signed.get("tested_by"), signed.get("checked_by"))
 
 
+class NotFinal(Exception):
+    """`campaign_report(final=True)` of a report that can only be a DRAFT: the missing items."""
+
+    def __init__(self, missing: tuple[str, ...]) -> None:
+        super().__init__(", ".join(missing))
+        self.missing = missing
+
+
 def campaign_report(
-    session: Session,
+    sessions: sessionmaker[Session],
     campaign_id: int,
     *,
     database: str,
     profile: Profile,
     generated_at: str,
     report_number: str | None = None,
+    final: bool = False,
 ) -> Report:
-    """Analyse the stored campaign (recording the run) and assemble its report. A campaign
-    that cannot be analysed (e.g. every trial failed) still gets its report: plan,
-    acquisition and events, with the reason in place of the results."""
+    """Analyse the stored campaign, assemble its report and record the analysis run (reads,
+    the computation outside any transaction, then one short write). A campaign that cannot be
+    analysed (e.g. every trial failed) still gets its report: plan, acquisition and events,
+    with the reason in place of the results. ``final``: NotFinal, nothing recorded, when the
+    report lacks an item of ISO/IEC 17025 7.8.2."""
     try:
-        stored: StoredAnalysis | None = analyze_stored(session, campaign_id)
+        stored: StoredAnalysis | None = compute_stored(read_campaign(sessions, campaign_id))
     except AnalysisError as exc:
         stored, reason = None, str(exc)
-    inputs = report_inputs(
-        session, campaign_id, stored, database=database, report_number=report_number
-    )
+    with sessions() as session:
+        inputs = report_inputs(
+            session, campaign_id, stored, database=database, report_number=report_number
+        )
+    if final and (missing := missing_items(inputs)):
+        raise NotFinal(missing)
     if stored is None:
         return build_report(inputs, reason, profile, generated_at=generated_at)
+    stored = record_run(sessions, campaign_id, stored)
+    ident = replace(inputs.identification, analysis_run=stored.run_id)
     return build_report(
-        inputs, stored.analysis, profile, generated_at=generated_at, signal=stored.signal
+        replace(inputs, identification=ident),
+        stored.analysis,
+        profile,
+        generated_at=generated_at,
+        signal=stored.signal,
     )

@@ -5,6 +5,7 @@ never inside the web server) and `gyrostand report`. A stop goes through the dat
 from __future__ import annotations
 
 import asyncio
+import os
 import subprocess
 import sys
 import tempfile
@@ -13,6 +14,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
+
+from gyrostand.db.url import DB_ENV
 
 GYROSTAND = (sys.executable, "-m", "gyrostand")
 START_WAIT_S = 60.0
@@ -55,10 +58,17 @@ class Processes:
     command: Sequence[str] = GYROSTAND
     acquisitions: dict[int, Acquisition] = field(default_factory=dict)
 
+    @property
+    def environment(self) -> dict[str, str]:
+        """The commands' environment: the database in GYROSTAND_DB, not in their arguments
+        (a password in the URL would show in `ps`, which lists every process's arguments)."""
+        return {**os.environ, DB_ENV: self.db}
+
     def _spawn(self, args: Sequence[str], what: str) -> Acquisition:
         stderr = tempfile.TemporaryFile()  # noqa: SIM115 (kept with the process, read at its end)
         process = subprocess.Popen(
-            [*self.command, *args, "--db", self.db, "--quiet"],
+            [*self.command, *args, "--quiet"],
+            env=self.environment,
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
             stderr=stderr,
@@ -114,8 +124,6 @@ class Processes:
             *self.command,
             "report",
             str(campaign_id),
-            "--db",
-            self.db,
             "--out",
             str(out),
             "--format",
@@ -123,6 +131,7 @@ class Processes:
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,
+            env=self.environment,
         )
         _, err = await process.communicate()
         if process.returncode:

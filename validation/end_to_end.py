@@ -188,8 +188,7 @@ def campaign_row(
                     if t.status == "failed"
                 ]
                 row["stand_s"] = {str(i): (b - a) / 1000 for i, (a, b) in sorted(spans.items())}
-                with sessions.begin() as session:
-                    row |= _analysis(analyze_stored(session, result.campaign_id).analysis, draw)
+                row |= _analysis(analyze_stored(sessions, result.campaign_id).analysis, draw)
             finally:
                 sessions.kw["bind"].dispose()
     except typer.Exit as exc:  # a one-line CLI error, already on stderr

@@ -353,14 +353,13 @@ def test_stored_and_reported(tmp_path: Path, compensated) -> None:
             assert s.compensation_se_deg == comp.standard_error_deg
             assert tuple(o.compensation_deg for o in rows) == comp.transient_deg
     assert len(stored) == 4
-    with sessions.begin() as session:
-        report = campaign_report(
-            session,
-            store.campaign_id,
-            database=str(path),
-            profile=load_profile(),
-            generated_at="now",
-        )
+    report = campaign_report(
+        sessions,
+        store.campaign_id,
+        database=str(path),
+        profile=load_profile(),
+        generated_at="now",
+    )
     rows = {(r.trial, r.j): r for r in report.signal.settle}
     assert rows.keys() == stored.keys()
     for key, (estimate, saved) in stored.items():

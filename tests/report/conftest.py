@@ -54,14 +54,13 @@ class Stored:
         return str(self.path)
 
     def report(self, generated_at: str = GENERATED) -> Report:
-        with self.sessions.begin() as session:
-            return campaign_report(
-                session,
-                self.campaign_id,
-                database=self.url,
-                profile=load_profile(),
-                generated_at=generated_at,
-            )
+        return campaign_report(
+            self.sessions,
+            self.campaign_id,
+            database=self.url,
+            profile=load_profile(),
+            generated_at=generated_at,
+        )
 
 
 def import_paper(folder: Path, operator: str = OPERATOR, plan_toml: str | None = None) -> Stored:

@@ -5,6 +5,7 @@ flagged; the JSON document; the PDF's text (one render per module)."""
 
 import json
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -182,3 +183,19 @@ def test_a_suffix_that_names_no_format_and_an_unwritable_file(
     (tmp_path / "file").write_text("")
     with pytest.raises(ReportError, match="cannot write .*file/fleet.json: .*file is a file"):
         write_fleet_report(report, tmp_path / "file" / "fleet.json")
+
+
+def test_smirnov_not_rejecting_for_a_group_set_apart_is_inconclusive(report: FleetReport) -> None:
+    """Factory B's C is set apart by the analysis of variance; had Smirnov's test (4 units
+    against 8) not reached its level, it would be inconclusive, not "no difference"."""
+    c = report.analysis.parameters[0]
+    b = next(s for s in c.smirnov if s.group == "B")
+    assert b.differs and c.smirnov_verdict(b) == "differs from the rest"
+    weak = replace(b, p_value=0.085, differs=False)
+    c_weak = replace(c, smirnov=tuple(weak if s is b else s for s in c.smirnov))
+    assert c_weak.smirnov_verdict(weak) == "inconclusive: the analysis of variance sets it apart"
+    others = [s for s in c.smirnov if s.group != "B"]
+    assert [c.smirnov_verdict(s) for s in others] == ["no difference found"] * 2
+    analysis = replace(report.analysis, parameters=(c_weak, *report.analysis.parameters[1:]))
+    html = render_fleet_html(replace(report, analysis=analysis))
+    assert "<td>inconclusive: the analysis of variance sets it apart</td>" in html

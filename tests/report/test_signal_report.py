@@ -88,9 +88,11 @@ def test_observation_correlations_follow_the_closed_form(simulated_report: Repor
         assert o.inflation == pytest.approx(1 + 2 * np.sum((1 - k / o.n) * rho), rel=1e-6)
     # and the analysis takes each series' N_eff = N / f for its trial means
     analysed = {t.index: t for t in simulated_report.analysis.trials}
+    rows = {r.index: r for r in simulated_report.trials}  # the trial table shows the same N_eff
     for o in section.observations:
-        t = analysed[o.trial]
+        t, row = analysed[o.trial], rows[o.trial]
         assert (t.n_eff_before if o.j == 1 else t.n_eff_under) == pytest.approx(o.n_eff)
+        assert (row.n_eff_before if o.j == 1 else row.n_eff_under) == pytest.approx(o.n_eff)
         assert t.var_mean_deg2 > t.paper_var_mean_deg2
 
 

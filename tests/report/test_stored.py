@@ -2,13 +2,17 @@
 analysis run recorded once per distinct result, and reports of campaigns that cannot be analysed."""
 
 import json
+import sqlite3
+import threading
 from pathlib import Path
 
+import pytest
 from sqlalchemy import func, select
 
 from gyrostand.analysis.trials import SeriesSummary
-from gyrostand.db.models import AnalysisRun, Observation, Series, Trial
+from gyrostand.db.models import AnalysisRun, Campaign, Observation, Series, Trial
 from gyrostand.db.queries import load_campaign
+from gyrostand.report import stored as stored_module
 from gyrostand.report.compliance import NOT_ASSESSED
 from gyrostand.report.html import render_html
 from gyrostand.report.json_doc import report_json
@@ -83,10 +87,9 @@ def runs(stored: Stored) -> int:
 
 def test_a_run_is_recorded_once_per_distinct_result(tmp_path: Path) -> None:
     stored = import_paper(tmp_path)
-    with stored.sessions.begin() as session:
-        first = analyze_stored(session, stored.campaign_id)
-    with stored.sessions.begin() as session:
-        again = analyze_stored(session, stored.campaign_id)
+    first = analyze_stored(stored.sessions, stored.campaign_id)
+    again = analyze_stored(stored.sessions, stored.campaign_id)
+    with stored.sessions() as session:
         row = session.get(AnalysisRun, again.run_id)
         assert row.results_json == json.loads(json.dumps(first.analysis.to_dict()))
         assert row.inputs_hash == first.inputs.sha256()
@@ -94,10 +97,42 @@ def test_a_run_is_recorded_once_per_distinct_result(tmp_path: Path) -> None:
     with stored.sessions.begin() as session:
         trial = session.scalar(select(Trial).where(Trial.index == 2))
         trial.summary_delta_mean_deg = 0.22
-    with stored.sessions.begin() as session:
-        changed = analyze_stored(session, stored.campaign_id)
+    changed = analyze_stored(stored.sessions, stored.campaign_id)
     assert changed.inputs.sha256() != first.inputs.sha256()
     assert changed.run_id != first.run_id and runs(stored) == 2
+
+
+def test_a_writer_holding_the_lock_meanwhile_delays_the_run_and_fails_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """While the analysis computes, another process (a campaign acquiring into the same file)
+    takes the write lock, writes and commits a moment later. The analysis read before that
+    commit; its run is recorded once the lock is free (one transaction spanning the read and
+    the write fails here: "database is locked", its snapshot being stale)."""
+    stored = import_paper(tmp_path)
+    acquisition = sqlite3.connect(stored.path, isolation_level=None, check_same_thread=False)
+    compute = stored_module.analyze_campaign
+    released = threading.Event()
+
+    def holding_the_lock(*args: object, **kwargs: object) -> object:
+        acquisition.execute("BEGIN IMMEDIATE")
+        acquisition.execute("UPDATE campaign SET operator = 'acquiring' WHERE id = 1")
+
+        def commit() -> None:
+            acquisition.execute("COMMIT")
+            released.set()
+
+        threading.Timer(0.3, commit).start()
+        return compute(*args, **kwargs)
+
+    monkeypatch.setattr(stored_module, "analyze_campaign", holding_the_lock)
+    run = analyze_stored(stored.sessions, stored.campaign_id)
+    assert released.is_set()  # the run's write waited for the other writer's commit
+    with stored.sessions() as session:
+        assert session.get_one(Campaign, stored.campaign_id).operator == "acquiring"
+        assert session.get_one(AnalysisRun, run.run_id).inputs_hash == run.inputs.sha256()
+    assert runs(stored) == 1
+    acquisition.close()
 
 
 def test_a_campaign_that_cannot_be_analysed_still_gets_its_report(tmp_path: Path) -> None:
