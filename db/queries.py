@@ -420,7 +420,8 @@ class CampaignFilter:
     """Which campaigns `campaign_list` returns (None: any). `labels`: every key = value must be
     among the campaign's labels (the stand is the label `stand`); `since`/`until`: when the
     campaign started (imports: when they were stored), `until` exclusive; `text`: in the
-    operator, instrument model or serial, in any case (a substring, no wildcards)."""
+    operator, instrument model or serial, or a label's key or value, in any case (a substring,
+    no wildcards)."""
 
     model: str | None = None
     serial: str | None = None
@@ -499,10 +500,20 @@ def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
         if value is not None:
             query = query.where(column == value)
     if where.text is not None:
+        labelled = (
+            select(CampaignLabel.id)
+            .where(
+                CampaignLabel.campaign_id == Campaign.id,
+                CampaignLabel.key.icontains(where.text, autoescape=True)
+                | CampaignLabel.value.icontains(where.text, autoescape=True),
+            )
+            .exists()
+        )
         query = query.where(
             Campaign.operator.icontains(where.text, autoescape=True)
             | Instrument.model.icontains(where.text, autoescape=True)
             | Instrument.serial.icontains(where.text, autoescape=True)
+            | labelled
         )
     if where.since is not None:
         query = query.where(started >= where.since)
