@@ -30,7 +30,8 @@ def summary(plan: Plan) -> str:
         design += f", {plan.residual_dof} residual degrees of freedom"
     bus = plan.bus
     if bus.simulated:
-        where = f"simulated stand in {bus.timing} time"
+        pace = "virtual time" if bus.timing == "virtual" else "real time (paced by the wall clock)"
+        where = f"simulated stand in {pace}"
     else:
         where = f"python-can {bus.interface or '(configured)'} {bus.channel or ''}".rstrip()
     if plan.compass.protocol != "gyrostand":

@@ -95,8 +95,8 @@
 
   const yesNo = (v) => (v === null || v === undefined ? "not tested" : v ? "yes" : "no");
   const estimate = (e, scale, digits, unit) =>
-    e === null ? "not estimated" : num(e.value / scale, digits) + unit + " (" +
-      num(e.low / scale, digits) + " to " + num(e.high / scale, digits) + ")";
+    e === null ? "not estimated" : num(e.value / scale, digits) + " (" +
+      num(e.low / scale, digits) + " to " + num(e.high / scale, digits) + ")" + unit;
 
   // The status banner: what the database holds (and whether the run waits for the operator).
   function banner(s) {
@@ -118,8 +118,8 @@
     const r = s.result;
     $("result").hidden = !r;
     if (r) {
-      const level = " at " + num(100 * r.confidence, 0) + " %";
-      $("result-c").textContent = estimate(r.c_gcm2s2, 1e7, 4, "×10⁷ g·cm²·s⁻²") + level;
+      const level = ", " + num(100 * r.confidence, 0) + " % confidence";
+      $("result-c").textContent = estimate(r.c_gcm2s2, 1e7, 4, " ×10⁷ g·cm²·s⁻²") + level;
       $("result-t").textContent = estimate(r.t_s, 1, 4, " s") + level;
       $("result-homogeneous").textContent = yesNo(r.homogeneous);
       $("result-adequate").textContent = yesNo(r.adequate);
