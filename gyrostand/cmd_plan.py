@@ -22,39 +22,10 @@ if TYPE_CHECKING:
 
 
 def summary(plan: Plan) -> str:
-    """The plan in one line: design with the fit's residual degrees of freedom, N, settle, bus,
-    database."""
-    fit = sum(t.role == "fit" for t in plan.trials)
-    design = f"{len(plan.trials)} trials ({fit} fit, {len(plan.trials) - fit} control)"
-    if not plan.campaign.acquisition_only:
-        design += f", {plan.residual_dof} residual degrees of freedom"
-    bus = plan.bus
-    if bus.simulated:
-        pace = "virtual time" if bus.timing == "virtual" else "real time (paced by the wall clock)"
-        where = f"simulated stand in {pace}"
-    else:
-        where = f"python-can {bus.interface or '(configured)'} {bus.channel or ''}".rstrip()
-    if plan.compass.protocol != "gyrostand":
-        where += f", compass on {plan.compass.protocol}"
-    acceptance = ", acceptance by excursions" if plan.acceptance is not None else ""
-    return (
-        f"{design}, N = {plan.n_obs}, settle by {plan.settle.method}{acceptance}, {where}, "
-        f"database {shown_url(plan.database)}"
-    )
+    """The plan in one line: `plan.summary.describe` and the database."""
+    from gyrostand.plan.summary import describe
 
-
-def design_warning(plan: Plan) -> str | None:
-    """Why the design is fragile when it leaves few residual degrees of freedom (None if not)."""
-    from gyrostand.plan.model import FEW_RESIDUAL_DOF, FIT_PARAMETERS
-
-    dof = plan.residual_dof
-    if plan.campaign.acquisition_only or dof > FEW_RESIDUAL_DOF:
-        return None
-    return (
-        f"the fit of C and T leaves {dof} residual degree{'s' if dof != 1 else ''} of freedom "
-        f"(fit trials minus the {FIT_PARAMETERS} parameters): its t({dof}) intervals are wide, "
-        "and a residual variance near 0 by chance goes unnoticed in them; add fit trials"
-    )
+    return f"{describe(plan)}, database {shown_url(plan.database)}"
 
 
 def register(app: typer.Typer) -> None:
@@ -71,6 +42,7 @@ def register(app: typer.Typer) -> None:
         one summary line, or every problem one per line (exit code 1)."""
         from gyrostand.plan.codec import prepare
         from gyrostand.plan.model import PlanError, load_plan
+        from gyrostand.plan.summary import design_warning
 
         try:
             checked = load_plan(plan)

@@ -34,6 +34,7 @@ from gyrostand.db.models import CAMPAIGN_STATUSES, Campaign
 from gyrostand.db.queries import CampaignFilter, campaign_list, sign_offs
 from gyrostand.db.session import writer
 from gyrostand.plan.model import Plan, PlanError, load_plan, parse_plan
+from gyrostand.plan.summary import describe, design_warning
 from gyrostand.station.operator import (
     FIELD,
     ActionRefused,
@@ -164,8 +165,6 @@ def create_app(
     ) -> Response:
         """The start form: a plan to check; once checked, its summary, the device under test,
         the operator and the prompts before the campaign, and Start."""
-        from gyrostand.cmd_plan import design_warning, summary
-
         form = form or {}
         return station.page(
             request,
@@ -173,7 +172,7 @@ def create_app(
             code,
             plan=path,
             checked=plan,
-            summary=None if plan is None else summary(plan),
+            summary=None if plan is None else describe(plan),
             warning=None if plan is None else design_warning(plan),
             unit={} if plan is None else unit_values(plan, form),
             problems=problems_by_field(problems or []),

@@ -25,12 +25,12 @@ from gyrostand.db.models import (
     Trial,
 )
 from gyrostand.db.queries import (
+    CampaignResult,
+    campaign_result,
     campaign_summary,
     latest_attempt,
     live_file_of,
-    method_checks,
     raw_log_segments,
-    verdict,
 )
 
 TRACE_POINTS = 600
@@ -64,30 +64,6 @@ class Current:
     mean_deg: float | None
     spread_deg: float | None
     settle_estimate_deg: float | None
-
-
-@dataclass(frozen=True)
-class Estimate:
-    """A fitted parameter and its confidence interval."""
-
-    value: float
-    low: float
-    high: float
-
-
-@dataclass(frozen=True)
-class CampaignResult:
-    """The campaign's latest analysis run (recorded by `gyrostand report` or `analyze`): C and T
-    with their (1 - q) confidence intervals, Cochran's homogeneity and Fisher's adequacy
-    decisions (None: not made), `db.queries.verdict` in words."""
-
-    run_id: int
-    confidence: float
-    c_gcm2s2: Estimate | None
-    t_s: Estimate | None
-    homogeneous: bool | None
-    adequate: bool | None
-    verdict: str
 
 
 STOP_REASONS = ("interrupted", "failed")
@@ -289,37 +265,6 @@ def _reason(status: str, events: tuple[dict[str, Any], ...]) -> str | None:
     return why[-1]["message"] if why else None
 
 
-def campaign_result(session: Session, campaign_id: int) -> CampaignResult | None:
-    """The result of the campaign's latest analysis run, or None (not analysed)."""
-    run = session.scalars(
-        select(AnalysisRun)
-        .where(AnalysisRun.campaign_id == campaign_id)
-        .order_by(AnalysisRun.id.desc())
-        .limit(1)
-    ).first()
-    if run is None:
-        return None
-    results = run.results_json
-    fit = results.get("fit") or {}
-    estimates, intervals = fit.get("estimates") or {}, fit.get("confidence_intervals") or {}
-
-    def estimate(name: str) -> Estimate | None:
-        if estimates.get(name) is None or name not in intervals:
-            return None
-        return Estimate(estimates[name], *intervals[name])
-
-    homogeneous, adequate = method_checks(results)
-    return CampaignResult(
-        run_id=run.id,
-        confidence=1.0 - float(results.get("q", 0.05)),
-        c_gcm2s2=estimate("C_gcm2s2"),
-        t_s=estimate("T_s"),
-        homogeneous=homogeneous,
-        adequate=adequate,
-        verdict=verdict(results),
-    )
-
-
 def report_files(folder: Path, campaign_id: int) -> list[Path]:
     """The report files of the campaign in `folder` (campaign-ID.html, campaign-ID-trials.csv,
     ... whatever their profile), newest first."""
@@ -332,15 +277,19 @@ def report_files(folder: Path, campaign_id: int) -> list[Path]:
 
 
 def report_decision(folder: Path, campaign_id: int) -> str | None:
-    """The conformity decision of the campaign's newest JSON report in `folder` (PASS, FAIL,
-    INCONCLUSIVE, NOT ASSESSED), or None when there is none."""
-    for path in report_files(folder, campaign_id):
-        if path.suffix == ".json":
-            try:
-                return str(json.loads(path.read_text(encoding="utf-8"))["conformity"]["verdict"])
-            except (OSError, ValueError, KeyError, TypeError):
-                return None
-    return None
+    """The conformity decision of the campaign's newest JSON report in `folder`, or None when
+    there is none."""
+    newest = next((p for p in report_files(folder, campaign_id) if p.suffix == ".json"), None)
+    return None if newest is None else conformity_verdict(newest)
+
+
+def conformity_verdict(report_json: Path) -> str | None:
+    """A JSON report's overall decision (PASS, FAIL, INCONCLUSIVE, NOT ASSESSED), or None when
+    it cannot be read."""
+    try:
+        return str(json.loads(report_json.read_text(encoding="utf-8"))["conformity"]["verdict"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def _current(session: Session, resume: Any) -> Current | None:

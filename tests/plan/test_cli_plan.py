@@ -261,3 +261,17 @@ def test_schema_describes_every_field(schema: dict[str, Any]) -> None:
         for key, field in table.get("properties", {}).items():
             if "$ref" not in field:  # a subtable: its own definition is described
                 assert field.get("description"), f"{name}.{key} has no description"
+
+
+@pytest.mark.parametrize(
+    ("bus", "said"),
+    [
+        ('timing = "virtual"', "simulated stand in virtual time,"),
+        ('timing = "realtime"\nspeedup = 50.0', "real time (paced by the wall clock),"),
+    ],
+)
+def test_the_summary_names_the_simulated_stand_s_pace(tmp_path: Path, bus: str, said: str) -> None:
+    plan = tmp_path / "plan.toml"
+    plan.write_text(PAPER.read_text().replace('timing = "virtual"', bus, 1))
+    code, out = gyrostand("plan", "check", plan)
+    assert code == 0 and said in out and "realtime time" not in out, out
