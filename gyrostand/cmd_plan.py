@@ -1,9 +1,9 @@
 """CLI: plan check|schema -- validate a campaign plan file; the plan's JSON Schema for editors.
 
 `gyrostand plan check PLAN` prints one summary line (with the fit's residual degrees of freedom,
-and a warning line when they are few), or every problem one per line with its path in the plan
-(exit code 1). `gyrostand plan schema [--out FILE]` prints the JSON Schema of a
-plan file, generated from the plan model (docs/plan.md).
+and a warning line when they are few), or every problem one per line on stderr
+("gyrostand: error: PLAN: [table] key: ...", exit code 1). `gyrostand plan schema [--out FILE]`
+prints the JSON Schema of a plan file, generated from the plan model (docs/plan.md).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def register(app: typer.Typer) -> None:
             prepare(checked)
         except PlanError as exc:
             for problem in exc.problems:
-                typer.echo(f"{plan}: {problem}")
+                typer.echo(f"gyrostand: error: {plan}: {problem}", err=True)
             raise typer.Exit(EXIT_FAILED) from None
         typer.echo(f"{plan}: ok — {summary(checked)}")
         if warning := design_warning(checked):
