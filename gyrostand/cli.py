@@ -47,8 +47,9 @@ def first_sentence(text: str) -> str:
 
 class _HelpLayout:
     """How a command's `--help` reads: its paragraphs wrapped to the terminal; its line in the
-    command list is the first sentence of its help; flags show no value type (they take none); arguments are named in capitals in
-    the usage line, optional ones in brackets (`replay [OPTIONS] LOG`, `analyze [CAMPAIGN]`)."""
+    command list is the first sentence of its help; flags show no value type (they take none);
+    arguments are named in capitals in the usage line, optional ones in brackets (`replay
+    [OPTIONS] LOG`, `analyze [CAMPAIGN]`)."""
 
     params: list[Any]
     help: str | None
