@@ -29,7 +29,8 @@ def read_trials_csv(path: str | Path) -> list[TrialInput]:
     try:
         frame = pd.read_csv(path, comment="#", skipinitialspace=True, dtype={"role": str})
     except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise AnalysisError(f"{path}: cannot read the CSV table ({exc})") from exc
+        why = " ".join(str(exc).split())  # pandas ends its message with a newline
+        raise AnalysisError(f"{path}: cannot read the CSV table ({why})") from exc
     missing = [c for c in COLUMNS if c not in frame.columns]
     if missing:
         raise MissingDataError(f"{path}: missing column(s) {', '.join(missing)}")

@@ -421,7 +421,8 @@ class CampaignFilter:
     """Which campaigns `campaign_list` returns (None: any). `labels`: every key = value must be
     among the campaign's labels (the stand is the label `stand`); `since`/`until`: when the
     campaign started (imports: when they were stored), `until` exclusive; `text`: in the
-    operator, instrument model or serial, in any case (a substring, no wildcards)."""
+    operator, instrument model or serial, or a label's key or value, in any case (a substring,
+    no wildcards)."""
 
     model: str | None = None
     serial: str | None = None
@@ -450,6 +451,61 @@ def verdict(results: dict[str, Any] | None) -> str:
         "?" if value is None else ("yes" if value else "no") for value in method_checks(results)
     )
     return f"homogeneous {homogeneous}, adequate on trial means {adequate}"
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A fitted parameter and its confidence interval."""
+
+    value: float
+    low: float
+    high: float
+
+
+@dataclass(frozen=True)
+class CampaignResult:
+    """The campaign's latest analysis run (recorded by `gyrostand report` or `analyze`): C and T
+    with their (1 - q) confidence intervals, Cochran's homogeneity and Fisher's adequacy
+    decisions (None: not made), `db.queries.verdict` in words."""
+
+    run_id: int
+    confidence: float
+    c_gcm2s2: Estimate | None
+    t_s: Estimate | None
+    homogeneous: bool | None
+    adequate: bool | None
+    verdict: str
+
+
+def campaign_result(session: Session, campaign_id: int) -> CampaignResult | None:
+    """The result of the campaign's latest analysis run, or None (not analysed)."""
+    run = session.scalars(
+        select(AnalysisRun)
+        .where(AnalysisRun.campaign_id == campaign_id)
+        .order_by(AnalysisRun.id.desc())
+        .limit(1)
+    ).first()
+    if run is None:
+        return None
+    results = run.results_json
+    fit = results.get("fit") or {}
+    estimates, intervals = fit.get("estimates") or {}, fit.get("confidence_intervals") or {}
+
+    def estimate(name: str) -> Estimate | None:
+        if estimates.get(name) is None or name not in intervals:
+            return None
+        return Estimate(estimates[name], *intervals[name])
+
+    homogeneous, adequate = method_checks(results)
+    return CampaignResult(
+        run_id=run.id,
+        confidence=1.0 - float(results.get("q", 0.05)),
+        c_gcm2s2=estimate("C_gcm2s2"),
+        t_s=estimate("T_s"),
+        homogeneous=homogeneous,
+        adequate=adequate,
+        verdict=verdict(results),
+    )
 
 
 @dataclass(frozen=True)
@@ -500,10 +556,20 @@ def campaign_list(session: Session, where: CampaignFilter) -> list[CampaignRow]:
         if value is not None:
             query = query.where(column == value)
     if where.text is not None:
+        labelled = (
+            select(CampaignLabel.id)
+            .where(
+                CampaignLabel.campaign_id == Campaign.id,
+                CampaignLabel.key.icontains(where.text, autoescape=True)
+                | CampaignLabel.value.icontains(where.text, autoescape=True),
+            )
+            .exists()
+        )
         query = query.where(
             Campaign.operator.icontains(where.text, autoescape=True)
             | Instrument.model.icontains(where.text, autoescape=True)
             | Instrument.serial.icontains(where.text, autoescape=True)
+            | labelled
         )
     if where.since is not None:
         query = query.where(started >= where.since)

@@ -46,9 +46,10 @@ def first_sentence(text: str) -> str:
 
 
 class _HelpLayout:
-    """How a command's `--help` reads: its line in the command list is the first sentence of
-    its help; flags show no value type (they take none); arguments are named in capitals in
-    the usage line, optional ones in brackets (`replay [OPTIONS] LOG`, `analyze [CAMPAIGN]`)."""
+    """How a command's `--help` reads: its paragraphs wrapped to the terminal; its line in the
+    command list is the first sentence of its help; flags show no value type (they take none);
+    arguments are named in capitals in the usage line, optional ones in brackets (`replay
+    [OPTIONS] LOG`, `analyze [CAMPAIGN]`)."""
 
     params: list[Any]
     help: str | None
@@ -56,6 +57,9 @@ class _HelpLayout:
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        if self.help:  # paragraphs re-wrapped to the terminal, not broken where the source is
+            paragraphs = self.help.strip().split("\n\n")
+            self.help = "\n\n".join(" ".join(p.split()) for p in paragraphs)
         if self.short_help is None and self.help:
             self.short_help = first_sentence(self.help)
         for param in self.params:

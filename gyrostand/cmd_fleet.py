@@ -47,7 +47,14 @@ def analysed_fleet(model: str, by: str, q: float, db: str) -> tuple[FleetInputs,
     try:
         return inputs, analyze_fleet(inputs.units, factor=by, q=q)
     except FleetError as error:
-        fail(f"model {model}: {error}")
+        why: dict[str, list[int]] = {}  # the campaigns left out, by reason
+        for c in inputs.left_out:
+            why.setdefault(c.reason, []).append(c.campaign_id)
+        left = "; ".join(
+            f"campaign{'s' if len(ids) > 1 else ''} {', '.join(map(str, sorted(ids)))}: {reason}"
+            for reason, ids in why.items()
+        )
+        fail(f"model {model}: {error}" + (f" (left out: {left})" if left else ""))
 
 
 def register(app: typer.Typer) -> None:

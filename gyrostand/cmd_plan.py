@@ -1,9 +1,9 @@
 """CLI: plan check|schema -- validate a campaign plan file; the plan's JSON Schema for editors.
 
 `gyrostand plan check PLAN` prints one summary line (with the fit's residual degrees of freedom,
-and a warning line when they are few), or every problem one per line with its path in the plan
-(exit code 1). `gyrostand plan schema [--out FILE]` prints the JSON Schema of a
-plan file, generated from the plan model (docs/plan.md).
+and a warning line when they are few), or every problem one per line on stderr
+("gyrostand: error: PLAN: [table] key: ...", exit code 1). `gyrostand plan schema [--out FILE]`
+prints the JSON Schema of a plan file, generated from the plan model (docs/plan.md).
 """
 
 from __future__ import annotations
@@ -22,46 +22,10 @@ if TYPE_CHECKING:
 
 
 def summary(plan: Plan) -> str:
-    """The plan in one line: design with the fit's residual degrees of freedom, N, settle, bus,
-    database."""
-    fit = sum(t.role == "fit" for t in plan.trials)
-    design = f"{len(plan.trials)} trials ({fit} fit, {len(plan.trials) - fit} control)"
-    if not plan.campaign.acquisition_only:
-        design += f", {plan.residual_dof} residual degrees of freedom"
-    bus = plan.bus
-    if bus.simulated:
-        where = f"simulated stand in {bus.timing} time"
-    else:
-        where = f"python-can {bus.interface or '(configured)'} {bus.channel or ''}".rstrip()
-    if plan.stand.protocol == "cia402":
-        from gyrostand.plan.model import K_PROMPT
+    """The plan in one line: `plan.summary.describe` and the database."""
+    from gyrostand.plan.summary import describe
 
-        k_prompts = sum(p.id.startswith(K_PROMPT) for p in plan.prompt)
-        where += f", CiA 402 drive node {plan.stand.node_id} (K set by hand: {k_prompts} prompts)"
-    if plan.compass.protocol != "gyrostand":
-        where += f", compass on {plan.compass.protocol}"
-    if plan.inclinometer_mount is not None:
-        protocol, address, axis, _ = plan.inclinometer_mount
-        where += f", roll measured by a {protocol} inclinometer ({address}, axis {axis})"
-    acceptance = ", acceptance by excursions" if plan.acceptance is not None else ""
-    return (
-        f"{design}, N = {plan.n_obs}, settle by {plan.settle.method}{acceptance}, {where}, "
-        f"database {shown_url(plan.database)}"
-    )
-
-
-def design_warning(plan: Plan) -> str | None:
-    """Why the design is fragile when it leaves few residual degrees of freedom (None if not)."""
-    from gyrostand.plan.model import FEW_RESIDUAL_DOF, FIT_PARAMETERS
-
-    dof = plan.residual_dof
-    if plan.campaign.acquisition_only or dof > FEW_RESIDUAL_DOF:
-        return None
-    return (
-        f"the fit of C and T leaves {dof} residual degree{'s' if dof != 1 else ''} of freedom "
-        f"(fit trials minus the {FIT_PARAMETERS} parameters): its t({dof}) intervals are wide, "
-        "and a residual variance near 0 by chance goes unnoticed in them; add fit trials"
-    )
+    return f"{describe(plan)}, database {shown_url(plan.database)}"
 
 
 def register(app: typer.Typer) -> None:
@@ -78,13 +42,14 @@ def register(app: typer.Typer) -> None:
         one summary line, or every problem one per line (exit code 1)."""
         from gyrostand.plan.codec import prepare
         from gyrostand.plan.model import PlanError, load_plan
+        from gyrostand.plan.summary import design_warning
 
         try:
             checked = load_plan(plan)
             prepare(checked)
         except PlanError as exc:
             for problem in exc.problems:
-                typer.echo(f"{plan}: {problem}")
+                typer.echo(f"gyrostand: error: {plan}: {problem}", err=True)
             raise typer.Exit(EXIT_FAILED) from None
         typer.echo(f"{plan}: ok — {summary(checked)}")
         if warning := design_warning(checked):

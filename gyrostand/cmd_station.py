@@ -38,7 +38,11 @@ def register(app: typer.Typer) -> None:
         port: Annotated[int, typer.Option(help="TCP port.", min=1, max=65535)] = 8000,
         db: DbOption = DEFAULT_DB,
         reports: Annotated[
-            Path, typer.Option(help="Folder for the reports generated at the station.")
+            Path,
+            typer.Option(
+                help="Folder of the reports: written there at the station as `gyrostand report "
+                "--out` does, and every campaign-ID report file in it linked on its page."
+            ),
         ] = DEFAULT_OUT,
         allow_host: Annotated[
             list[str] | None,

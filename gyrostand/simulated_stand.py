@@ -17,7 +17,7 @@ from typing import Any
 
 import can
 from can.interfaces.virtual import VirtualBus, channels_lock
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from gyrostand.acquisition.bus import SimulatorBus
 from gyrostand.devices.nmea2000 import Product
@@ -68,11 +68,14 @@ class StandSpec:
 
     def config(self) -> SimConfig:
         """The SimConfig (StandSetupError naming every unknown or inconsistent knob)."""
+        tables = simulator_tables()
         try:
-            return simulator_config(simulator_tables().model_validate(dict(self.simulator)))
+            return simulator_config(tables.model_validate(dict(self.simulator)))
         except ValidationError as exc:
             problems = [
-                f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors(include_url=False)
+                f"{'.'.join(map(str, e['loc']))}: {e['msg']}"
+                + (_known_knobs(tables, e["loc"]) if e["type"] == "extra_forbidden" else "")
+                for e in exc.errors(include_url=False)
             ]
             raise StandSetupError("simulated stand: " + "; ".join(problems)) from None
         except SimConfigError as exc:
@@ -288,3 +291,18 @@ class SimulatedStand:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _known_knobs(tables: type[BaseModel], loc: tuple[Any, ...]) -> str:
+    """For an unknown knob at `loc`: the one meant when only its case differs (the plan's
+    [instrument] lp_gcm2s2 is the simulator's compass lP_gcm2s2), and the valid names."""
+    model: Any = tables
+    for key in loc[:-1]:
+        table = model.model_fields.get(key) if isinstance(key, str) else None
+        if table is None or not isinstance(table.annotation, type):
+            return ""
+        model = table.annotation
+    names = list(model.model_fields)
+    meant = [n for n in names if n.lower() == str(loc[-1]).lower()]
+    hint = f" (did you mean {meant[0]}?)" if meant else ""
+    return f"{hint}; valid: {', '.join(names)}"

@@ -34,13 +34,16 @@ from gyrostand.db.models import CAMPAIGN_STATUSES, Campaign
 from gyrostand.db.queries import CampaignFilter, campaign_list, sign_offs
 from gyrostand.db.session import writer
 from gyrostand.plan.model import Plan, PlanError, load_plan, parse_plan
+from gyrostand.plan.summary import describe, design_warning
 from gyrostand.station.operator import (
     FIELD,
     ActionRefused,
     answer,
     request_stop,
     start_answers,
+    unit_values,
     waiting_for,
+    with_unit,
 )
 from gyrostand.station.processes import Processes, ProcessRefused
 from gyrostand.station.security import (
@@ -51,14 +54,22 @@ from gyrostand.station.security import (
     action_form,
 )
 from gyrostand.station.signoff import SignOffRefused, sign_off
-from gyrostand.station.state import fingerprint, live_file, live_state, read_live
+from gyrostand.station.state import (
+    fingerprint,
+    live_file,
+    live_state,
+    read_live,
+    report_decision,
+    report_files,
+)
 
 TICK_S = 0.1
 """The update stream checks the database's fingerprint of the campaign this often and pushes
 the campaign's state when it changed."""
 IDLE_TICK_S = 1.0
 """... and this often while nothing acquires (a run started elsewhere is seen within it)."""
-REPORT_FORMATS = {"html": "html", "html+pdf": "html,pdf"}
+REPORT_FORMATS = {"html": "html,json", "html+pdf": "html,pdf,json"}
+"""The report formats offered, each with the JSON the page reads the report's decision from."""
 STATIC = Path(__file__).parent / "static"
 ID_MAX = 2**63 - 1  # the largest id a database stores (SQLite INTEGER, PostgreSQL BIGINT)
 
@@ -144,8 +155,33 @@ def create_app(
             statuses=CAMPAIGN_STATUSES,
         )
 
+    def start_page(
+        request: Request,
+        code: int = 200,
+        path: str = "",
+        plan: Plan | None = None,
+        problems: list[str] | None = None,
+        form: Any = None,
+    ) -> Response:
+        """The start form: a plan to check; once checked, its summary, the device under test,
+        the operator and the prompts before the campaign, and Start."""
+        form = form or {}
+        return station.page(
+            request,
+            "start.html.j2",
+            code,
+            plan=path,
+            checked=plan,
+            summary=None if plan is None else describe(plan),
+            warning=None if plan is None else design_warning(plan),
+            unit={} if plan is None else unit_values(plan, form),
+            problems=problems_by_field(problems or []),
+            prompts=() if plan is None else plan.prompts_before("campaign"),
+            form={k: v for k, v in form.items() if k.startswith(FIELD)},
+        )
+
     async def new(request: Request) -> Response:
-        return station.page(request, "start.html.j2", plan="", problems=[], prompts=(), form={})
+        return start_page(request)
 
     def uploaded(text: str) -> Path:
         """An uploaded plan (valid) as a file the campaign command reads, named by its hash."""
@@ -169,16 +205,23 @@ def create_app(
         return load_plan(Path(path)), str(Path(path).resolve())
 
     async def start(request: Request) -> Response:
+        """Check the plan (the form without `start`), or start it (with `start`: the answers,
+        the device under test and the operator as the checked form gave them)."""
         form = await action_form(request, access)
         path = str(form.get("plan", "")).strip()
-        prompts: tuple[Any, ...] = ()
+        plan: Plan | None = None
         try:
             plan, path = await read_plan(path, form.get("upload"))
-            prompts = plan.prompts_before("campaign")
+            if form.get("start") != "1":
+                return start_page(request, path=path, plan=plan)
             answers, problems = start_answers(plan, form)
-            if problems:
-                raise PlanError(problems)
-            digest = hashlib.sha256(plan.text.encode()).hexdigest()
+            text, unit_problems = with_unit(plan, unit_values(plan, form))
+            if problems or unit_problems:
+                raise PlanError(unit_problems + problems)
+            if text != plan.text:  # run as edited, the plan file left as it is
+                parse_plan(text)
+                path = str(await run_in_threadpool(uploaded, text))
+            digest = hashlib.sha256(text.encode()).hexdigest()
 
             def newest() -> int | None:
                 return station.read(
@@ -190,15 +233,7 @@ def create_app(
             cid = await station.processes.start(Path(path), newest, answers)
         except (PlanError, ProcessRefused) as exc:
             problems = exc.problems if isinstance(exc, PlanError) else [str(exc)]
-            return station.page(
-                request,
-                "start.html.j2",
-                400,
-                plan=path,
-                problems=problems_by_field(problems),
-                prompts=prompts,
-                form={k: v for k, v in form.items() if k.startswith(FIELD)},
-            )
+            return start_page(request, 400, path, plan, problems, form)
         return RedirectResponse(f"/campaigns/{cid}", status_code=303)
 
     def state_json(cid: int) -> dict[str, Any]:
@@ -208,9 +243,17 @@ def create_app(
         if state["status"] == "running" and not acquiring:
             state["status"] = "interrupted"  # its process is gone (killed): resume continues it
         state["acquiring"] = acquiring
-        state["process_error"] = None if running else station.processes.error(cid)
-        state["live"] = read_live(station.read(live_file, cid)) if acquiring else None
+        # a stopped, paused or failed run says why in the database (state["reason"]); an error
+        # line is shown only for a run that ended without saying (interrupted)
+        error = None if running else station.processes.error(cid)
+        state["process_error"] = error if state["status"] == "interrupted" else None
         state["prompt"] = station.read(waiting_for, cid) if acquiring else None
+        live = read_live(station.read(live_file, cid)) if acquiring else None
+        state["live"] = None if state["prompt"] else live  # its series ended: not the current
+        job = station.processes.reports.get(cid)
+        state["report"] = None if job is None else job.progress()
+        state["reports"] = [p.name for p in report_files(station.reports, cid)]
+        state["decision"] = report_decision(station.reports, cid)
         return state
 
     def live_change(path: Path | None, mtime: int | None) -> tuple[int | None, Any]:
@@ -224,7 +267,9 @@ def create_app(
     def changed(cid: int, last: tuple[Any, ...] | None) -> tuple[tuple[Any, ...], bool]:
         """The campaign's fingerprint (with whether a process acquires into it) and whether it
         differs from `last`."""
-        now = (*station.read(fingerprint, cid), station.acquiring(cid))
+        job = station.processes.reports.get(cid)
+        report = None if job is None else tuple(job.progress().values())
+        now = (*station.read(fingerprint, cid), station.acquiring(cid), report)
         return now, now != last
 
     async def campaign(request: Request) -> Response:
@@ -236,7 +281,7 @@ def create_app(
             "campaign.html.j2",
             state=state,
             signed=signed,
-            reports=sorted(p.name for p in (station.reports / str(cid)).glob("campaign-*")),
+            formats=state["report"]["formats"] if state["report"] else "html,json",
             message=request.query_params.get("message", ""),
         )
 
@@ -312,12 +357,12 @@ def create_app(
     async def report(request: Request) -> Response:
         cid = campaign_id(request)
         form = await action_form(request, access)
-        formats = REPORT_FORMATS.get(str(form.get("formats", "html")), "html")
-        try:
-            await station.processes.report(cid, station.reports / str(cid), formats)
+        formats = REPORT_FORMATS.get(str(form.get("formats", "html")), REPORT_FORMATS["html"])
+        try:  # the same folder as `gyrostand report --out`
+            station.processes.report(cid, station.reports, formats)
         except ProcessRefused as exc:
             return back(cid, str(exc))
-        return back(cid, "report written")
+        return back(cid)
 
     async def signoff(request: Request) -> Response:
         cid = campaign_id(request)
@@ -333,15 +378,10 @@ def create_app(
     async def files(request: Request) -> Response:
         cid = campaign_id(request)
         name = request.path_params["name"]
-        folder = (station.reports / str(cid)).resolve()
-        try:
-            path = (folder / name).resolve()
-            found = path.parent == folder and name.startswith(f"campaign-{cid}") and path.is_file()
-        except (OSError, ValueError):  # a NUL in the name, a name too long for a file
-            found = False
-        if not found:
+        found = {p.name: p for p in report_files(station.reports, cid)}
+        if name not in found:
             raise HTTPException(404, f"no report file {name!r} for campaign {cid}")
-        return FileResponse(path)
+        return FileResponse(found[name])
 
     async def refused(request: Request, exc: Exception) -> Response:
         return Response(str(exc), status_code=403, media_type="text/plain")

@@ -18,6 +18,8 @@ from gyrostand.plan.prompts import ANSWER, PROMPT, STOP_REQUEST, message, pendin
 
 FIELD = "answer-"
 """The start form's field of a prompt's answer: answer-ID."""
+UNIT_FIELDS = (("instrument", "model"), ("instrument", "serial"), ("campaign", "operator"))
+"""The start form's fields TABLE.KEY of the plan: the device under test and who runs it."""
 
 
 def pending_prompt(session: Session, campaign_id: int) -> tuple[str, str] | None:
@@ -81,3 +83,30 @@ def start_answers(plan: Plan, form: Mapping[str, Any]) -> tuple[dict[str, str], 
         except ValueError as exc:
             problems.append(f"[[prompt]] {exc}")
     return answers, problems
+
+
+def unit_values(plan: Plan, form: Mapping[str, Any]) -> dict[str, str]:
+    """The start form's device under test and operator (TABLE.KEY: value), the plan's values
+    where the form has none."""
+    values = {}
+    for table, key in UNIT_FIELDS:
+        name = f"{table}.{key}"
+        values[name] = str(form.get(name, getattr(getattr(plan, table), key))).strip()
+    return values
+
+
+def with_unit(plan: Plan, values: Mapping[str, str]) -> tuple[str, list[str]]:
+    """The plan's text with the start form's device under test and operator in it (tomlkit
+    keeps the rest of the file as written: the text is unchanged when they are), and its
+    problems ("[table] key: ..." lines)."""
+    import tomlkit
+
+    document = tomlkit.parse(plan.text)
+    problems = []
+    for name, value in values.items():
+        table, key = name.split(".")
+        if not value:
+            problems.append(f"[{table}] {key}: must not be empty")
+        elif value != getattr(getattr(plan, table), key):
+            document[table][key] = value  # type: ignore[index]
+    return tomlkit.dumps(document), problems

@@ -18,6 +18,7 @@ from typing import IO
 from gyrostand.db.url import DB_ENV
 
 GYROSTAND = (sys.executable, "-m", "gyrostand")
+ERROR = "gyrostand: error: "  # `gyrostand.errors.fail`'s prefix
 START_WAIT_S = 60.0
 """How long a new campaign may take to appear in the database (imports, bus, raw log folder)."""
 
@@ -28,7 +29,8 @@ class ProcessRefused(RuntimeError):
 
 @dataclass
 class Acquisition:
-    """A `gyrostand campaign ...` process of this server, and its stderr."""
+    """A `gyrostand campaign ...` or `gyrostand report` process of this server, and its
+    stderr."""
 
     process: subprocess.Popen[bytes]
     stderr: IO[bytes]
@@ -38,15 +40,20 @@ class Acquisition:
     def running(self) -> bool:
         return self.process.poll() is None
 
+    def lines(self) -> list[str]:
+        """What the process wrote on stderr so far, by line."""
+        self.stderr.seek(0)
+        return self.stderr.read().decode(errors="replace").strip().splitlines()
+
     def error(self) -> str | None:
-        """The process's last error line, once it has ended with a non-zero exit code."""
+        """The process's last error line ("gyrostand: error: " left out), once it has ended with
+        a non-zero exit code; None when it wrote none (a stopped or paused run: its outcome is
+        in the database)."""
         code = self.process.poll()
         if code is None or code == 0:
             return None
-        self.stderr.seek(0)
-        lines = self.stderr.read().decode(errors="replace").strip().splitlines()
-        errors = [line for line in lines if line.startswith("gyrostand: ")]
-        return (errors or lines or [f"{self.what} ended with exit code {code}"])[-1]
+        errors = [line for line in self.lines() if line.startswith(ERROR)]
+        return errors[-1].removeprefix(ERROR) if errors else None
 
 
 @dataclass
@@ -57,6 +64,7 @@ class Processes:
     db: str
     command: Sequence[str] = GYROSTAND
     acquisitions: dict[int, Acquisition] = field(default_factory=dict)
+    reports: dict[int, Report] = field(default_factory=dict)
 
     @property
     def environment(self) -> dict[str, str]:
@@ -64,10 +72,10 @@ class Processes:
         (a password in the URL would show in `ps`, which lists every process's arguments)."""
         return {**os.environ, DB_ENV: self.db}
 
-    def _spawn(self, args: Sequence[str], what: str) -> Acquisition:
+    def _spawn(self, args: Sequence[str], what: str, quiet: bool = True) -> Acquisition:
         stderr = tempfile.TemporaryFile()  # noqa: SIM115 (kept with the process, read at its end)
         process = subprocess.Popen(
-            [*self.command, *args, "--quiet"],
+            [*self.command, *args, *(["--quiet"] if quiet else [])],
             env=self.environment,
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
@@ -117,23 +125,31 @@ class Processes:
             args = ["campaign", "resume", str(campaign_id)]
         self.acquisitions[campaign_id] = self._spawn(args, args[1])
 
-    async def report(self, campaign_id: int, out: Path, formats: str) -> None:
-        """`gyrostand report ID --out OUT --format FORMATS`, waited for without blocking the
-        server (ProcessRefused with its error line)."""
-        process = await asyncio.create_subprocess_exec(
-            *self.command,
-            "report",
-            str(campaign_id),
-            "--out",
-            str(out),
-            "--format",
-            formats,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            env=self.environment,
-        )
-        _, err = await process.communicate()
-        if process.returncode:
-            lines = err.decode(errors="replace").strip().splitlines()
-            raise ProcessRefused(lines[-1] if lines else "gyrostand report failed")
+    def report(self, campaign_id: int, out: Path, formats: str) -> None:
+        """Start `gyrostand report ID --out OUT --format FORMATS` (its progress: `reports`)."""
+        if self.report_running(campaign_id):
+            raise ProcessRefused(f"a report of campaign {campaign_id} is being written")
+        args = ["report", str(campaign_id), "--out", str(out), "--format", formats]
+        self.reports[campaign_id] = Report(self._spawn(args, "report", quiet=False), formats)
+
+    def report_running(self, campaign_id: int) -> bool:
+        job = self.reports.get(campaign_id)
+        return job is not None and job.process.running
+
+
+@dataclass(frozen=True)
+class Report:
+    """A report being written (or written) by this server, with the formats asked for."""
+
+    process: Acquisition
+    formats: str
+
+    def progress(self) -> dict[str, object]:
+        """For the page: running, the formats, its latest stage line, its error line."""
+        lines = [line.removeprefix("report: ") for line in self.process.lines()]
+        return {
+            "running": self.process.running,
+            "formats": self.formats,
+            "stage": lines[-1] if lines else "starting",
+            "error": self.process.error(),
+        }

@@ -5,6 +5,7 @@ writes: its live state (progress, current series, trace, events). The campaign l
 from __future__ import annotations
 
 import json
+import re
 import statistics
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
@@ -15,6 +16,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from gyrostand.db.models import (
+    AnalysisRun,
     Campaign,
     Event,
     Observation,
@@ -22,7 +24,14 @@ from gyrostand.db.models import (
     Series,
     Trial,
 )
-from gyrostand.db.queries import campaign_summary, latest_attempt, live_file_of, raw_log_segments
+from gyrostand.db.queries import (
+    CampaignResult,
+    campaign_result,
+    campaign_summary,
+    latest_attempt,
+    live_file_of,
+    raw_log_segments,
+)
 
 TRACE_POINTS = 600
 """Points of the heading trace sent to the page: about what a screen's plot is wide."""
@@ -57,6 +66,10 @@ class Current:
     settle_estimate_deg: float | None
 
 
+STOP_REASONS = ("interrupted", "failed")
+"""Event kinds that say why a campaign stopped, paused or failed (with any error event)."""
+
+
 @dataclass(frozen=True)
 class LiveState:
     """A campaign as the page shows it; `as_json()` is what the update stream sends.
@@ -80,6 +93,9 @@ class LiveState:
     eta_wall_s: float | None
     trace: tuple[tuple[float, float], ...]
     events: tuple[dict[str, Any], ...]
+    reason: str | None
+    """Why it stopped, paused or failed: the stored event that says so (None otherwise)."""
+    result: CampaignResult | None
 
     def as_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -100,6 +116,9 @@ def fingerprint(session: Session, campaign_id: int) -> tuple[Any, ...]:
             .join(Series, Series.id == Observation.series_id)
             .join(Trial, Trial.id == Series.trial_id)
             .where(Trial.campaign_id == campaign_id)
+            .scalar_subquery(),
+            select(func.max(AnalysisRun.id))  # analysed: the result to show
+            .where(AnalysisRun.campaign_id == campaign_id)
             .scalar_subquery(),
         )
     ).one()
@@ -183,7 +202,7 @@ def live_state(session: Session, campaign_id: int) -> LiveState:
             .join(Series, Series.id == Observation.series_id)
             .join(Trial, Trial.id == Series.trial_id)
             .where(Trial.campaign_id == campaign_id, Observation.window_end_ms.is_not(None))
-            .order_by(Observation.id)
+            .order_by(Observation.window_end_ms, Observation.id)  # in stand time, over runs
         )
     ]
     events = tuple(
@@ -234,7 +253,43 @@ def live_state(session: Session, campaign_id: int) -> LiveState:
         eta_wall_s=eta_wall,
         trace=tuple(decimate(trace)),
         events=events,
+        reason=_reason(summary.status, events),
+        result=campaign_result(session, campaign_id),
     )
+
+
+def _reason(status: str, events: tuple[dict[str, Any], ...]) -> str | None:
+    if status not in ("stopped", "paused", "failed"):
+        return None
+    why = [e for e in events if e["kind"] in STOP_REASONS or e["severity"] == "error"]
+    return why[-1]["message"] if why else None
+
+
+def report_files(folder: Path, campaign_id: int) -> list[Path]:
+    """The report files of the campaign in `folder` (campaign-ID.html, campaign-ID-trials.csv,
+    ... whatever their profile), newest first."""
+    name = re.compile(rf"campaign-{campaign_id}([.-].*)?\.(html|pdf|json|csv)")
+    try:
+        found = [p for p in folder.iterdir() if name.fullmatch(p.name) and p.is_file()]
+    except OSError:
+        return []
+    return sorted(found, key=lambda p: (-p.stat().st_mtime_ns, p.name))
+
+
+def report_decision(folder: Path, campaign_id: int) -> str | None:
+    """The conformity decision of the campaign's newest JSON report in `folder`, or None when
+    there is none."""
+    newest = next((p for p in report_files(folder, campaign_id) if p.suffix == ".json"), None)
+    return None if newest is None else conformity_verdict(newest)
+
+
+def conformity_verdict(report_json: Path) -> str | None:
+    """A JSON report's overall decision (PASS, FAIL, INCONCLUSIVE, NOT ASSESSED), or None when
+    it cannot be read."""
+    try:
+        return str(json.loads(report_json.read_text(encoding="utf-8"))["conformity"]["verdict"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def _current(session: Session, resume: Any) -> Current | None:

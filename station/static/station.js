@@ -48,14 +48,18 @@
   const series = (j) => "j=" + j + (j === 1 ? " (before rocking)" : " (rocking)");
   let pace = null;  // [stand ms, wall s] of the first live snapshot of this page
 
-  // The running acquisition's own snapshot (between the database's writes).
+  const WAITING = "waiting for the operator";  // the engine's phase while a prompt is open
+  const ROCKING = ["confirming the stand rocks as commanded", "settling", "observing"];
+
+  // The running acquisition's own snapshot (between the database's writes). While it waits
+  // for the operator its series has ended: the stored state (render) tells where it goes on.
   function live(l, counted) {
     if (counted) window.stationUpdates += 1;
-    if (l.trial === 0) return;
+    if (l.trial === 0 || l.phase === WAITING) return;
     $("trial").textContent = l.trial + "/" + l.n_trials;
     $("series").textContent = series(l.j);
     $("observation").textContent = l.k + "/" + l.n_obs;
-    $("phase").textContent = l.phase + (l.j === 2 && l.phase !== "done" ? ", rocking" : "");
+    $("phase").textContent = l.phase + (l.j === 2 && ROCKING.includes(l.phase) ? ", rocking" : "");
     const v = l.values_deg;
     if (v.length) {
       const mean = v.reduce((a, b) => a + b, 0) / v.length;
@@ -71,10 +75,16 @@
     $("eta").textContent = "stand " + hms(l.remaining_ms / 1000) + ", wall " + (rate > 0 ? hms(l.remaining_ms / 1000 / rate) : "?");
   }
 
-  // The question the acquisition waits for: a text field, or "yes" to confirm.
+  // The question the acquisition waits for, in a modal dialog: a text field, or "yes" to
+  // confirm.
   function prompt(p) {
-    $("prompt").hidden = !p;
-    if (!p || $("prompt-id").value === p.id) return;
+    const dialog = $("prompt");
+    if (!p) {
+      if (dialog.open) dialog.close();
+      return;
+    }
+    if (!dialog.open) dialog.showModal();
+    if ($("prompt-id").value === p.id) return;
     $("prompt-id").value = p.id;
     $("prompt-text").textContent = p.text;
     const confirm = p.kind === "confirm";
@@ -83,10 +93,63 @@
     $("answer").textContent = confirm ? "yes, confirm" : "answer";
   }
 
+  const yesNo = (v) => (v === null || v === undefined ? "not tested" : v ? "yes" : "no");
+  const estimate = (e, scale, digits, unit) =>
+    e === null ? "not estimated" : num(e.value / scale, digits) + " (" +
+      num(e.low / scale, digits) + " to " + num(e.high / scale, digits) + ")" + unit;
+
+  // The status banner: what the database holds (and whether the run waits for the operator).
+  function banner(s) {
+    const status = s.prompt ? "waiting for the operator" : s.status;
+    $("banner").className = "banner status-" + (s.prompt ? "waiting" : s.status);
+    $("status").textContent = status;
+    let detail = s.reason || "";
+    if (s.status === "interrupted") detail = "its process ended without finishing: resume continues it";
+    if (s.prompt) detail = "the stand is stopped until the question is answered";
+    if (s.status === "completed") detail = s.result ? s.result.verdict : "not analysed yet: generate the report";
+    $("status-detail").textContent = detail;
+    $("progress").max = Math.max(1, s.observations_planned);
+    $("progress").value = s.observations;
+    $("progress-text").textContent = s.observations + "/" + s.observations_planned + " observations";
+  }
+
+  // The latest analysis run's result and the report's decision; the campaign's report files.
+  function result(s) {
+    const r = s.result;
+    $("result").hidden = !r;
+    if (r) {
+      const level = ", " + num(100 * r.confidence, 0) + " % confidence";
+      $("result-c").textContent = estimate(r.c_gcm2s2, 1e7, 4, " ×10⁷ g·cm²·s⁻²") + level;
+      $("result-t").textContent = estimate(r.t_s, 1, 4, " s") + level;
+      $("result-homogeneous").textContent = yesNo(r.homogeneous);
+      $("result-adequate").textContent = yesNo(r.adequate);
+      $("result-decision").textContent = s.decision || "no report yet";
+    }
+    const job = s.report;
+    $("report-progress").hidden = !(job && (job.running || job.error));
+    if (job) {
+      $("report-stage").textContent = job.running ? "writing the report: " + job.stage
+        : job.error ? "the report failed: " + job.error : "";
+      $("report").disabled = job.running;
+    }
+    $("reports").hidden = !s.reports.length;
+    const links = $("report-links");
+    links.replaceChildren();
+    for (const name of s.reports) {
+      const a = document.createElement("a");
+      a.href = location.pathname + "/files/" + encodeURIComponent(name);
+      a.textContent = name;
+      links.append(a, " ");
+    }
+  }
+
+  const loaded = initial.status;  // a message of the action that led here is about this status
   function render(s) {
     window.stationUpdates += 1;
     window.stationAcquiring = s.acquiring;
-    $("status").textContent = s.status;
+    banner(s);
+    result(s);
+    if (s.status !== loaded && $("message")) $("message").remove();
     $("stop").hidden = !s.acquiring;
     $("resume").hidden = s.acquiring || s.status === "completed";
     prompt(s.prompt);
@@ -95,7 +158,7 @@
     $("trial").textContent = c ? c.trial + "/" + s.n_trials + (c.attempt > 1 ? " (attempt " + c.attempt + ")" : "") : "-";
     $("series").textContent = c ? series(c.j) : "-";
     $("observation").textContent = c ? c.k + "/" + s.n_obs : "-";
-    $("phase").textContent = c ? c.phase : "done";
+    $("phase").textContent = s.prompt ? "stand stopped, " + WAITING : c ? c.phase : "done";
     $("mean").textContent = c && c.mean_deg !== null ? num(c.mean_deg, 4) + "°" + (c.spread_deg === null ? "" : " (s = " + num(c.spread_deg, 4) + "°)") : "";
     $("settle").textContent = c && c.settle_estimate_deg !== null ? num(c.settle_estimate_deg, 4) + "°" : "";
     $("stand-time").textContent = hms(s.stand_time_s);

@@ -295,6 +295,12 @@ CASES = [
     ),
     Case("analyze missing csv", ("analyze", "--csv", "{tmp}/none.csv"), "cannot read"),
     Case(
+        "analyze csv that is prose",  # pandas's message ends with a newline: not shown as \\n
+        ("analyze", "--csv", "{file}"),
+        "Expected 1 fields in line 3, saw 4)",
+        make=text_file("README.md", b"Title\nplain text\ntext, with, some, commas\n"),
+    ),
+    Case(
         "analyze csv without columns",
         ("analyze", "--csv", "{file}"),
         "missing column",

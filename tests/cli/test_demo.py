@@ -1,5 +1,6 @@
 """The demo's embedded plan is the shipped paper campaign (examples/paper.toml links to it)."""
 
+import json
 from pathlib import Path
 
 from gyrostand.cmd_demo import DEMO_PLAN
@@ -40,14 +41,36 @@ def test_the_demo_runs_the_whole_chain(tmp_path: Path, monkeypatch) -> None:
     from gyrostand import cmd_demo
     from gyrostand.cli import app
 
-    from ..acquisition.harness import plan_text
+    from ..acquisition.harness import FAST_SIM, plan_text
+    from .test_fleet_commands import TRIALS
 
     plan = tmp_path / "plan.toml"
-    plan.write_text(plan_text(n_obs=3, database="runs/demo.sqlite", raw_dir="runs/raw"))
+    text = plan_text(TRIALS, n_obs=4, database="runs/demo.sqlite", raw_dir="runs/raw")
+    plan.write_text(text.replace("acquisition_only = true", "acquisition_only = false") + FAST_SIM)
     monkeypatch.setattr(cmd_demo, "DEMO_PLAN", plan)
     monkeypatch.chdir(tmp_path)
     result = CliRunner().invoke(app, ["demo", "--quiet"])
     assert result.exit_code == 0, result.output
-    assert "campaign 1 completed: 2 trials completed, 0 failed, 12 observations" in result.output
+    assert "campaign 1 completed: 4 trials completed, 0 failed, 32 observations" in result.output
     report = result.output.splitlines()[-1].removeprefix("report: ")
     assert (tmp_path / report).is_file() and (tmp_path / "runs" / "demo.sqlite").is_file()
+    # it ends with the result, as the report's JSON states it
+    written = json.loads((tmp_path / report).with_suffix(".json").read_text())
+    assert written["analysis"] is not None, written["analysis_error"]
+    fit = written["analysis"]["fit"]
+    (c, t), (c_ci, t_ci) = (
+        (fit["estimates"][k] for k in ("C_gcm2s2", "T_s")),
+        (fit["confidence_intervals"][k] for k in ("C_gcm2s2", "T_s")),
+    )
+    yes = {True: "yes", False: "no", None: "not tested"}
+    assert result.output.splitlines()[-7:-1] == [
+        "result:",
+        f"  C = {c / 1e7:.4f}e7 g·cm²·s⁻², 95 % confidence interval {c_ci[0] / 1e7:.4f}e7 to "
+        f"{c_ci[1] / 1e7:.4f}e7",
+        f"  T = {t:.4f} s, 95 % confidence interval {t_ci[0]:.4f} to {t_ci[1]:.4f}",
+        f"  trial variances homogeneous (Cochran): "
+        f"{yes[written['analysis']['cochran']['homogeneous']]}",
+        f"  model adequate on the trial means (Fisher): "
+        f"{yes[written['analysis']['adequacy']['adequate_mean_basis']]}",
+        f"  report's decision: {written['conformity']['verdict']}",
+    ]

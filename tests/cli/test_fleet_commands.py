@@ -144,7 +144,9 @@ def test_the_quick_plan_is_the_papers_trials_on_a_quicker_compass() -> None:
         (("report", "--model", MODEL, "--by", "Lot!"), "--by 'Lot!' is no label key"),
         (
             ("report", "--model", MODEL, "--by", "lot"),
-            f"model {MODEL}: the fleet has 0 groups by lot: at least 2 are needed",
+            f"model {MODEL}: the fleet has 0 groups by lot: at least 2 are needed to compare them "
+            "(left out: campaigns 1, 2, 3, 4, 5, 6: no label lot (campaign run/import --tag "
+            "lot=...))",
         ),
         (("analyze", "--model", "nope", "--by", "factory"), "no completed campaign of model"),
         (("analyze", "--model", MODEL, "--by", "Lot!"), "--by 'Lot!' is no label key"),

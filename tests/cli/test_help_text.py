@@ -76,3 +76,8 @@ def test_every_command_is_one_sentence_on_one_line() -> None:
 def test_shell_completion_is_offered() -> None:
     output = help_of(())
     assert "--install-completion" in output and "--show-completion" in output
+
+
+def test_paragraphs_are_wrapped_to_the_terminal_not_where_the_source_breaks() -> None:
+    wide = help_of(("fleet", "simulate"))
+    assert "drawn from the type's distribution" in wide  # on one line at 200 columns

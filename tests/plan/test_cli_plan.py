@@ -13,6 +13,8 @@ from typer.testing import CliRunner
 from gyrostand.cli import app
 from gyrostand.plan.model import PlanError, parse_any_plan, parse_plan
 
+ERROR = "gyrostand: error: "  # plan check's problems, one per line on stderr
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "examples" / "paper.toml"
 SHIPPED = sorted(ROOT.glob("examples/*.toml")) + [ROOT / "gyrostand" / "plans" / "paper.toml"]
@@ -76,21 +78,24 @@ def test_bad_plan_lists_every_problem_with_its_path(tmp_path: Path) -> None:
     code, out = gyrostand("plan", "check", plan)
     assert code == 1 and "Traceback" not in out
     assert out.splitlines() == [
-        f"{plan}: [campaign] n_obs: must be >= 2",
-        f"{plan}: [[trials]] 4 period_s: must be > 0",
-        f"{plan}: [settle] hold_s: must be >= 0",
-        f"{plan}: [tracking] confirm: unknown key",
+        f"{ERROR}{plan}: [campaign] n_obs: must be >= 2",
+        f"{ERROR}{plan}: [[trials]] 4 period_s: must be > 0",
+        f"{ERROR}{plan}: [settle] hold_s: must be >= 0",
+        f"{ERROR}{plan}: [tracking] confirm: unknown key",
     ]
 
 
 def test_unreadable_file_and_syntax_error_are_one_line(tmp_path: Path) -> None:
     missing = tmp_path / "missing.toml"
     code, out = gyrostand("plan", "check", missing)
-    assert (code, out) == (1, f"{missing}: cannot read the file (No such file or directory)\n")
+    assert (code, out) == (
+        1,
+        f"{ERROR}{missing}: cannot read the file (No such file or directory)\n",
+    )
     broken = tmp_path / "broken.toml"
     broken.write_text("[campaign\n")
     code, out = gyrostand("plan", "check", broken)
-    assert code == 1 and out.count("\n") == 1 and out.startswith(f"{broken}: TOML syntax: ")
+    assert code == 1 and out.count("\n") == 1 and out.startswith(f"{ERROR}{broken}: TOML syntax: ")
 
 
 def test_check_also_prepares_the_run(tmp_path: Path) -> None:
@@ -261,3 +266,17 @@ def test_schema_describes_every_field(schema: dict[str, Any]) -> None:
         for key, field in table.get("properties", {}).items():
             if "$ref" not in field:  # a subtable: its own definition is described
                 assert field.get("description"), f"{name}.{key} has no description"
+
+
+@pytest.mark.parametrize(
+    ("bus", "said"),
+    [
+        ('timing = "virtual"', "simulated stand in virtual time,"),
+        ('timing = "realtime"\nspeedup = 50.0', "real time (paced by the wall clock),"),
+    ],
+)
+def test_the_summary_names_the_simulated_stand_s_pace(tmp_path: Path, bus: str, said: str) -> None:
+    plan = tmp_path / "plan.toml"
+    plan.write_text(PAPER.read_text().replace('timing = "virtual"', bus, 1))
+    code, out = gyrostand("plan", "check", plan)
+    assert code == 0 and said in out and "realtime time" not in out, out

@@ -24,6 +24,8 @@ from gyrostand.plan.model import (
     parse_plan,
 )
 
+ERROR = "gyrostand: error: "  # plan check's problems, one per line on stderr
+
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "examples" / "paper.toml"
 TEXT = PAPER.read_text()
@@ -160,14 +162,15 @@ def test_plan_check_shows_the_bounds_of_n(tmp_path: Path) -> None:
     result = runner.invoke(app, ["plan", "check", str(plan)])
     assert result.exit_code == 1
     assert result.output == (
-        f"{plan}: [campaign] n_obs: must be <= 2147483647 "
+        f"{ERROR}{plan}: [campaign] n_obs: must be <= 2147483647 "
         "(observation k is a 32-bit integer column of the database)\n"
     )
     plan.write_text(_with(TEXT, "n_obs = 5 ", "n_obs = 1000000000 "))
     result = runner.invoke(app, ["plan", "check", str(plan)])
     assert result.exit_code == 1
     assert result.output == (
-        f"{plan}: [campaign] n_obs: 1000000000 x (64 s window + 0 s spacing) = 740740.7 days of "
+        f"{ERROR}{plan}: [campaign] n_obs: 1000000000 x (64 s window + 0 s spacing) = "
+        "740740.7 days of "
         "stand time in the longest series; a series may take at most 7 days\n"
     )
 
@@ -245,17 +248,18 @@ def test_plan_check_shows_every_problem(tmp_path: Path) -> None:
     result = runner.invoke(app, ["plan", "check", str(plan)])
     assert result.exit_code == 1
     lines = result.output.splitlines()
-    assert lines[0].startswith(f"{plan}: [[trials]]: 2 fit trials, but the analysis needs")
+    assert lines[0].startswith(f"{ERROR}{plan}: [[trials]]: 2 fit trials, but the analysis needs")
     assert lines[1:] == [
-        f"{plan}: [[trials]] 3 amplitude_cm: 60 exceeds the stand's limit 50 cm",
-        f"{plan}: [campaign] n_obs: 1000000000 x (64 s window + 0 s spacing) = 740740.7 days of "
+        f"{ERROR}{plan}: [[trials]] 3 amplitude_cm: 60 exceeds the stand's limit 50 cm",
+        f"{ERROR}{plan}: [campaign] n_obs: 1000000000 x (64 s window + 0 s spacing) = "
+        "740740.7 days of "
         "stand time in the longest series; a series may take at most 7 days",
     ]
     plan.write_text(_with(TEXT, "n_obs = 5 ", f"n_obs = {10**30} "))
     result = runner.invoke(app, ["plan", "check", str(plan)])
     assert result.exit_code == 1
     assert result.output == (
-        f"{plan}: [campaign] n_obs: must be <= 2147483647 "
+        f"{ERROR}{plan}: [campaign] n_obs: must be <= 2147483647 "
         "(observation k is a 32-bit integer column of the database)\n"
     )
 
@@ -268,6 +272,7 @@ def test_a_trial_the_stand_command_cannot_carry_is_a_plan_problem(tmp_path: Path
     result = CliRunner().invoke(app, ["plan", "check", str(plan)])
     assert result.exit_code == 1
     assert result.output == (
-        f"{plan}: [[trials]] 1: the stand command cannot carry it: STAND_COMMAND.DIRECTION = "
+        f"{ERROR}{plan}: [[trials]] 1: the stand command cannot carry it: "
+        "STAND_COMMAND.DIRECTION = "
         "359.999 is outside the allowed range [0, 359.99] deg\n"
     )

@@ -122,7 +122,7 @@ def test_bad_knobs_fail_in_one_line(pytester: pytest.Pytester) -> None:
     result.assert_outcomes(errors=2, failed=1)
     result.stdout.fnmatch_lines(
         [
-            "*simulated stand: faults.dorp_rate: Extra inputs are not permitted",
+            "*simulated stand: faults.dorp_rate: Extra inputs are not permitted; valid: drop_rate*",
             "*simulated stand: noise.white_sigma_deg: must be a number >= 0, got -1.0",
             "E * inject_fault: drop_rate must be a probability in ?0, 1?",
         ],

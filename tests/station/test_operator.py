@@ -80,7 +80,7 @@ def test_prompt_answered_and_stop_requested_for_a_run_started_elsewhere(tmp_path
         until(lambda: db.exists() and prompts_of(db), "the first prompt")
         client = station(db, tmp_path / "reports")
         page = client.get("/campaigns/1").text
-        assert '<span id="status">running</span>' in page  # its lease is held elsewhere
+        assert '<strong id="status">running</strong>' in page  # its lease is held elsewhere
         assert initial(page)["prompt"] == {
             "id": "plate",
             "text": "serial number on the plate?",
@@ -114,7 +114,7 @@ def test_prompt_answered_and_stop_requested_for_a_run_started_elsewhere(tmp_path
         ("safe stop requested at the station: stand told to stop rocking",)
     ]
     page = client.get("/campaigns/1").text
-    assert '<span id="status">stopped</span>' in page and initial(page)["prompt"] is None
+    assert '<strong id="status">stopped</strong>' in page and initial(page)["prompt"] is None
     late = client.post("/campaigns/1/stop", data=csrf(client))
     assert "is not being acquired: nothing to stop" in late.text
     # resumed from a terminal without one, the trial's prompt answered on the command line
@@ -136,7 +136,7 @@ def test_a_campaign_whose_process_died_shows_interrupted(client_for) -> None:
     db = Path(client.app.state.processes.db)  # the client's copy
     with closing(sqlite3.connect(db)) as conn, conn:
         conn.execute("UPDATE campaign SET status = 'running'")  # as a kill -9 leaves it
-    assert '<span id="status">interrupted</span>' in client.get("/campaigns/1").text
+    assert '<strong id="status">interrupted</strong>' in client.get("/campaigns/1").text
     listing = client.get("/").text
     assert "<td>interrupted</td>" in listing and "<td>running</td>" not in listing
     body = ""
@@ -161,13 +161,15 @@ def test_plan_upload_is_checked_per_field_and_asks_the_campaign_prompts(
     assert cells == [("[campaign] n_obs", "must be &gt;= 2")]
     assert not (tmp_path / "reports" / "plans").exists()  # nothing kept of a bad plan
     files = {"upload": ("p.toml", (plan.read_text() + CAMPAIGN_PROMPT).encode(), "text/plain")}
-    asked = client.post("/campaigns", data=csrf(client), files=files)
+    checked = client.post("/campaigns", data=csrf(client), files=files)
+    assert checked.status_code == 200 and 'id="problems"' not in checked.text  # asked, no error
+    assert 'type="checkbox" name="answer-oil" value="yes"' in checked.text
+    saved = re.search(r'name="plan" value="([^"]+)"', checked.text)
+    assert saved is not None and Path(saved[1]).read_text().endswith(CAMPAIGN_PROMPT)
+    asked = client.post("/campaigns", data={"plan": saved[1], "start": "1", **csrf(client)})
     assert asked.status_code == 400
     cells = re.findall(r"<tr><td>([^<]*)</td><td>([^<]*)</td></tr>", asked.text)
     assert cells == [("[[prompt]] oil", "answer yes to confirm (fluid topped up?)")]
-    assert 'type="checkbox" name="answer-oil" value="yes"' in asked.text
-    saved = re.search(r'name="plan" size="60" value="([^"]+)"', asked.text)
-    assert saved is not None and Path(saved[1]).read_text().endswith(CAMPAIGN_PROMPT)
     garbled = {"upload": ("x.toml", b"\xff\xfe", "text/plain")}
     text = client.post("/campaigns", data=csrf(client), files=garbled).text
     assert "x.toml is not UTF-8 text" in text

@@ -32,8 +32,8 @@ def serving(station_db: Path, folder: Path, *options: str) -> Iterator[int]:
     db = folder / "db.sqlite"
     with sqlite3.connect(station_db) as src, sqlite3.connect(db) as dst:
         src.backup(dst)
-    (folder / "reports" / "1").mkdir(parents=True)
-    (folder / "reports" / "1" / "campaign-1.html").write_text("the report")
+    (folder / "reports").mkdir(parents=True)
+    (folder / "reports" / "campaign-1.html").write_text("the report")
     port = free_port()
     command = [sys.executable, "-m", "gyrostand", "station", "--db", str(db), "--port", str(port)]
     command += ["--reports", str(folder / "reports"), *options]

@@ -32,7 +32,7 @@ def test_campaigns_page_lists_and_filters(client_for) -> None:
 def test_campaign_page_and_stream_hold_the_stored_campaign(client_for) -> None:
     client = client_for()
     page = client.get("/campaigns/1").text
-    assert '<span id="status">completed</span>' in page
+    assert '<strong id="status">completed</strong>' in page
     body = ""
     with client.stream("GET", "/campaigns/1/stream") as response:  # "end": nothing acquiring
         assert response.headers["content-type"].startswith("text/event-stream")

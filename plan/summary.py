@@ -1,0 +1,42 @@
+"""A checked plan in words: its design, N, settle method and bus on one line (`gyrostand plan
+check`, the station's start form), and why a design is fragile."""
+
+from __future__ import annotations
+
+from gyrostand.plan.model import FEW_RESIDUAL_DOF, FIT_PARAMETERS, K_PROMPT, Plan
+
+
+def describe(plan: Plan) -> str:
+    """The design with the fit's residual degrees of freedom, N, settle, acceptance, bus."""
+    fit = sum(t.role == "fit" for t in plan.trials)
+    design = f"{len(plan.trials)} trials ({fit} fit, {len(plan.trials) - fit} control)"
+    if not plan.campaign.acquisition_only:
+        design += f", {plan.residual_dof} residual degrees of freedom"
+    bus = plan.bus
+    if bus.simulated:
+        pace = "virtual time" if bus.timing == "virtual" else "real time (paced by the wall clock)"
+        where = f"simulated stand in {pace}"
+    else:
+        where = f"python-can {bus.interface or '(configured)'} {bus.channel or ''}".rstrip()
+    if plan.stand.protocol == "cia402":
+        k_prompts = sum(p.id.startswith(K_PROMPT) for p in plan.prompt)
+        where += f", CiA 402 drive node {plan.stand.node_id} (K set by hand: {k_prompts} prompts)"
+    if plan.compass.protocol != "gyrostand":
+        where += f", compass on {plan.compass.protocol}"
+    if plan.inclinometer_mount is not None:
+        protocol, address, axis, _ = plan.inclinometer_mount
+        where += f", roll measured by a {protocol} inclinometer ({address}, axis {axis})"
+    acceptance = ", acceptance by excursions" if plan.acceptance is not None else ""
+    return f"{design}, N = {plan.n_obs}, settle by {plan.settle.method}{acceptance}, {where}"
+
+
+def design_warning(plan: Plan) -> str | None:
+    """Why the design is fragile when it leaves few residual degrees of freedom (None if not)."""
+    dof = plan.residual_dof
+    if plan.campaign.acquisition_only or dof > FEW_RESIDUAL_DOF:
+        return None
+    return (
+        f"the fit of C and T leaves {dof} residual degree{'s' if dof != 1 else ''} of freedom "
+        f"(fit trials minus the {FIT_PARAMETERS} parameters): its t({dof}) intervals are wide, "
+        "and a residual variance near 0 by chance goes unnoticed in them; add fit trials"
+    )
