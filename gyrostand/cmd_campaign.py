@@ -161,7 +161,7 @@ def preflight(plan: Plan) -> None:
             )
         try:
             if plan.compass.protocol == "nmea2000":
-                _, name, instrument = plan.heading_source
+                _, name, instrument, _ = plan.heading_source
                 identify(opened, None if name is None else int(name, 16), instrument)
         except IdentificationError as exc:
             fail(str(exc), code=EXIT_FAILED)

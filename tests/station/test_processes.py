@@ -2,7 +2,6 @@
 (`ps` shows every process's arguments: a PostgreSQL URL's password would be readable by every
 user of the machine), and the commands' --db default reads it."""
 
-import asyncio
 import json
 import sys
 from pathlib import Path
@@ -33,7 +32,9 @@ def test_the_station_hands_the_database_over_in_the_environment(tmp_path: Path) 
     processes = Processes(URL, recorder(acquisition))
     processes.resume(3)
     assert processes.acquisitions[3].process.wait() == 0
-    asyncio.run(Processes(URL, recorder(report)).report(3, tmp_path, "html"))
+    reports = Processes(URL, recorder(report))
+    reports.report(3, tmp_path, "html")
+    assert reports.reports[3].process.process.wait() == 0
     for out, args in (
         (acquisition, ["campaign", "resume", "3", "--quiet"]),
         (report, ["report", "3", "--out", str(tmp_path), "--format", "html"]),
