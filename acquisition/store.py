@@ -15,6 +15,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from gyrostand import SOFTWARE_VERSION
 from gyrostand.acquisition.engine import Measured, ObservationResult, SeriesCompensation, TrialState
 from gyrostand.acquisition.retry import new_attempt
+from gyrostand.acquisition.serial_input import serial_source
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.db.lease import take_lease
 from gyrostand.db.models import Campaign, Event, Observation, RawLogSegment, Series, Trial
@@ -112,7 +113,10 @@ class CampaignStore:
         with writer(sessions).begin() as session:
             campaign = new_campaign(session, header, status="running", source=source, labels=labels)
             virtual = plan.bus.simulated and plan.bus.timing == "virtual"
-            heading = source_info(codec_for(plan), plan.compass.protocol, virtual)
+            if plan.compass.protocol == "iec61162":
+                heading = serial_source(plan).info
+            else:
+                heading = source_info(codec_for(plan), plan.compass.protocol, virtual)
             campaign.heading_source = heading.protocol
             campaign.heading_time_base = heading.time_base
             campaign.heading_resolution_deg = heading.resolution_deg

@@ -101,7 +101,11 @@ class Iec61162Source:
 
     def close(self, clock: CampaignClock) -> SourceOutput:
         """The end of the stream: a sentence cut by it is truncated."""
-        return self.decode_pieces(self._framer.close(), clock)
+        return self.decode_pieces(self.close_pieces(), clock)
+
+    def close_pieces(self) -> list[Received]:
+        """The end of the stream, framed: a sentence cut by it is truncated."""
+        return self._framer.close()
 
     def decode_pieces(
         self,

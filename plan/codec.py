@@ -23,6 +23,22 @@ def sim_config(bus: BusPlan) -> SimConfig:
     return simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
 
 
+def _serial_problems(plan: Plan) -> list[str]:
+    """A serial compass: a real one needs its port; the simulated stand's is simulated too (on
+    a pseudo-terminal pair of its own, in virtual time: timed by the simulation; its line is
+    checked by `acquisition.serial_input.check_serial`)."""
+    if not plan.bus.simulated:
+        if plan.compass.port is None:
+            return ['[compass] port: missing (the compass\'s serial port, e.g. "/dev/ttyUSB0")']
+        return []
+    if plan.bus.timing != "virtual":
+        return [
+            '[compass] protocol: "iec61162" on the simulated stand needs [bus] timing = '
+            '"virtual" (its simulated compass is timed by the simulation)'
+        ]
+    return []
+
+
 def prepare(plan: Plan) -> None:
     """Everything that can be checked before the bus or the database is touched (PlanError),
     including that the stand command of every trial can be encoded (its DBC ranges)."""
@@ -39,11 +55,13 @@ def prepare(plan: Plan) -> None:
             '"gyrostand" stand controller only)'
         )
     compass = plan.compass
-    if compass.protocol in ("iec61162", "cia406"):
+    if compass.protocol == "cia406":
         problems.append(
-            f'[compass] protocol: "{compass.protocol}" is not runnable yet (gyrostand, dbc and '
-            "nmea2000 are)"
+            '[compass] protocol: "cia406" is not runnable yet (gyrostand, dbc, nmea2000 and '
+            "iec61162 are)"
         )
+    elif compass.protocol == "iec61162":
+        problems += _serial_problems(plan)
     elif compass.own_bus:
         problems.append(
             "[compass] interface: a compass on a CAN bus of its own is not runnable yet (put it "
