@@ -35,7 +35,7 @@ HDT_RESOLUTION_DEG = 0.1  # a real compass: HDT's one decimal (THS's two are fin
 SIM_SENTENCES = ("THS", "ROT")  # the simulated compass: THS, IEC 61162-1 Ed. 5's heading
 THS_RESOLUTION_DEG = 0.01
 READ_GUARD_WALL_S = 60.0  # virtual time: the pty gives back what was written at once
-SIM_PORT = "the simulated compass's line"  # its name in messages (the pty's path varies)
+SIM_PORT = "(simulated line)"  # its name in messages (the pty's path varies)
 
 
 def serial_log_path(can_log: Path | str) -> Path:

@@ -75,6 +75,7 @@ class Iec61162Source:
                 f"(reception - stand time) over the last {WINDOW} stand statuses"
             ),
             sequence=UNNUMBERED,
+            silence=f"serial port {port} silent",
         )
         self._framer = Framer(baud)
         self._alarms: dict[str, Alarm] = {}  # the last of each alarm, to tell its changes
