@@ -170,7 +170,7 @@ def run_live(
         progress = store.progress()
     _remove_live_files(segments)  # left by killed runs: never to be taken for this one's
     raw_log = raw_log_path(store, plan, segments)
-    serial = _serial_input(plan, codec, raw_log, clock_ms, segments if first_frame else ())
+    serial = _serial_input(plan, codec, raw_log, clock_ms, segments if start == "continued" else ())
     segment = store.open_segment(str(raw_log), start if segments else "new", first_frame)
     store.set_status("running")
     try:
