@@ -870,7 +870,7 @@ class Plan(_Table):
             message = 'protocol = "dbc" needs the lab\'s DBC ([protocol] dbc_path)'
             errors.append(_error("compass", ("compass", "protocol"), message))
         if (
-            compass.protocol == "nmea2000"
+            compass.protocol in ("nmea2000", "iec61162")
             and not self.bus.simulated
             and self.bus.timing == "virtual"
         ):

@@ -24,7 +24,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PLAN = ROOT / "examples" / "paper.toml"
-SOURCES = ("gyrostand", "nmea2000")
+SOURCES = ("gyrostand", "nmea2000", "iec61162")
 
 
 def campaign(folder: Path, protocol: str, seed: int) -> dict[str, dict[str, float]]:
