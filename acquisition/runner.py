@@ -26,14 +26,9 @@ from gyrostand.acquisition.bus import LiveBus
 from gyrostand.acquisition.engine import Command, CommandNotSent, Engine, Phase
 from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
-from gyrostand.acquisition.serial_input import (
-    SerialInput,
-    check_serial_logs,
-    logged_pieces,
-    replay_stream,
-)
+from gyrostand.acquisition.serial_input import SerialInput, replay_stream
 from gyrostand.acquisition.store import CampaignStore
-from gyrostand.acquisition.virtual_time import Grants, StreamClock
+from gyrostand.acquisition.virtual_time import Grants
 from gyrostand.db.merge import database_identity
 from gyrostand.db.models import Campaign, Observation, RawLogSegment, Series, Trial
 from gyrostand.db.queries import (
@@ -46,8 +41,10 @@ from gyrostand.db.queries import (
 )
 from gyrostand.db.wal import checkpoint
 from gyrostand.devices.decoder import frame_decoder, source_info
+from gyrostand.devices.serial_replay import logged_pieces
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
+from gyrostand.frames.stream_clock import StreamClock
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import MIN_FIT_TRIALS, Plan
 from gyrostand.stand.controller import StandController, StandError
@@ -489,10 +486,9 @@ def replay(
     paths = [log.path for log in checked]
     if plan.compass.protocol == "iec61162":  # its sentences from the serial logs beside
         try:
-            check_serial_logs(plan, paths)
+            decoder, stream = replay_stream(plan, codec, paths)
         except LogFileError as exc:
             raise ReplayLogError(str(exc)) from exc
-        decoder, stream = replay_stream(plan, codec, paths)
         info = decoder.source.info
     else:
         decoder, stream = frame_decoder(codec, *plan.heading_source), read_segments(paths)

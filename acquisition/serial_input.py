@@ -11,23 +11,22 @@ IEC 61162-450 TAG-block log (`devices.tagblock`), the CAN log's name with `.nmea
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from gyrostand.acquisition.virtual_time import StreamClock
-from gyrostand.devices.framing import Received
 from gyrostand.devices.iec61162 import Iec61162Source
 from gyrostand.devices.serial_config import SerialCompassConfig
 from gyrostand.devices.serial_decoder import SerialSourceDecoder
 from gyrostand.devices.serial_port import SerialPortError, SerialReader, open_port
+from gyrostand.devices.serial_replay import check_serial_logs, serial_log_path, serial_replay
 from gyrostand.devices.serial_sim import SerialCompass, VirtualLine
 from gyrostand.devices.source import ByteChunks
-from gyrostand.devices.tagblock import SUFFIX, TagBlockWriter, read_tag_log
-from gyrostand.frames.batch import FrameBatch, RawFrames
-from gyrostand.frames.logfile import LogFileError, blf_start_s, read_raw_frames, sha256_of
+from gyrostand.devices.tagblock import TagBlockWriter
+from gyrostand.frames.batch import RawFrames
+from gyrostand.frames.logfile import sha256_of
 from gyrostand.plan.model import Plan
 from gyrostand.stand.protocol import Codec
 
@@ -36,11 +35,6 @@ SIM_SENTENCES = ("THS", "ROT")  # the simulated compass: THS, IEC 61162-1 Ed. 5'
 THS_RESOLUTION_DEG = 0.01
 READ_GUARD_WALL_S = 60.0  # virtual time: the pty gives back what was written at once
 SIM_PORT = "(simulated line)"  # its name in messages (the pty's path varies)
-
-
-def serial_log_path(can_log: Path | str) -> Path:
-    """The serial raw log beside a CAN raw log."""
-    return Path(can_log).with_suffix(SUFFIX)
 
 
 def check_serial(plan: Plan) -> None:
@@ -84,15 +78,6 @@ def virtual_time_base(baud: int) -> str:
     )
 
 
-def stand_times(plan: Plan) -> Callable[[FrameBatch], np.ndarray] | None:
-    """Virtual time: the stand's frames timed by the stand time they carry (as the raw log
-    keeps them, `StreamClock`), which is also the simulated line's clock."""
-    if plan.bus.timing != "virtual":
-        return None
-    clock = StreamClock()
-    return lambda batch: clock.times_s(batch, 0)
-
-
 class LineTransmitter:
     """The simulated stand's heading transmitter on a virtual serial line: each batch of
     samples written onto the pty at once, timed on the stand clock (from `clock_ms`)."""
@@ -132,10 +117,9 @@ class SerialInput:
             self._close_line()
             raise
         self.log = TagBlockWriter(self.path, skip=skip)
-        self.source = serial_source(plan)
         self._virtual = plan.bus.timing == "virtual"
-        times = stand_times(plan)
-        self.decoder = SerialSourceDecoder(codec, self.source, self.take, stand_time=times)
+        self.source = serial_source(plan)
+        self.decoder = SerialSourceDecoder(codec, self.source, self.take, stand_time=self._virtual)
         self.info = self.source.info
 
     def stream_pos(self, frame: int) -> int:
@@ -187,64 +171,11 @@ class SerialInput:
             self.line.close()
 
 
-def logged_pieces(can_logs: Sequence[str | Path]) -> int:
-    """The pieces of the serial logs beside earlier segments' CAN logs (complete lines)."""
-    return sum(
-        sum(1 for _ in read_tag_log(p)) for p in map(serial_log_path, can_logs) if p.is_file()
-    )
-
-
-class ReplayedLine:
-    """The serial logs beside a replay's CAN logs, read in order as one line: `until(us)`
-    gives the pieces whose first byte came before that time (`SerialSourceDecoder`'s
-    `replayed`: it holds those still on the wire after its batch's frames)."""
-
-    def __init__(self, paths: Sequence[Path]) -> None:
-        self._pieces: Iterator[Received] = (p for path in paths for p in read_tag_log(path))
-        self._next: Received | None = next(self._pieces, None)
-
-    def until(self, horizon_us: int) -> list[Received]:
-        out: list[Received] = []
-        while self._next is not None and self._next.time_s * 1e6 < horizon_us:
-            out.append(self._next)
-            self._next = next(self._pieces, None)
-        return out
-
-
-def check_serial_logs(plan: Plan, can_logs: Sequence[Path]) -> int:
-    """The serial logs beside a replay's CAN logs, read whole (`LogFileError` naming what is
-    wrong); their pieces. Out of virtual time each CAN log must give its start time (the
-    serial log's times are Unix times, the CAN log's relative to its start)."""
-    pieces = 0
-    for log in can_logs:
-        path = serial_log_path(log)
-        if not path.is_file():
-            raise LogFileError(f"{path}: no serial log beside {log.name} (the compass's sentences)")
-        try:
-            pieces += sum(1 for _ in read_tag_log(path))
-        except OSError as exc:
-            raise LogFileError(f"{path}: {exc.strerror or exc}") from exc
-        if plan.bus.timing != "virtual" and blf_start_s(log) is None:
-            raise LogFileError(
-                f"{log}: no start time in its header (its writer was killed): its frames "
-                "cannot be put on the serial log's clock"
-            )
-    return pieces
-
-
 def replay_stream(
     plan: Plan, codec: Codec, can_logs: Sequence[Path]
 ) -> tuple[SerialSourceDecoder, Iterator[RawFrames]]:
-    """A replay's decoder and its CAN frames, on the serial log's clock."""
-    line = ReplayedLine([serial_log_path(p) for p in can_logs])
-    source = serial_source(plan)
-    decoder = SerialSourceDecoder(codec, source, replayed=line.until, stand_time=stand_times(plan))
-
-    def frames() -> Iterator[RawFrames]:
-        for log in can_logs:
-            start = blf_start_s(log) or 0.0
-            for raw in read_raw_frames(log):
-                raw.timestamp[:] += start
-                yield raw
-
-    return decoder, frames()
+    """A replay's decoder and its CAN frames (`devices.serial_replay`), the logs checked
+    first (`LogFileError`)."""
+    virtual = plan.bus.timing == "virtual"
+    check_serial_logs(can_logs, virtual)
+    return serial_replay(codec, serial_source(plan), can_logs, virtual)

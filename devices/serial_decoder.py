@@ -21,6 +21,7 @@ from gyrostand.devices.iec61162 import Iec61162Source
 from gyrostand.devices.source import ByteChunks
 from gyrostand.devices.tagblock import reception_ms
 from gyrostand.frames.batch import BatchDecoder, FrameBatch, RawFrames
+from gyrostand.frames.stream_clock import StreamClock
 from gyrostand.stand.protocol import Codec
 
 
@@ -29,9 +30,8 @@ class SerialSourceDecoder:
 
     The pieces come from `take` (the chunks the port has read since the last batch) or, in a
     replay, from `replayed(horizon_us)` (the raw log's pieces up to that time at least).
-    `stand_time`: the stand's frames' times from the batch of them alone (virtual time:
-    the stand time they carry, `acquisition.virtual_time.StreamClock`, which is also the
-    serial line's time and the raw log's)."""
+    `stand_time`: the stand's frames timed by the stand time they carry (virtual time, where it
+    is also the serial line's time and the raw log's: `frames.stream_clock`)."""
 
     def __init__(
         self,
@@ -40,14 +40,14 @@ class SerialSourceDecoder:
         take: Callable[[], ByteChunks] | None = None,
         *,
         replayed: Callable[[int], Iterable[Received]] | None = None,
-        stand_time: Callable[[FrameBatch], np.ndarray] | None = None,
+        stand_time: bool = False,
     ) -> None:
         self.stand = BatchDecoder(codec)
         self.source = source
         self.take = take
         self.replayed = replayed
         self.clock = ReceptionClock()
-        self._stand_time = stand_time
+        self._stream_clock = StreamClock() if stand_time else None
         self._byte_us = byte_time_s(source.baud) * 1e6
         self._held: list[tuple[int, Received]] = []  # pieces after the last batch's frames
         self.end = 0  # merged stream position of the next frame or piece
@@ -71,8 +71,8 @@ class SerialSourceDecoder:
 
     def decode(self, raw: RawFrames) -> FrameBatch:
         stand = self.stand.decode(replace(raw, start=0))
-        if self._stand_time is not None:  # (in place: the raw log's timestamps too)
-            raw.timestamp[:] = self._stand_time(stand)
+        if self._stream_clock is not None:  # (in place: the raw log's timestamps too)
+            raw.timestamp[:] = self._stream_clock.times_s(stand, 0)
         n = len(raw)
         latest = np.maximum.accumulate(np.round(raw.timestamp * 1e6).astype(np.int64))
         horizon = int(latest[-1]) if n else -1

@@ -25,9 +25,9 @@ from sqlalchemy.exc import DBAPIError
 
 import gyrostand.acquisition.runner  # noqa: F401  (imported once, before the forks)
 import gyrostand.cmd_campaign  # noqa: F401
-from gyrostand.acquisition.serial_input import serial_log_path
 from gyrostand.cli import app
 from gyrostand.devices.framing import Received
+from gyrostand.devices.serial_replay import serial_log_path
 from gyrostand.devices.tagblock import read_tag_log
 from gyrostand.frames.logfile import BatchBLFWriter, read_segments
 from tests.acquisition.harness import FAST_SIM, plan_text

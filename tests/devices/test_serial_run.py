@@ -15,6 +15,9 @@ from typer.testing import CliRunner
 
 from gyrostand.cli import app
 from gyrostand.devices.tagblock import read_tag_log
+from gyrostand.plan.codec import codec_for
+from gyrostand.plan.model import parse_plan
+from gyrostand.report.signal_record import heading_source, headings_in
 from tests.acquisition.harness import FAST_SIM, plan_text
 
 runner = CliRunner()
@@ -120,3 +123,21 @@ def test_a_port_that_does_not_open_is_one_line_before_anything_is_written(
         f"gyrostand: error: serial port {port}: cannot open it (No such file or directory)"
     )
     assert not (tmp_path / "db.sqlite").exists()
+
+
+def test_the_report_reads_the_headings_from_the_serial_log(campaign: Path) -> None:
+    """The report's heading traces and reading record (`report.signal_record.headings_in`) take
+    the headings from the serial log: every THS sentence in trial 1's still series, at its
+    reception time (virtual time: the stand time of its sample)."""
+    plan = parse_plan(campaign.read_text())
+    (blf,) = (campaign.parent / "raw").glob("*.blf")
+    windows = [o for o in observations(campaign.with_name("db.sqlite")) if o[:2] == (1, 1)]
+    span = (min(o[4] for o in windows), max(o[5] for o in windows))
+    t, h = headings_in([blf], codec_for(plan), {1: span}, heading_source(plan))[1]
+    ths = [
+        (round(p.time_s * 1000), float(p.data.split(b",")[1]))
+        for p in read_tag_log(blf.with_suffix(".nmea"))
+        if p.data.startswith(b"$HETHS") and span[0] <= p.time_s * 1000 < span[1]
+    ]
+    assert len(ths) == (span[1] - span[0]) // 500  # one every 0.5 s (2 Hz)
+    assert list(zip(t.tolist(), h.tolist(), strict=True)) == ths
