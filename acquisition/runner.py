@@ -41,7 +41,7 @@ from gyrostand.db.queries import (
 )
 from gyrostand.db.wal import checkpoint
 from gyrostand.devices.decoder import frame_decoder, source_info
-from gyrostand.devices.serial_replay import logged_pieces
+from gyrostand.devices.serial_replay import logged_pieces, serial_log_path
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.frames.stream_clock import StreamClock
@@ -267,16 +267,15 @@ def run_live(
     finally:
         live_file.close()
         live.close()
-        if serial is not None:
-            _close_serial(store, serial)
+        serial_log = _close_serial(store, serial) if serial is not None else None
         sha = sha256_of(raw_log)
         log_error = live.recorder.log_error
         if log_error is None:
-            store.close_segment(segment, live.recorder.logged, sha)
+            store.close_segment(segment, live.recorder.logged, sha, serial=serial_log)
             store.run_event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
         else:  # it ends before the run did, as a killed run's does
             frames = _readable_frames(raw_log)
-            store.close_segment(segment, frames, sha, ending="killed")
+            store.close_segment(segment, frames, sha, ending="killed", serial=serial_log)
             store.run_event(
                 "raw log",
                 "error",
@@ -303,11 +302,13 @@ def _serial_input(
     return SerialInput(plan, codec, raw_log, clock_ms, logged_pieces([s.path for s in earlier]))
 
 
-def _close_serial(store: CampaignStore, serial: SerialInput) -> None:
+def _close_serial(store: CampaignStore, serial: SerialInput) -> tuple[int | None, str | None]:
+    """Close the serial input: its log's lines and hash, also in an event."""
     lines, sha = serial.close()
     store.run_event(
         "raw log", "info", f"serial sentences in {serial.path} ({lines} lines, sha256 {sha})"
     )
+    return lines, sha
 
 
 class RawLogFailed(RuntimeError):
@@ -502,7 +503,7 @@ def replay(
                 seq = store.open_segment(
                     str(log.path.resolve()), "continued" if position else "new", position
                 )
-                store.close_segment(seq, log.frames, log.sha256)
+                store.close_segment(seq, log.frames, log.sha256, serial=serial_log_of(log.path))
                 position += log.frames
                 if log.truncated is not None:
                     store.run_event(
@@ -561,13 +562,26 @@ def close_killed_segments(store: CampaignStore) -> None:
         ]
     for seq, path in left:
         frames, sha = _readable_frames(path), sha256_of(path) if path.is_file() else None
-        store.close_segment(seq, frames, sha, ending="killed")
+        store.close_segment(seq, frames, sha, ending="killed", serial=serial_log_of(path))
         store.run_event(
             "raw log",
             "warning" if sha else "error",
             f"raw log {path} left open by the stopped run: {frames} frames readable"
             + (f" (sha256 {sha})" if sha else "; the file is missing"),
         )
+
+
+def serial_log_of(can_log: Path) -> tuple[int | None, str | None] | None:
+    """The complete lines (None: a line not ours in it) and hash of the serial log beside a
+    CAN log; None when there is none."""
+    path = serial_log_path(can_log)
+    if not path.is_file():
+        return None
+    try:
+        lines: int | None = logged_pieces([can_log])
+    except LogFileError:
+        lines = None
+    return lines, sha256_of(path)
 
 
 def _readable_frames(path: Path) -> int:

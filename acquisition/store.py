@@ -251,9 +251,15 @@ class CampaignStore:
         return seq
 
     def close_segment(
-        self, seq: int, frames: int, sha256: str | None, ending: str = "closed"
+        self,
+        seq: int,
+        frames: int,
+        sha256: str | None,
+        ending: str = "closed",
+        serial: tuple[int | None, str | None] | None = None,
     ) -> None:
-        """The file's frame count and hash, once nothing more will be written to it."""
+        """The file's frame count and hash, once nothing more will be written to it; `serial`:
+        the lines and hash of the serial log beside it (a serial compass's)."""
         with self._tx() as session:
             segment = session.scalars(
                 select(RawLogSegment).where(
@@ -261,6 +267,8 @@ class CampaignStore:
                 )
             ).one()
             segment.frames, segment.sha256, segment.ending = frames, sha256, ending
+            if serial is not None:
+                segment.serial_lines, segment.serial_sha256 = serial
 
     # ---------------------------------------------------------------------------------- Sink
     def continue_counting(self) -> None:

@@ -83,8 +83,10 @@ def test_the_serial_log_is_recorded_with_its_hash(campaign: Path) -> None:
         (message,) = conn.execute(
             "SELECT message FROM event WHERE kind = 'raw log' AND message LIKE 'serial%'"
         ).fetchone()
+        segment = conn.execute("SELECT serial_lines, serial_sha256 FROM raw_log_segment").fetchall()
     sha = hashlib.sha256(log.read_bytes()).hexdigest()
     assert message == f"serial sentences in {log} ({len(pieces)} lines, sha256 {sha})"
+    assert segment == [(len(pieces), sha)]
 
 
 def test_replay_of_both_logs_gives_the_live_observations(campaign: Path, tmp_path: Path) -> None:
@@ -94,6 +96,9 @@ def test_replay_of_both_logs_gives_the_live_observations(campaign: Path, tmp_pat
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     assert observations(db) == observations(campaign.with_name("db.sqlite"))
+    with sqlite3.connect(db) as conn, sqlite3.connect(campaign.with_name("db.sqlite")) as live:
+        query = "SELECT frames, sha256, serial_lines, serial_sha256 FROM raw_log_segment"
+        assert conn.execute(query).fetchall() == live.execute(query).fetchall()
 
 
 def test_replay_without_the_serial_log_is_one_line(campaign: Path, tmp_path: Path) -> None:
