@@ -206,6 +206,10 @@ def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None
     )
     if result.raw_log is not None:
         _out().print(f"raw frames: {printable(result.raw_log)} (sha256 {result.raw_log_sha256})")
+        from gyrostand.devices.serial_replay import serial_log_path
+
+        if (sentences := serial_log_path(result.raw_log)).is_file():  # a serial compass's
+            _out().print(f"serial sentences: {printable(sentences)}")
     if result.trials_failed and resumable:
         _out().print(
             f"retry the failed trials with: gyrostand campaign resume {result.campaign_id} "

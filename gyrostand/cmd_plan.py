@@ -35,6 +35,8 @@ def summary(plan: Plan) -> str:
         where = f"python-can {bus.interface or '(configured)'} {bus.channel or ''}".rstrip()
     if plan.compass.protocol != "gyrostand":
         where += f", compass on {plan.compass.protocol}"
+        if plan.compass.protocol == "iec61162" and not bus.simulated:
+            where += f" at {plan.compass.port}, {plan.compass.baud} baud"
     acceptance = ", acceptance by excursions" if plan.acceptance is not None else ""
     return (
         f"{design}, N = {plan.n_obs}, settle by {plan.settle.method}{acceptance}, {where}, "
