@@ -216,8 +216,16 @@ def request_identity(bus: can.BusABC | RecordedSend) -> None:
 class LiveBus:
     """Opens everything a live campaign needs on the bus; `close()` releases it in order."""
 
-    def __init__(self, plan: Plan, codec: Codec, raw_log: Path | None, clock_ms: int = 0) -> None:
-        """`clock_ms`: the simulated stand's clock at its start (`Simulator`)."""
+    def __init__(
+        self,
+        plan: Plan,
+        codec: Codec,
+        raw_log: Path | None,
+        clock_ms: int = 0,
+        compass: HeadingTransmitter | None = None,
+    ) -> None:
+        """`clock_ms`: the simulated stand's clock at its start (`Simulator`); `compass`: the
+        simulated compass when it is not on the bus (a serial line's)."""
         self.plan = plan
         self.virtual = plan.bus.timing == "virtual"
         self.simulator: Simulator | None = None
@@ -231,7 +239,7 @@ class LiveBus:
                     config,
                     codec=codec_for(plan),
                     clock_ms=clock_ms,
-                    transmitter=transmitter(plan),
+                    transmitter=compass or transmitter(plan),
                 )
             self.recorder = Recorder(plan.bus.queue_size, raw_log, log_rest=not self.virtual)
             # in virtual time the stand repeats each command in the stream at the stand time it

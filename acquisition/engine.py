@@ -774,7 +774,8 @@ class Engine:
             )
             return
         if not counts:
-            self.fail(f"bus silence: no heading frame for {waited}", kind="bus silence")
+            silence = self.source.silence
+            self.fail(f"{silence}: no heading frame for {waited}", kind="bus silence")
             return
         n = sum(counts.values())
         causes = sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))

@@ -26,8 +26,9 @@ from gyrostand.acquisition.bus import LiveBus
 from gyrostand.acquisition.engine import Command, CommandNotSent, Engine, Phase
 from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
+from gyrostand.acquisition.serial_input import SerialInput, replay_stream
 from gyrostand.acquisition.store import CampaignStore
-from gyrostand.acquisition.virtual_time import Grants, StreamClock
+from gyrostand.acquisition.virtual_time import Grants
 from gyrostand.db.merge import database_identity
 from gyrostand.db.models import Campaign, Observation, RawLogSegment, Series, Trial
 from gyrostand.db.queries import (
@@ -40,11 +41,14 @@ from gyrostand.db.queries import (
 )
 from gyrostand.db.wal import checkpoint
 from gyrostand.devices.decoder import frame_decoder, source_info
+from gyrostand.devices.serial_replay import logged_pieces, serial_log_path
 from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
+from gyrostand.frames.stream_clock import StreamClock
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import MIN_FIT_TRIALS, Plan
 from gyrostand.stand.controller import StandController, StandError
+from gyrostand.stand.protocol import Codec
 
 BATCH_FRAMES = 50_000
 VIRTUAL_STALL_WALL_S = 60.0  # virtual time: no frame at all for this long = no simulator
@@ -169,17 +173,24 @@ def run_live(
         progress = store.progress()
     _remove_live_files(segments)  # left by killed runs: never to be taken for this one's
     raw_log = raw_log_path(store, plan, segments)
+    serial = _serial_input(plan, codec, raw_log, clock_ms, segments if start == "continued" else ())
     segment = store.open_segment(str(raw_log), start if segments else "new", first_frame)
     store.set_status("running")
-    live = LiveBus(plan, codec, raw_log, clock_ms)
+    try:
+        live = LiveBus(plan, codec, raw_log, clock_ms, serial and serial.transmitter)
+    except BaseException:
+        if serial is not None:
+            serial.close()
+        raise
     grants = Grants(live.bus, start_ms=clock_ms) if live.virtual else None
     stream_clock = StreamClock()
     display = ProgressDisplay(quiet=quiet)
     operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)
     commander = LiveCommander(live.controller, grants)
-    source = source_info(codec, plan.compass.protocol, encoder=plan.compass.encoder())
+    heading, encoder = plan.heading_source, plan.compass.encoder()
+    source = serial.info if serial else source_info(codec, plan.compass.protocol, encoder=encoder)
     engine = Engine(plan, store, commander, progress, operator, source, start_ms=clock_ms)
-    decoder = frame_decoder(codec, *plan.heading_source, plan.inclinometer_mount)
+    decoder = serial.decoder if serial else frame_decoder(codec, *heading, plan.inclinometer_mount)
     if grants is None:
         silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
         silence = f"bus silence: no frame at all for {silence_wall_s:g} s (wall clock)"
@@ -209,8 +220,7 @@ def run_live(
                         "error",
                         f"the acquisition's queue overflowed: {lost} frames dropped",
                     )
-                for before, overflow in live.recorder.overflows:
-                    engine.frames_dropped(position + before, overflow)
+                overflows = live.recorder.overflows
                 if live.recorder.log_error is not None:  # as a database refusing writes
                     engine.interrupt(f"the raw log cannot be written: {live.recorder.log_error}")
                     break
@@ -221,10 +231,16 @@ def run_live(
                 if live.simulator is not None and live.simulator.error is not None:
                     engine.interrupt(f"simulated stand failed: {live.simulator.error!r}")
                     break
+                if serial is not None and serial.error is not None:
+                    engine.interrupt(serial.error)
+                    break
                 if msgs:
                     last_frame = time.monotonic()
                     raw = RawFrames.from_messages(position, msgs)
                     batch = decoder.decode(raw)
+                    for before, overflow in overflows:
+                        at = position + before  # (a serial line's pieces among the frames)
+                        engine.frames_dropped(serial.stream_pos(before) if serial else at, overflow)
                     engine.feed(batch)
                     if run_start and batch.headings.t_ms.size:
                         t_ms = int(batch.headings.t_ms[0])
@@ -232,7 +248,12 @@ def run_live(
                         store.run_event(RUN_START, "info", first, t_ms)
                         run_start = False
                     live_file.headings(batch.headings)
-                    if grants is not None:  # the log ends where the campaign did
+                    if grants is not None and serial is not None:  # (timed by the decoder)
+                        keep = serial.decoder.frames_before(engine.consumed)
+                        raw, msgs = raw.head(keep), msgs[:keep]
+                        restamp(raw, msgs, raw.timestamp)
+                        _granted(engine, grants.progress, engine.now_ms)
+                    elif grants is not None:  # the log ends where the campaign did
                         keep = engine.consumed - position
                         times_s = stream_clock.times_s(batch, position)[:keep]
                         raw, msgs = raw.head(keep), msgs[:keep]
@@ -240,6 +261,8 @@ def run_live(
                         _granted(engine, grants.progress, engine.now_ms)
                     skip = min(max(first_frame - position, 0), len(msgs))  # in earlier logs
                     live.recorder.log(raw.tail(skip), msgs[skip:])
+                    if serial is not None:
+                        serial.log_batch(engine.consumed)
                     position += len(msgs)
                 else:
                     if grants is not None:
@@ -251,14 +274,15 @@ def run_live(
     finally:
         live_file.close()
         live.close()
+        serial_log = _close_serial(store, serial) if serial is not None else None
         sha = sha256_of(raw_log)
         log_error = live.recorder.log_error
         if log_error is None:
-            store.close_segment(segment, live.recorder.logged, sha)
+            store.close_segment(segment, live.recorder.logged, sha, serial=serial_log)
             store.run_event("raw log", "info", f"raw frames in {raw_log} (sha256 {sha})")
         else:  # it ends before the run did, as a killed run's does
             frames = _readable_frames(raw_log)
-            store.close_segment(segment, frames, sha, ending="killed")
+            store.close_segment(segment, frames, sha, ending="killed", serial=serial_log)
             store.run_event(
                 "raw log",
                 "error",
@@ -273,6 +297,25 @@ def run_live(
     if log_error is not None:
         raise RawLogFailed(f"the raw log {raw_log} cannot be written: {log_error}")
     return result(store, outcome, raw_log, sha)
+
+
+def _serial_input(
+    plan: Plan, codec: Codec, raw_log: Path, clock_ms: int, earlier: Sequence[RawLogSegment]
+) -> SerialInput | None:
+    """A serial compass's input (None for a compass on CAN); `earlier`: the segments whose
+    serial logs hold the start of a re-run's line."""
+    if plan.compass.protocol != "iec61162":
+        return None
+    return SerialInput(plan, codec, raw_log, clock_ms, logged_pieces([s.path for s in earlier]))
+
+
+def _close_serial(store: CampaignStore, serial: SerialInput) -> tuple[int | None, str | None]:
+    """Close the serial input: its log's lines and hash, also in an event."""
+    lines, sha = serial.close()
+    store.run_event(
+        "raw log", "info", f"serial sentences in {serial.path} ({lines} lines, sha256 {sha})"
+    )
+    return lines, sha
 
 
 class RawLogFailed(RuntimeError):
@@ -448,10 +491,20 @@ def replay(
     up to its end, with a warning event."""
     codec = codec_for(plan)
     checked = checked or [check_replay_log(log) for log in logs]
+    paths = [log.path for log in checked]
+    if plan.compass.protocol == "iec61162":  # its sentences from the serial logs beside
+        try:
+            decoder, stream = replay_stream(plan, codec, paths)
+        except LogFileError as exc:
+            raise ReplayLogError(str(exc)) from exc
+        info = decoder.source.info
+    else:
+        heading, encoder = plan.heading_source, plan.compass.encoder()
+        decoder = frame_decoder(codec, *heading, plan.inclinometer_mount)
+        stream = read_segments(paths)
+        info = source_info(codec, plan.compass.protocol, encoder=encoder)
     store = CampaignStore.create(sessions, plan, source="replay")
-    source = source_info(codec, plan.compass.protocol, encoder=plan.compass.encoder())
-    engine = Engine(plan, store, _NoCommands(), source=source)
-    decoder = frame_decoder(codec, *plan.heading_source, plan.inclinometer_mount)
+    engine = Engine(plan, store, _NoCommands(), source=info)
     position = 0
     try:
         with store.deferred():
@@ -459,7 +512,7 @@ def replay(
                 seq = store.open_segment(
                     str(log.path.resolve()), "continued" if position else "new", position
                 )
-                store.close_segment(seq, log.frames, log.sha256)
+                store.close_segment(seq, log.frames, log.sha256, serial=serial_log_of(log.path))
                 position += log.frames
                 if log.truncated is not None:
                     store.run_event(
@@ -468,7 +521,7 @@ def replay(
                         f"raw log {log.path.name} truncated after {log.frames} frames "
                         f"({log.truncated}): replayed up to there",
                     )
-            for raw in read_segments([log.path for log in checked]):
+            for raw in stream:
                 engine.feed(decoder.decode(raw))
                 if engine.phase is Phase.DONE:
                     break
@@ -518,13 +571,26 @@ def close_killed_segments(store: CampaignStore) -> None:
         ]
     for seq, path in left:
         frames, sha = _readable_frames(path), sha256_of(path) if path.is_file() else None
-        store.close_segment(seq, frames, sha, ending="killed")
+        store.close_segment(seq, frames, sha, ending="killed", serial=serial_log_of(path))
         store.run_event(
             "raw log",
             "warning" if sha else "error",
             f"raw log {path} left open by the stopped run: {frames} frames readable"
             + (f" (sha256 {sha})" if sha else "; the file is missing"),
         )
+
+
+def serial_log_of(can_log: Path) -> tuple[int | None, str | None] | None:
+    """The complete lines (None: a line not ours in it) and hash of the serial log beside a
+    CAN log; None when there is none."""
+    path = serial_log_path(can_log)
+    if not path.is_file():
+        return None
+    try:
+        lines: int | None = logged_pieces([can_log])
+    except LogFileError:
+        lines = None
+    return lines, sha256_of(path)
 
 
 def _readable_frames(path: Path) -> int:

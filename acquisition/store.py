@@ -16,6 +16,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from gyrostand import SOFTWARE_VERSION
 from gyrostand.acquisition.engine import Measured, ObservationResult, SeriesCompensation, TrialState
 from gyrostand.acquisition.retry import new_attempt
+from gyrostand.acquisition.serial_input import serial_source
 from gyrostand.analysis.measured_motion import MeasuredMotion
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.db.lease import take_lease
@@ -122,13 +123,16 @@ class CampaignStore:
         with writer(sessions).begin() as session:
             campaign = new_campaign(session, header, status="running", source=source, labels=labels)
             virtual = plan.bus.simulated and plan.bus.timing == "virtual"
-            heading = source_info(
-                codec_for(plan),
-                plan.compass.protocol,
-                virtual,
-                plan.stand.protocol,
-                plan.compass.encoder(),
-            )
+            if plan.compass.protocol == "iec61162":
+                heading = serial_source(plan).info
+            else:
+                heading = source_info(
+                    codec_for(plan),
+                    plan.compass.protocol,
+                    virtual,
+                    plan.stand.protocol,
+                    plan.compass.encoder(),
+                )
             campaign.heading_source = heading.protocol
             campaign.heading_time_base = heading.time_base
             campaign.heading_resolution_deg = heading.resolution_deg
@@ -263,9 +267,15 @@ class CampaignStore:
         return seq
 
     def close_segment(
-        self, seq: int, frames: int, sha256: str | None, ending: str = "closed"
+        self,
+        seq: int,
+        frames: int,
+        sha256: str | None,
+        ending: str = "closed",
+        serial: tuple[int | None, str | None] | None = None,
     ) -> None:
-        """The file's frame count and hash, once nothing more will be written to it."""
+        """The file's frame count and hash, once nothing more will be written to it; `serial`:
+        the lines and hash of the serial log beside it (a serial compass's)."""
         with self._tx() as session:
             segment = session.scalars(
                 select(RawLogSegment).where(
@@ -273,6 +283,8 @@ class CampaignStore:
                 )
             ).one()
             segment.frames, segment.sha256, segment.ending = frames, sha256, ending
+            if serial is not None:
+                segment.serial_lines, segment.serial_sha256 = serial
 
     # ---------------------------------------------------------------------------------- Sink
     def continue_counting(self) -> None:

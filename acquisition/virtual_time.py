@@ -1,16 +1,13 @@
 """The controller's side of virtual time (`stand.virtual_time`): SIM_SYNC frames that let the
-simulated stand run ahead by a fixed lead of what has been processed, and stream times that make
-the raw log's timestamps depend on the stream alone."""
+simulated stand run ahead by a fixed lead of what has been processed (the stream times that make
+the raw log's timestamps depend on the stream alone: `frames.stream_clock`)."""
 
 from __future__ import annotations
 
 import time
 
 import can
-import numpy as np
 
-from gyrostand.frames.batch import FrameBatch
-from gyrostand.stand.protocol import ClockFrame
 from gyrostand.stand.virtual_time import DEFAULT_LEAD_MS, encode_sync
 
 RESEND_WALL_S = 0.5  # idle: repeat the last SIM_SYNC (a stand process started after us)
@@ -43,27 +40,3 @@ class Grants:
         stand that already has it)."""
         if time.monotonic() - self._sent_wall >= RESEND_WALL_S:
             self.sync(self.start_ms if self._sent_ms is None else self._sent_ms)
-
-
-class StreamClock:
-    """Stand time of every frame of the stream: its own (heading, status, SIM_CLOCK), else
-    that of the last timed frame before it. In virtual time these are the raw log's timestamps,
-    so the log does not depend on when frames were received."""
-
-    def __init__(self) -> None:
-        self._last_ms = 0
-
-    def times_s(self, batch: FrameBatch, start: int) -> np.ndarray:
-        n = batch.end - start
-        t_ms = np.full(n, -1, dtype=np.int64)
-        t_ms[batch.headings.pos - start] = batch.headings.t_ms
-        t_ms[batch.statuses.pos - start] = batch.statuses.t_ms
-        for pos, frame in batch.others:
-            if isinstance(frame, ClockFrame):
-                t_ms[pos - start] = frame.stand_time_ms
-        timed = np.where(t_ms >= 0, np.arange(n), -1)
-        np.maximum.accumulate(timed, out=timed)
-        t_ms = np.where(timed >= 0, t_ms[np.maximum(timed, 0)], self._last_ms)
-        if n:
-            self._last_ms = int(t_ms[-1])
-        return t_ms / 1000.0

@@ -413,7 +413,9 @@ class RawLogSegment(Base):
     series). `sha256` and `frames` are set when the run closes the file with every frame of the
     run in it ("closed"), or, for a log that ends before its run did ("killed": left open by a
     killed run, found by a later resume; or a write that failed, e.g. on a full disk, which stops
-    the run), with the frames readable up to its last complete block."""
+    the run), with the frames readable up to its last complete block. A serial compass's
+    sentences are in a log beside it (its name with `.nmea`, IEC 61162-450 TAG blocks):
+    `serial_lines` and `serial_sha256` when closed as `frames` and `sha256` are."""
 
     __tablename__ = "raw_log_segment"
     __table_args__ = (
@@ -435,6 +437,8 @@ class RawLogSegment(Base):
     frames: Mapped[int | None] = mapped_column(BigInteger)
     sha256: Mapped[str | None] = mapped_column(String(64))
     ending: Mapped[str | None] = mapped_column(String(16))
+    serial_lines: Mapped[int | None] = mapped_column(BigInteger)
+    serial_sha256: Mapped[str | None] = mapped_column(String(64))
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
 
     campaign: Mapped[Campaign] = relationship(back_populates="raw_logs")

@@ -75,6 +75,7 @@ class Iec61162Source:
                 f"(reception - stand time) over the last {WINDOW} stand statuses"
             ),
             sequence=UNNUMBERED,
+            silence=f"serial port {port} silent",
         )
         self._framer = Framer(baud)
         self._alarms: dict[str, Alarm] = {}  # the last of each alarm, to tell its changes
@@ -101,7 +102,11 @@ class Iec61162Source:
 
     def close(self, clock: CampaignClock) -> SourceOutput:
         """The end of the stream: a sentence cut by it is truncated."""
-        return self.decode_pieces(self._framer.close(), clock)
+        return self.decode_pieces(self.close_pieces(), clock)
+
+    def close_pieces(self) -> list[Received]:
+        """The end of the stream, framed: a sentence cut by it is truncated."""
+        return self._framer.close()
 
     def decode_pieces(
         self,

@@ -62,6 +62,7 @@ class SourceInfo:
     resolution_deg: float  # one step of the transmitted heading
     time_base: str  # how headings are timed, one line (stored with the campaign)
     sequence: SequenceRule
+    silence: str = "bus silence"  # what no heading at all is, naming where it should come from
 
 
 @dataclass(frozen=True)

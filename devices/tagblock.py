@@ -51,14 +51,19 @@ def tag_line(piece: Received) -> bytes:
 
 
 class TagBlockWriter:
-    """Appends pieces to a TAG-block log; every `write` reaches the operating system."""
+    """Appends pieces to a TAG-block log; every `write` reaches the operating system. `skip`:
+    the first pieces given are not written (earlier logs of the same line hold them)."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, skip: int = 0) -> None:
         self.path = path
         self._file: io.BufferedWriter = path.open("ab")
         self.lines = 0
+        self._skip = skip
 
     def write(self, pieces: list[Received]) -> None:
+        if self._skip:
+            skipped, self._skip = min(self._skip, len(pieces)), max(self._skip - len(pieces), 0)
+            pieces = pieces[skipped:]
         if not pieces:
             return
         self._file.write(b"".join(tag_line(p) for p in pieces))

@@ -279,6 +279,20 @@ def _other_objects(data: bytes, pos: int) -> tuple[int, list[can.Message]]:
     return end - pos, list(can.BLFReader(io.BytesIO(blf)))
 
 
+def blf_start_s(path: Path) -> float | None:
+    """The Unix time its frames' timestamps count from (to the ms), from a BLF file's header:
+    None when the header has none (a killed writer's, or times before 1990: virtual time)."""
+    with path.open("rb") as f:
+        header = f.read(_FILE_HEADER.size)
+    if len(header) < _FILE_HEADER.size or header[:4] != b"LOGG":
+        return None
+    year, month, _, day, hour, minute, second, ms = _FILE_HEADER.unpack(header)[-16:-8]
+    if year == 0:
+        return None
+    d = datetime.datetime(year, month, day, hour, minute, second, ms * 1000, datetime.UTC)
+    return d.timestamp()
+
+
 def _systemtime(t: float | None) -> tuple[int, ...]:
     """A Unix time as the file header's SYSTEMTIME (UTC, ms); zeros for none or not a date."""
     if t is None or t < _SYSTEMTIME_EPOCH:

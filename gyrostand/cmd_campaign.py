@@ -169,6 +169,16 @@ def preflight(plan: Plan) -> None:
             fail(f"cannot send on the CAN bus (channel {bus.channel!r}): {exc}", code=EXIT_FAILED)
         finally:
             opened.shutdown()
+    from gyrostand.acquisition.serial_input import check_serial
+    from gyrostand.devices.serial_config import SerialSimError
+    from gyrostand.devices.serial_port import SerialPortError
+
+    try:
+        check_serial(plan)
+    except SerialPortError as exc:
+        fail(str(exc), code=EXIT_FAILED)
+    except SerialSimError as exc:
+        fail(f"[compass] the simulated serial compass: {exc}")
     try:
         check_raw_log_dir(plan)
     except OSError as exc:
@@ -208,6 +218,10 @@ def print_outcome(result: RunResult, db: str, *, resumable: bool = True) -> None
     )
     if result.raw_log is not None:
         _out().print(f"raw frames: {printable(result.raw_log)} (sha256 {result.raw_log_sha256})")
+        from gyrostand.devices.serial_replay import serial_log_path
+
+        if (sentences := serial_log_path(result.raw_log)).is_file():  # a serial compass's
+            _out().print(f"serial sentences: {printable(sentences)}")
     if result.trials_failed and resumable:
         _out().print(
             f"retry the failed trials with: gyrostand campaign resume {result.campaign_id} "
@@ -245,6 +259,7 @@ def run_campaign(
     from gyrostand.acquisition.runner import RawLogFailed, result, run_live
     from gyrostand.acquisition.store import ReRunMismatch
     from gyrostand.db.session import unusable
+    from gyrostand.devices.serial_port import SerialPortError
 
     def mark(kind: str, severity: str, message: str, status: str) -> None:
         """An event saying why, and the campaign's status (as far as the database lets us)."""
@@ -274,6 +289,9 @@ def run_campaign(
     except KeyboardInterrupt:  # python's own handler (ours cannot be set outside the main thread)
         mark("interrupted", "warning", "interrupted before acquiring (Ctrl-C)", "stopped")
         return result(store, "stopped", None, None)
+    except SerialPortError as exc:
+        mark("serial port", "error", str(exc), "paused")
+        fail(f"campaign {store.campaign_id}: {exc}", code=EXIT_FAILED)
     except (can.CanError, OSError, ValueError) as exc:
         mark("bus error", "error", f"could not use the bus: {exc}", "paused")
         fail(f"campaign {store.campaign_id} could not use the bus: {exc}", code=EXIT_FAILED)

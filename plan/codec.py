@@ -44,6 +44,22 @@ def stand_config(plan: Plan) -> SimConfig:
     return dataclasses.replace(config, inclinometer=inclinometer)
 
 
+def _serial_problems(plan: Plan) -> list[str]:
+    """A serial compass: a real one needs its port; the simulated stand's is simulated too (on
+    a pseudo-terminal pair of its own, in virtual time: timed by the simulation; its line is
+    checked by `acquisition.serial_input.check_serial`)."""
+    if not plan.bus.simulated:
+        if plan.compass.port is None:
+            return ['[compass] port: missing (the compass\'s serial port, e.g. "/dev/ttyUSB0")']
+        return []
+    if plan.bus.timing != "virtual":
+        return [
+            '[compass] protocol: "iec61162" on the simulated stand needs [bus] timing = '
+            '"virtual" (its simulated compass is timed by the simulation)'
+        ]
+    return []
+
+
 def prepare(plan: Plan) -> None:
     """Everything that can be checked before the bus or the database is touched (PlanError),
     including that the stand command of every trial can be encoded (its DBC ranges)."""
@@ -58,10 +74,7 @@ def prepare(plan: Plan) -> None:
         problems += _cia402_problems(plan)
     compass = plan.compass
     if compass.protocol == "iec61162":
-        problems.append(
-            '[compass] protocol: "iec61162" is not runnable yet (gyrostand, dbc, nmea2000 and '
-            "cia406 are)"
-        )
+        problems += _serial_problems(plan)
     elif compass.own_bus:
         problems.append(
             "[compass] interface: a compass on a CAN bus of its own is not runnable yet (put it "

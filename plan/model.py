@@ -1017,7 +1017,7 @@ class Plan(_Table):
             message = 'protocol = "dbc" needs the lab\'s DBC ([protocol] dbc_path)'
             errors.append(_error("compass", ("compass", "protocol"), message))
         if (
-            compass.protocol in ("nmea2000", "cia406")
+            compass.protocol in ("nmea2000", "cia406", "iec61162")
             and not self.bus.simulated
             and self.bus.timing == "virtual"
         ):

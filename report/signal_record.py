@@ -21,7 +21,10 @@ from pathlib import Path
 import numpy as np
 
 from gyrostand.analysis.errors import AnalysisError
-from gyrostand.devices.decoder import frame_decoder
+from gyrostand.devices.decoder import SourceDecoder, frame_decoder
+from gyrostand.devices.iec61162 import Iec61162Source
+from gyrostand.devices.serial_decoder import SerialSourceDecoder
+from gyrostand.devices.serial_replay import check_serial_logs, serial_replay
 from gyrostand.frames.batch import BatchDecoder
 from gyrostand.frames.logfile import read_segments
 from gyrostand.plan.codec import codec_for
@@ -32,8 +35,18 @@ from gyrostand.stand.encoder import Encoder
 from gyrostand.stand.protocol import Codec, SignalMap
 
 Span = tuple[float, float]  # stand ms, [start, end)
-HeadingSource = tuple[str, str | None, tuple[str, str], Encoder | None]  # `Plan.heading_source`
-GYROSTAND: HeadingSource = ("gyrostand", None, ("", ""), None)
+SerialLine = tuple[int, bool]  # an IEC 61162 compass's baud rate; virtual time
+# `Plan.heading_source` and, for a serial compass, its line (its sentences in the serial logs)
+HeadingSource = tuple[str, str | None, tuple[str, str], Encoder | None, SerialLine | None]
+GYROSTAND: HeadingSource = ("gyrostand", None, ("", ""), None, None)
+
+
+def heading_source(plan: Plan) -> HeadingSource:
+    """The plan's heading source as its raw logs are read back."""
+    line = None
+    if plan.compass.protocol == "iec61162":
+        line = (plan.compass.baud, plan.bus.timing == "virtual")
+    return (*plan.heading_source, line)
 
 
 def headings_in(
@@ -65,9 +78,17 @@ def _valid_headings(
     Kept for the next call with the same files: the analysis and the report's plots of one
     campaign read its log once (a changed file has another size or mtime; the report verifies
     each log's SHA-256 before reading it)."""
-    decoder = frame_decoder(Codec(dbc_path, signal_map), *source)
+    protocol, name, product, encoder, line = source
+    codec, paths = Codec(dbc_path, signal_map), [Path(path) for path, _, _ in stamps]
+    decoder: BatchDecoder | SourceDecoder | SerialSourceDecoder
+    if line is None:
+        decoder = frame_decoder(codec, protocol, name, product, encoder)
+        stream = read_segments(paths)
+    else:  # LogFileError for serial logs missing or unreadable
+        check_serial_logs(paths, line[1])
+        decoder, stream = serial_replay(codec, Iec61162Source(line[0]), paths, line[1])
     times, values = [np.empty(0)], [np.empty(0)]
-    for raw in read_segments([Path(path) for path, _, _ in stamps]):
+    for raw in stream:
         headings = decoder.decode(raw).headings
         times.append(headings.t_ms[headings.valid])
         values.append(headings.heading_deg[headings.valid])
@@ -183,7 +204,7 @@ def log_signal(
     protocol and judged by the plan's [acceptance] when a plan is given."""
     codec = Codec() if plan is None else codec_for(plan)
     record = log_record(
-        log, codec, start_s, end_s, GYROSTAND if plan is None else plan.heading_source
+        log, codec, start_s, end_s, GYROSTAND if plan is None else heading_source(plan)
     )
     note = "A raw log without its campaign: no series, no settle points."
     return signal_section(record, note, (), acceptance_of(plan))

@@ -72,7 +72,12 @@ from gyrostand.report.model import (
 )
 from gyrostand.report.settings import AnalysisSettings, fallback_notes, settings_from_plan
 from gyrostand.report.signal import SignalSection, signal_section
-from gyrostand.report.signal_record import acceptance_of, headings_in, still_series_record
+from gyrostand.report.signal_record import (
+    acceptance_of,
+    headings_in,
+    still_series_record,
+)
+from gyrostand.report.signal_record import heading_source as heading_source_of
 from gyrostand.report.transient import transient_check
 
 TRACE_BINS = 600  # per trial: enough for a page-wide plot, small enough for inline SVG
@@ -627,7 +632,7 @@ def heading_traces(
     """Binned valid heading frames of each trial's stand-time span [start, end], from the raw
     log (`headings_in`)."""
     closed = {index: (t0, np.nextafter(t1, np.inf)) for index, (t0, t1) in spans.items()}
-    found = headings_in(logs, codec_for(plan), closed, plan.heading_source)
+    found = headings_in(logs, codec_for(plan), closed, heading_source_of(plan))
     return {index: _binned(spans[index], *found[index], bins) for index in spans}
 
 
@@ -690,7 +695,8 @@ def _reading(
         )
     if not logs:
         return None, f"No usable raw CAN log ({check}): no reading record.", acceptance
-    reading, note = still_series_record(logs, codec_for(plan), records, plan.heading_source)
+    source = heading_source_of(plan)
+    reading, note = still_series_record(logs, codec_for(plan), records, source)
     return reading, note, acceptance
 
 

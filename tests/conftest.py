@@ -81,6 +81,7 @@ SLOW_FILES = frozenset(
         "db/test_merge.py",
         "db/test_wal.py",
         "devices/test_source_cli.py",
+        "devices/test_serial_resume.py",
         "plugin/test_pytest_plugin.py",
         "station/test_browser.py",
         "station/test_security.py",

@@ -5,9 +5,10 @@ Runs examples/paper.toml (the campaign of Potemkin 1982 on the simulated stand, 
 simulator seed, i.e. the same compass physics and noise; analyses each as `gyrostand analyze`
 does, and prints C and T with their standard errors and the difference to the gyrostand-protocol
 run in units of that run's SE. Target: |difference| < 1 SE (the sources differ only in the
-heading's resolution, 0.001 deg vs 1e-4 rad = 0.0057 deg for NMEA 2000 and 360/65536 = 0.0055 deg
+heading's resolution, 0.001 deg vs 1e-4 rad = 0.0057 deg for NMEA 2000, 360/65536 = 0.0055 deg
 for the CiA 406 encoder (its EDS, devices/data/sim-encoder.eds, read counter-clockwise from a
-zero), and their timing by reception).
+zero) and 0.01 deg for IEC 61162 THS sentences at 4800 baud through a pseudo-terminal pair, and
+in their timing by reception).
 
 Run: .venv/bin/python validation/heading_sources.py [--seeds 1,2,3]
 A paper campaign takes ~20 s of one core per source (stand time ~15 h, virtual time).
@@ -30,6 +31,7 @@ EDS = ROOT / "devices" / "data" / "sim-encoder.eds"
 SOURCES = {  # protocol -> the rest of its [compass] table
     "gyrostand": "",
     "nmea2000": "",
+    "iec61162": "",
     "cia406": f'node_id = 5\neds = "{EDS}"\nzero_counts = 1200\ndirection = "counterclockwise"\n',
 }
 

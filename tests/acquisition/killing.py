@@ -26,6 +26,9 @@ from sqlalchemy.exc import DBAPIError
 import gyrostand.acquisition.runner  # noqa: F401  (imported once, before the forks)
 import gyrostand.cmd_campaign  # noqa: F401
 from gyrostand.cli import app
+from gyrostand.devices.framing import Received
+from gyrostand.devices.serial_replay import serial_log_path
+from gyrostand.devices.tagblock import read_tag_log
 from gyrostand.frames.logfile import BatchBLFWriter, read_segments
 from tests.acquisition.harness import FAST_SIM, plan_text
 
@@ -50,9 +53,11 @@ def small_containers(path: Path) -> BatchBLFWriter:
     return BatchBLFWriter(path, max_container_size=4096)
 
 
-def write_plan(folder: Path, database: str, seed: int = 0) -> Path:
+def write_plan(folder: Path, database: str, seed: int = 0, compass: str = "") -> Path:
+    """The plan (`compass`: a [compass] table, default gyrostand's frame)."""
     path = folder / "plan.toml"
-    path.write_text(plan_text(database=database, raw_dir=str(folder / "raw"), seed=seed) + FAST_SIM)
+    text = plan_text(database=database, raw_dir=str(folder / "raw"), seed=seed)
+    path.write_text(text + FAST_SIM + compass)
     return path
 
 
@@ -194,23 +199,26 @@ class KillRun:
 
 
 def kill_and_resume(
-    folder: Path, kills: int, seed: int, urls: tuple[str, str] | None = None
+    folder: Path, kills: int, seed: int, urls: tuple[str, str] | None = None, compass: str = ""
 ) -> KillRun:
     """An uninterrupted run and one killed `kills` times (then resumed to its end) of the same
-    plan (simulator seed `seed`) under `folder`, into the databases `urls` (reference, killed;
-    default: SQLite files in `folder`); what differs."""
+    plan (simulator seed `seed`, [compass] table `compass`) under `folder`, into the databases
+    `urls` (reference, killed; default: SQLite files in `folder`); what differs."""
     t0 = time.monotonic()
     reference, killed = folder / "reference", folder / "killed"
     reference.mkdir()
     killed.mkdir()
     ref_db, db = urls or tuple(f"sqlite:///{d / 'db.sqlite'}" for d in (reference, killed))
     problems: list[str] = []
-    if forked(["campaign", "run", str(write_plan(reference, ref_db, seed)), "--quiet"]) != 0:
+    if (
+        forked(["campaign", "run", str(write_plan(reference, ref_db, seed, compass)), "--quiet"])
+        != 0
+    ):
         return KillRun(0, ("the uninterrupted run failed",), (), time.monotonic() - t0)
     expected = snapshot(ref_db)
     rng = random.Random(seed)
     moments = sorted(rng.randrange(-1, expected["campaign"][0][3]) for _ in range(kills))
-    plan = write_plan(killed, db, seed)
+    plan = write_plan(killed, db, seed, compass)
     writes_now = Writes(db)
     before = snapshot(db)
     done = 0
@@ -253,4 +261,12 @@ def kill_and_resume(
     got, want = frames(readable), frames([s.path for s in segments(ref_db)])
     if any(a.shape != b.shape or not np.array_equal(a, b) for a, b in zip(got, want, strict=True)):
         problems.append("the segments read in order differ from the uninterrupted raw log")
+    if serial_pieces(logs) != serial_pieces(segments(ref_db)):
+        problems.append("the serial logs read in order differ from the uninterrupted one")
     return KillRun(done, tuple(problems), tuple(logs), time.monotonic() - t0)
+
+
+def serial_pieces(logs: list[Segment]) -> list[Received]:
+    """The pieces of the serial logs beside the CAN logs (a serial compass's), in order."""
+    paths = [serial_log_path(s.path) for s in logs]
+    return [p for path in paths if path.is_file() for p in read_tag_log(path)]

@@ -387,11 +387,6 @@ VALUES = [
                 "[compass] interface: the simulated compass sits on the simulated stand's bus",
             ),
             (
-                "iec61162 not runnable yet",
-                'protocol = "iec61162"\nport = "/dev/ttyUSB0"',
-                '[compass] protocol: "iec61162" is not runnable yet',
-            ),
-            (
                 "cia406 without its node id",
                 'protocol = "cia406"\ncounts_per_revolution = 8192',
                 '[compass] node_id: missing (protocol = "cia406")',
@@ -440,6 +435,24 @@ VALUES = [
         '[compass] protocol: a compass timed by reception needs timing = "realtime" on a real bus',
         ("simulated = true", 'simulated = false\ninterface = "virtual"\ntiming = "virtual"'),
         append='\n[compass]\nprotocol = "nmea2000"\n',
+    ),
+    plan_case(
+        "iec61162 on the simulated stand in real time",
+        '[compass] protocol: "iec61162" on the simulated stand needs [bus] timing = "virtual"',
+        ("simulated = true", 'simulated = true\ntiming = "realtime"'),
+        append='\n[compass]\nprotocol = "iec61162"\n',
+    ),
+    plan_case(
+        "iec61162 on a real bus without its port",
+        '[compass] port: missing (the compass\'s serial port, e.g. "/dev/ttyUSB0")',
+        ("simulated = true", 'simulated = false\ninterface = "virtual"'),
+        append='\n[compass]\nprotocol = "iec61162"\n',
+    ),
+    plan_case(
+        "iec61162 on a real bus in virtual time",
+        '[compass] protocol: a compass timed by reception needs timing = "realtime" on a real bus',
+        ("simulated = true", 'simulated = false\ninterface = "virtual"\ntiming = "virtual"'),
+        append='\n[compass]\nprotocol = "iec61162"\nport = "/dev/ttyUSB0"\n',
     ),
     # the stand's protocol ([stand], docs/instruments.md)
     *(

@@ -141,3 +141,27 @@ def test_through_a_pseudo_terminal_pair(serial_run: Recorder) -> None:
     assert reader.error is None
     assert sink.observations == serial_run.observations
     assert sink.calls == serial_run.calls
+
+
+def test_a_silent_line_fails_the_trial_naming_the_port() -> None:
+    """The compass stops sending (the stand goes on): the trial in progress fails, the message
+    naming the serial port; the campaign goes on to the next trial."""
+    sink, _ = run(serial(line_silence_at_s=300.0, line_silence_for_s=7.0))
+    failures = [args for name, args in sink.calls if name == "trial_failed"]
+    assert len(failures) == 1
+    assert "serial port /dev/ttyS0 silent: no heading frame for 5" in str(failures[0])
+    assert len(sink.observations) >= 6  # the other trials completed
+
+
+def test_a_wrong_baud_rate_is_named_and_fails_the_trial() -> None:
+    """The compass sends at 9600 baud to a 38400-baud port: what the UART makes of it is no
+    sentence; an event names the port and the baud rate, the trial fails on no valid heading."""
+    sink, _ = run(serial(sender_baud=9600))
+    events = [args for name, args in sink.calls if name == "event" and args[0] == "wrong baud rate"]
+    assert len(events) == 1
+    assert "serial port /dev/ttyS0: no NMEA sentences at 38400 baud: wrong baud rate?" in str(
+        events[0]
+    )
+    failures = [args[2] for name, args in sink.calls if name == "trial_failed"]
+    assert failures and all("no valid heading frame" in f for f in failures)
+    assert sink.observations == []
