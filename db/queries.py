@@ -708,6 +708,12 @@ def live_file_of(raw_log: str | Path) -> Path:
     return Path(raw_log).with_suffix(".live.json")
 
 
+def live_watch_of(live_file: Path) -> Path:
+    """Touched by the operator station while a page shows the run's live view (beside the live
+    file, campaign-ID.live.watch): the acquisition then rewrites its live file often."""
+    return live_file.with_suffix(".watch")
+
+
 def sign_offs(session: Session, campaign_id: int) -> dict[str, SignOff]:
     """The campaign's signatures (entered at the operator station) by role."""
     rows = session.scalars(select(SignOff).where(SignOff.campaign_id == campaign_id))

@@ -52,6 +52,10 @@ _LOG_CONTAINER_TYPE = 10  # object type of a LOG_CONTAINER (a block of other obj
 _CONTAINER_SIZE = 128 * 1024  # uncompressed bytes per LOG_CONTAINER (python-can's default)
 _NO_COMPRESSION = 0  # LOG_CONTAINER method: stored as is
 _ZLIB_DEFLATE = 2  # LOG_CONTAINER method: zlib
+# zlib level of the containers, measured on a campaign's frames (128 KiB containers, one core):
+# level 1 117 MB/s to 19.5 % of the size, level 6 (zlib's and can.BLFWriter's default) 37 MB/s
+# to 18.7 %: 0.9 us a frame saved (a second of a 1.2-million-frame campaign) for 4 % more disk
+ZLIB_LEVEL = 1
 _CAN_MESSAGE = 1  # object type of a classic CAN frame (CAN_MESSAGE)
 _CAN_ERROR_EXT = 73  # object type of an error frame (CAN_ERROR_EXT)
 _CHANNEL = 1  # BLF channel of every frame we write (BLF counts channels from 1)
@@ -371,9 +375,16 @@ class BatchBLFWriter(BinaryIOMessageWriter):
     a killed process leaves a file readable up to its last complete container. `stop` writes the
     last container and the final file header (size, object count, start and stop times)."""
 
-    def __init__(self, file: Path, *, max_container_size: int = _CONTAINER_SIZE) -> None:
+    def __init__(
+        self,
+        file: Path,
+        *,
+        max_container_size: int = _CONTAINER_SIZE,
+        compression_level: int = ZLIB_LEVEL,
+    ) -> None:
         super().__init__(file, mode="wb")
         self.max_container_size = max_container_size
+        self.compression_level = compression_level
         self.object_count = 0
         self.uncompressed_size = _FILE_HEADER_SIZE
         self.start_timestamp: float | None = None
@@ -428,7 +439,8 @@ class BatchBLFWriter(BinaryIOMessageWriter):
         """The first `size` pending bytes as one zlib LOG_CONTAINER (objects may span two)."""
         chunk = bytes(self._pending[:size])
         del self._pending[:size]
-        self.file.write(_container_object(_ZLIB_DEFLATE, zlib.compress(chunk), len(chunk)))
+        payload = zlib.compress(chunk, self.compression_level)
+        self.file.write(_container_object(_ZLIB_DEFLATE, payload, len(chunk)))
         self.uncompressed_size += _OBJ_HEADER_BASE.size + _LOG_CONTAINER.size + len(chunk)
 
     def stop(self) -> None:

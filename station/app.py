@@ -8,6 +8,7 @@ server-sent events, POST `/campaigns/{id}/stop|resume|answer|report|signoff`, an
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hashlib
 import json
 from collections.abc import AsyncIterator
@@ -31,7 +32,7 @@ from starlette.templating import Jinja2Templates
 
 from gyrostand.db.lease import held_elsewhere
 from gyrostand.db.models import CAMPAIGN_STATUSES, Campaign
-from gyrostand.db.queries import CampaignFilter, campaign_list, sign_offs
+from gyrostand.db.queries import CampaignFilter, campaign_list, live_watch_of, sign_offs
 from gyrostand.db.session import writer
 from gyrostand.plan.model import Plan, PlanError, load_plan, parse_plan
 from gyrostand.plan.summary import describe, design_warning
@@ -257,11 +258,15 @@ def create_app(
         return state
 
     def live_change(path: Path | None, mtime: int | None) -> tuple[int | None, Any]:
-        """The live file's modification time, and its snapshot when that is not `mtime`."""
+        """The live file's modification time, and its snapshot when that is not `mtime`; the
+        acquisition is told that a page watches (it then rewrites the file every tick)."""
         try:
             now = None if path is None else path.stat().st_mtime_ns
         except OSError:
             now = None
+        if path is not None and now is not None:
+            with contextlib.suppress(OSError):  # (unwatched, it is rewritten every 2 s)
+                live_watch_of(path).touch()
         return now, (read_live(path) if now is not None and now != mtime else None)
 
     def changed(cid: int, last: tuple[Any, ...] | None) -> tuple[tuple[Any, ...], bool]:

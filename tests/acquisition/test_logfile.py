@@ -15,12 +15,16 @@ import numpy as np
 import pytest
 
 from gyrostand.frames.batch import RawFrames
-from gyrostand.frames.logfile import BatchBLFWriter, read_blf, read_raw_frames
+from gyrostand.frames.logfile import ZLIB_LEVEL, BatchBLFWriter, read_blf, read_raw_frames
 
 DATA = Path(__file__).parent / "data"
 # made by the writer this module replaced (python-can 4.6.1's BLFWriter plus a numpy batch
-# method, commit 58c8595) from reference_batches(): the default 128 KiB containers, and 2 KiB
-REFERENCES = {"reference.blf": {}, "reference-2k-containers.blf": {"max_container_size": 2048}}
+# method, commit 58c8595) from reference_batches(): the default 128 KiB containers, and 2 KiB;
+# zlib level 6 (python-can's default then; ours is ZLIB_LEVEL, pinned against can.BLFWriter)
+REFERENCES = {
+    "reference.blf": {"compression_level": 6},
+    "reference-2k-containers.blf": {"max_container_size": 2048, "compression_level": 6},
+}
 REFERENCE_T0 = 1_700_000_000.1234567  # a Unix time: the header holds start and stop dates
 REFERENCE_CUTS = (0, 1, 1, 50, 173, 174, 400, 523, 600)  # batch bounds (one batch is empty)
 
@@ -169,7 +173,8 @@ def test_numpy_blf_reader_equals_python_can(tmp_path: Path) -> None:
 
 def test_batch_blf_writer_equals_python_can_writer(tmp_path: Path) -> None:
     """Several default (128 KiB) containers, with error frames and remote frames: the objects
-    python-can's BLFWriter writes, byte for byte (the header is pinned by the references)."""
+    python-can's BLFWriter writes at our zlib level, byte for byte (the header is pinned by the
+    references)."""
     messages = sample_messages(5000)
     for i, m in enumerate(messages):
         m.timestamp = 1_700_000_000.0 + i * 0.001
@@ -177,7 +182,7 @@ def test_batch_blf_writer_equals_python_can_writer(tmp_path: Path) -> None:
     with BatchBLFWriter(ours) as writer:
         for start in range(0, len(messages), 777):
             writer.write_frames(RawFrames.from_messages(start, messages[start : start + 777]))
-    with can.BLFWriter(theirs) as writer:
+    with can.BLFWriter(theirs, compression_level=ZLIB_LEVEL) as writer:
         for m in messages:
             writer.on_message_received(m)
     assert ours.read_bytes()[144:] == theirs.read_bytes()[144:]

@@ -2,6 +2,7 @@
 the database holds is shown, plans are checked per field, the token is required beyond
 loopback, cross-site actions are refused and stored text stays text."""
 
+import os
 import re
 from pathlib import Path
 
@@ -191,6 +192,29 @@ def test_live_file_is_read_while_written_and_gone_after_the_run(station_db: Path
     assert not path.exists() and read_live(path) is None
 
 
+def test_live_file_is_rewritten_often_only_while_a_page_watches(tmp_path: Path) -> None:
+    from gyrostand.acquisition.engine import Phase, Snapshot
+    from gyrostand.acquisition.progress import LiveFile
+
+    def snap(now_ms: int) -> Snapshot:
+        return Snapshot(1, 2, 1, 1, 5, Phase.SETTLE, now_ms, (), None, 9_000)
+
+    path = tmp_path / "campaign-7.live.json"
+    live = LiveFile(path, every_s=0.0, unwatched_s=3600.0)
+    live.update(snap(1000))  # the first one is written: a page's first view shows it
+    live.update(snap(2000))  # nobody watches: not rewritten for an hour
+    assert read_live(path)["now_ms"] == 1000
+    live.watch.touch()  # what the station's update stream does every tick
+    assert live.watch.name == "campaign-7.live.watch"
+    live.update(snap(3000))
+    assert read_live(path)["now_ms"] == 3000
+    os.utime(live.watch, (0, 0))  # a watch long ago: none now
+    live.update(snap(4000))
+    assert read_live(path)["now_ms"] == 3000
+    live.close()
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_live_heading_trace_keeps_extremes_of_the_last_20_minutes(tmp_path: Path) -> None:
     import numpy as np
 
@@ -202,7 +226,7 @@ def test_live_heading_trace_keeps_extremes_of_the_last_20_minutes(tmp_path: Path
         n = len(t_ms)
         return Headings(np.arange(n), np.array(t_ms), np.array(deg), np.array(valid), np.zeros(n))
 
-    live = LiveFile(tmp_path / "live.json", every_s=0.0)
+    live = LiveFile(tmp_path / "live.json", every_s=0.0, unwatched_s=0.0)
     snap = Snapshot(1, 2, 1, 1, 5, Phase.SETTLE, 0, (), 0.1, 9_000)
     live.headings(batch([1000, 0, 5000, 3000], [3.0, 1.0, 2.0, 99.0], [1, 1, 1, 0]))
     live.update(snap)
