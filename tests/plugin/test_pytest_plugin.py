@@ -21,9 +21,11 @@ LAB_OPTIONS = ("--gyrostand-dbc", str(LAB_DBC), "--gyrostand-signals", str(LAB_S
 
 
 def example() -> str:
-    """The example test file of docs/testing.md (its one python block)."""
-    (block,) = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "testing.md").read_text(), re.S)
-    return block
+    """The example test file of docs/testing.md (the python block of its "Example" section)."""
+    text = (ROOT / "docs" / "testing.md").read_text()
+    found = re.search(r"\n## Example\n.*?```python\n(.*?)```", text, re.S)
+    assert found is not None, "docs/testing.md: no python block under ## Example"
+    return found.group(1)
 
 
 def expected_outcomes() -> dict[str, int]:
