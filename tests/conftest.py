@@ -80,10 +80,14 @@ SLOW_FILES = frozenset(
         "db/test_concurrency.py",
         "db/test_merge.py",
         "db/test_wal.py",
-        "devices/test_source_cli.py",
+        "devices/test_cia406_campaign.py",
         "devices/test_serial_resume.py",
+        "devices/test_serial_run.py",
+        "devices/test_simulate_cia406_cli.py",
+        "devices/test_source_cli.py",
         "plugin/test_pytest_plugin.py",
         "station/test_browser.py",
+        "station/test_campaign_page.py",
         "station/test_security.py",
     }
 )
