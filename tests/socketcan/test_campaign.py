@@ -38,9 +38,9 @@ pytestmark = pytest.mark.socketcan
 BAND_DEG = 0.05  # settle band of the plan
 # (K deg, A cm, tau s, role). Settled rolling error of each under the simulator's C and T
 # (SIM_OPTIONS), from model 1.1 (seed 000) as stand.physics.rolling_error_rad computes it:
+# (three fit trials only: each trial costs about a minute of CI under the VM's emulation)
 TRIALS = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "fit"), (10.0, 15.0, 4.0, "fit")]
-TRIALS += [(200.0, 20.0, 7.0, "control")]
-TRUE_SHIFT_DEG = [0.409255, -0.471120, 0.161608, 0.116186]
+TRUE_SHIFT_DEG = [0.409255, -0.471120, 0.161608]
 MALFORMED = "100#DEADBEEF"  # GYRO_HEADING with 4 data bytes instead of 8
 TIMEOUT_S = 900.0  # wall seconds for a process start or a campaign under emulation
 
@@ -81,7 +81,7 @@ class Run:
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory, channel, stand):
-    """A four-trial campaign over the channel; one malformed heading frame sent with cansend
+    """A three-trial campaign over the channel; one malformed heading frame sent with cansend
     while the first series is observing; candump recording throughout. The analysis runs in
     the background while the other tests go on (its imports take minutes under emulation)."""
     needs("candump")
@@ -169,18 +169,19 @@ def test_malformed_heading_frame_is_recorded_as_an_acquisition_event(run: Run) -
     assert "Traceback" not in run.campaign.stderr.read_text()
 
 
-def test_interface_down_mid_campaign_fails_the_trial_then_resume_recovers(
+def test_interface_down_mid_campaign_fails_the_trial_and_pauses_resumably(
     tmp_path_factory, channel, stand
 ) -> None:
     """`ip link set <channel> down` during trial 2 (or 3: virtual time runs as fast as the VM
     allows) and up once the campaign has given up, with on_trial_failure = "pause": that trial
-    fails naming the kernel's ENETDOWN, the campaign pauses cleanly, and `gyrostand campaign
-    resume` on the restored interface completes the rest."""
+    fails naming the kernel's ENETDOWN, the campaign pauses cleanly with the rest pending and
+    the resume command named, and the simulated stand lives on. (Resuming a paused campaign is
+    tested on the host, tests/acquisition: a third process start here costs minutes of CI.)"""
     if os.geteuid() != 0:
         pytest.skip("taking the interface down needs root")
     folder = tmp_path_factory.mktemp("link-down")
     plan = folder / "plan.toml"
-    plan.write_text(plan_text(folder, channel, TRIALS[:3], BAND_DEG, on_failure="pause"))
+    plan.write_text(plan_text(folder, channel, TRIALS, BAND_DEG, on_failure="pause"))
     db = folder / "campaign.sqlite"
     campaign = Process.start([*gyrostand_command(), "campaign", "run", str(plan), "--quiet"],
                              folder, "campaign")  # fmt: skip
@@ -207,20 +208,6 @@ def test_interface_down_mid_campaign_fails_the_trial_then_resume_recovers(
     assert trials[k:] == [(i, "pending", None) for i in range(k + 1, 4)]
     events = query(db, "SELECT kind, message FROM event WHERE severity = 'error'")
     assert any(kind == "bus error" and "Network is down" in m for kind, m in events), events
-
-    resume = subprocess.run(
-        [*gyrostand_command(), "campaign", "resume", "1", "--db", str(db), "--quiet"],
-        cwd=folder,
-        capture_output=True,
-        text=True,
-        timeout=TIMEOUT_S,
-    )
-    # the pending trials completed; with the failed one left failed, 2 of 3 fit trials cannot
-    # be analysed: the campaign ends "failed", exit 1 (`campaign resume --retry-failed` next)
-    assert resume.returncode == 1, f"{resume.stdout}{resume.stderr}{query(db, trials_sql)}"
-    assert "cannot be analysed" in resume.stderr and "Traceback" not in resume.stderr
-    assert query(db, "SELECT status FROM campaign") == [("failed",)]
-    assert query(db, trials_sql) == [t if t[0] <= k else (t[0], "completed", None) for t in trials]
 
 
 def test_campaign_over_socketcan_completes_into_sqlite_and_is_analysed(run: Run) -> None:
