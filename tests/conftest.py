@@ -69,9 +69,12 @@ SLOW_FILES = frozenset(
         "acquisition/test_cli_campaign.py",
         "acquisition/test_kill_resume.py",
         "acquisition/test_live.py",
+        "acquisition/test_liveness.py",
         "acquisition/test_measured_amplitude_campaign.py",
         "acquisition/test_raw_log_names.py",
         "acquisition/test_stop_resume_report.py",
+        "cli/test_bad_databases.py",
+        "cli/test_demo.py",
         "cli/test_fleet_commands.py",
         "cli/test_progress.py",
         "cli/test_raw_log_full.py",
@@ -86,9 +89,13 @@ SLOW_FILES = frozenset(
         "devices/test_simulate_cia406_cli.py",
         "devices/test_source_cli.py",
         "plugin/test_pytest_plugin.py",
+        "report/test_signal_early.py",
+        "report/test_signal_report.py",
         "station/test_browser.py",
         "station/test_campaign_page.py",
+        "station/test_operator.py",
         "station/test_security.py",
+        "validation/test_end_to_end.py",
     }
 )
 
