@@ -260,6 +260,21 @@ def trial_inputs(campaign: Campaign) -> tuple[tuple[TrialInput, ...], tuple[Left
     return tuple(inputs), tuple(left_out)
 
 
+def commanded_motion(campaign: Campaign, trials: Sequence[TrialInput]) -> tuple[TrialInput, ...]:
+    """`trials` (from `stored_inputs`) with the commanded K, A, tau instead of the applied ones:
+    the fit a campaign would give without its measured motion."""
+    by_index = {t.index: t for t in campaign.trials}
+    return tuple(
+        replace(
+            t,
+            direction_deg=by_index[t.index].cmd_direction_deg,
+            amplitude_cm=by_index[t.index].cmd_amplitude_cm,
+            period_s=by_index[t.index].cmd_period_s,
+        )
+        for t in trials
+    )
+
+
 def stored_inputs(campaign: Campaign) -> StoredInputs:
     """The analysis inputs of a loaded campaign (see `db.queries.load_campaign`)."""
     trials, left_out = trial_inputs(campaign)

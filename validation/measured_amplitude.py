@@ -12,7 +12,6 @@ motion (as `gyrostand analyze` does) and with the commanded one. Run:
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import tempfile
 from pathlib import Path
@@ -24,7 +23,7 @@ from gyrostand.cli import app
 from gyrostand.db.queries import load_campaign
 from gyrostand.db.session import open_database
 from gyrostand.plan.overrides import with_keys
-from gyrostand.report.stored import stored_inputs
+from gyrostand.report.stored import commanded_motion, stored_inputs
 from gyrostand.stand.simconfig import CompassParams
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -53,17 +52,8 @@ def fits(db: Path) -> dict[str, dict[str, tuple[float, float]]]:
     """C and T (estimate, SE) with the measured and with the commanded motion."""
     with open_database(f"sqlite:///{db}", upgrade=False, create=False)() as session:
         stored = load_campaign(session, 1)
-        by_index = {t.index: t for t in stored.trials}
         inputs = stored_inputs(stored)
-    commanded = tuple(
-        dataclasses.replace(
-            t,
-            direction_deg=by_index[t.index].cmd_direction_deg,
-            amplitude_cm=by_index[t.index].cmd_amplitude_cm,
-            period_s=by_index[t.index].cmd_period_s,
-        )
-        for t in inputs.trials
-    )
+        commanded = commanded_motion(stored, inputs.trials)
     s = inputs.settings
     out = {}
     for name, trials in (("measured", inputs.trials), ("commanded", commanded)):

@@ -8,7 +8,6 @@ moves C of model 1.1, not T). Virtual time: no wall clock involved."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import sqlite3
 from pathlib import Path
@@ -20,7 +19,7 @@ from gyrostand.cli import app
 from gyrostand.db.queries import load_campaign
 from gyrostand.db.session import open_database
 from gyrostand.plan.overrides import with_keys
-from gyrostand.report.stored import stored_inputs
+from gyrostand.report.stored import commanded_motion, stored_inputs
 from gyrostand.stand.simconfig import CompassParams
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -72,17 +71,8 @@ def test_measured_amplitude_gives_c_and_t_the_commanded_does_not(tmp_path: Path)
     # the same observations with the commanded motion
     with open_database(f"sqlite:///{db}", upgrade=False, create=False)() as session:
         campaign = load_campaign(session, 1)
-        by_index = {t.index: t for t in campaign.trials}
         inputs = stored_inputs(campaign)
-        commanded = tuple(
-            dataclasses.replace(
-                t,
-                direction_deg=by_index[t.index].cmd_direction_deg,
-                amplitude_cm=by_index[t.index].cmd_amplitude_cm,
-                period_s=by_index[t.index].cmd_period_s,
-            )
-            for t in inputs.trials
-        )
+        commanded = commanded_motion(campaign, inputs.trials)
     s = inputs.settings
     naive = analyze_campaign(
         commanded, s.constants, q=s.q, start=s.start, admissible=s.admissible, forecast=s.forecast
