@@ -92,7 +92,10 @@ def normality_check(trials: Sequence[TrialInput], q: float) -> AssumptionCheck:
     if not groups:
         return _not_checked("normality", method, trials, "no series with N >= 3 and spread")
     checks = _series_checks(groups, lambda rows: stats.shapiro(rows, axis=-1))
-    combined = stats.combine_pvalues([c.p_value for c in checks], method="fisher")
+    # Shapiro-Wilk's p at N = 3 is 0 at W = 3/4 (two equal readings) and Fisher's -2 sum log p
+    # would be infinite: such a series counts as p = the smallest positive double.
+    p_values = np.maximum([c.p_value for c in checks], np.finfo(float).tiny)
+    combined = stats.combine_pvalues(p_values, method="fisher")
     rejected = sum(c.p_value < q for c in checks)
     return AssumptionCheck(
         "normality",
