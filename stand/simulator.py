@@ -251,6 +251,13 @@ class Simulator:
     def _send(self, msgs: list[can.Message]) -> None:
         for msg in msgs:
             msg.timestamp += self._epoch_s
+        # an in-process bus that takes a batch at once (`acquisition.bus.SimulatorBus`)
+        send_batch = getattr(self.bus, "send_batch", None)
+        if send_batch is not None and self._recorder is None:
+            send_batch(msgs)
+            self.frames_sent += len(msgs)
+            return
+        for msg in msgs:
             if self._send_one(msg):
                 self.frames_sent += 1
                 if self._recorder is not None:
