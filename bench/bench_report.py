@@ -69,6 +69,8 @@ print(*(f"{b[0] - a[0]:.3f},{b[1] - a[1]:.3f}" for a, b in zip(t, t[1:])))
 NAMES = ("imports", "analysis", "json + csv", "figures + html", "pdf (Typst)", "total")
 TARGET_CPU_S = 3.0  # issue 33: the paper campaign's report, all formats, in a fresh process
 RUNS = 3
+FLEET_TARGET_CPU_S = 2.0  # issue 33: the fleet report
+FLEET_MODEL = "two-rotor marine gyrocompass"  # the simulated fleet's (the demo plan's)
 
 
 def main() -> None:
@@ -124,6 +126,50 @@ def main() -> None:
         info = subprocess.run(["pdfinfo", str(pdf)], capture_output=True, text=True, check=True)
         pages = next(line.split()[-1] for line in info.stdout.splitlines() if "Pages" in line)
         print(f"  {pages} pages, {pdf.stat().st_size / 1e6:.2f} MB")
+        fleet(folder)
+
+
+def command_cpu(*args: str, cwd: Path) -> tuple[float, float]:
+    """CPU and wall seconds of one gyrostand command in a fresh process."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "gyrostand", *args], check=True, cwd=cwd)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    return cpu, time.perf_counter() - start
+
+
+def fleet(folder: Path) -> None:
+    """The fleet report of a simulated fleet (`fleet simulate`: 2 factories x 3 units, the
+    quick plan) in each format, against its target."""
+    db = str(folder / "fleet.sqlite")
+    subprocess.run(
+        [sys.executable, "-m", "gyrostand", "fleet", "simulate", "--db", db]
+        + ["--groups", "2", "--units-per-group", "3"],
+        check=True,
+        cwd=folder,
+        capture_output=True,
+    )
+    for suffix in ("json", "html", "pdf"):
+        out = str(folder / f"fleet.{suffix}")
+        cpu, wall = command_cpu(
+            "fleet",
+            "report",
+            "--model",
+            FLEET_MODEL,
+            "--by",
+            "factory",
+            "--db",
+            db,
+            "-o",
+            out,
+            cwd=folder,
+        )
+        verdict = "OK" if cpu <= FLEET_TARGET_CPU_S else "NOT"
+        print(
+            f"  `gyrostand fleet report -o fleet.{suffix}` (6 units): CPU {cpu:.2f} s, wall "
+            f"{wall:.2f} s: {verdict} (target <= {FLEET_TARGET_CPU_S:g} s CPU)"
+        )
 
 
 if __name__ == "__main__":

@@ -316,13 +316,14 @@ def stored_inputs(campaign: Campaign) -> StoredInputs:
 @dataclass(frozen=True)
 class StoredAnalysis:
     """The analysis of a stored campaign, its inputs, the recorded run (None: not recorded
-    yet), and the signal analysis of its reading (section 10), whose independence check the
-    analysis uses."""
+    yet), the signal analysis of its reading (section 10), whose independence check the
+    analysis uses, and the trials' heading traces from the same raw log."""
 
     analysis: CampaignAnalysis
     inputs: StoredInputs
     run_id: int | None
     signal: SignalSection
+    traces: dict[int, HeadingTrace | None]  # `campaign_traces`: the report's heading plots
 
 
 def read_campaign(sessions: sessionmaker[Session], campaign_id: int) -> Campaign:
@@ -367,7 +368,7 @@ def compute_stored(campaign: Campaign, inputs: StoredInputs | None = None) -> St
     if not isinstance(check, str):
         warnings = analysis.warnings + check.warnings(analysis.cochran.s_e)
         analysis = replace(analysis, transient=check, warnings=warnings)
-    return StoredAnalysis(analysis, inputs, None, signal)
+    return StoredAnalysis(analysis, inputs, None, signal, campaign_traces(campaign))
 
 
 def record_run(
@@ -385,6 +386,7 @@ def record_run(
             "schema": STORED_SCHEMA,
             "analysis": encode(stored.analysis),
             "signal": encode(stored.signal),
+            "traces": encode(stored.traces),
         }
     }
     digest, version = stored.inputs.sha256(), SOFTWARE_VERSION
@@ -439,9 +441,10 @@ def _rebuilt(run: AnalysisRun, inputs: StoredInputs) -> StoredAnalysis | None:
     try:
         analysis = decode(CampaignAnalysis, typed["analysis"])
         signal = decode(SignalSection, typed["signal"])
+        traces = decode(dict[int, HeadingTrace | None], typed["traces"])
     except (TypeError, KeyError, ValueError):
         return None
-    return StoredAnalysis(analysis, inputs, run.id, signal)
+    return StoredAnalysis(analysis, inputs, run.id, signal, traces)
 
 
 def analyze_stored(sessions: sessionmaker[Session], campaign_id: int) -> StoredAnalysis:
@@ -450,6 +453,21 @@ def analyze_stored(sessions: sessionmaker[Session], campaign_id: int) -> StoredA
     log that verifies but cannot be read; a read, any computation outside a transaction, then
     one short write when it was computed."""
     return record_run(sessions, campaign_id, stored_analysis(sessions, campaign_id))
+
+
+def record_analysis(sessions: sessionmaker[Session], campaign_id: int) -> str | None:
+    """`analyze_stored` for a campaign that just completed, so that its first report rebuilds
+    the analysis instead of computing it: None, or why it cannot be analysed (its report says
+    so in its place, or the database refused the run: the report records it)."""
+    from sqlalchemy.exc import OperationalError
+
+    from gyrostand.frames.logfile import LogFileError
+
+    try:
+        analyze_stored(sessions, campaign_id)
+    except (AnalysisError, LogFileError, OperationalError) as exc:  # the report tries again
+        return str(exc)
+    return None
 
 
 # -------------------------------------------------------------------------- report inputs
@@ -736,18 +754,25 @@ def heading_traces(
     return {index: _binned(spans[index], *found[index], bins) for index in spans}
 
 
+def campaign_traces(campaign: Campaign) -> dict[int, HeadingTrace | None]:
+    """Per trial index its binned heading trace from the raw log (`heading_traces`); empty
+    without a usable raw log or a whole plan."""
+    _, logs = _raw_log_check(campaign)
+    plan, spans = _plan(campaign), trial_stand_spans(campaign)
+    return heading_traces(logs, plan, spans) if logs and plan is not None and spans else {}
+
+
 def _records(
-    campaign: Campaign, plan: Plan | None, logs: Sequence[Path], check: str
+    campaign: Campaign,
+    traces: dict[int, HeadingTrace | None],
+    check: str,
 ) -> tuple[tuple[TrialRecord, ...], str]:
-    """Per trial its series and (from the raw log) its heading trace; and how the plots were
+    """Per trial its series and (`campaign_traces`) its heading trace; and how the plots were
     made."""
     current = current_trials(campaign.trials)
     series = {t.index: _series_records(t) for t in current}
     has_observations = any(s.observations for rows in series.values() for s in rows)
-    spans = trial_stand_spans(campaign)
-    traces: dict[int, HeadingTrace | None] = {}
-    if logs and plan is not None and spans:
-        traces = heading_traces(logs, plan, spans)
+    if traces:
         frames = sum(t.frames for t in traces.values() if t is not None)
         note = (
             f"Heading from the raw CAN log ({frames} valid heading frames within the trials), "
@@ -831,7 +856,8 @@ def report_inputs(
     unused = {(t.index, t.attempt) for t in left_out}
     plan = _plan(campaign)
     check, logs = _raw_log_check(campaign)
-    records, note = _records(campaign, plan, logs, check)
+    traces = campaign_traces(campaign) if stored is None else stored.traces
+    records, note = _records(campaign, traces, check)
     if stored is None:
         reading, reading_note, acceptance = _reading(plan, logs, check, records)
     else:  # the record the analysis's signal section was made from: not read again

@@ -1,6 +1,6 @@
-"""The stored analysis reused: a typed round trip (analysis and signal section to the run's JSON
-and back), a report of an unchanged campaign rebuilt from its run without fitting again, and a
-changed observation, raw log or software version computing it again."""
+"""The stored analysis reused: a typed round trip (analysis, signal section, heading traces to
+the run's JSON and back), a report of an unchanged campaign rebuilt from its run without
+fitting again, and a changed observation, raw log or software version computing it again."""
 
 import json
 from dataclasses import fields, is_dataclass
@@ -119,6 +119,8 @@ def test_an_unchanged_campaign_reuses_its_run_and_a_changed_one_fits_again(
     assert again.run_id == first.run_id and runs(sim) == before
     same(first.analysis, again.analysis, "analysis")
     same(first.signal, again.signal, "signal")
+    same(first.traces, again.traces, "traces")
+    assert any(t is not None and t.frames for t in again.traces.values())
     report = sim.report()  # the report too rebuilds it
     assert len(fits) == 1 and report.inputs.identification.analysis_run == first.run_id
 
