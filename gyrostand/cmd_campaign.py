@@ -277,7 +277,8 @@ def run_campaign(
         outcome = run_live(
             plan, store, start=start, quiet=quiet, stop=stop, answers=answers, terminal=terminal
         )
-        if outcome.outcome == "completed":  # recorded now, the first report rebuilds it
+        if outcome.outcome == "completed" and not plan.campaign.acquisition_only:
+            # the analysis recorded now: the campaign's first report rebuilds it
             from gyrostand.report.stored import record_analysis
 
             record_analysis(store.sessions, store.campaign_id)
