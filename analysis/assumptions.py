@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from gyrostand.analysis.cochran import CochranResult
 from gyrostand.analysis.trials import TrialInput
@@ -87,6 +86,8 @@ def _series_checks(
 
 def normality_check(trials: Sequence[TrialInput], q: float) -> AssumptionCheck:
     """Shapiro-Wilk per series, Fisher-combined."""
+    from scipy import stats
+
     method = "Shapiro-Wilk per series, Fisher-combined"
     groups = _raw_series(trials)
     if not groups:
@@ -119,6 +120,8 @@ def ljung_box_lag1(x: np.ndarray) -> np.ndarray:
 
 def independence_check(trials: Sequence[TrialInput], q: float) -> AssumptionCheck:
     """Lag-1 Ljung-Box per series, summed over series."""
+    from scipy import stats
+
     method = "lag-1 autocorrelation (Ljung-Box Q) per series, summed"
     groups = _raw_series(trials)
     if not groups:
