@@ -5,6 +5,10 @@ STAMP  := $(VENV)/.installed-$(shell sha1sum pyproject.toml | cut -c1-12)
 
 .PHONY: demo test bench system-deps
 
+# pytest-xdist hands out whole files: a module-scoped fixture (a campaign several tests read) is
+# then built once, not once on each worker that got one of its tests
+DIST   := --dist loadfile
+
 system-deps:
 	@tools/system-deps
 
@@ -21,12 +25,12 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
-	$(VENV)/bin/pytest -n auto -m "not slow"  # pytest-xdist: one worker per core
+	$(VENV)/bin/pytest -n auto $(DIST) -m "not slow"  # pytest-xdist: one worker per core
 
 # The long end-to-end tests (tests/conftest.py SLOW_FILES): CI's second stage
 .PHONY: test-slow
 test-slow: $(STAMP)
-	$(VENV)/bin/pytest -n auto -m slow
+	$(VENV)/bin/pytest -n auto $(DIST) -m slow
 
 bench: $(STAMP)
 	@for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

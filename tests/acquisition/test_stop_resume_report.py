@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 
 from gyrostand.cli import app
 from gyrostand.db.queries import RUN_START
+from tests.artefacts import copy_database
 
 from .harness import FAST_SIM, plan_text
 from .test_cli_campaign import start, wait_for_observations
@@ -88,9 +89,21 @@ def stopped_and_resumed(folder: Path, timing: str) -> Path:
     return db
 
 
+@pytest.fixture(scope="module")
+def virtual_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The campaign stopped and resumed in virtual time, once for the tests of this file (each
+    works on a copy)."""
+    return stopped_and_resumed(tmp_path_factory.mktemp("virtual"), "virtual")
+
+
 @pytest.mark.parametrize("timing", ["realtime", "virtual"])
-def test_stop_resume_analyse_report(tmp_path: Path, timing: str) -> None:
-    db = stopped_and_resumed(tmp_path, timing)
+def test_stop_resume_analyse_report(
+    tmp_path: Path, timing: str, request: pytest.FixtureRequest
+) -> None:
+    if timing == "virtual":
+        db = copy_database(request.getfixturevalue("virtual_db"), tmp_path / "db.sqlite")
+    else:
+        db = stopped_and_resumed(tmp_path, timing)
     rows = query(db, OBSERVATIONS)
     assert len(rows) == 4 * 2 * 4
     # one campaign time: in the order they were stored, the windows follow one another
@@ -144,11 +157,13 @@ def restart_clock(db: Path, t0_ms: int) -> None:
             )
 
 
-def test_a_stand_clock_that_restarted_is_placed_after_the_run_before(tmp_path: Path) -> None:
+def test_a_stand_clock_that_restarted_is_placed_after_the_run_before(
+    virtual_db: Path, tmp_path: Path
+) -> None:
     """The database a stand clock restarting at 0 gives (as before) is analysed: the resumed
     run is placed after the first, and the series the first run acquired whole get the same
     transient left as with the clock going on (their record is the same)."""
-    db = stopped_and_resumed(tmp_path, "virtual")
+    db = copy_database(virtual_db, tmp_path / "db.sqlite")
     ((t0,),) = query(db, f"SELECT stand_time_ms FROM event WHERE kind = '{RUN_START}'")
     first_run = [  # the series the first run acquired whole
         (i, j) for i, j, end in query(db, FIRST_RUN) if end is not None and end < t0

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from tests.acquisition.harness import FAST_SIM, plan_text
+from tests.artefacts import built_once
 
 
 def write_plan(folder: Path, name: str = "plan.toml", **kw: object) -> Path:
@@ -40,9 +41,7 @@ class Stand:
         return copy
 
 
-@pytest.fixture(scope="session")
-def stand(tmp_path_factory: pytest.TempPathFactory) -> Stand:
-    folder = tmp_path_factory.mktemp("stand")
+def run_campaign_1(folder: Path) -> None:
     plan = write_plan(folder)
     # in a process of its own: its exit closes the database, so the file holds everything
     # (no write-ahead log left over) and copies of it are whole
@@ -54,9 +53,21 @@ def stand(tmp_path_factory: pytest.TempPathFactory) -> Stand:
         timeout=300,
     )
     assert proc.returncode == 0, proc.stderr
-    db = folder / "db.sqlite"
-    assert not db.with_name(db.name + "-wal").exists()
-    return Stand(plan, db, folder / "raw" / "db-campaign-1.blf")
+    assert not (folder / "db.sqlite-wal").exists()
+
+
+@pytest.fixture(scope="session")
+def stand(tmp_path_factory: pytest.TempPathFactory) -> Stand:
+    """Campaign 1, run once for all the session's workers, in a folder of this worker's own (the
+    plan's database and raw log folder are there: a command run on the plan writes nowhere
+    another worker reads)."""
+    built = built_once(tmp_path_factory, "stand", run_campaign_1)
+    folder = tmp_path_factory.mktemp("stand")
+    plan = folder / "plan.toml"
+    plan.write_text((built / "plan.toml").read_text().replace(str(built), str(folder)))
+    shutil.copyfile(built / "db.sqlite", folder / "db.sqlite")
+    shutil.copytree(built / "raw", folder / "raw")
+    return Stand(plan, folder / "db.sqlite", folder / "raw" / "db-campaign-1.blf")
 
 
 def db_state(db: Path) -> tuple[bytes, bytes] | None:
