@@ -15,8 +15,10 @@ Hammersley 1946), so sigma^2 is estimated by S^2 (N - 1) / (N - f).
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.integrate import quad
 
 from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.noise import MAX_CORRELATION, CorrelationModel
 
 
 def variance_inflation(rho: np.ndarray, n: int) -> float:
@@ -49,3 +51,45 @@ def correlated_series(s2: float, n: int, inflation: float, what: str) -> Correla
         )
     sigma2 = s2 * (n - 1) / (n - inflation)  # E[S^2] = sigma^2 (N - f) / (N - 1)
     return CorrelatedSeries(n, inflation, n / inflation, sigma2, sigma2 * inflation / n)
+
+
+def window_mean_correlation(
+    model: CorrelationModel, window_s: float, step_s: float, dt_s: float
+) -> float:
+    """Correlation of the means of two windows of length W whose starts are D apart, of a
+    reading with correlation ``model`` sampled every ``dt_s``: the double integral of K over the
+    two windows (as behind seed 004 eq 8.93),
+
+        cov = (1/W^2) integral_{-W}^{W} (W - |u|) K(D + u) du,
+
+    the variance the same at D = 0 plus the white part s_w^2 dt / W."""
+
+    def averaged(d: float) -> float:
+        points = sorted(u for u in {0.0, -d} if -window_s < u < window_s)  # kinks of |u|, K
+        integral = quad(
+            lambda u: (window_s - abs(u)) * model(d + u),
+            -window_s,
+            window_s,
+            points=points or None,
+            limit=200,
+        )[0]
+        return integral / window_s**2
+
+    variance = averaged(0.0) + model.white_variance * dt_s / window_s
+    return float(averaged(step_s) / variance)
+
+
+def independent_spacing_s(
+    model: CorrelationModel, window_s: float, max_correlation: float = MAX_CORRELATION
+) -> tuple[float, float]:
+    """The correlation of successive means of windows of ``window_s`` laid end to end, and the
+    spacing (s) between windows from which it is at most ``max_correlation`` (0 when it is
+    already), for the exponential model K = sigma^2 e^(-mu|tau|) (white part left out: it only
+    lowers the correlation). Windows D >= W apart cover pairs of times at least D - W apart, so
+    the double integral factorises: rho(W + s) = rho(W) e^(-mu s) (Sveshnikov §8.3, the
+    correlation of averages behind eqs 8.92-8.94), and s = ln(rho(W) / rho_max) / mu."""
+    if model.is_smooth:
+        raise ValueError("independent_spacing_s takes the exponential correlation model")
+    exponential = CorrelationModel(model.variance, model.decay_per_s)
+    touching = window_mean_correlation(exponential, window_s, window_s, 0.0)
+    return touching, max(0.0, float(np.log(touching / max_correlation)) / model.decay_per_s)

@@ -357,6 +357,9 @@ def max_sampling_interval(
     return float(brentq(excess, grid[k - 1], grid[k], xtol=1e-6 * grid[k]))
 
 
+MAX_CORRELATION = 0.1  # successive observations more correlated break the tests' independence
+
+
 @dataclass(frozen=True)
 class SamplingAdvice:
     """Recommended reading interval (8.94) and whether successive observations are correlated:
@@ -379,7 +382,7 @@ def sampling_advice(
     record_s: float,
     factor: float = 1.1,
     observation_interval_s: float | None = None,
-    max_correlation: float = 0.1,
+    max_correlation: float = MAX_CORRELATION,
 ) -> SamplingAdvice:
     """``max_sampling_interval`` plus the correlation between successive observations."""
     rho = None
