@@ -12,6 +12,7 @@ from scipy.integrate import quad
 from scipy.optimize import brentq, curve_fit
 
 from gyrostand.analysis.allan import AllanDeviation, allan_deviation
+from gyrostand.analysis.effective import MAX_CORRELATION
 from gyrostand.analysis.errors import AnalysisError
 
 
@@ -355,9 +356,6 @@ def max_sampling_interval(
     if k == 0:
         return float(grid[0])
     return float(brentq(excess, grid[k - 1], grid[k], xtol=1e-6 * grid[k]))
-
-
-MAX_CORRELATION = 0.1  # successive observations more correlated break the tests' independence
 
 
 @dataclass(frozen=True)

@@ -83,15 +83,18 @@ class Spacing:
 def spacing(plan: Plan) -> Spacing | None:
     """The plan's observation spacing checked against [observation] correlation_time_s (None
     when the plan does not state it)."""
-    from gyrostand.analysis.effective import independent_spacing_s
-    from gyrostand.analysis.noise import MAX_CORRELATION, CorrelationModel
+    from gyrostand.analysis.effective import (
+        MAX_CORRELATION,
+        independent_spacing_s,
+        touching_correlation,
+    )
 
     obs = plan.observation
-    if obs.correlation_time_s is None:
+    tau = obs.correlation_time_s
+    if tau is None:
         return None
-    model = CorrelationModel(1.0, 1.0 / obs.correlation_time_s)
     windows = {obs.still_window_s, *(obs.rocking_window_periods * t.period_s for t in plan.trials)}
     window = min(windows)  # the shortest window correlates most (rho(W) falls with W)
-    touching, needed = independent_spacing_s(model, window)
-    rho = touching * math.exp(-model.decay_per_s * obs.spacing_s)  # rho(W + s), see there
-    return Spacing(obs.correlation_time_s, window, obs.spacing_s, rho, needed, MAX_CORRELATION)
+    rho = touching_correlation(window, tau) * math.exp(-obs.spacing_s / tau)  # rho(W + s)
+    needed = independent_spacing_s(window, tau)
+    return Spacing(tau, window, obs.spacing_s, rho, needed, MAX_CORRELATION)

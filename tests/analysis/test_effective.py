@@ -12,6 +12,7 @@ from gyrostand.analysis.campaign import analyze_campaign
 from gyrostand.analysis.effective import (
     correlated_series,
     independent_spacing_s,
+    touching_correlation,
     variance_inflation,
     window_mean_correlation,
 )
@@ -100,29 +101,30 @@ def test_campaign_reports_the_standard_error_the_trial_means_have() -> None:
     assert np.std(z_old) > 1.35
 
 
-@pytest.mark.parametrize(("mu", "window"), [(0.05, 28.0), (0.05, 60.0), (0.01, 30.0)])
-def test_independent_spacing_meets_the_correlation_bound(mu: float, window: float) -> None:
-    """rho(W) of windows end to end in closed form; rho(W + s) = 0.1 at the spacing returned."""
-    model = CorrelationModel(2e-4, mu)
-    touching, spacing = independent_spacing_s(model, window)
-    x = mu * window
-    assert touching == pytest.approx(
-        math.exp(-x) * (math.cosh(x) - 1) / (x - 1 + math.exp(-x)), rel=1e-9
-    )
-    assert spacing == pytest.approx(math.log(touching / 0.1) / mu, rel=1e-9)
+@pytest.mark.parametrize(("tau", "window"), [(20.0, 28.0), (20.0, 60.0), (100.0, 30.0)])
+def test_independent_spacing_meets_the_correlation_bound(tau: float, window: float) -> None:
+    """The closed form of rho(W) against the double integral by quadrature; rho(W + s) = 0.1 at
+    the spacing returned."""
+    model = CorrelationModel(2e-4, 1 / tau)
+    touching = touching_correlation(window, tau)
+    assert touching == pytest.approx(window_mean_correlation(model, window, window, 0.1), rel=1e-8)
+    spacing = independent_spacing_s(window, tau)
     assert window_mean_correlation(model, window, window + spacing, 0.1) == pytest.approx(0.1)
 
 
 def test_spaced_window_means_of_a_simulated_reading_are_independent() -> None:
-    """Exponentially correlated readings (AR(1) at 1 s, mu = 0.05/s, fixed seed): the lag-1
+    """Exponentially correlated readings (AR(1) at 1 s, tau_k = 20 s, fixed seed): the lag-1
     correlation of 28 s window means is ~0.44 end to end and ~0.10 at the spacing returned."""
-    mu, window = 0.05, 28
-    touching, spacing = independent_spacing_s(CorrelationModel(1.0, mu), window)
-    phi = math.exp(-mu)
+    tau, window = 20.0, 28
+    phi = math.exp(-1 / tau)
     x = lfilter(
         [math.sqrt(1 - phi**2)], [1, -phi], np.random.default_rng(7).standard_normal(400_000)
     )
-    for step, expected in ((window, touching), (window + round(spacing), 0.1)):
+    spacing = independent_spacing_s(window, tau)
+    for step, expected in (
+        (window, touching_correlation(window, tau)),
+        (window + round(spacing), 0.1),
+    ):
         starts = np.arange(0, x.size - window, step)
         csum = np.concatenate([[0.0], np.cumsum(x)])
         means = (csum[starts + window] - csum[starts]) / window  # windows [start, start + W)
