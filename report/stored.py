@@ -44,6 +44,7 @@ from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.gyro_model import KnownConstants
 from gyrostand.analysis.measured_motion import PREFERENCE
 from gyrostand.analysis.settle import SettleOutcome
+from gyrostand.analysis.transient import PLAN_CONTRADICTED
 from gyrostand.analysis.trials import SeriesSummary, TrialInput, series_moments
 from gyrostand.db.models import AnalysisRun, Campaign, Series, Trial
 from gyrostand.db.queries import campaign_constants, current_trials, load_campaign, sign_offs
@@ -336,6 +337,9 @@ def compute_stored(campaign: Campaign) -> StoredAnalysis:
     if not isinstance(check, str):
         warnings = analysis.warnings + check.warnings(analysis.cochran.s_e)
         analysis = replace(analysis, transient=check, warnings=warnings)
+    contradicted = [e.message for e in campaign.events if e.kind == PLAN_CONTRADICTED]
+    if contradicted:  # told while the campaign ran; the settle criteria used the record's values
+        analysis = replace(analysis, warnings=(*contradicted, *analysis.warnings))
     return StoredAnalysis(analysis, inputs, None, signal)
 
 
