@@ -25,16 +25,21 @@ the series observes from the end of the first block at which
 The band criterion is only evaluated to record the time saved: measured when it held before,
 else predicted from the fitted transient. A transient the model does not describe (wrong period
 or damping in the plan) keeps the standard error up and ends in the settle timeout. omega0 and
-the damping come from the plan (instrument data); the analysis re-estimates them from the whole
-record (`report.transient`). A plan 10 % short on the period, or 0.05 low on the damping ratio,
-biases the estimate (bench/bench_early_settle.py prints by how much).
+the damping come from the plan (instrument data) until the record contradicts them: as each
+series starts, once the record spans a precession period, the period and damping ratio are
+estimated from it (`identify`); when they are well determined and more than 3 SE from the
+plan's, the record's are used from there on and a "plan contradicted" event says so. A
+compensated criterion compensates only once the record has determined them (confirming the
+plan's or replacing them): until then a series waits for the bound, as "estimate" does, since
+a compensation with a wrong period is biased and a short compensated record cannot tell. The
+analysis re-estimates them from the whole record too (`report.transient`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -46,7 +51,10 @@ from gyrostand.analysis.transient import (
     TransientFit,
     TransientModel,
     Windows,
+    contradicts,
     fit_transient,
+    fit_transient_free,
+    well_determined,
 )
 from gyrostand.plan.model import EstimatePlan, SettlePlan
 
@@ -86,8 +94,9 @@ class _Segment:
 
 class TransientRecord:
     """Window means (stand seconds, headings) and the steps of the equilibrium since the engine
-    started; the last KEEP_SEGMENTS segments are kept and fitted (so the work per block stays
-    bounded over a campaign)."""
+    started; the last KEEP_SEGMENTS segments are fitted on every block (so the work per block
+    stays bounded over a campaign), the whole record once per series to identify the period
+    and damping (`identify`)."""
 
     def __init__(self) -> None:
         self._segments: list[_Segment] = []
@@ -105,7 +114,6 @@ class TransientRecord:
         if empty:
             self._segments.pop()
         self._segments.append(_Segment(t_s, free=empty or not self._segments))
-        del self._segments[:-KEEP_SEGMENTS]
 
     def add(self, start_s: float, end_s: float, heading_deg: float) -> None:
         """A window mean over [start_s, end_s); a window before any step starts a segment."""
@@ -116,16 +124,76 @@ class TransientRecord:
         value = float(about(self._branch, heading_deg))
         self._segments[-1].rows.append(((start_s + end_s) / 2, end_s - start_s, value))
 
-    def fit(self, model: TransientModel) -> tuple[TransientFit, int] | None:
+    def fit(self, model: TransientModel, free: bool = False) -> tuple[TransientFit, int] | None:
         """The fit of the kept segments and the current segment's index in it; None while it
-        cannot be fitted (too short, degenerate)."""
-        kept = self._segments
+        cannot be fitted (too short, degenerate). ``free``: the period and damping ratio are
+        estimated too, from ``model``'s (`fit_transient_free`)."""
+        kept = self._segments if free else self._segments[-KEEP_SEGMENTS:]
         rows = [(k, *row) for k, s in enumerate(kept) for row in s.rows]
         seg = Segments(tuple(s.step_s for s in kept), (True, *(s.free for s in kept[1:])))
         try:
-            return fit_transient(model, seg, Windows.of(rows)), len(kept) - 1
+            fitter = fit_transient_free if free else fit_transient
+            return fitter(model, seg, Windows.of(rows)), len(kept) - 1
         except AnalysisError:
             return None
+
+    @property
+    def span_s(self) -> float:
+        """Stand seconds from the first window to the last."""
+        rows = [row for s in self._segments for row in s.rows]
+        return rows[-1][0] - rows[0][0] if rows else 0.0
+
+
+@dataclass(frozen=True)
+class Identified:
+    """The compass's period and damping ratio as the whole record gives them (a free fit), well
+    determined (`well_determined`), with their standard errors; ``contradicted``: more than
+    REJECT_SE from the plan's (`contradicts`)."""
+
+    undamped_period_s: float
+    period_se_s: float
+    damping_ratio: float
+    damping_ratio_se: float
+    contradicted: bool
+
+    def describe(self, plan: EstimatePlan) -> str:
+        """The "plan contradicted" event message."""
+        return (
+            f"the record contradicts the plan: period {self.undamped_period_s:.0f} +/- "
+            f"{self.period_se_s:.0f} s vs the plan's {plan.undamped_period_s:g} s, damping ratio "
+            f"{self.damping_ratio:.3f} +/- {self.damping_ratio_se:.3f} vs the plan's "
+            f"{plan.damping_ratio:g} (transient model fitted to the record, Bezvesilna & Gura); "
+            "the settle criterion uses the record's values from here: check [settle] "
+            "undamped_period_s and damping_ratio"
+        )
+
+    def applied(self, plan: EstimatePlan) -> EstimatePlan:
+        """``plan`` with the record's period and damping ratio when they contradict its own."""
+        if not self.contradicted:
+            return plan
+        return replace(
+            plan, undamped_period_s=self.undamped_period_s, damping_ratio=self.damping_ratio
+        )
+
+
+def identify(record: TransientRecord, plan: EstimatePlan) -> Identified | None:
+    """The record's own period and damping ratio once it spans a precession period (a free
+    fit needs about one, `estimate_settle_point_free`) and determines them well; None
+    otherwise."""
+    if record.span_s < plan.undamped_period_s:
+        return None
+    fitted = record.fit(plan.model, free=True)
+    if fitted is None or not well_determined(fitted[0]):
+        return None
+    fit = fitted[0]
+    assert fit.period_se_s is not None and fit.damping_ratio_se is not None
+    return Identified(
+        fit.model.undamped_period_s,
+        fit.period_se_s,
+        fit.model.damping_ratio,
+        fit.damping_ratio_se,
+        contradicts(fit, plan.model),
+    )
 
 
 @dataclass(frozen=True)

@@ -44,19 +44,22 @@ import numpy as np
 
 from gyrostand.acquisition.early_settle import (
     EarlySettle,
+    Identified,
     TransientRecord,
     band_settled,
     describe,
     hold_blocks,
+    identify,
 )
 from gyrostand.acquisition.motion import MotionRecorder
 from gyrostand.analysis.angles import wrap180
 from gyrostand.analysis.measured_motion import STAND_REPORT, MeasuredMotion, preferred
 from gyrostand.analysis.settle import SettleOutcome
+from gyrostand.analysis.transient import PLAN_CONTRADICTED
 from gyrostand.devices.source import SourceInfo
 from gyrostand.devices.stand_frames import GYROSTAND
 from gyrostand.frames.batch import DeviceEvent, FrameBatch, Headings, RollSample, Statuses
-from gyrostand.plan.model import Plan, TrialPlan
+from gyrostand.plan.model import EstimatePlan, Plan, TrialPlan
 from gyrostand.stand.protocol import (
     AckFrame,
     ClockFrame,
@@ -388,6 +391,8 @@ class Engine:
         self._settle_start: int | None = None
         self._early: EarlySettle | None = None  # settle.method = "estimate" / "compensated"
         self._record = TransientRecord()  # window means and equilibrium steps of this run
+        self._identified: Identified | None = None  # the record's period, damping (`identify`)
+        self._contradiction_told = False
         self._step_ms: int | None = None  # the last start/stop that took effect (this run)
         self._windows: list[tuple[int, int]] = []  # the series' observation windows (ms)
         self._series_errors = 0
@@ -1227,7 +1232,7 @@ class Engine:
         if w.used and limit is None:  # (frames are used once the reference heading is known)
             assert self._ref is not None
             self._record.add(w.start_ms / 1000, w.end_ms / 1000, self._ref + w.mean_ndeg() / NANO)
-        estimate = settle.estimate
+        estimate = self._estimate_plan()
         if estimate is None:
             if band:
                 assert self._ref is not None
@@ -1236,6 +1241,7 @@ class Engine:
                 )
         elif w.used and limit is None:
             if self._early is None:
+                estimate = self._identify(estimate, w.end_ms)
                 spacing = round(self.plan.observation.spacing_s * 1000)
                 self._early = EarlySettle(
                     estimate,
@@ -1328,6 +1334,32 @@ class Engine:
             f"{plan.transient_tolerance_deg:.5f} deg)"
         )
 
+    def _estimate_plan(self) -> EstimatePlan | None:
+        """The transient-model criterion with the period and damping in use: the record's
+        once it contradicted the plan's (`identify`), else the plan's."""
+        estimate = self.plan.settle.estimate
+        if estimate is None or self._identified is None:
+            return estimate
+        return self._identified.applied(estimate)
+
+    def _identify(self, estimate: EstimatePlan, end_ms: int) -> EstimatePlan:
+        """As a series starts (and before a compensated one is compensated): the criterion
+        with the record's period and damping when they contradict the plan's (told once in a
+        "plan contradicted" warning event, while the campaign runs), the plan's when the record
+        confirms them, and without compensation while the record cannot tell."""
+        plan = self.plan.settle.estimate
+        assert plan is not None
+        found = identify(self._record, plan)
+        if found is not None and found.contradicted and not self._contradiction_told:
+            self._contradiction_told = True
+            message = found.describe(plan)
+            self.sink.event(PLAN_CONTRADICTED, "warning", message, self._tidx, self._j, end_ms)
+        if found is not None:
+            self._identified = found
+        if self._identified is None:
+            return replace(estimate, compensated=False)
+        return self._identified.applied(plan)
+
     def _early_settled(self, w: _Window) -> SettleOutcome:
         """How an early-settle series settled (also told in an "early settle" event with the
         estimate and the time saved against the band criterion)."""
@@ -1417,11 +1449,12 @@ class Engine:
         """Compensated series: the fitted transient over each observation window of this run
         (the fit now includes the observations themselves). None otherwise, or when the record
         cannot be fitted (the analysis then says the series is not compensated)."""
-        estimate = self.plan.settle.estimate
+        estimate = self._estimate_plan()
         if estimate is None or not estimate.compensated or not self._windows:
             return None
         if self._early is None or self._early.last is None or not self._early.last.compensates:
             return None  # settled by the bound (a free state) or resumed mid-series
+        estimate = self._identify(estimate, self.now_ms)  # the record now has the observations
         fitted = self._record.fit(estimate.model)
         if fitted is None:
             return None

@@ -12,11 +12,20 @@ S^2 of the N observations is then biased low, E[S^2] = sigma^2 (N - f) / (N - 1)
 Hammersley 1946), so sigma^2 is estimated by S^2 (N - 1) / (N - f).
 """
 
+from __future__ import annotations
+
+import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gyrostand.analysis.errors import AnalysisError
+
+if TYPE_CHECKING:
+    from gyrostand.analysis.noise import CorrelationModel
+
+MAX_CORRELATION = 0.1  # successive observations more correlated break the tests' independence
 
 
 def variance_inflation(rho: np.ndarray, n: int) -> float:
@@ -49,3 +58,53 @@ def correlated_series(s2: float, n: int, inflation: float, what: str) -> Correla
         )
     sigma2 = s2 * (n - 1) / (n - inflation)  # E[S^2] = sigma^2 (N - f) / (N - 1)
     return CorrelatedSeries(n, inflation, n / inflation, sigma2, sigma2 * inflation / n)
+
+
+def window_mean_correlation(
+    model: CorrelationModel, window_s: float, step_s: float, dt_s: float
+) -> float:
+    """Correlation of the means of two windows of length W whose starts are D apart, of a
+    reading with correlation ``model`` sampled every ``dt_s``: the double integral of K over the
+    two windows (as behind seed 004 eq 8.93),
+
+        cov = (1/W^2) integral_{-W}^{W} (W - |u|) K(D + u) du,
+
+    the variance the same at D = 0 plus the white part s_w^2 dt / W."""
+    from scipy.integrate import quad  # on demand: `plan check` imports this module, not scipy
+
+    def averaged(d: float) -> float:
+        points = sorted(u for u in {0.0, -d} if -window_s < u < window_s)  # kinks of |u|, K
+        integral = quad(
+            lambda u: (window_s - abs(u)) * model(d + u),
+            -window_s,
+            window_s,
+            points=points or None,
+            limit=200,
+        )[0]
+        return integral / window_s**2
+
+    variance = averaged(0.0) + model.white_variance * dt_s / window_s
+    return float(averaged(step_s) / variance)
+
+
+def touching_correlation(window_s: float, correlation_time_s: float) -> float:
+    """Correlation of the means of two windows of W laid end to end, of a reading with the
+    exponential correlation sigma^2 e^(-|tau| / tau_k) (Sveshnikov eq 8.89's model): the double
+    integral of `window_mean_correlation` in closed form, x = W / tau_k,
+
+        rho(W) = e^(-x) (cosh x - 1) / (x - 1 + e^(-x)) = (1 - e^(-x))^2 / (2 (x - 1 + e^(-x)))."""
+    x = window_s / correlation_time_s
+    return math.expm1(-x) ** 2 / (2.0 * (x + math.expm1(-x)))
+
+
+def independent_spacing_s(
+    window_s: float, correlation_time_s: float, max_correlation: float = MAX_CORRELATION
+) -> float:
+    """The spacing between windows of W from which successive window means of the exponential
+    model are correlated at most ``max_correlation`` (0 when end to end already are). Windows
+    D >= W apart cover pairs of times at least D - W apart, so the double integral factorises:
+    rho(W + s) = rho(W) e^(-s / tau_k) (Sveshnikov §8.3, the correlation of averages behind
+    eqs 8.92-8.94), and s = tau_k ln(rho(W) / rho_max). The white part of the reading is left
+    out: it only lowers the correlation."""
+    ratio = touching_correlation(window_s, correlation_time_s) / max_correlation
+    return max(0.0, correlation_time_s * math.log(ratio))

@@ -9,6 +9,7 @@ from itertools import pairwise
 import numpy as np
 
 from gyrostand.analysis.allan import AllanDeviation, allan_deviation
+from gyrostand.analysis.effective import MAX_CORRELATION
 from gyrostand.analysis.errors import AnalysisError
 
 
@@ -390,7 +391,7 @@ def sampling_advice(
     record_s: float,
     factor: float = 1.1,
     observation_interval_s: float | None = None,
-    max_correlation: float = 0.1,
+    max_correlation: float = MAX_CORRELATION,
 ) -> SamplingAdvice:
     """``max_sampling_interval`` plus the correlation between successive observations."""
     rho = None

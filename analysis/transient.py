@@ -251,18 +251,28 @@ WELL_DETERMINED = 0.1  # relative SE below which the record is said to determine
 REJECT_SE = 3.0  # ... and to contradict the plan's when these many SE away
 
 
+PLAN_CONTRADICTED = "plan contradicted"  # the acquisition event: the record's period, damping used
+
+
+def well_determined(record: TransientFit) -> bool:
+    """The record's own period and damping ratio (a `fit_transient_free`) have relative SE
+    below WELL_DETERMINED."""
+    assert record.period_se_s is not None and record.damping_ratio_se is not None
+    return (
+        record.period_se_s < WELL_DETERMINED * record.model.undamped_period_s
+        and record.damping_ratio_se < WELL_DETERMINED * record.model.damping_ratio
+    )
+
+
 def contradicts(record: TransientFit, plan: TransientModel) -> bool:
     """The record's own period and damping ratio (a `fit_transient_free`) are well determined
     and more than REJECT_SE standard errors from the plan's. Only a warning: on records of a
     few hours those SE run about 2x low (bench/bench_early_settle.py), so the plan's values
     stay in use."""
+    if not well_determined(record):
+        return False
     assert record.period_se_s is not None and record.damping_ratio_se is not None
     period, ratio = record.model.undamped_period_s, record.model.damping_ratio
-    if not (
-        record.period_se_s < WELL_DETERMINED * period
-        and record.damping_ratio_se < WELL_DETERMINED * ratio
-    ):
-        return False
     return (
         max(
             abs(period - plan.undamped_period_s) / record.period_se_s,

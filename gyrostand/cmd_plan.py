@@ -1,9 +1,11 @@
 """CLI: plan check|schema -- validate a campaign plan file; the plan's JSON Schema for editors.
 
 `gyrostand plan check PLAN` prints one summary line (with the fit's residual degrees of freedom,
-and a warning line when they are few), or every problem one per line on stderr
-("gyrostand: error: PLAN: [table] key: ...", exit code 1). `gyrostand plan schema [--out FILE]`
-prints the JSON Schema of a plan file, generated from the plan model (docs/plan.md).
+and a warning line when they are few) and a line on the spacing of the observations (a warning
+when successive ones are correlated, naming the spacing they need), or every problem one per
+line on stderr ("gyrostand: error: PLAN: [table] key: ...", exit code 1). `gyrostand plan
+schema [--out FILE]` prints the JSON Schema of a plan file, generated from the plan model
+(docs/plan.md).
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ def register(app: typer.Typer) -> None:
         one summary line, or every problem one per line (exit code 1)."""
         from gyrostand.plan.codec import prepare
         from gyrostand.plan.model import PlanError, load_plan
-        from gyrostand.plan.summary import design_warning
+        from gyrostand.plan.summary import design_warning, spacing
 
         try:
             checked = load_plan(plan)
@@ -54,6 +56,14 @@ def register(app: typer.Typer) -> None:
         typer.echo(f"{plan}: ok — {summary(checked)}")
         if warning := design_warning(checked):
             typer.echo(f"{plan}: warning — {warning}")
+        if (observed := spacing(checked)) is None:
+            typer.echo(
+                f"{plan}: note — independence of successive observations not checked: "
+                "state the reading's correlation time, [observation] correlation_time_s"
+            )
+        else:
+            kind = "note" if observed.independent else "warning"
+            typer.echo(f"{plan}: {kind} — {observed.describe()}")
 
     @plan_app.command("schema")
     def schema(

@@ -308,6 +308,10 @@ class ObservationPlan(_Table):
     """Whole rocking periods per observation while rocking."""
     spacing_s: float = Field(0.0, ge=0)
     """Stand seconds between consecutive windows."""
+    correlation_time_s: float | None = Field(None, gt=0)
+    """The reading's correlation time 1/mu, s (the exponential model a report fits to a record
+    of this compass, Sveshnikov eq 8.89); with it `plan check` states the spacing that makes
+    successive observations independent (eqs 8.92-8.94)."""
 
     def window_ms(self, rocking_period_s: float | None) -> int:
         """Window length in stand milliseconds for a still (None) or rocking series."""

@@ -1,7 +1,11 @@
 """A checked plan in words: its design, N, settle method and bus on one line (`gyrostand plan
-check`, the station's start form), and why a design is fragile."""
+check`, the station's start form), why a design is fragile, and whether its observations are
+spaced to be independent."""
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 from gyrostand.plan.model import FEW_RESIDUAL_DOF, FIT_PARAMETERS, K_PROMPT, Plan
 
@@ -40,3 +44,57 @@ def design_warning(plan: Plan) -> str | None:
         f"(fit trials minus the {FIT_PARAMETERS} parameters): its t({dof}) intervals are wide, "
         "and a residual variance near 0 by chance goes unnoticed in them; add fit trials"
     )
+
+
+@dataclass(frozen=True)
+class Spacing:
+    """The plan's spacing against the one that makes successive observations independent, for
+    the reading's correlation time: the correlation of successive observations at the plan's
+    spacing in its shortest window (``window_s``; the still window when no rocking one is
+    shorter), and the spacing from which every window's is at most ``max_correlation``."""
+
+    correlation_time_s: float
+    window_s: float
+    spacing_s: float
+    correlation: float
+    needed_s: float
+    max_correlation: float
+
+    @property
+    def independent(self) -> bool:
+        return self.spacing_s >= self.needed_s
+
+    def describe(self) -> str:
+        where = (
+            f"successive observations of the {self.window_s:g} s windows correlate "
+            f"rho = {self.correlation:+.3f} at [observation] spacing_s = {self.spacing_s:g} for "
+            f"the reading's correlation time {self.correlation_time_s:g} s (Sveshnikov "
+            f"eqs 8.92-8.94)"
+        )
+        if self.independent:
+            return f"{where}: independent (|rho| <= {self.max_correlation:g})"
+        return (
+            f"{where}, beyond |rho| = {self.max_correlation:g}: Cochran's and Fisher's tests "
+            f"assume independent observations; set [observation] spacing_s = "
+            f"{math.ceil(self.needed_s)} (stand seconds between windows)"
+        )
+
+
+def spacing(plan: Plan) -> Spacing | None:
+    """The plan's observation spacing checked against [observation] correlation_time_s (None
+    when the plan does not state it)."""
+    from gyrostand.analysis.effective import (
+        MAX_CORRELATION,
+        independent_spacing_s,
+        touching_correlation,
+    )
+
+    obs = plan.observation
+    tau = obs.correlation_time_s
+    if tau is None:
+        return None
+    windows = {obs.still_window_s, *(obs.rocking_window_periods * t.period_s for t in plan.trials)}
+    window = min(windows)  # the shortest window correlates most (rho(W) falls with W)
+    rho = touching_correlation(window, tau) * math.exp(-obs.spacing_s / tau)  # rho(W + s)
+    needed = independent_spacing_s(window, tau)
+    return Spacing(tau, window, obs.spacing_s, rho, needed, MAX_CORRELATION)

@@ -20,7 +20,7 @@ import numpy as np
 from gyrostand.analysis.angles import about
 from gyrostand.analysis.assumptions import AssumptionCheck
 from gyrostand.analysis.campaign import json_safe
-from gyrostand.analysis.effective import variance_inflation
+from gyrostand.analysis.effective import variance_inflation, window_mean_correlation
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.excursions import (
     CHECKED_MIN_LEVEL,
@@ -105,33 +105,6 @@ class ObservationCorrelation:
     @property
     def n_eff(self) -> float:
         return self.n / self.inflation
-
-
-def window_mean_correlation(
-    model: CorrelationModel, window_s: float, step_s: float, dt_s: float
-) -> float:
-    """Correlation of the means of two windows of length W whose starts are D apart, of a
-    reading with correlation ``model`` sampled every ``dt_s``: the double integral of K over the
-    two windows (as behind seed 004 eq 8.93),
-
-        cov = (1/W^2) integral_{-W}^{W} (W - |u|) K(D + u) du,
-
-    the variance the same at D = 0 plus the white part s_w^2 dt / W."""
-    from scipy.integrate import quad
-
-    def averaged(d: float) -> float:
-        points = sorted(u for u in {0.0, -d} if -window_s < u < window_s)  # kinks of |u|, K
-        integral = quad(
-            lambda u: (window_s - abs(u)) * model(d + u),
-            -window_s,
-            window_s,
-            points=points or None,
-            limit=200,
-        )[0]
-        return integral / window_s**2
-
-    variance = averaged(0.0) + model.white_variance * dt_s / window_s
-    return float(averaged(step_s) / variance)
 
 
 def _windows(record: TrialRecord, j: int) -> tuple[float, float] | None:

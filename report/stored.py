@@ -45,6 +45,7 @@ from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.gyro_model import KnownConstants
 from gyrostand.analysis.measured_motion import PREFERENCE
 from gyrostand.analysis.settle import SettleOutcome
+from gyrostand.analysis.transient import PLAN_CONTRADICTED
 from gyrostand.analysis.trials import SeriesSummary, TrialInput, series_moments
 from gyrostand.analysis.typed_json import decode, encode
 from gyrostand.db.models import AnalysisRun, Campaign, Series, Trial
@@ -368,6 +369,9 @@ def compute_stored(campaign: Campaign, inputs: StoredInputs | None = None) -> St
     if not isinstance(check, str):
         warnings = analysis.warnings + check.warnings(analysis.cochran.s_e)
         analysis = replace(analysis, transient=check, warnings=warnings)
+    contradicted = [e.message for e in campaign.events if e.kind == PLAN_CONTRADICTED]
+    if contradicted:  # told while the campaign ran; the settle criteria used the record's values
+        analysis = replace(analysis, warnings=(*contradicted, *analysis.warnings))
     return StoredAnalysis(analysis, inputs, None, signal, campaign_traces(campaign))
 
 

@@ -228,6 +228,9 @@ def rms(errors: dict[tuple[int, int], float]) -> float:
 
 
 COMPENSATED_SETTLE = EARLY_SETTLE.replace('method = "estimate"', 'method = "compensated"')
+# not compensated: the run's first series (state unknown) and the second, which starts before the
+# record determines the period and damping (it spans one period from the third series on)
+UNCONFIRMED = {(1, 1), (1, 2)}
 
 
 @pytest.fixture(scope="module")
@@ -261,23 +264,25 @@ def test_model_criterion_bounds_the_transient_left(band, early) -> None:
 
 
 def test_compensated_series_start_early_and_compensate_the_transient(band, compensated) -> None:
-    """Every series after the run's first starts inside its transient and is compensated; the
-    first (state unknown) waits for the transient bound."""
+    """Every series once the record determines the period and damping starts inside its
+    transient and is compensated; the ones before wait for the transient bound."""
     waited, comp_s = settle_s(band[0]), settle_s(compensated[0])
-    transients = [key for key in waited if key != (1, 1)]  # (1, 1): the compass starts settled
+    transients = [key for key in waited if key not in UNCONFIRMED]
     assert all(comp_s[key] < 0.3 * waited[key] for key in transients)
-    assert compensated[1].stand.stand_time_s < 0.6 * band[1].stand.stand_time_s
+    # 0.80 (below 0.6 when the second series was compensated on the plan's word): half of this
+    # short run's series wait for the record to confirm the plan's period and damping
+    assert compensated[1].stand.stand_time_s < 0.85 * band[1].stand.stand_time_s
     config = scaled_config()
     raw = {
         key: np.mean([o.value_deg for o in compensated[0].observations if (o.trial, o.j) == key])
         for key in waited
     }
     c = config.compass
-    assert abs(raw[(1, 2)] - c.heading_deg - c.settled_shift_deg(45.0, 24.0, 6.0)) > 0.1
+    assert abs(raw[(2, 1)] - c.heading_deg) > 0.1  # observed inside the transient after the stop
     comp_err, band_err = errors_deg(compensated[0], config), errors_deg(band[0], config)
     assert rms(comp_err) < rms(band_err)
     done = {(a[0], a[1]): a[2] for a in compensated[0].of("series_completed")}
-    assert done[(1, 1)] is None
+    assert done[(1, 1)] is None and done[(1, 2)] is None
     for key in transients:
         comp = done[key]
         assert comp.first_k == 1 and len(comp.transient_deg) == 4
@@ -294,14 +299,14 @@ def test_the_outcome_records_estimate_and_time_saved(band, compensated) -> None:
         outcome = settled[key][3]
         assert event[5] == settled[key][2]  # the event tells the decision at its stand time
         assert f"settle point {outcome.estimate_deg:.5f} deg" in event[2]
-        assert outcome.criterion == ("estimate" if key == (1, 1) else "compensated")
+        assert outcome.criterion == ("estimate" if key in UNCONFIRMED else "compensated")
         assert outcome.settle_s == comp_s[key]
         assert outcome.standard_error_deg <= 0.015
         assert outcome.stable_since_s <= outcome.settle_s
         assert outcome.blocks and outcome.blocks[-1][1] == settled[key][2]  # the settle record
         assert outcome.step_ms is not None and outcome.step_ms <= outcome.blocks[0][0]
         # the band time predicted from the fit vs the band criterion on the same seed's readings
-        if key != (1, 1):
+        if key not in UNCONFIRMED:
             assert not outcome.band_measured
             assert outcome.band_s == pytest.approx(waited[key], rel=0.15)
         assert outcome.saved_s == pytest.approx(outcome.band_s - outcome.settle_s)
@@ -337,7 +342,7 @@ def test_stored_and_reported(tmp_path: Path, compensated) -> None:
         stored = {}
         for index, s in series:
             outcome = SettleOutcome.from_dict(s.settle_outcome)
-            first = (index, s.j) == (1, 1)  # the run's first series: not compensated
+            first = (index, s.j) in UNCONFIRMED  # not compensated
             assert outcome.criterion == ("estimate" if first else "compensated")
             assert outcome.standard_error_deg <= 0.015
             assert s.settle_estimate_deg == outcome.estimate_deg
@@ -363,7 +368,7 @@ def test_stored_and_reported(tmp_path: Path, compensated) -> None:
     rows = {(r.trial, r.j): r for r in report.signal.settle}
     assert rows.keys() == stored.keys()
     for key, (estimate, saved) in stored.items():
-        assert rows[key].criterion == ("estimate" if key == (1, 1) else "compensated")
+        assert rows[key].criterion == ("estimate" if key in UNCONFIRMED else "compensated")
         assert rows[key].estimate_deg == estimate and rows[key].saved_s == saved
 
 

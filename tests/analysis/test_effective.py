@@ -1,14 +1,24 @@
 """Means of correlated observations: N_eff from the correlation function, against AR(1) closed
 forms and simulation (fixed seeds), and through a whole campaign's analysis."""
 
+import math
+
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 
 from gyrostand.analysis import paper_example as paper
 from gyrostand.analysis.campaign import analyze_campaign
-from gyrostand.analysis.effective import correlated_series, variance_inflation
+from gyrostand.analysis.effective import (
+    correlated_series,
+    independent_spacing_s,
+    touching_correlation,
+    variance_inflation,
+    window_mean_correlation,
+)
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.gyro_model import RollingErrorModel
+from gyrostand.analysis.noise import CorrelationModel
 from gyrostand.analysis.synthetic import Design, ar1, synthetic_trials
 from gyrostand.analysis.trials import TrialInput
 
@@ -89,3 +99,34 @@ def test_campaign_reports_the_standard_error_the_trial_means_have() -> None:
         assert new.cochran.pooled_variance > old.cochran.pooled_variance
     assert np.std(z_new) == pytest.approx(1.0, abs=0.12)
     assert np.std(z_old) > 1.35
+
+
+@pytest.mark.parametrize(("tau", "window"), [(20.0, 28.0), (20.0, 60.0), (100.0, 30.0)])
+def test_independent_spacing_meets_the_correlation_bound(tau: float, window: float) -> None:
+    """The closed form of rho(W) against the double integral by quadrature; rho(W + s) = 0.1 at
+    the spacing returned."""
+    model = CorrelationModel(2e-4, 1 / tau)
+    touching = touching_correlation(window, tau)
+    assert touching == pytest.approx(window_mean_correlation(model, window, window, 0.1), rel=1e-8)
+    spacing = independent_spacing_s(window, tau)
+    assert window_mean_correlation(model, window, window + spacing, 0.1) == pytest.approx(0.1)
+
+
+def test_spaced_window_means_of_a_simulated_reading_are_independent() -> None:
+    """Exponentially correlated readings (AR(1) at 1 s, tau_k = 20 s, fixed seed): the lag-1
+    correlation of 28 s window means is ~0.44 end to end and ~0.10 at the spacing returned."""
+    tau, window = 20.0, 28
+    phi = math.exp(-1 / tau)
+    x = lfilter(
+        [math.sqrt(1 - phi**2)], [1, -phi], np.random.default_rng(7).standard_normal(400_000)
+    )
+    spacing = independent_spacing_s(window, tau)
+    for step, expected in (
+        (window, touching_correlation(window, tau)),
+        (window + round(spacing), 0.1),
+    ):
+        starts = np.arange(0, x.size - window, step)
+        csum = np.concatenate([[0.0], np.cumsum(x)])
+        means = (csum[starts + window] - csum[starts]) / window  # windows [start, start + W)
+        r = np.corrcoef(means[:-1], means[1:])[0, 1]
+        assert r == pytest.approx(expected, abs=4 / math.sqrt(means.size))

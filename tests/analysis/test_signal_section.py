@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from gyrostand.analysis.effective import window_mean_correlation
 from gyrostand.analysis.noise import CorrelationModel
 from gyrostand.report.compliance import FAIL, PASS
 from gyrostand.report.model import (
@@ -24,7 +25,6 @@ from gyrostand.report.signal import (
     settle_rows,
     signal_section,
     uniform_record,
-    window_mean_correlation,
 )
 
 

@@ -35,9 +35,43 @@ def test_every_shipped_plan_passes(plan: Path) -> None:
     assert re.fullmatch(
         rf"{name}: ok — 6 trials \(4 fit, 2 control\), 2 residual degrees of freedom, N = 5, .*\n"
         rf"{name}: warning — the fit of C and T leaves 2 residual degrees of freedom .* add fit "
-        r"trials\n",
+        r"trials\n"
+        rf"{name}: note — successive observations of the 28 s windows correlate rho = \+0\.09\d "
+        r"at \[observation\] spacing_s = 30 .*: independent \(\|rho\| <= 0\.1\)\n",
         out,
     )
+
+
+@pytest.mark.parametrize(
+    ("spacing", "correlation_time", "said"),
+    [
+        # rho(28 s windows end to end) = 0.4389 (closed form in tests/analysis/test_effective.py),
+        # ln(0.4389 / 0.1) / 0.05 = 29.58 s
+        ("0.0", "20.0", "rho = +0.439 at [observation] spacing_s = 0 "),
+        ("0.0", "20.0", "set [observation] spacing_s = 30 (stand seconds between windows)"),
+        ("29.0", "20.0", "rho = +0.103 at [observation] spacing_s = 29 "),  # 0.4389 e^(-1.45)
+        ("0.0", "2.0", "rho = +0.038 at [observation] spacing_s = 0 "),  # ~ 1 / (2 (14 - 1))
+        ("0.0", None, "independence of successive observations not checked: state"),
+    ],
+)
+def test_spacing_is_checked_against_the_correlation_time(
+    tmp_path: Path, spacing: str, correlation_time: str | None, said: str
+) -> None:
+    """The spacing that makes successive observations independent (Sveshnikov eqs 8.92-8.94)."""
+    text = re.sub(r"(?m)^spacing_s = .*$", f"spacing_s = {spacing}", PAPER.read_text())
+    if correlation_time is None:
+        text = re.sub(r"(?m)^correlation_time_s = .*\n", "", text)
+    else:
+        text = re.sub(
+            r"(?m)^correlation_time_s = .*$", f"correlation_time_s = {correlation_time}", text
+        )
+    plan = tmp_path / "plan.toml"
+    plan.write_text(text)
+    code, out = gyrostand("plan", "check", plan)
+    assert code == 0, out
+    assert said in out.replace("\n", " ")
+    warned = spacing == "0.0" and correlation_time == "20.0" or spacing == "29.0"
+    assert ("warning — successive observations" in out) == warned
 
 
 @pytest.mark.parametrize(("fit", "warned"), [(3, True), (5, False)])

@@ -1,0 +1,28 @@
+"""A plan 10 % short on the period, on the lockstep simulated stand (the compass scaled to a
+1200 s period, as in test_early_settle; ~10 s on a loaded machine, so in the slow stage): with
+the plan at 1080 s the compensated criterion told nothing and left 0.03-0.04 deg in the series
+means before; now a "plan contradicted" event comes at trial 2's first series and the compensated
+series' means lie within their SE (+ the noise) of the truth."""
+
+import pytest
+
+from gyrostand.analysis.transient import PLAN_CONTRADICTED
+
+from .test_early_settle import COMPENSATED_SETTLE, SCALED_T0_S, errors_deg, run, scaled_config
+
+
+@pytest.mark.parametrize("factor", [0.9])
+def test_the_compensated_criterion_uses_the_record_s_period(factor: float) -> None:
+    settle = COMPENSATED_SETTLE.replace(
+        f"undamped_period_s = {SCALED_T0_S}", f"undamped_period_s = {factor * SCALED_T0_S:g}"
+    )
+    sink, _, _ = run(settle, scaled_config())
+    told = [a for a in sink.of("event") if a[0] == PLAN_CONTRADICTED]
+    assert [(a[1], a[3], a[4]) for a in told] == [("warning", 2, 1)]
+    assert f"vs the plan's {factor * SCALED_T0_S:g} s" in told[0][2]
+    errors = errors_deg(sink, scaled_config())
+    done = {(a[0], a[1]): a[2] for a in sink.of("series_completed")}
+    for key in ((2, 1), (2, 2)):  # compensated with the record's period
+        comp = done[key]
+        assert comp is not None
+        assert abs(errors[key]) < 3 * comp.standard_error_deg + 0.004  # its SE + the noise
