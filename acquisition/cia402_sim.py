@@ -49,7 +49,9 @@ class SimulatedCia402:
         plan: Plan,
         drive_faults: DriveFaults = DriveFaults(),
         servo: ServoModel = ServoModel(),
+        clock_ms: int = 0,
     ) -> None:
+        """`clock_ms`: the campaign clock at this run's first SYNC (a resumed campaign's)."""
         s = plan.stand
         assert s.node_id is not None and s.counts_per_degree and s.arm_length_cm
         config = stand_config(plan)
@@ -83,7 +85,9 @@ class SimulatedCia402:
         compass = dataclasses.replace(config, inclinometer=off)
         self.compass = StandEngine(compass, self.codec, transmitter=transmitter(plan))
         kinematics = Kinematics(s.counts_per_degree, s.arm_length_cm)
-        self.stand = Cia402Stand(self.axis, kinematics, s.ramp_s, self.codec, self._motion)
+        self.stand = Cia402Stand(
+            self.axis, kinematics, s.ramp_s, self.codec, self._motion, clock_ms
+        )
         self._compass_frames: list[can.Message] = []
         self.inclinometer: SimInclinometerFrames | None = None
         self._platform: tuple[list[float], list[float]] = ([], [])  # SYNC stand s, roll deg
