@@ -58,7 +58,13 @@ def test_stop_then_resume_goes_on_with_the_campaign_clock(
     db = tmp_path / "db.sqlite"
     monkeypatch.setattr(cia402_run, "SimulatedCia402", partial(SimulatedCia402, servo=SERVO))
     plan = parse_plan(
-        plan_text([(45.0, 24.0, 6.0, "fit")], n_obs=2, hold_s=30.0, database=str(db))
+        plan_text(
+            [(45.0, 24.0, 6.0, "fit")],
+            n_obs=2,
+            hold_s=30.0,
+            database=str(db),
+            raw_dir=str(tmp_path / "raw"),
+        )
         + FAST_SIM
         + STAND
         + COMPASS
