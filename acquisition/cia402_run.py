@@ -3,7 +3,13 @@
 The same engine, store, operator link (prompts, stop requests) and raw log as `runner.run_live`;
 the stream is the stand adapter's acks and statuses and the compass's frames, fed in stand-time
 steps. A stop (Ctrl-C, SIGTERM, the station's stop request, the end of the campaign) brings the
-axis to rest by the roll's stop ramp, then disables it, before the run ends."""
+axis to rest by the roll's stop ramp, then disables it, before the run ends.
+
+A resumed campaign (`runner.resume_point`) starts its run on an axis at rest and enabled (the
+master's setup, `devices.cia402`): a killed run's simulation is run again from its start in
+virtual time (the same frames: the stored record is re-derived, the campaign ends as an
+uninterrupted one), a stopped one goes on at its first incomplete series with the campaign clock
+going on from its last stored time."""
 
 from __future__ import annotations
 
@@ -19,10 +25,13 @@ from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
 from gyrostand.acquisition.runner import (
     RunResult,
     _judged,
+    _remove_live_files,
     _show,
     _stop_on_signals,
+    mark_run_start,
     raw_log_path,
     result,
+    resume_point,
 )
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.queries import live_file_of, raw_log_segments
@@ -40,28 +49,33 @@ def run_cia402(
     plan: Plan,
     store: CampaignStore,
     *,
+    start: str = "new",
     quiet: bool = False,
     stop: threading.Event | None = None,
     answers: Mapping[str, str] | None = None,
     terminal: IO[str] | None = None,
 ) -> RunResult:
-    """Acquire a new campaign on the plan's simulated CiA 402 stand (virtual time)."""
+    """Acquire the trials the database does not hold yet on the plan's simulated CiA 402 stand
+    (virtual time); `start` as `runner.run_live` takes it."""
     stop = stop or threading.Event()
-    try:
-        sim = SimulatedCia402(plan)
-    except DriveError as exc:  # one line (the campaign stays as stored: nothing acquired)
-        raise ValueError(f"the CiA 402 drive could not be started: {exc}") from None
     with store.sessions() as session:
         segments = raw_log_segments(session, store.campaign_id)
+    first_frame, progress, clock_ms = resume_point(store, plan, start, segments)
+    try:
+        sim = SimulatedCia402(plan, clock_ms=clock_ms)
+    except DriveError as exc:  # one line (the campaign stays as stored: nothing acquired)
+        raise ValueError(f"the CiA 402 drive could not be started: {exc}") from None
+    _remove_live_files(segments)
     raw_log = raw_log_path(store, plan, segments)
-    segment = store.open_segment(str(raw_log), "new")
+    segment = store.open_segment(str(raw_log), start if segments else "new", first_frame)
     store.set_status("running")
     display = ProgressDisplay(quiet=quiet)
     operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)
     stand = Cia402Lockstep(sim, plan)
     source = source_info(sim.codec, plan.compass.protocol, True, plan.stand.protocol)
-    engine = Engine(plan, store, stand, store.progress(), operator, source)
+    engine = Engine(plan, store, stand, progress, operator, source, start_ms=clock_ms)
     decoder = stand.decoder()
+    run_start = start == "restarted"  # a boundary of the compass's record
     recorder = Recorder(plan.bus.queue_size, raw_log, log_rest=False)
     live_file = LiveFile(live_file_of(raw_log))
     position = 0
@@ -75,7 +89,9 @@ def run_cia402(
                 msgs = sim.advance_to(sim.stand.t_s + stand.step_s)
                 for batch in feed(engine, decoder, position, msgs, sim.stand.take_faults()):
                     live_file.headings(batch.headings)
-                recorder.log(RawFrames.from_messages(position, msgs), msgs)
+                    run_start = run_start and not mark_run_start(store, batch.headings)
+                skip = min(max(first_frame - position, 0), len(msgs))  # in earlier logs
+                recorder.log(RawFrames.from_messages(position + skip, msgs[skip:]), msgs[skip:])
                 position += len(msgs)
                 _show(engine, display, live_file)
             _to_rest(sim, store)
@@ -102,5 +118,5 @@ def _to_rest(sim: SimulatedCia402, store: CampaignStore) -> None:
         store.run_event("stand", "error", f"the axis not at rest {REST_LIMIT_S:g} s after stopping")
     else:
         store.run_event(
-            "stand", "info", f"the axis at rest and disabled at stand time {stand.t_s:g} s"
+            "stand", "info", f"the axis at rest and disabled at stand time {stand.t_ms / 1000:g} s"
         )

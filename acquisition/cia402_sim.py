@@ -9,16 +9,20 @@ real protocol timed by reception (NMEA 2000: a CiA 402 stand has no clock to put
 frame); its rolling error follows the platform's motion as the master commands it (the roll
 begins, the stop ramp begins), at the platform's true amplitude (the commanded one times the
 simulator's `faults.amplitude_factor`, which the drive's encoder does not see: its
-`platform_scale`)."""
+`platform_scale`). With a CiA 410 [inclinometer] in the plan, the simulated one
+(`stand.inclinometer`, [bus.simulator.inclinometer]'s noise, bias, rate and faults) sends the
+platform's true roll: the drive's position at each SYNC times that scale."""
 
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import uuid
 from collections.abc import Iterator
 
 import can
 import canopen
+import numpy as np
 
 from gyrostand.acquisition.bus import transmitter
 from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault, Motion
@@ -29,9 +33,10 @@ from gyrostand.devices.decoder import SourceDecoder, frame_decoder
 from gyrostand.devices.roll_trajectory import Kinematics
 from gyrostand.devices.sim_drive import SIM_DRIVE_EDS, DriveFaults, ServoModel, SimDrive
 from gyrostand.frames.batch import BatchDecoder, FrameBatch, RawFrames
-from gyrostand.plan.codec import codec_for, sim_config
+from gyrostand.plan.codec import codec_for, stand_config
 from gyrostand.plan.model import Plan
 from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.inclinometer import SimInclinometerFrames
 
 STEP_S = 5.0  # stand time per batch fed to the engine
 
@@ -44,10 +49,12 @@ class SimulatedCia402:
         plan: Plan,
         drive_faults: DriveFaults = DriveFaults(),
         servo: ServoModel = ServoModel(),
+        clock_ms: int = 0,
     ) -> None:
+        """`clock_ms`: the campaign clock at this run's first SYNC (a resumed campaign's)."""
         s = plan.stand
         assert s.node_id is not None and s.counts_per_degree and s.arm_length_cm
-        config = sim_config(plan.bus)
+        config = stand_config(plan)
         channel = f"gyrostand-cia402-{uuid.uuid4().hex}-sim"
         self._networks = (canopen.Network(), canopen.Network())
         for net in self._networks:
@@ -74,10 +81,45 @@ class SimulatedCia402:
             self.close()
             raise
         self.codec = codec_for(plan)
-        self.compass = StandEngine(config, self.codec, transmitter=transmitter(plan))
+        off = dataclasses.replace(config.inclinometer, node_id=None)  # (ours below)
+        compass = dataclasses.replace(config, inclinometer=off)
+        self.compass = StandEngine(compass, self.codec, transmitter=transmitter(plan))
         kinematics = Kinematics(s.counts_per_degree, s.arm_length_cm)
-        self.stand = Cia402Stand(self.axis, kinematics, s.ramp_s, self.codec, self._motion)
+        self.stand = Cia402Stand(
+            self.axis, kinematics, s.ramp_s, self.codec, self._motion, clock_ms
+        )
         self._compass_frames: list[can.Message] = []
+        self.inclinometer: SimInclinometerFrames | None = None
+        self._platform: tuple[list[float], list[float]] = ([], [])  # SYNC stand s, roll deg
+        if config.inclinometer.node_id is not None:
+            seed = np.random.SeedSequence(config.seed).spawn(4)[3]  # the smart stand's one
+            self.inclinometer = SimInclinometerFrames(
+                config.inclinometer, np.random.default_rng(seed)
+            )
+            status_due = self.axis.on_cycle
+
+            def on_cycle() -> None:
+                self._sample_platform(s.counts_per_degree)
+                status_due()
+
+            self.axis.on_cycle = on_cycle
+
+    def _sample_platform(self, counts_per_degree: float) -> None:
+        """The platform's true roll at the SYNC whose TPDO the master just took."""
+        t, deg = self._platform
+        t.append(self.axis.t_s - self.axis.cycle_s)
+        deg.append(self.drive.platform_deg(counts_per_degree))
+
+    def _inclinometer_frames(self) -> list[can.Message]:
+        """The inclinometer's frames up to the last SYNC sampled (its roll between SYNCs
+        interpolated), the samples before then dropped."""
+        t, deg = self._platform
+        if self.inclinometer is None or not t:
+            return []
+        times, angles = np.array(t), np.radians(deg)
+        frames = self.inclinometer.frames(t[-1], lambda at: np.interp(at, times, angles))
+        self._platform = ([t[-1]], [deg[-1]])
+        return frames
 
     def _motion(self, m: Motion) -> None:
         """The compass's rolling error follows the platform: its simulation runs up to the
@@ -89,12 +131,14 @@ class SimulatedCia402:
 
     @staticmethod
     def _compass_only(msgs: list[can.Message]) -> list[can.Message]:
-        """The compass's own frames (29-bit NMEA 2000), not the simulator's stand frames."""
+        """The compass's own frames (29-bit NMEA 2000), not the simulator's stand frames (nor
+        its inclinometer's, which rolls with the simulator's idea of the platform)."""
         return [m for m in msgs if m.is_extended_id]
 
     def advance_to(self, t_s: float) -> list[can.Message]:
-        """Every frame of the stand and the compass up to stand time `t_s`, in time order."""
-        frames = self.stand.advance_to(t_s)
+        """Every frame of the stand, the compass and the inclinometer up to stand time `t_s`,
+        in time order."""
+        frames = self.stand.advance_to(t_s) + self._inclinometer_frames()
         compass = self._compass_frames + self._compass_only(self.compass.advance_to(t_s))
         self._compass_frames = []
         return sorted(frames + compass, key=lambda m: m.timestamp)
@@ -143,7 +187,9 @@ class Cia402Lockstep:
         self.sim.stand.issue(command, now_ms)
 
     def decoder(self) -> BatchDecoder | SourceDecoder:
-        return frame_decoder(self.sim.codec, *self.plan.heading_source)
+        return frame_decoder(
+            self.sim.codec, *self.plan.heading_source, self.plan.inclinometer_mount
+        )
 
     def steps(self, engine: Engine, max_stand_s: float = 200_000.0) -> Iterator[list[can.Message]]:
         """Feed the engine step by step until it is done (or `max_stand_s`)."""

@@ -15,9 +15,10 @@ none of that: gyrostand is its master (`devices.cia402`). This adapter is that s
   commanded periods (`analysis.measured_roll`), "rocking" while a roll is under way.
 
 Clock: a drive has no clock to report. The campaign clock is the SYNC count x cycle_ms (stand
-time; stored with the campaign's time base, `devices.clock.CIA402_STAND_CLOCK`): every ack and
-status carries it, and a compass timed by reception is
-put on it by its statuses (`devices.clock.ReceptionClock`).
+time; stored with the campaign's time base, `devices.clock.CIA402_STAND_CLOCK`), from `clock_ms`
+(a resumed campaign's clock goes on from its last stored time): every ack and status carries it,
+and a compass timed by reception is put on it by its statuses (`devices.clock.ReceptionClock`).
+The frames' reception times are the SYNC count x cycle_ms of this run.
 
 The acks and statuses go into the campaign's stream (and raw log) in the encoding of the plan's
 stand codec, never onto the CANopen bus (whose identifiers they would collide with): a replay of
@@ -52,7 +53,7 @@ class DriveFault:
 
     kind: str  # "drive fault", "following error" or "heartbeat lost"
     reason: str
-    t_ms: int
+    t_ms: int  # its reception time (ms of this run's SYNC count), where it cuts the stream
 
 
 @dataclass(frozen=True)
@@ -78,8 +79,10 @@ class Cia402Stand:
         ramp_s: float,
         codec: Codec,
         on_motion: Callable[[Motion], None] = lambda m: None,
+        clock_ms: int = 0,
     ) -> None:
         self.axis = axis
+        self.clock_ms = clock_ms
         self.kinematics = kinematics
         self.ramp_s = ramp_s
         self.codec = codec
@@ -102,7 +105,11 @@ class Cia402Stand:
 
     @property
     def t_ms(self) -> int:
-        return self.axis.cycle * self.axis.config.cycle_ms
+        """The campaign clock (what acks and statuses carry)."""
+        return self.clock_ms + self.axis.cycle * self.axis.config.cycle_ms
+
+    def _fault(self, kind: str, reason: str) -> None:
+        self._faults.append(DriveFault(kind, reason, self.axis.cycle * self.axis.config.cycle_ms))
 
     @property
     def rocking(self) -> bool:
@@ -208,7 +215,7 @@ class Cia402Stand:
         try:
             self.axis.enable()
         except DriveError as exc:  # (no ack: the fault fails the trial, naming the drive's error)
-            self._faults.append(DriveFault("drive fault", str(exc), self.t_ms))
+            self._fault("drive fault", str(exc))
             return
         roll = RollTrajectory(self.kinematics.amplitude_deg(A), tau, self.ramp_s)
         self._rocking = Rocking(
@@ -230,7 +237,7 @@ class Cia402Stand:
         kind = "following error" if code else "drive fault"
         if "heartbeat" in rocking.failure:
             kind = "heartbeat lost"
-        self._faults.append(DriveFault(kind, f"CiA 402 drive: {rocking.failure}", self.t_ms))
+        self._fault(kind, f"CiA 402 drive: {rocking.failure}")
         if self._setting is not None:
             self.on_motion(Motion(self.t_s, "stop", *self._setting))
 

@@ -23,7 +23,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand.acquisition.bus import LiveBus
-from gyrostand.acquisition.engine import Command, CommandNotSent, Engine, Phase
+from gyrostand.acquisition.engine import Command, CommandNotSent, Engine, Phase, TrialState
 from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
 from gyrostand.acquisition.serial_input import SerialInput, replay_stream
@@ -42,7 +42,7 @@ from gyrostand.db.queries import (
 from gyrostand.db.wal import checkpoint
 from gyrostand.devices.decoder import frame_decoder, source_info
 from gyrostand.devices.serial_replay import logged_pieces, serial_log_path
-from gyrostand.frames.batch import RawFrames
+from gyrostand.frames.batch import Headings, RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.frames.stream_clock import StreamClock
 from gyrostand.plan.codec import codec_for
@@ -152,25 +152,13 @@ def run_live(
     if plan.stand.protocol == "cia402":
         from gyrostand.acquisition.cia402_run import run_cia402
 
-        if start != "new":
-            raise ValueError("resuming a campaign on a CiA 402 stand is not runnable yet")
-        return run_cia402(plan, store, quiet=quiet, stop=stop, answers=answers, terminal=terminal)
+        return run_cia402(
+            plan, store, start=start, quiet=quiet, stop=stop, answers=answers, terminal=terminal
+        )
     codec = codec_for(plan)
     with store.sessions() as session:
         segments = raw_log_segments(session, store.campaign_id)
-    first_frame, clock_ms = 0, 0
-    if start == "continued":
-        first_frame = sum(s.frames or 0 for s in segments)  # all closed, or found killed
-        store.re_run()
-        progress = None  # from the campaign's start
-    else:
-        if start == "restarted":
-            store.redo_uncompensated()
-            store.complete_acquired()
-            if plan.bus.simulated:  # its clock goes on, as a stand's does: one campaign time
-                with store.sessions() as session:
-                    clock_ms = -(-last_stand_time_ms(session, store.campaign_id) // 1000) * 1000
-        progress = store.progress()
+    first_frame, progress, clock_ms = resume_point(store, plan, start, segments)
     _remove_live_files(segments)  # left by killed runs: never to be taken for this one's
     raw_log = raw_log_path(store, plan, segments)
     serial = _serial_input(plan, codec, raw_log, clock_ms, segments if start == "continued" else ())
@@ -242,11 +230,7 @@ def run_live(
                         at = position + before  # (a serial line's pieces among the frames)
                         engine.frames_dropped(serial.stream_pos(before) if serial else at, overflow)
                     engine.feed(batch)
-                    if run_start and batch.headings.t_ms.size:
-                        t_ms = int(batch.headings.t_ms[0])
-                        first = f"this run's first heading at stand time {t_ms / 1000:g} s"
-                        store.run_event(RUN_START, "info", first, t_ms)
-                        run_start = False
+                    run_start = run_start and not mark_run_start(store, batch.headings)
                     live_file.headings(batch.headings)
                     if grants is not None and serial is not None:  # (timed by the decoder)
                         keep = serial.decoder.frames_before(engine.consumed)
@@ -297,6 +281,35 @@ def run_live(
     if log_error is not None:
         raise RawLogFailed(f"the raw log {raw_log} cannot be written: {log_error}")
     return result(store, outcome, raw_log, sha)
+
+
+def resume_point(
+    store: CampaignStore, plan: Plan, start: str, segments: Sequence[RawLogSegment]
+) -> tuple[int, dict[int, TrialState] | None, int]:
+    """Where a run of the campaign begins (`start` as `run_live` takes it): the frames of the
+    earlier raw logs (`segments`) a re-run derives again without logging them, the progress the
+    engine continues from (None: the campaign's start) and the stand clock it goes on from, ms."""
+    if start == "continued":
+        store.re_run()
+        return sum(s.frames or 0 for s in segments), None, 0  # all closed, or found killed
+    clock_ms = 0
+    if start == "restarted":
+        store.redo_uncompensated()
+        store.complete_acquired()
+        if plan.bus.simulated:  # its clock goes on, as a stand's does: one campaign time
+            with store.sessions() as session:
+                clock_ms = -(-last_stand_time_ms(session, store.campaign_id) // 1000) * 1000
+    return 0, store.progress(), clock_ms
+
+
+def mark_run_start(store: CampaignStore, headings: Headings) -> bool:
+    """The RUN_START event of a restarted run at its first heading, if `headings` has one."""
+    if not headings.t_ms.size:
+        return False
+    t_ms = int(headings.t_ms[0])
+    first = f"this run's first heading at stand time {t_ms / 1000:g} s"
+    store.run_event(RUN_START, "info", first, t_ms)
+    return True
 
 
 def _serial_input(

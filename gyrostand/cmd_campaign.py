@@ -397,8 +397,6 @@ def continue_campaign(
         except PlanError as exc:
             fail(f"campaign {campaign_id}: stored plan invalid: " + "; ".join(exc.problems))
         checked = bus.checked(stored, db)
-        if checked.stand.protocol == "cia402":
-            fail(f"campaign {campaign_id}: resuming on a CiA 402 stand is not runnable yet")
         given = checked_answers(checked, answers, new=False)
         preflight(checked)
         not_interrupted(stop, f"campaign {campaign_id} was taken over")

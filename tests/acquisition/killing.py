@@ -15,9 +15,11 @@ import random
 import signal
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from sqlalchemy import Connection, Engine, create_engine, inspect, text
@@ -53,10 +55,11 @@ def small_containers(path: Path) -> BatchBLFWriter:
     return BatchBLFWriter(path, max_container_size=4096)
 
 
-def write_plan(folder: Path, database: str, seed: int = 0, compass: str = "") -> Path:
-    """The plan (`compass`: a [compass] table, default gyrostand's frame)."""
+def write_plan(folder: Path, database: str, seed: int = 0, compass: str = "", **plan: Any) -> Path:
+    """The plan (`compass`: a [compass] table, default gyrostand's frame; `plan`: `plan_text`'s
+    keywords)."""
     path = folder / "plan.toml"
-    text = plan_text(database=database, raw_dir=str(folder / "raw"), seed=seed)
+    text = plan_text(database=database, raw_dir=str(folder / "raw"), seed=seed, **plan)
     path.write_text(text + FAST_SIM + compass)
     return path
 
@@ -199,32 +202,38 @@ class KillRun:
 
 
 def kill_and_resume(
-    folder: Path, kills: int, seed: int, urls: tuple[str, str] | None = None, compass: str = ""
+    folder: Path,
+    kills: int,
+    seed: int,
+    urls: tuple[str, str] | None = None,
+    compass: str = "",
+    answers: tuple[str, ...] = (),
+    plan: Mapping[str, Any] = MappingProxyType({}),
 ) -> KillRun:
     """An uninterrupted run and one killed `kills` times (then resumed to its end) of the same
-    plan (simulator seed `seed`, [compass] table `compass`) under `folder`, into the databases
+    plan (simulator seed `seed`, [compass] table `compass`, the plan's prompts answered by
+    `answers`, ID=VALUE; `plan`: `plan_text`'s keywords) under `folder`, into the databases
     `urls` (reference, killed; default: SQLite files in `folder`); what differs."""
+    answered = [f"--answer={a}" for a in answers]
     t0 = time.monotonic()
     reference, killed = folder / "reference", folder / "killed"
     reference.mkdir()
     killed.mkdir()
     ref_db, db = urls or tuple(f"sqlite:///{d / 'db.sqlite'}" for d in (reference, killed))
     problems: list[str] = []
-    if (
-        forked(["campaign", "run", str(write_plan(reference, ref_db, seed, compass)), "--quiet"])
-        != 0
-    ):
+    reference_plan = write_plan(reference, ref_db, seed, compass, **plan)
+    if forked(["campaign", "run", str(reference_plan), "--quiet", *answered]) != 0:
         return KillRun(0, ("the uninterrupted run failed",), (), time.monotonic() - t0)
     expected = snapshot(ref_db)
     rng = random.Random(seed)
     moments = sorted(rng.randrange(-1, expected["campaign"][0][3]) for _ in range(kills))
-    plan = write_plan(killed, db, seed, compass)
+    killed_plan = write_plan(killed, db, seed, compass, **plan)
     writes_now = Writes(db)
     before = snapshot(db)
     done = 0
     for moment in moments:
         args = ["campaign", "resume", campaign_id(db), "--db", db] if before["campaign"] else []
-        args = args or ["campaign", "run", str(plan)]
+        args = args or ["campaign", "run", str(killed_plan)]
         delay = rng.uniform(0.0, 0.02)
 
         def due(moment: int = moment, delay: float = delay) -> bool:
@@ -233,7 +242,7 @@ def kill_and_resume(
             time.sleep(delay)
             return True
 
-        code = forked([*args, "--quiet"], due)
+        code = forked([*args, "--quiet", *answered], due)
         writes_now.close()
         now = snapshot(db)
         if now["observation"][: len(before["observation"])] != before["observation"]:
@@ -246,7 +255,7 @@ def kill_and_resume(
                 problems.append(f"{' '.join(args[:2])} ended with exit code {code}")
             break  # finished before the kill came
         done += 1
-    if forked(["campaign", "resume", campaign_id(db), "--db", db, "--quiet"]) != 0:
+    if forked(["campaign", "resume", campaign_id(db), "--db", db, "--quiet", *answered]) != 0:
         problems.append("the last resume failed")
     final = snapshot(db)
     problems += [f"table {name} differs" for name in TABLES if final[name] != expected[name]]

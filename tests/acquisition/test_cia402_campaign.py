@@ -56,9 +56,23 @@ def run(
         sim.close()
 
 
+# a CiA 410 inclinometer on the platform, which rolls 3 % more than the encoder counts (the
+# kinematics' error)
+INCLINOMETER = """
+[inclinometer]
+protocol = "cia410"
+node_id = 4
+[bus.simulator.inclinometer]
+rate_hz = 5.0
+noise_deg = 0.005
+[bus.simulator.faults]
+amplitude_factor = 1.03
+"""
+
+
 @pytest.fixture(scope="module")
 def campaign() -> tuple[Recorder, Cia402Lockstep]:
-    return run(cia402_plan())
+    return run(parse_plan(cia402_plan().text.replace("[stand]", INCLINOMETER + "[stand]", 1)))
 
 
 def _gain(period_s: float) -> float:
@@ -69,31 +83,49 @@ def _gain(period_s: float) -> float:
     return math.sin(half) / half * abs(wn**2 / (wn**2 - w**2 + 2j * SERVO.damping * wn * w))
 
 
+def _ours(stream: list[can.Message]) -> list[can.Message]:
+    """The stand's frames: commands, acks, statuses (not the compass's nor the
+    inclinometer's)."""
+    c = Codec()
+    ids = {c.command_arbitration_id, c.ack_arbitration_id, *c.status_arbitration_ids}
+    return [m for m in stream if m.arbitration_id in ids]
+
+
 def _frames(stream: list[can.Message]) -> list[object]:
     codec = Codec()
-    return [codec.decode(m) for m in stream if not m.is_extended_id]
+    return [codec.decode(m) for m in _ours(stream)]
 
 
 def test_three_fit_trials_complete_with_the_motion_measured_on_the_drive(campaign):
+    """The trials apply the inclinometer's measure of the roll; the drive's own measure (its
+    actual position) does not see the platform's 3 % more."""
     sink, _ = campaign
     assert [args[0] for args in sink.of("trial_completed")] == [1, 2, 3]
     assert len(sink.observations) == 3 * 2 * 2 and not sink.of("trial_failed")
-    for measured, (K, A, tau, _) in zip(sink.measured, TRIALS, strict=True):
+    series = [args[3] for args in sink.of("series_completed") if args[1] == 2]
+    for measured, motions, (K, A, tau, _) in zip(sink.measured, series, TRIALS, strict=True):
+        by_source = {m.source: m for m in motions}
+        assert set(by_source) == {"inclinometer", "drive position"}
+        drive, inclinometer = by_source["drive position"], by_source["inclinometer"]
         assert measured is not None and measured.direction_deg == K  # the operator's K
-        assert measured.source == "drive position"
+        assert measured.source == "inclinometer"
+        assert measured.amplitude_cm == inclinometer.amplitude_cm
         # the encoder's roll: the commanded one through the servo's lag (0.7 to 1 % less),
         # within the statuses' 0.01 cm and the drive's 5 ms Euler steps
-        assert measured.amplitude_cm == pytest.approx(A * _gain(tau), abs=0.006 + 3e-4 * A)
-        assert A - measured.amplitude_cm > 0.05  # not the commanded amplitude
-        assert measured.period_s == pytest.approx(tau, abs=0.002)
+        assert drive.amplitude_cm == pytest.approx(A * _gain(tau), abs=0.006 + 3e-4 * A)
+        assert A - drive.amplitude_cm > 0.05  # not the commanded amplitude
+        assert drive.period_s == pytest.approx(tau, abs=0.002)
+        # the platform's: 1.03 x, within 4 SE of the inclinometer's noise and 0.01 deg steps
+        limit = 4 * inclinometer.amplitude_se_cm + 0.01
+        assert inclinometer.amplitude_cm == pytest.approx(1.03 * A * _gain(tau), abs=limit)
+        assert inclinometer.period_s == pytest.approx(tau, abs=0.002)
 
 
 def test_acks_and_statuses_are_on_the_sync_clock(campaign):
     """The campaign clock is SYNC count x cycle_ms: every ack and status carries a whole number
     of cycles, and the frame's reception (virtual) time is that stand time."""
     _, stand = campaign
-    ours = [m for m in stand.stream if not m.is_extended_id]
-    frames = list(zip(ours, _frames(stand.stream), strict=True))
+    frames = list(zip(_ours(stand.stream), _frames(stand.stream), strict=True))
     acks = [(m, f) for m, f in frames if isinstance(f, AckFrame)]
     statuses = [(m, f) for m, f in frames if isinstance(f, StandStatusFrame)]
     assert len(acks) >= 3 * 3 and len(statuses) > 1000
@@ -110,7 +142,7 @@ def test_two_runs_are_the_same_frames(campaign):
     """Byte for byte, whatever the host's load (the first 150 s of stand time: the first
     trial's still series and its rocking's start)."""
     _, first = campaign
-    _, second = run(cia402_plan(), max_stand_s=150.0)
+    _, second = run(first.plan, max_stand_s=150.0)
     ours = [(m.arbitration_id, bytes(m.data), m.timestamp) for m in second.stream]
     assert len(ours) > 1000
     assert (
