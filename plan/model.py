@@ -38,6 +38,7 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
+from gyrostand.plan.procedures import ProcedurePlan, ReferencePlan, StandardPlan, duplicated, needs
 from gyrostand.stand.encoder import Encoder, EncoderError, encoder_from_eds
 from gyrostand.stand.protocol import SignalMap
 from gyrostand.stand.simconfig import SimConfigError, simulator_config, simulator_tables
@@ -871,6 +872,10 @@ class Plan(_Table):
     report: ReportPlan = Field(default_factory=ReportPlan)
     prompt: tuple[PromptPlan, ...] = Field((), strict=False)
     """Questions to the operator before the campaign or a trial ([[prompt]])."""
+    procedure: tuple[ProcedurePlan, ...] = Field((), strict=False)
+    """The standard's own tests ([[procedure]]), run before the trials."""
+    reference: ReferencePlan | None = None
+    standard: StandardPlan = Field(default_factory=StandardPlan)
     _text: str = PrivateAttr("")
 
     @field_validator("trials")
@@ -921,6 +926,7 @@ class Plan(_Table):
             + self._bad_prompts()
             + self._bad_compass()
             + self._bad_inclinometer()
+            + self._bad_procedures()
         )
         if errors:
             raise ValidationError.from_exception_data(type(self).__name__, errors)
@@ -1036,6 +1042,39 @@ class Plan(_Table):
             return []
         message = "missing: the inclinometer measures the roll angle; A is arm x angle (rad)"
         return [_error("inclinometer", ("stand", "arm_length_cm"), message)]
+
+    def _bad_procedures(self) -> list[InitErrorDetails]:
+        """One procedure of each kind, those following the settling run-up with one, and the
+        rolling points within the stand's limits unless forecast."""
+        errors = [
+            _error("procedure", ("procedure", row), message)
+            for row, message in duplicated(self.procedure) + needs(self.procedure)
+        ]
+        if self.procedure and self.settle.transient_model is None:
+            message = (
+                "the standard's procedures need the compass's precession: [settle] "
+                "undamped_period_s and damping_ratio (instrument data)"
+            )
+            errors.append(_error("procedure", ("settle", "undamped_period_s"), message))
+        limits = self.stand_limits
+        for row, proc in enumerate(self.procedure):
+            if proc.points is None or proc.beyond_stand == "forecast":
+                continue
+            for n, point in enumerate(proc.points):
+                for key, limit_key, maximum, unit in _STAND_LIMITS:
+                    limit: StandLimit | None = getattr(limits, limit_key)
+                    value = getattr(point, key)
+                    if limit is None or (value <= limit.value if maximum else value >= limit.value):
+                        continue
+                    message = (
+                        f"rolling point {n + 1} (K {_number(point.direction_deg)} deg, A "
+                        f"{_number(point.amplitude_cm)} cm, tau {_number(point.period_s)} s): "
+                        f"{_number(value)} {unit} {'exceeds' if maximum else 'is below'} the "
+                        f"stand's limit {_number(limit.value)} {unit}; the stand cannot reach it "
+                        '(beyond_stand = "forecast" forecasts it by model 1.1 instead)'
+                    )
+                    errors.append(_error("stand_limit", ("procedure", row, "points"), message))
+        return errors
 
     @property
     def heading_source(self) -> tuple[str, str | None, tuple[str, str], Encoder | None]:

@@ -115,6 +115,7 @@ class Procedure:
     readings: int | None
     interval_s: float | None
     axes: int | None
+    band_deg: float | None = None  # settling: the band width the readings must stay within
 
 
 @dataclass(frozen=True)
@@ -129,6 +130,11 @@ class Requirement:
     verified: bool
     procedure: Procedure | None
     verified_by: Verification | None = None
+    limit_h: float | None = None  # a limit in hours (the settling time)
+
+    @property
+    def unit(self) -> str:
+        return "h" if self.limit_h is not None else "deg"
 
 
 @dataclass(frozen=True)
@@ -354,6 +360,9 @@ def _requirement(row: Any, where: str) -> Requirement:
     limit = _optional(row, "limit_deg", (int, float), where)
     if limit is not None and limit <= 0:
         raise ReportError(f"{where}: limit_deg must be a positive number")
+    limit_h = _optional(row, "limit_h", (int, float), where)
+    if limit_h is not None and (limit_h <= 0 or limit is not None):
+        raise ReportError(f"{where}: limit_h must be a positive number, and not with limit_deg")
     if limit is None and evidence in NEEDS_LIMIT:
         raise ReportError(f"{where}: evidence {evidence} needs limit_deg")
     procedure = _optional(row, "procedure", dict, where)
@@ -368,6 +377,7 @@ def _requirement(row: Any, where: str) -> Requirement:
         verified=_get(row, "verified", bool, where),
         procedure=None if procedure is None else _procedure(procedure, f"{where}.procedure"),
         verified_by=_verification(row, where),
+        limit_h=None if limit_h is None else float(limit_h),
     )
 
 
@@ -393,15 +403,17 @@ def _procedure(table: dict[str, Any], where: str) -> Procedure:
     readings = _optional(table, "readings", int, where)
     interval = _optional(table, "interval_s", (int, float), where)
     axes = _optional(table, "axes", int, where)
+    band = _optional(table, "band_deg", (int, float), where)
     if (readings is None) != (interval is None):
         raise ReportError(f"{where}: give readings and interval_s together")
-    if any(v is not None and v <= 0 for v in (readings, interval, axes)):
-        raise ReportError(f"{where}: readings, interval_s, axes must be > 0")
+    if any(v is not None and v <= 0 for v in (readings, interval, axes, band)):
+        raise ReportError(f"{where}: readings, interval_s, axes, band_deg must be > 0")
     return Procedure(
         text=_get(table, "text", str, where),
         readings=readings,
         interval_s=None if interval is None else float(interval),
         axes=axes,
+        band_deg=None if band is None else float(band),
     )
 
 
@@ -678,8 +690,9 @@ NEEDS_ENVELOPE = {"rolling_error_stand", "rolling_error_forecast"}
 
 def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceItem:
     value, lat, u = finding.value_deg, finding.latitude_deg, finding.uncertainty_deg
-    limit: float | None = req.limit_deg
-    limit_text = "-" if limit is None else f"{limit:g} deg"
+    unit = req.unit
+    limit: float | None = req.limit_deg if req.limit_h is None else req.limit_h
+    limit_text = "-" if limit is None else f"{limit:g} {unit}"
     if limit is not None and req.secant_latitude:
         limit_text += " x sec(latitude)"
     forecast = req.evidence == "rolling_error_forecast"
@@ -706,7 +719,7 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
                 ),
             ]
             compared = (
-                f"{value:.3f} +/- {u:.3f} deg against the acceptance limit {accept:.3f} deg "
+                f"{value:.3f} +/- {u:.3f} {unit} against the acceptance limit {accept:.3f} {unit} "
                 f"({profile.decision_rule} acceptance)"
             )
             if unverified:
@@ -727,7 +740,7 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
         source=req.source,
         verified=req.verified,
         verified_by=None if req.verified_by is None else req.verified_by.describe(),
-        stated_limit_deg=req.limit_deg,
+        stated_limit_deg=req.limit_deg if req.limit_h is None else req.limit_h,
         secant_latitude=req.secant_latitude,
         limit_deg=limit,
         limit_text=limit_text,
