@@ -9,7 +9,6 @@ after a kill, operator prompts for a compass switched by hand; a real compass ne
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import can

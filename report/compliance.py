@@ -53,6 +53,7 @@ from gyrostand.report.errors import ReportError
 if TYPE_CHECKING:  # annotations only (scipy is not loaded for this module)
     from gyrostand.analysis.campaign import CampaignAnalysis
     from gyrostand.analysis.forecast import EnvelopeWorst, Extrapolation
+    from gyrostand.analysis.procedures import ProcedureResults
     from gyrostand.report.model import PlanSummary
 
 PASS, FAIL, NOT_ASSESSED = "PASS", "FAIL", "NOT ASSESSED"
@@ -436,6 +437,7 @@ class Evidence:
     plan: PlanSummary | None
     profile: Profile
     imported: bool = False  # the data were imported from a file, not acquired on the stand
+    procedures: ProcedureResults | None = None  # the standard's own tests, when run
 
     @property
     def site_latitude_deg(self) -> float:
@@ -488,7 +490,27 @@ def _procedure_differs(req: Requirement, e: Evidence) -> str | None:
     )
 
 
+def _departs(e: Evidence, kind: str) -> str:
+    """The sentence on the plan's departure from the standard's procedure (empty: none)."""
+    assert e.procedures is not None
+    how = e.procedures.departure(kind)
+    return "" if how is None else f"; the procedure departs from the standard's: {how}"
+
+
 def _settling_time(req: Requirement, e: Evidence) -> Finding:
+    if e.procedures is not None and e.procedures.settling is not None:
+        s = e.procedures.settling
+        return Finding(
+            s.value_s / 3600.0,
+            e.site_latitude_deg,
+            f"run-up from switch-on: the reading stays within +/-{s.half_band_deg:g} deg of its "
+            f"settle point {s.settle_point_deg:.3f} deg from {s.value_s / 60:.1f} min on, by the "
+            "settle model of Bezvesilna & Gura (eq 3, omega and xi fitted: damped period "
+            f"{s.period_s / 60:.1f} min) on the record from {s.fit_from_s / 60:.1f} min to "
+            f"{s.record_s / 3600:.2f} h" + _departs(e, "settling"),
+            s.expanded_s / 3600.0,
+            "U = 2 u, u propagated from the fit's covariance (GUM eq 13)",
+        )
     if e.imported:
         return _not_assessed("the imported data record no run-up from switch-on")
     return _not_assessed(
@@ -497,7 +519,30 @@ def _settling_time(req: Requirement, e: Evidence) -> Finding:
     )
 
 
+def _settle_point(e: Evidence) -> Any:
+    """The settle point procedure's result (None: not run)."""
+    return None if e.procedures is None else e.procedures.settle_point
+
+
+def _readings_text(p: Any) -> str:
+    return f"{p.n} readings {p.interval_s / 60:g} min apart after settling"
+
+
 def _settle_point_error(req: Requirement, e: Evidence) -> Finding:
+    if (p := _settle_point(e)) is not None:
+        if p.error_deg is None:
+            return _not_assessed("settle point error: not assessed (no reference heading)")
+        assert e.procedures is not None and e.procedures.reference_deg is not None
+        return Finding(
+            abs(p.error_deg),
+            e.site_latitude_deg,
+            f"settle point heading {p.heading_deg:.3f} deg (mean of {_readings_text(p)}) "
+            f"against the reference heading {e.procedures.reference_deg:g} deg: error "
+            f"{p.error_deg:+.3f} deg" + _departs(e, "settle_point"),
+            p.error_expanded_deg,
+            f"U = k u, u^2 = S^2/N + u(reference)^2, k = {p.coverage_factor:.2f} "
+            "(t, Welch-Satterthwaite, GUM G.4.1)",
+        )
     differs = _procedure_differs(req, e)
     return _not_assessed(
         "no reference (true) heading is recorded with the campaign's observations, so the "
@@ -507,6 +552,16 @@ def _settle_point_error(req: Requirement, e: Evidence) -> Finding:
 
 
 def _settle_repeatability(req: Requirement, e: Evidence) -> Finding:
+    if e.procedures is not None and (r := e.procedures.repeatability) is not None:
+        points = ", ".join(f"{v:.3f}" for v in r.settle_points_deg)
+        return Finding(
+            r.range_deg,
+            e.site_latitude_deg,
+            f"range of the settle points of {len(r.settle_points_deg)} run-ups ({points} deg), "
+            "each from switch-on" + _departs(e, "repeatability"),
+            r.expanded_deg,
+            "U = 2 sqrt(u_max^2 + u_min^2), u = S / sqrt(N) of each run-up's readings",
+        )
     if e.imported:
         return _not_assessed(
             "the imported data record no run-up and no reference heading: repeatability not "
@@ -520,6 +575,14 @@ def _speed_course_errors(req: Requirement, e: Evidence) -> Finding:
 
 
 def _heading_rms(req: Requirement, e: Evidence) -> Finding:
+    if (p := _settle_point(e)) is not None:
+        return Finding(
+            p.rms_deg,
+            e.site_latitude_deg,
+            f"RMS of the {_readings_text(p)} about their mean" + _departs(e, "settle_point"),
+            p.rms_expanded_deg,
+            f"U = 2 u, u = RMS / sqrt(2 (N - 1)) with N = {p.n} (GUM E.4.3)",
+        )
     differs = _procedure_differs(req, e)
     if differs is not None:
         return _not_assessed(f"not assessed: the stand procedure differs: {differs}")
@@ -559,6 +622,8 @@ def _rolling_error_stand(req: Requirement, e: Evidence) -> Finding:
             f"not assessed: the stand procedure differs: the standard asks {proc.text}; the "
             "stand rocks about one axis at a time, in one direction K per trial"
         )
+    if e.procedures is not None and e.procedures.rolling:
+        return _rolling_procedure(e)
     env = e.profile.envelope
     lo, hi = env.period_s
     inside, outside = [], []
@@ -592,6 +657,36 @@ def _rolling_error_stand(req: Requirement, e: Evidence) -> Finding:
         u[worst.index],
         f"U = t(0.975, nu = {dof}) sqrt(S^2/N) = {_t975(dof):.3f} \u00d7 {math.sqrt(var):.4f} deg, "
         f"{how_u}",
+    )
+
+
+def _rolling_procedure(e: Evidence) -> Finding:
+    """The rolling procedure's points: the worst measured one decides; points beyond the
+    stand are left to the forecast (named, decide nothing)."""
+    assert e.procedures is not None
+    measured = [r for r in e.procedures.rolling if not r.forecast]
+    forecast = [r for r in e.procedures.rolling if r.forecast]
+
+    def name(r: Any) -> str:
+        return f"K {r.direction_deg:g} deg, A {r.amplitude_cm:g} cm, tau {r.period_s:g} s"
+
+    left = (
+        ""
+        if not forecast
+        else "; beyond the stand, forecast by model 1.1 (the forecast row, no decision): "
+        + "; ".join(name(r) for r in forecast)
+    )
+    if not measured:
+        return _not_assessed(f"no point of the rolling procedure within the stand's reach{left}")
+    worst = max(measured, key=lambda r: abs(r.error_deg) + _guard(e, r.expanded_deg))
+    return Finding(
+        abs(worst.error_deg),
+        e.site_latitude_deg,
+        f"largest |error| against the static settle point over {len(measured)} rolling points "
+        f"(at {name(worst)}: {worst.error_deg:+.3f} deg){left}" + _departs(e, "rolling"),
+        worst.expanded_deg,
+        "U = k u, u^2 = u(rolling mean)^2 + u(settle point)^2, k by Welch-Satterthwaite "
+        "(GUM G.4.1)",
     )
 
 
@@ -762,6 +857,7 @@ def assess(
     plan: PlanSummary | None = None,
     *,
     imported: bool = False,
+    procedures: ProcedureResults | None = None,
 ) -> Compliance:
     """Every requirement of the profile judged on this campaign and its plan's observation
     protocol (all NOT ASSESSED when the campaign could not be analysed); ``imported``: the data
@@ -770,7 +866,7 @@ def assess(
         findings = [_not_assessed("the campaign could not be analysed")] * len(profile.requirements)
         latitude = None
     else:
-        evidence = Evidence(analysis, plan, profile, imported)
+        evidence = Evidence(analysis, plan, profile, imported, procedures)
         findings = [EVIDENCE[req.evidence](req, evidence) for req in profile.requirements]
         latitude = evidence.site_latitude_deg
     judged = [

@@ -62,7 +62,8 @@ class CompassParams:
         0.0, "static error of the settle point: settled reading minus true heading at rest, deg"
     )
     runup_error_deg: float = param(
-        30.0, "azimuth of the sensitive element from its settle point at switch-on (rotor stop), deg"
+        30.0,
+        "azimuth of the sensitive element from its settle point at switch-on (rotor stop), deg",
     )
     repeatability_sd_deg: float = param(
         0.03, "standard deviation of the settle point from one run-up to the next, deg"
