@@ -13,7 +13,10 @@ from dataclasses import dataclass
 
 import can
 import numpy as np
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
 
+from gyrostand import SOFTWARE_VERSION
 from gyrostand.analysis.procedures import (
     ProcedureResults,
     RollingError,
@@ -24,6 +27,8 @@ from gyrostand.analysis.procedures import (
     settling_time,
 )
 from gyrostand.analysis.transient import TransientModel
+from gyrostand.db.models import ProcedureRun
+from gyrostand.db.session import writer
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.plan.model import StandLimits
 from gyrostand.plan.procedures import ProcedurePlan, ReferencePlan, ResolvedProcedure, RollingPoint
@@ -217,3 +222,26 @@ def run_procedures(
         reference_deg=None if reference is None else reference.heading_deg,
         departures=tuple((p.kind, d) for p in procedures for d in p.departures),
     )
+
+
+def store_procedures(
+    sessions: sessionmaker[Session], campaign_id: int, results: ProcedureResults
+) -> None:
+    """Store the campaign's procedure results (once: a resumed campaign keeps them)."""
+    with writer(sessions).begin() as session:
+        session.add(
+            ProcedureRun(
+                campaign_id=campaign_id,
+                results_json=results.to_dict(),
+                software_version=SOFTWARE_VERSION,
+            )
+        )
+
+
+def procedures_stored(sessions: sessionmaker[Session], campaign_id: int) -> bool:
+    """Whether the campaign's procedures were run and stored (a resumed campaign skips them)."""
+    with sessions() as session:
+        found = session.scalar(
+            select(ProcedureRun.id).where(ProcedureRun.campaign_id == campaign_id)
+        )
+    return found is not None

@@ -15,7 +15,8 @@ with its uncertainty, from the readings of the run-ups.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -46,6 +47,11 @@ class SettlingTime:
     @property
     def expanded_s(self) -> float:
         return 2.0 * self.u_s
+
+    @property
+    def settled(self) -> bool:
+        """Whether the reading settled within the record (value_s is infinite otherwise)."""
+        return math.isfinite(self.value_s)
 
 
 def _last_exit_s(theta: np.ndarray, t_s: np.ndarray, half_band_deg: float) -> float:
@@ -94,7 +100,9 @@ def settling_time(
     grid = np.arange(0.0, tau[-1] + GRID_S / 2, GRID_S)
     value = _last_exit_s(theta, grid, half_band_deg)
     grad = np.zeros(5)
-    for j in range(1, 5):  # R does not move the exit; central differences for the rest
+    if not math.isfinite(value):  # outside the band at the record's end: not settled in it
+        grad[:] = 0.0
+    for j in range(1, 5 if math.isfinite(value) else 1):  # R does not move the exit
         h = 1e-4 * max(abs(theta[j]), math.sqrt(cov[j, j]))
         up, down = theta.copy(), theta.copy()
         up[j] += h
@@ -248,6 +256,35 @@ class ProcedureResults:
     rolling: tuple[RollingError, ...]
     reference_deg: float | None
     departures: tuple[tuple[str, str], ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        """The stored record (JSON: a settling time not reached is null)."""
+        record = asdict(self)
+        if self.settling is not None and not self.settling.settled:
+            record["settling"]["value_s"] = None
+        return record
+
+    @classmethod
+    def from_dict(cls, record: dict[str, Any]) -> ProcedureResults:
+        settling = record["settling"]
+        if settling is not None and settling["value_s"] is None:
+            settling = {**settling, "value_s": math.inf}
+        point = record["settle_point"]
+        repeat = record["repeatability"]
+        return cls(
+            settling=None if settling is None else SettlingTime(**settling),
+            settle_point=None
+            if point is None
+            else SettlePoint(**{**point, "readings_deg": tuple(point["readings_deg"])}),
+            repeatability=None
+            if repeat is None
+            else Repeatability(
+                **{**repeat, "settle_points_deg": tuple(repeat["settle_points_deg"])}
+            ),
+            rolling=tuple(RollingError(**r) for r in record["rolling"]),
+            reference_deg=record["reference_deg"],
+            departures=tuple((k, text) for k, text in record["departures"]),
+        )
 
     def departure(self, kind: str) -> str | None:
         """How the plan's procedure of this kind departs from the standard's (None: it does

@@ -1050,6 +1050,12 @@ class Plan(_Table):
             _error("procedure", ("procedure", row), message)
             for row, message in duplicated(self.procedure) + needs(self.procedure)
         ]
+        if self.procedure and not self.bus.simulated:
+            message = (
+                "the standard's procedures run on the simulated compass only (not yet on a "
+                "real bus: switching the compass and recording its run-up there is not built)"
+            )
+            errors.append(_error("procedure", ("procedure",), message))
         if self.procedure and self.settle.transient_model is None:
             message = (
                 "the standard's procedures need the compass's precession: [settle] "

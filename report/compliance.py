@@ -500,6 +500,17 @@ def _departs(e: Evidence, kind: str) -> str:
 def _settling_time(req: Requirement, e: Evidence) -> Finding:
     if e.procedures is not None and e.procedures.settling is not None:
         s = e.procedures.settling
+        if not s.settled:
+            return Finding(
+                s.record_s / 3600.0,
+                e.site_latitude_deg,
+                f"run-up from switch-on: the reading had not settled within "
+                f"+/-{s.half_band_deg:g} deg of its settle point by the end of the "
+                f"{s.record_s / 3600:.2f} h record (the value is that lower bound)"
+                + _departs(e, "settling"),
+                0.0,
+                "a lower bound: no uncertainty",
+            )
         return Finding(
             s.value_s / 3600.0,
             e.site_latitude_deg,

@@ -72,4 +72,9 @@ def _resolve(proc: ProcedurePlan, plan: Plan, profile: Profile) -> ResolvedProce
         default("interval_s", interval, 120.0 if rolling else 1200.0, " s")
     if proc.kind == "rolling" and proc.points is None:
         fill["points"] = envelope_points(profile)
+    elif proc.kind == "rolling":
+        departures.append(
+            f"{len(proc.points or ())} points of the plan's instead of the envelope's "
+            f"{len(profile.envelope.forecast_periods_s)} at its largest acceleration"
+        )
     return ResolvedProcedure(proc.model_copy(update=fill), tuple(departures))
