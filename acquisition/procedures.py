@@ -179,6 +179,7 @@ def run_procedures(
     reference: ReferencePlan | None,
     model: TransientModel,
     limits: StandLimits,
+    latitude_deg: float,
 ) -> ProcedureResults:
     """The plan's procedures on the simulated compass, in stand time: run-up 1 from switch-on
     (settling), its settle point after the settling record, the rolling points, then the
@@ -220,6 +221,7 @@ def run_procedures(
         repeatability=repeat,
         rolling=rolling,
         reference_deg=None if reference is None else reference.heading_deg,
+        latitude_deg=latitude_deg,
         departures=tuple((p.kind, d) for p in procedures for d in p.departures),
     )
 

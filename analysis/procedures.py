@@ -247,7 +247,8 @@ def rolling_error(
 class ProcedureResults:
     """What the standard's procedures measured: the settling time of the first run-up, its
     settle point (readings after settling), the repeatability over the run-ups, the errors at
-    the rolling envelope's points; the reference heading (None: not stated) and, per kind, how
+    the rolling envelope's points; the reference heading (None: not stated), the site's
+    latitude and, per kind, how
     the plan departs from the profile's procedure."""
 
     settling: SettlingTime | None
@@ -255,6 +256,7 @@ class ProcedureResults:
     repeatability: Repeatability | None
     rolling: tuple[RollingError, ...]
     reference_deg: float | None
+    latitude_deg: float  # the site's, for the limits' sec(latitude)
     departures: tuple[tuple[str, str], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
@@ -283,6 +285,7 @@ class ProcedureResults:
             ),
             rolling=tuple(RollingError(**r) for r in record["rolling"]),
             reference_deg=record["reference_deg"],
+            latitude_deg=record["latitude_deg"],
             departures=tuple((k, text) for k, text in record["departures"]),
         )
 

@@ -66,7 +66,9 @@ def run_procedures_of(plan: Plan, store: CampaignStore, quiet: bool) -> None:
     config = simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
     model = plan.settle.transient_model
     assert model is not None  # the plan's check
-    results = run_procedures(config, procedures, plan.reference, model, plan.stand_limits)
+    results = run_procedures(
+        config, procedures, plan.reference, model, plan.stand_limits, plan.site.latitude_deg
+    )
     store_procedures(store.sessions, store.campaign_id, results)
     kinds = ", ".join(p.kind for p in procedures)
     store.run_event("procedures", "info", f"the standard's procedures run and stored: {kinds}")

@@ -433,7 +433,7 @@ class Evidence:
     """What the evaluators look at: the analysis, the plan's observation protocol (None: the
     data were imported without one), the profile."""
 
-    analysis: CampaignAnalysis
+    analysis: CampaignAnalysis | None  # None: only the procedures' evidence (`_measured_by`)
     plan: PlanSummary | None
     profile: Profile
     imported: bool = False  # the data were imported from a file, not acquired on the stand
@@ -441,6 +441,9 @@ class Evidence:
 
     @property
     def site_latitude_deg(self) -> float:
+        if self.analysis is None:
+            assert self.procedures is not None  # (assess)
+            return self.procedures.latitude_deg
         return self.analysis.constants.latitude_deg
 
 
@@ -862,6 +865,19 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
     )
 
 
+def _measured_by(procedures: ProcedureResults | None, evidence: str) -> bool:
+    """Whether the standard's procedures give this evidence (judged without the analysis)."""
+    if procedures is None:
+        return False
+    return {
+        "settling_time": procedures.settling is not None,
+        "settle_point_error": procedures.settle_point is not None,
+        "heading_rms": procedures.settle_point is not None,
+        "settle_repeatability": procedures.repeatability is not None,
+        "rolling_error_stand": bool(procedures.rolling),
+    }.get(evidence, False)
+
+
 def assess(
     profile: Profile,
     analysis: CampaignAnalysis | None,
@@ -873,12 +889,17 @@ def assess(
     """Every requirement of the profile judged on this campaign and its plan's observation
     protocol (all NOT ASSESSED when the campaign could not be analysed); ``imported``: the data
     came from a file, and the reasons say so rather than describe the stand."""
-    if analysis is None:
+    if analysis is None and procedures is None:
         findings = [_not_assessed("the campaign could not be analysed")] * len(profile.requirements)
         latitude = None
     else:
         evidence = Evidence(analysis, plan, profile, imported, procedures)
-        findings = [EVIDENCE[req.evidence](req, evidence) for req in profile.requirements]
+        findings = [
+            EVIDENCE[req.evidence](req, evidence)
+            if analysis is not None or _measured_by(procedures, req.evidence)
+            else _not_assessed("the campaign could not be analysed")
+            for req in profile.requirements
+        ]
         latitude = evidence.site_latitude_deg
     judged = [
         _judge(req, finding, profile)

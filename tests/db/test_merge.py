@@ -134,7 +134,7 @@ def test_two_stands_merge_whole_and_once(stands: Stands, db_url: str, tmp_path: 
     with sessions.begin() as session:
         session.add(SignOff(campaign_id=1, role="tested_by", name="A. Tester"))
         # the standard's procedures' results (a JSON row; tests/procedures runs them for real)
-        none = ProcedureResults(None, None, None, (), None).to_dict()
+        none = ProcedureResults(None, None, None, (), None, 46.5).to_dict()
         session.add(ProcedureRun(campaign_id=1, results_json=none, software_version="t"))
     sessions.kw["bind"].dispose()
     stand_fit = fit_of(["analyze", "1", "--json", "--db", str(s1)])

@@ -77,7 +77,12 @@ def run(plan: Plan, profile) -> ProcedureResults:
     model = plan.settle.transient_model
     assert model is not None
     return run_procedures(
-        config(plan), resolve(plan, profile), plan.reference, model, plan.stand_limits
+        config(plan),
+        resolve(plan, profile),
+        plan.reference,
+        model,
+        plan.stand_limits,
+        plan.site.latitude_deg,
     )
 
 
@@ -101,7 +106,9 @@ def test_plan_defaults_come_from_the_profile_and_departures_are_recorded(a821) -
     point = resolved["settle_point"]
     assert point.plan.readings == 10
     assert point.departures == ("interval_s 300 s instead of the standard's 1200 s",)
-    assert resolved["rolling"].departures == ()
+    assert resolved["rolling"].departures == (
+        "3 points of the plan's instead of the envelope's 5 at its largest acceleration",
+    )
 
 
 def test_envelope_points_lie_at_the_profile_acceleration(a821) -> None:
@@ -192,3 +199,9 @@ def test_no_reference_heading_leaves_the_settle_point_error_not_assessed(a821) -
     assert e.verdict == NOT_ASSESSED
     assert e.detail == "settle point error: not assessed (no reference heading)"
     assert items["heading-rms"].verdict == PASS and items["settling-time"].verdict == PASS
+
+
+def test_procedures_on_a_real_bus_are_refused() -> None:
+    with pytest.raises(PlanError) as err:
+        parse_plan(PAPER.replace("simulated = true", "simulated = false") + FAST.format(knob=""))
+    assert any("simulated compass only" in p for p in err.value.problems), err.value.problems
