@@ -31,7 +31,7 @@ from gyrostand.db.models import ProcedureRun
 from gyrostand.db.session import writer
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.plan.model import StandLimits
-from gyrostand.plan.procedures import ProcedurePlan, ReferencePlan, ResolvedProcedure, RollingPoint
+from gyrostand.plan.procedures import ProcedurePlan, ReferencePlan, ResolvedProcedure
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.runup import switch_on
 from gyrostand.stand.simconfig import SimConfig
@@ -125,15 +125,6 @@ def _settle_point(
     return settle_point(values, interval, reference.heading_deg, reference.uncertainty_deg)
 
 
-def _reachable(point: RollingPoint, limits: StandLimits) -> bool:
-    amplitude, low, high = limits.max_amplitude_cm, limits.min_period_s, limits.max_period_s
-    return (
-        (amplitude is None or point.amplitude_cm <= amplitude.value)
-        and (low is None or point.period_s >= low.value)
-        and (high is None or point.period_s <= high.value)
-    )
-
-
 def _rolling(
     runup: RunUp, proc: ProcedurePlan, static: SettlePoint, limits: StandLimits
 ) -> tuple[RollingError, ...]:
@@ -143,7 +134,7 @@ def _rolling(
     n, interval = proc.readings, proc.interval_s
     assert n is not None and interval is not None and proc.points is not None  # resolved
     for point in proc.points:
-        if not _reachable(point, limits):
+        if limits.broken(point):
             out.append(
                 RollingError(
                     point.direction_deg, point.amplitude_cm, point.period_s, None, None, True

@@ -38,7 +38,14 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from gyrostand.plan.procedures import ProcedurePlan, ReferencePlan, StandardPlan, duplicated, needs
+from gyrostand.plan.procedures import (
+    ProcedurePlan,
+    ReferencePlan,
+    RollingPoint,
+    StandardPlan,
+    duplicated,
+    needs,
+)
 from gyrostand.stand.encoder import Encoder, EncoderError, encoder_from_eds
 from gyrostand.stand.protocol import SignalMap
 from gyrostand.stand.simconfig import SimConfigError, simulator_config, simulator_tables
@@ -791,6 +798,19 @@ class StandLimits:
     min_period_s: StandLimit | None
     max_period_s: StandLimit | None
 
+    def broken(
+        self, motion: TrialPlan | RollingPoint
+    ) -> list[tuple[str, str, StandLimit, bool, str]]:
+        """The limits a motion (amplitude_cm, period_s) breaks: (its key, the limit's field,
+        the limit, whether a maximum, the unit)."""
+        out = []
+        for key, limit_key, maximum, unit in _STAND_LIMITS:
+            limit: StandLimit | None = getattr(self, limit_key)
+            value = getattr(motion, key)
+            if limit is not None and (value > limit.value if maximum else value < limit.value):
+                out.append((key, limit_key, limit, maximum, unit))
+        return out
+
 
 class ProtocolPlan(_Table):
     """[protocol]"""
@@ -975,11 +995,8 @@ class Plan(_Table):
         limits = self.stand_limits
         errors = []
         for row, trial in enumerate(self.trials):
-            for key, limit_key, maximum, unit in _STAND_LIMITS:
-                limit: StandLimit | None = getattr(limits, limit_key)
+            for key, limit_key, limit, maximum, unit in limits.broken(trial):
                 value = getattr(trial, key)
-                if limit is None or (value <= limit.value if maximum else value >= limit.value):
-                    continue
                 # the simulator's limit is "the simulated stand's" when [stand] states another
                 simulated = limit.source == "simulator" and limit_key in self.stand.model_fields_set
                 message = (
@@ -1067,11 +1084,8 @@ class Plan(_Table):
             if proc.points is None or proc.beyond_stand == "forecast":
                 continue
             for n, point in enumerate(proc.points):
-                for key, limit_key, maximum, unit in _STAND_LIMITS:
-                    limit: StandLimit | None = getattr(limits, limit_key)
+                for key, _, limit, maximum, unit in limits.broken(point):
                     value = getattr(point, key)
-                    if limit is None or (value <= limit.value if maximum else value >= limit.value):
-                        continue
                     message = (
                         f"rolling point {n + 1} (K {_number(point.direction_deg)} deg, A "
                         f"{_number(point.amplitude_cm)} cm, tau {_number(point.period_s)} s): "
