@@ -190,9 +190,13 @@ def run_procedures(
         settling.fit_from_s or 0.0,
     )
     readings = by_kind.get("settle_point") or by_kind.get("repeatability")
+    # the readings after settling: from the record's end, or the settling time (+ U) if later
+    start_s = settling.max_wait_s
+    if settled.settled:
+        start_s = max(start_s, settled.value_s + settled.expanded_s)
     static = None
     if readings is not None:
-        static = _settle_point(first, readings, settling.max_wait_s, reference)
+        static = _settle_point(first, readings, start_s, reference)
     rolling: tuple[RollingError, ...] = ()
     if "rolling" in by_kind and static is not None:
         rolling = _rolling(first, by_kind["rolling"], static, limits)
@@ -203,7 +207,7 @@ def run_procedures(
         for k in range(2, proc.runups + 1):
             at_s += proc.off_s
             runup = RunUp(config, k, at_s)
-            points.append(_settle_point(runup, proc, settling.max_wait_s, reference))
+            points.append(_settle_point(runup, proc, start_s, reference))
             at_s += runup.now_s
         repeat = repeatability(points)
     return ProcedureResults(

@@ -24,6 +24,7 @@ from scipy import stats
 from gyrostand.analysis.settle import _damped_jacobian, estimate_settle_point_free
 
 GRID_S = 1.0  # the fitted reading's grid when searching the last band exit, s
+MAX_HORIZON = 10.0  # the fitted transient is followed past the record to at most 10x its length
 MAX_FIT_READINGS = 20_000  # a longer record is thinned evenly to about this many readings
 COVERAGE = 0.95  # expanded uncertainties: about 95 %
 
@@ -50,8 +51,13 @@ class SettlingTime:
 
     @property
     def settled(self) -> bool:
-        """Whether the reading settled within the record (value_s is infinite otherwise)."""
+        """Whether the fitted reading settles at all (value_s is infinite otherwise)."""
         return math.isfinite(self.value_s)
+
+    @property
+    def extrapolated(self) -> bool:
+        """Whether the settling time lies after the record's end (predicted by the fit)."""
+        return self.value_s > self.record_s
 
 
 def _last_exit_s(theta: np.ndarray, t_s: np.ndarray, half_band_deg: float) -> float:
@@ -97,7 +103,9 @@ def settling_time(
     jac = _damped_jacobian(tau, *theta)
     # the fit's covariance S^2 (J^T J)^-1, inflated for correlated noise as the SE of R^ is
     cov = np.linalg.inv(jac.T @ jac) * (est.residual_sd_deg * est.se_inflation) ** 2
-    grid = np.arange(0.0, tau[-1] + GRID_S / 2, GRID_S)
+    # past the record's end the fitted transient is extrapolated, up to ten decay times
+    horizon = tau[-1] + (10.0 / est.damping_per_s if est.damping_per_s > 0 else 0.0)
+    grid = np.arange(0.0, min(horizon, MAX_HORIZON * tau[-1]) + GRID_S / 2, GRID_S)
     value = _last_exit_s(theta, grid, half_band_deg)
     grad = np.zeros(5)
     if not math.isfinite(value):  # outside the band at the record's end: not settled in it

@@ -504,16 +504,17 @@ def _settling_time(req: Requirement, e: Evidence) -> Finding:
     if e.procedures is not None and e.procedures.settling is not None:
         s = e.procedures.settling
         if not s.settled:
-            return Finding(
-                s.record_s / 3600.0,
-                e.site_latitude_deg,
-                f"run-up from switch-on: the reading had not settled within "
-                f"+/-{s.half_band_deg:g} deg of its settle point by the end of the "
-                f"{s.record_s / 3600:.2f} h record (the value is that lower bound)"
-                + _departs(e, "settling"),
-                0.0,
-                "a lower bound: no uncertainty",
+            from gyrostand.analysis.procedures import MAX_HORIZON
+
+            bound_h = MAX_HORIZON * s.record_s / 3600.0
+            why = (
+                f"run-up from switch-on: the fitted reading does not settle within "
+                f"+/-{s.half_band_deg:g} deg of its settle point within {bound_h:.3g} h (ten "
+                f"times the {s.record_s / 3600:.3g} h record)" + _departs(e, "settling")
             )
+            if req.limit_h is None or bound_h <= req.limit_h:
+                return _not_assessed(f"{why}: not compared with the limit")
+            return Finding(bound_h, e.site_latitude_deg, why, 0.0, "a lower bound: U = 0")
         return Finding(
             s.value_s / 3600.0,
             e.site_latitude_deg,
@@ -521,7 +522,9 @@ def _settling_time(req: Requirement, e: Evidence) -> Finding:
             f"settle point {s.settle_point_deg:.3f} deg from {s.value_s / 60:.1f} min on, by the "
             "settle model of Bezvesilna & Gura (eq 3, omega and xi fitted: damped period "
             f"{s.period_s / 60:.1f} min) on the record from {s.fit_from_s / 60:.1f} min to "
-            f"{s.record_s / 3600:.2f} h" + _departs(e, "settling"),
+            f"{s.record_s / 3600:.2f} h"
+            + (", extrapolated past the record's end" if s.extrapolated else "")
+            + _departs(e, "settling"),
             s.expanded_s / 3600.0,
             "U = 2 u, u propagated from the fit's covariance (GUM eq 13)",
         )

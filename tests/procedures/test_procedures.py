@@ -182,13 +182,23 @@ def test_the_simulated_compass_passes_every_clause_it_is_tested_on(results, a821
     }
 
 
-def test_a_settle_point_error_fails_that_clause_only(results, a821) -> None:
+@pytest.mark.parametrize(
+    ("knob", "clause"),
+    [
+        ("settle_point_error_deg = 1.5", "settle-point-error"),  # limit 0.75 sec(46.5) = 1.09
+        # a compass ~12 h to settle (limit 6 h): 40 h of run-ups, in the slow stage
+        pytest.param("damping_ratio = 0.02", "settling-time", marks=pytest.mark.slow),
+    ],
+)
+def test_a_compass_failing_one_limit_fails_that_clause_only(
+    results, a821, knob: str, clause: str
+) -> None:
     plan, good = results
-    knob = fast_plan("settle_point_error_deg = 1.5")
-    out = run(knob, a821)
-    before, after = decisions(plan, good, a821), decisions(knob, out, a821)
+    failing = fast_plan(knob)
+    out = run(failing, a821)
+    before, after = decisions(plan, good, a821), decisions(failing, out, a821)
     changed = {k for k in before if before[k] != after[k]}
-    assert changed == {"settle-point-error"} and after["settle-point-error"] == FAIL
+    assert changed == {clause} and after[clause] == FAIL
 
 
 def test_no_reference_heading_leaves_the_settle_point_error_not_assessed(a821) -> None:
