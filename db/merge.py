@@ -46,6 +46,7 @@ from gyrostand.db.models import (
     Instrument,
     MeasuredMotionRow,
     Observation,
+    ProcedureRun,
     RawLogSegment,
     Series,
     SignOff,
@@ -64,6 +65,7 @@ COPIED = (
     RawLogSegment,
     SignOff,
     AnalysisRun,
+    ProcedureRun,
 )
 """The tables of a campaign's rows, besides the campaign row: each has one non-nullable foreign
 key to the campaign or to another of them."""

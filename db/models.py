@@ -466,6 +466,21 @@ class AnalysisRun(Base):
 SIGN_OFF_ROLES = ("tested_by", "checked_by")
 
 
+class ProcedureRun(Base):
+    """The results of the standard's own procedures of a campaign (settling, settle point,
+    repeatability, rolling: `analysis.procedures.ProcedureResults` as JSON), one per campaign."""
+
+    __tablename__ = "procedure_run"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(
+        ForeignKey("campaign.id", ondelete="CASCADE"), unique=True
+    )
+    results_json: Mapped[dict[str, Any]] = mapped_column(JSON)
+    software_version: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
+
+
 class SignOff(Base):
     """A signature on a campaign's report: who tested it, who checked it (ISO/IEC 17025, 7.8.2),
     entered at the operator station. One per role; the checker is not the tester."""

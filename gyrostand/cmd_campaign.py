@@ -258,6 +258,7 @@ def run_campaign(
 
     from gyrostand.acquisition.runner import RawLogFailed, result, run_live
     from gyrostand.acquisition.store import ReRunMismatch
+    from gyrostand.campaign_procedures import run_procedures_of
     from gyrostand.db.session import unusable
     from gyrostand.devices.serial_port import SerialPortError
 
@@ -274,6 +275,7 @@ def run_campaign(
             mark("interrupted", "warning", "stopped by signal before acquiring", "stopped")
             return result(store, "stopped", None, None)
         terminal = sys.stdin if interactive() else None
+        run_procedures_of(plan, store, quiet)
         outcome = run_live(
             plan, store, start=start, quiet=quiet, stop=stop, answers=answers, terminal=terminal
         )

@@ -42,6 +42,7 @@ def register(app: typer.Typer) -> None:
     def check(plan: Annotated[Path, typer.Argument(help="Campaign plan (TOML).")]) -> None:
         """Validate a plan as `campaign run` does before it touches the bus or the database:
         one summary line, or every problem one per line (exit code 1)."""
+        from gyrostand.campaign_procedures import describe, resolved
         from gyrostand.plan.codec import prepare
         from gyrostand.plan.model import PlanError, load_plan
         from gyrostand.plan.summary import design_warning, spacing
@@ -53,7 +54,10 @@ def register(app: typer.Typer) -> None:
             for problem in exc.problems:
                 typer.echo(f"gyrostand: error: {plan}: {problem}", err=True)
             raise typer.Exit(EXIT_FAILED) from None
+        procedures = resolved(checked)
         typer.echo(f"{plan}: ok — {summary(checked)}")
+        for procedure in procedures:
+            typer.echo(f"{plan}: procedure — {describe(procedure)}")
         if warning := design_warning(checked):
             typer.echo(f"{plan}: warning — {warning}")
         if (observed := spacing(checked)) is None:

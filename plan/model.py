@@ -38,6 +38,14 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
+from gyrostand.plan.procedures import (
+    ProcedurePlan,
+    ReferencePlan,
+    RollingPoint,
+    StandardPlan,
+    duplicated,
+    needs,
+)
 from gyrostand.stand.encoder import Encoder, EncoderError, encoder_from_eds
 from gyrostand.stand.protocol import SignalMap
 from gyrostand.stand.simconfig import SimConfigError, simulator_config, simulator_tables
@@ -794,6 +802,19 @@ class StandLimits:
     min_period_s: StandLimit | None
     max_period_s: StandLimit | None
 
+    def broken(
+        self, motion: TrialPlan | RollingPoint
+    ) -> list[tuple[str, str, StandLimit, bool, str]]:
+        """The limits a motion (amplitude_cm, period_s) breaks: (its key, the limit's field,
+        the limit, whether a maximum, the unit)."""
+        out = []
+        for key, limit_key, maximum, unit in _STAND_LIMITS:
+            limit: StandLimit | None = getattr(self, limit_key)
+            value = getattr(motion, key)
+            if limit is not None and (value > limit.value if maximum else value < limit.value):
+                out.append((key, limit_key, limit, maximum, unit))
+        return out
+
 
 class ProtocolPlan(_Table):
     """[protocol]"""
@@ -875,6 +896,10 @@ class Plan(_Table):
     report: ReportPlan = Field(default_factory=ReportPlan)
     prompt: tuple[PromptPlan, ...] = Field((), strict=False)
     """Questions to the operator before the campaign or a trial ([[prompt]])."""
+    procedure: tuple[ProcedurePlan, ...] = Field((), strict=False)
+    """The standard's own tests ([[procedure]]), run before the trials."""
+    reference: ReferencePlan | None = None
+    standard: StandardPlan = Field(default_factory=StandardPlan)
     _text: str = PrivateAttr("")
 
     @field_validator("trials")
@@ -925,6 +950,7 @@ class Plan(_Table):
             + self._bad_prompts()
             + self._bad_compass()
             + self._bad_inclinometer()
+            + self._bad_procedures()
         )
         if errors:
             raise ValidationError.from_exception_data(type(self).__name__, errors)
@@ -973,11 +999,8 @@ class Plan(_Table):
         limits = self.stand_limits
         errors = []
         for row, trial in enumerate(self.trials):
-            for key, limit_key, maximum, unit in _STAND_LIMITS:
-                limit: StandLimit | None = getattr(limits, limit_key)
+            for key, limit_key, limit, maximum, unit in limits.broken(trial):
                 value = getattr(trial, key)
-                if limit is None or (value <= limit.value if maximum else value >= limit.value):
-                    continue
                 # the simulator's limit is "the simulated stand's" when [stand] states another
                 simulated = limit.source == "simulator" and limit_key in self.stand.model_fields_set
                 message = (
@@ -1040,6 +1063,42 @@ class Plan(_Table):
             return []
         message = "missing: the inclinometer measures the roll angle; A is arm x angle (rad)"
         return [_error("inclinometer", ("stand", "arm_length_cm"), message)]
+
+    def _bad_procedures(self) -> list[InitErrorDetails]:
+        """One procedure of each kind, those following the settling run-up with one, and the
+        rolling points within the stand's limits unless forecast."""
+        errors = [
+            _error("procedure", ("procedure", row), message)
+            for row, message in duplicated(self.procedure) + needs(self.procedure)
+        ]
+        if self.procedure and not self.bus.simulated:
+            message = (
+                "the standard's procedures run on the simulated compass only (not yet on a "
+                "real bus: switching the compass and recording its run-up there is not built)"
+            )
+            errors.append(_error("procedure", ("procedure",), message))
+        if self.procedure and self.settle.transient_model is None:
+            message = (
+                "the standard's procedures need the compass's precession: [settle] "
+                "undamped_period_s and damping_ratio (instrument data)"
+            )
+            errors.append(_error("procedure", ("settle", "undamped_period_s"), message))
+        limits = self.stand_limits
+        for row, proc in enumerate(self.procedure):
+            if proc.points is None or proc.beyond_stand == "forecast":
+                continue
+            for n, point in enumerate(proc.points):
+                for key, _, limit, maximum, unit in limits.broken(point):
+                    value = getattr(point, key)
+                    message = (
+                        f"rolling point {n + 1} (K {_number(point.direction_deg)} deg, A "
+                        f"{_number(point.amplitude_cm)} cm, tau {_number(point.period_s)} s): "
+                        f"{_number(value)} {unit} {'exceeds' if maximum else 'is below'} the "
+                        f"stand's limit {_number(limit.value)} {unit}; the stand cannot reach it "
+                        '(beyond_stand = "forecast" forecasts it by model 1.1 instead)'
+                    )
+                    errors.append(_error("stand_limit", ("procedure", row, "points"), message))
+        return errors
 
     @property
     def heading_source(self) -> tuple[str, str | None, tuple[str, str], Encoder | None]:

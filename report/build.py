@@ -423,6 +423,7 @@ def build_report(
         fitted,
         None if fitted is None else inputs.plan,
         imported=inputs.identification.source == "import",
+        procedures=inputs.procedures,
     )
     section = (
         forecast_section(fitted, profile.envelope.forecast_periods_s)

@@ -54,6 +54,7 @@ from gyrostand.report.errors import ReportError
 if TYPE_CHECKING:  # annotations only (scipy is not loaded for this module)
     from gyrostand.analysis.campaign import CampaignAnalysis
     from gyrostand.analysis.forecast import EnvelopeWorst, Extrapolation
+    from gyrostand.analysis.procedures import ProcedureResults
     from gyrostand.report.model import PlanSummary
 
 PASS, FAIL, NOT_ASSESSED = "PASS", "FAIL", "NOT ASSESSED"
@@ -116,6 +117,7 @@ class Procedure:
     readings: int | None
     interval_s: float | None
     axes: int | None
+    band_deg: float | None = None  # settling: the band width the readings must stay within
 
 
 @dataclass(frozen=True)
@@ -130,6 +132,11 @@ class Requirement:
     verified: bool
     procedure: Procedure | None
     verified_by: Verification | None = None
+    limit_h: float | None = None  # a limit in hours (the settling time)
+
+    @property
+    def unit(self) -> str:
+        return "h" if self.limit_h is not None else "deg"
 
 
 @dataclass(frozen=True)
@@ -355,6 +362,9 @@ def _requirement(row: Any, where: str) -> Requirement:
     limit = _optional(row, "limit_deg", (int, float), where)
     if limit is not None and limit <= 0:
         raise ReportError(f"{where}: limit_deg must be a positive number")
+    limit_h = _optional(row, "limit_h", (int, float), where)
+    if limit_h is not None and (limit_h <= 0 or limit is not None):
+        raise ReportError(f"{where}: limit_h must be a positive number, and not with limit_deg")
     if limit is None and evidence in NEEDS_LIMIT:
         raise ReportError(f"{where}: evidence {evidence} needs limit_deg")
     procedure = _optional(row, "procedure", dict, where)
@@ -369,6 +379,7 @@ def _requirement(row: Any, where: str) -> Requirement:
         verified=_get(row, "verified", bool, where),
         procedure=None if procedure is None else _procedure(procedure, f"{where}.procedure"),
         verified_by=_verification(row, where),
+        limit_h=None if limit_h is None else float(limit_h),
     )
 
 
@@ -394,15 +405,17 @@ def _procedure(table: dict[str, Any], where: str) -> Procedure:
     readings = _optional(table, "readings", int, where)
     interval = _optional(table, "interval_s", (int, float), where)
     axes = _optional(table, "axes", int, where)
+    band = _optional(table, "band_deg", (int, float), where)
     if (readings is None) != (interval is None):
         raise ReportError(f"{where}: give readings and interval_s together")
-    if any(v is not None and v <= 0 for v in (readings, interval, axes)):
-        raise ReportError(f"{where}: readings, interval_s, axes must be > 0")
+    if any(v is not None and v <= 0 for v in (readings, interval, axes, band)):
+        raise ReportError(f"{where}: readings, interval_s, axes, band_deg must be > 0")
     return Procedure(
         text=_get(table, "text", str, where),
         readings=readings,
         interval_s=None if interval is None else float(interval),
         axes=axes,
+        band_deg=None if band is None else float(band),
     )
 
 
@@ -421,13 +434,17 @@ class Evidence:
     """What the evaluators look at: the analysis, the plan's observation protocol (None: the
     data were imported without one), the profile."""
 
-    analysis: CampaignAnalysis
+    analysis: CampaignAnalysis | None  # None: only the procedures' evidence (`_measured_by`)
     plan: PlanSummary | None
     profile: Profile
     imported: bool = False  # the data were imported from a file, not acquired on the stand
+    procedures: ProcedureResults | None = None  # the standard's own tests, when run
 
     @property
     def site_latitude_deg(self) -> float:
+        if self.analysis is None:
+            assert self.procedures is not None  # (assess)
+            return self.procedures.latitude_deg
         return self.analysis.constants.latitude_deg
 
 
@@ -477,7 +494,41 @@ def _procedure_differs(req: Requirement, e: Evidence) -> str | None:
     )
 
 
+def _departs(e: Evidence, kind: str) -> str:
+    """The sentence on the plan's departure from the standard's procedure (empty: none)."""
+    assert e.procedures is not None
+    how = e.procedures.departure(kind)
+    return "" if how is None else f"; the procedure departs from the standard's: {how}"
+
+
 def _settling_time(req: Requirement, e: Evidence) -> Finding:
+    if e.procedures is not None and e.procedures.settling is not None:
+        s = e.procedures.settling
+        if not s.settled:
+            from gyrostand.analysis.procedures import MAX_HORIZON
+
+            bound_h = MAX_HORIZON * s.record_s / 3600.0
+            why = (
+                f"run-up from switch-on: the fitted reading does not settle within "
+                f"+/-{s.half_band_deg:g} deg of its settle point within {bound_h:.3g} h (ten "
+                f"times the {s.record_s / 3600:.3g} h record)" + _departs(e, "settling")
+            )
+            if req.limit_h is None or bound_h <= req.limit_h:
+                return _not_assessed(f"{why}: not compared with the limit")
+            return Finding(bound_h, e.site_latitude_deg, why, 0.0, "a lower bound: U = 0")
+        return Finding(
+            s.value_s / 3600.0,
+            e.site_latitude_deg,
+            f"run-up from switch-on: the reading stays within +/-{s.half_band_deg:g} deg of its "
+            f"settle point {s.settle_point_deg:.3f} deg from {s.value_s / 60:.1f} min on, by the "
+            "settle model of Bezvesilna & Gura (eq 3, omega and xi fitted: damped period "
+            f"{s.period_s / 60:.1f} min) on the record from {s.fit_from_s / 60:.1f} min to "
+            f"{s.record_s / 3600:.2f} h"
+            + (", extrapolated past the record's end" if s.extrapolated else "")
+            + _departs(e, "settling"),
+            s.expanded_s / 3600.0,
+            "U = 2 u, u propagated from the fit's covariance (GUM eq 13)",
+        )
     if e.imported:
         return _not_assessed("the imported data record no run-up from switch-on")
     return _not_assessed(
@@ -486,7 +537,30 @@ def _settling_time(req: Requirement, e: Evidence) -> Finding:
     )
 
 
+def _settle_point(e: Evidence) -> Any:
+    """The settle point procedure's result (None: not run)."""
+    return None if e.procedures is None else e.procedures.settle_point
+
+
+def _readings_text(p: Any) -> str:
+    return f"{p.n} readings {p.interval_s / 60:g} min apart after settling"
+
+
 def _settle_point_error(req: Requirement, e: Evidence) -> Finding:
+    if (p := _settle_point(e)) is not None:
+        if p.error_deg is None:
+            return _not_assessed("settle point error: not assessed (no reference heading)")
+        assert e.procedures is not None and e.procedures.reference_deg is not None
+        return Finding(
+            abs(p.error_deg),
+            e.site_latitude_deg,
+            f"settle point heading {p.heading_deg:.3f} deg (mean of {_readings_text(p)}) "
+            f"against the reference heading {e.procedures.reference_deg:g} deg: error "
+            f"{p.error_deg:+.3f} deg" + _departs(e, "settle_point"),
+            p.error_expanded_deg,
+            f"U = k u, u^2 = S^2/N + u(reference)^2, k = {p.coverage_factor:.2f} "
+            "(t, Welch-Satterthwaite, GUM G.4.1)",
+        )
     differs = _procedure_differs(req, e)
     return _not_assessed(
         "no reference (true) heading is recorded with the campaign's observations, so the "
@@ -496,6 +570,16 @@ def _settle_point_error(req: Requirement, e: Evidence) -> Finding:
 
 
 def _settle_repeatability(req: Requirement, e: Evidence) -> Finding:
+    if e.procedures is not None and (r := e.procedures.repeatability) is not None:
+        points = ", ".join(f"{v:.3f}" for v in r.settle_points_deg)
+        return Finding(
+            r.range_deg,
+            e.site_latitude_deg,
+            f"range of the settle points of {len(r.settle_points_deg)} run-ups ({points} deg), "
+            "each from switch-on" + _departs(e, "repeatability"),
+            r.expanded_deg,
+            "U = 2 sqrt(u_max^2 + u_min^2), u = S / sqrt(N) of each run-up's readings",
+        )
     if e.imported:
         return _not_assessed(
             "the imported data record no run-up and no reference heading: repeatability not "
@@ -509,6 +593,14 @@ def _speed_course_errors(req: Requirement, e: Evidence) -> Finding:
 
 
 def _heading_rms(req: Requirement, e: Evidence) -> Finding:
+    if (p := _settle_point(e)) is not None:
+        return Finding(
+            p.rms_deg,
+            e.site_latitude_deg,
+            f"RMS of the {_readings_text(p)} about their mean" + _departs(e, "settle_point"),
+            p.rms_expanded_deg,
+            f"U = 2 u, u = RMS / sqrt(2 (N - 1)) with N = {p.n} (GUM E.4.3)",
+        )
     differs = _procedure_differs(req, e)
     if differs is not None:
         return _not_assessed(f"not assessed: the stand procedure differs: {differs}")
@@ -548,6 +640,8 @@ def _rolling_error_stand(req: Requirement, e: Evidence) -> Finding:
             f"not assessed: the stand procedure differs: the standard asks {proc.text}; the "
             "stand rocks about one axis at a time, in one direction K per trial"
         )
+    if e.procedures is not None and e.procedures.rolling:
+        return _rolling_procedure(e)
     env = e.profile.envelope
     lo, hi = env.period_s
     inside, outside = [], []
@@ -581,6 +675,36 @@ def _rolling_error_stand(req: Requirement, e: Evidence) -> Finding:
         u[worst.index],
         f"U = t(0.975, nu = {dof}) sqrt(S^2/N) = {_t975(dof):.3f} \u00d7 {math.sqrt(var):.4f} deg, "
         f"{how_u}",
+    )
+
+
+def _rolling_procedure(e: Evidence) -> Finding:
+    """The rolling procedure's points: the worst measured one decides; points beyond the
+    stand are left to the forecast (named, decide nothing)."""
+    assert e.procedures is not None
+    measured = [r for r in e.procedures.rolling if not r.forecast]
+    forecast = [r for r in e.procedures.rolling if r.forecast]
+
+    def name(r: Any) -> str:
+        return f"K {r.direction_deg:g} deg, A {r.amplitude_cm:g} cm, tau {r.period_s:g} s"
+
+    left = (
+        ""
+        if not forecast
+        else "; beyond the stand, forecast by model 1.1 (the forecast row, no decision): "
+        + "; ".join(name(r) for r in forecast)
+    )
+    if not measured:
+        return _not_assessed(f"no point of the rolling procedure within the stand's reach{left}")
+    worst = max(measured, key=lambda r: abs(r.error_deg) + _guard(e, r.expanded_deg))
+    return Finding(
+        abs(worst.error_deg),
+        e.site_latitude_deg,
+        f"largest |error| against the static settle point over {len(measured)} rolling points "
+        f"(at {name(worst)}: {worst.error_deg:+.3f} deg){left}" + _departs(e, "rolling"),
+        worst.expanded_deg,
+        "U = k u, u^2 = u(rolling mean)^2 + u(settle point)^2, k by Welch-Satterthwaite "
+        "(GUM G.4.1)",
     )
 
 
@@ -677,8 +801,9 @@ NEEDS_ENVELOPE = {"rolling_error_stand", "rolling_error_forecast"}
 
 def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceItem:
     value, lat, u = finding.value_deg, finding.latitude_deg, finding.uncertainty_deg
-    limit: float | None = req.limit_deg
-    limit_text = "-" if limit is None else f"{limit:g} deg"
+    unit = req.unit
+    limit: float | None = req.limit_deg if req.limit_h is None else req.limit_h
+    limit_text = "-" if limit is None else f"{limit:g} {unit}"
     if limit is not None and req.secant_latitude:
         limit_text += " x sec(latitude)"
     forecast = req.evidence == "rolling_error_forecast"
@@ -705,7 +830,7 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
                 ),
             ]
             compared = (
-                f"{value:.3f} +/- {u:.3f} deg against the acceptance limit {accept:.3f} deg "
+                f"{value:.3f} +/- {u:.3f} {unit} against the acceptance limit {accept:.3f} {unit} "
                 f"({profile.decision_rule} acceptance)"
             )
             if unverified:
@@ -726,7 +851,7 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
         source=req.source,
         verified=req.verified,
         verified_by=None if req.verified_by is None else req.verified_by.describe(),
-        stated_limit_deg=req.limit_deg,
+        stated_limit_deg=req.limit_deg if req.limit_h is None else req.limit_h,
         secant_latitude=req.secant_latitude,
         limit_deg=limit,
         limit_text=limit_text,
@@ -742,22 +867,41 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
     )
 
 
+def _measured_by(procedures: ProcedureResults | None, evidence: str) -> bool:
+    """Whether the standard's procedures give this evidence (judged without the analysis)."""
+    if procedures is None:
+        return False
+    return {
+        "settling_time": procedures.settling is not None,
+        "settle_point_error": procedures.settle_point is not None,
+        "heading_rms": procedures.settle_point is not None,
+        "settle_repeatability": procedures.repeatability is not None,
+        "rolling_error_stand": bool(procedures.rolling),
+    }.get(evidence, False)
+
+
 def assess(
     profile: Profile,
     analysis: CampaignAnalysis | None,
     plan: PlanSummary | None = None,
     *,
     imported: bool = False,
+    procedures: ProcedureResults | None = None,
 ) -> Compliance:
     """Every requirement of the profile judged on this campaign and its plan's observation
     protocol (all NOT ASSESSED when the campaign could not be analysed); ``imported``: the data
     came from a file, and the reasons say so rather than describe the stand."""
-    if analysis is None:
+    if analysis is None and procedures is None:
         findings = [_not_assessed("the campaign could not be analysed")] * len(profile.requirements)
         latitude = None
     else:
-        evidence = Evidence(analysis, plan, profile, imported)
-        findings = [EVIDENCE[req.evidence](req, evidence) for req in profile.requirements]
+        evidence = Evidence(analysis, plan, profile, imported, procedures)
+        findings = [
+            EVIDENCE[req.evidence](req, evidence)
+            if analysis is not None or _measured_by(procedures, req.evidence)
+            else _not_assessed("the campaign could not be analysed")
+            for req in profile.requirements
+        ]
         latitude = evidence.site_latitude_deg
     judged = [
         _judge(req, finding, profile)

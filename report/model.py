@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gyrostand.analysis.campaign import LeftOutTrial
+from gyrostand.analysis.procedures import ProcedureResults
 from gyrostand.analysis.settle import SettleOutcome
 
 NOT_STATED = "not stated"  # an identification item the plan does not give
@@ -236,3 +237,4 @@ class ReportInputs:
     reading_note: str = "No reading record was given."  # where it came from, or why none
     acceptance: ExcursionCriterion | None = None  # None: the plan asks for no acceptance
     left_out: tuple[LeftOutTrial, ...] = ()  # trial attempts the analysis does not use, and why
+    procedures: ProcedureResults | None = None  # the standard's own tests (None: not run)

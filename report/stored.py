@@ -44,11 +44,12 @@ from gyrostand.analysis.campaign import (
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.gyro_model import KnownConstants
 from gyrostand.analysis.measured_motion import PREFERENCE
+from gyrostand.analysis.procedures import ProcedureResults
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.transient import PLAN_CONTRADICTED
 from gyrostand.analysis.trials import SeriesSummary, TrialInput, series_moments
 from gyrostand.analysis.typed_json import decode, encode
-from gyrostand.db.models import AnalysisRun, Campaign, Series, Trial
+from gyrostand.db.models import AnalysisRun, Campaign, ProcedureRun, Series, Trial
 from gyrostand.db.queries import campaign_constants, current_trials, load_campaign, sign_offs
 from gyrostand.db.session import writer
 from gyrostand.frames.logfile import sha256_of
@@ -907,7 +908,16 @@ def report_inputs(
         reading=reading,
         reading_note=reading_note,
         acceptance=acceptance,
+        procedures=stored_procedures(session, campaign.id),
     )
+
+
+def stored_procedures(session: Session, campaign_id: int) -> ProcedureResults | None:
+    """The campaign's stored results of the standard's procedures (None: none were run)."""
+    record = session.scalar(
+        select(ProcedureRun.results_json).where(ProcedureRun.campaign_id == campaign_id)
+    )
+    return None if record is None else ProcedureResults.from_dict(record)
 
 
 def _signatures(session: Session, campaign: Campaign) -> Signatures:

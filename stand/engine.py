@@ -175,7 +175,12 @@ class StandEngine:
         compass, noise = self.config.compass, self.config.noise
         n = len(t)
         deviation = self._precession.run(n) if compass.transient else np.zeros(n)
-        reading = compass.heading_deg + self._equilibrium_deg + np.degrees(deviation)
+        reading = (
+            compass.heading_deg
+            + compass.settle_point_error_deg
+            + self._equilibrium_deg
+            + np.degrees(deviation)
+        )
         if self.rocking:
             _, amplitude, period = self._actual_motion()
             p = 2.0 * math.pi / period

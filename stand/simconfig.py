@@ -58,6 +58,16 @@ class CompassParams:
         0.5, "reading oscillation at 2p, deg per g of stand acceleration A*p^2"
     )
     fluid_temp_c: float = param(42.0, "supporting-fluid temperature reported in GYRO_STATUS, degC")
+    settle_point_error_deg: float = param(
+        0.0, "static error of the settle point: settled reading minus true heading at rest, deg"
+    )
+    runup_error_deg: float = param(
+        30.0,
+        "azimuth of the sensitive element from its settle point at switch-on (rotor stop), deg",
+    )
+    repeatability_sd_deg: float = param(
+        0.03, "standard deviation of the settle point from one run-up to the next, deg"
+    )
 
     def settled_shift_deg(
         self, direction_deg: float, amplitude_cm: float, period_s: float
@@ -213,6 +223,7 @@ class SimConfig:
             "noise.white_sigma_deg": noise.white_sigma_deg,
             "noise.quantum_deg": noise.quantum_deg,
             "noise.spurious_amplitude_deg": noise.spurious_amplitude_deg,
+            "compass.repeatability_sd_deg": compass.repeatability_sd_deg,
             "faults.stuck_at_s": faults.stuck_at_s,
             "faults.stuck_for_s": faults.stuck_for_s,
             "faults.silence_at_s": faults.silence_at_s,

@@ -71,6 +71,7 @@ SLOW_FILES = frozenset(
         "acquisition/test_identify_campaign.py",
         "acquisition/test_kill_resume.py",
         "acquisition/test_live.py",
+        "procedures/test_campaign_procedures.py",
         "acquisition/test_liveness.py",
         "acquisition/test_measured_amplitude_campaign.py",
         "acquisition/test_raw_log_names.py",

@@ -87,6 +87,20 @@ def unknown_key(table: tuple[str, ...]) -> Case:
             "[[prompt]] 1 bogus_key: unknown key",
             append=prompt + BOGUS,
         )
+    if table[0] == "procedure":  # an array of tables the base plan does not have
+        settling = '\n[[procedure]]\nkind = "settling"\n'
+        if table == ("procedure",):
+            return plan_case(
+                "unknown key in [[procedure]]",
+                "[[procedure]] 1 bogus_key: unknown key",
+                append=settling + BOGUS,
+            )
+        point = '[[procedure]]\nkind = "rolling"\npoints = [{direction_deg = 45, amplitude_cm = 2, '
+        return plan_case(
+            "unknown key in [procedure.points]",
+            "[procedure.points] bogus_key: unknown key",
+            append=settling + point + "period_s = 6, bogus_key = 1}]\n",
+        )
     dotted = ".".join(table)
     args = ("campaign", "run", "{file}", "--db", "{db}", "--quiet")
     message = f"[{dotted}] bogus_key: unknown key"

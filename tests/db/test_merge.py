@@ -23,6 +23,7 @@ from sqlalchemy import create_engine, func, select, text
 from sqlalchemy.orm import Session
 from typer.testing import CliRunner
 
+from gyrostand.analysis.procedures import ProcedureResults
 from gyrostand.cli import app
 from gyrostand.db.merge import (
     COPIED,
@@ -32,7 +33,7 @@ from gyrostand.db.merge import (
     content_sha256,
     database_identity,
 )
-from gyrostand.db.models import AnalysisRun, Base, Campaign, SignOff
+from gyrostand.db.models import AnalysisRun, Base, Campaign, ProcedureRun, SignOff
 from gyrostand.db.session import open_database, sqlite_url
 from tests.db.conftest import make_campaign, run_stands_at_once
 
@@ -132,6 +133,9 @@ def test_two_stands_merge_whole_and_once(stands: Stands, db_url: str, tmp_path: 
     sessions = open_database(sqlite_url(s1))
     with sessions.begin() as session:
         session.add(SignOff(campaign_id=1, role="tested_by", name="A. Tester"))
+        # the standard's procedures' results (a JSON row; tests/procedures runs them for real)
+        none = ProcedureResults(None, None, None, (), None, 46.5).to_dict()
+        session.add(ProcedureRun(campaign_id=1, results_json=none, software_version="t"))
     sessions.kw["bind"].dispose()
     stand_fit = fit_of(["analyze", "1", "--json", "--db", str(s1)])
     checkpointed(s1)  # as the analyze process's exit does (db.wal): in this process, by hand

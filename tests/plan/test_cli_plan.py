@@ -34,6 +34,7 @@ def test_every_shipped_plan_passes(plan: Path) -> None:
     name = re.escape(str(plan))
     assert re.fullmatch(
         rf"{name}: ok — 6 trials \(4 fit, 2 control\), 2 residual degrees of freedom, N = 5, .*\n"
+        rf"(?:{name}: procedure — .*\n)*"  # the standard's procedures (type-approval.toml)
         rf"{name}: warning — the fit of C and T leaves 2 residual degrees of freedom .* add fit "
         r"trials\n"
         rf"{name}: note — successive observations of the 28 s windows correlate rho = \+0\.09\d "

@@ -1,0 +1,244 @@
+"""The standard's procedures on the simulated compass: run-ups from switch-on, recorded from the
+compass's own CAN frames (the simulated compass's `StandEngine` frames, decoded by the
+acquisition's `BatchDecoder`), in stand time (virtual: as fast as the machine allows,
+deterministic).
+
+Not yet here: the live bus (`acquisition.engine`), storage in the campaign database, resume
+after a kill, operator prompts for a compass switched by hand; a real compass needs them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import can
+import numpy as np
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+
+from gyrostand import SOFTWARE_VERSION
+from gyrostand.analysis.procedures import (
+    ProcedureResults,
+    RollingError,
+    SettlePoint,
+    repeatability,
+    rolling_error,
+    settle_point,
+    settling_time,
+)
+from gyrostand.analysis.transient import TransientModel
+from gyrostand.db.models import ProcedureRun
+from gyrostand.db.session import writer
+from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.plan.model import StandLimits
+from gyrostand.plan.procedures import ProcedurePlan, ReferencePlan, ResolvedProcedure
+from gyrostand.stand.protocol import Codec
+from gyrostand.stand.runup import switch_on
+from gyrostand.stand.simconfig import SimConfig
+
+CHUNK_S = 1800.0  # stand seconds of frames decoded at once (bounds the memory)
+
+
+@dataclass(frozen=True)
+class RunUpRecord:
+    """One run-up: its number, the stand time of switch-on, and the valid heading readings
+    (stand seconds from switch-on, deg, unwrapped) the compass sent."""
+
+    runup: int
+    switch_on_s: float
+    t_s: np.ndarray
+    heading_deg: np.ndarray
+
+    def readings(self, start_s: float, n: int, interval_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """n readings `interval_s` apart from `start_s` (seconds from switch-on): each the
+        first valid heading at or after its time (the heading indicated then)."""
+        wanted = start_s + interval_s * np.arange(n)
+        i = np.searchsorted(self.t_s, wanted - 1e-9)
+        if i.size and i[-1] >= self.t_s.size:
+            raise ValueError(
+                f"run-up {self.runup}: a reading at {wanted[-1]:g} s lies after the record's "
+                f"end at {self.t_s[-1]:g} s"
+            )
+        return self.t_s[i], self.heading_deg[i]
+
+
+class RunUp:
+    """Run-up k of the simulated compass, switched on at stand time `at_s` and recorded from its
+    frames as stand time advances; the stand under it can be rocked (`rock`)."""
+
+    def __init__(self, config: SimConfig, k: int, at_s: float) -> None:
+        self.k, self.at_s = k, at_s
+        self.codec = Codec()
+        self.engine = switch_on(config, k, at_s)
+        self._decoder = BatchDecoder(self.codec)
+        self._t: list[np.ndarray] = []
+        self._heading: list[np.ndarray] = []
+
+    @property
+    def now_s(self) -> float:
+        """Stand seconds since switch-on."""
+        return self.engine.stand_time_s
+
+    def advance(self, until_s: float) -> None:
+        """Record the compass's frames up to `until_s` seconds after switch-on."""
+        while self.now_s < until_s:
+            frames = self.engine.advance_to(min(self.now_s + CHUNK_S, until_s))
+            batch = self._decoder.decode(RawFrames.from_messages(0, frames)).headings
+            ok = batch.valid.astype(bool)
+            self._t.append((batch.t_ms[ok] - self.engine.clock_ms) / 1000.0)
+            self._heading.append(batch.heading_deg[ok])
+
+    def command(self, message: can.Message) -> None:
+        """A stand command at the current stand time; an error unless the stand accepts it."""
+        (ack,) = self.engine.receive(message)
+        frame = self.codec.decode(ack)
+        if not getattr(frame, "accepted", False):
+            raise ValueError(f"the stand refused {message}: {frame}")
+
+    def record(self) -> RunUpRecord:
+        """Everything recorded so far."""
+        heading = np.unwrap(np.concatenate(self._heading), period=360.0)
+        return RunUpRecord(self.k, self.at_s, np.concatenate(self._t), heading)
+
+
+def record_runup(config: SimConfig, k: int, at_s: float, duration_s: float) -> RunUpRecord:
+    """Run-up k of the simulated compass switched on at stand time `at_s`, recorded for
+    `duration_s` stand seconds from its frames."""
+    runup = RunUp(config, k, at_s)
+    runup.advance(duration_s)
+    return runup.record()
+
+
+ROLLING_WINDOW_PERIODS = 8  # a reading under rolling: the mean over whole rocking periods
+
+
+def _settle_point(
+    runup: RunUp, proc: ProcedurePlan, start_s: float, reference: ReferencePlan | None
+) -> SettlePoint:
+    """The proc's readings from `start_s` after switch-on, and the settle point they give."""
+    n, interval = proc.readings, proc.interval_s
+    assert n is not None and interval is not None  # resolved
+    runup.advance(start_s + (n - 1) * interval + 1.0)
+    _, values = runup.record().readings(start_s, n, interval)
+    if reference is None:
+        return settle_point(values, interval)
+    return settle_point(values, interval, reference.heading_deg, reference.uncertainty_deg)
+
+
+def _rolling(
+    runup: RunUp, proc: ProcedurePlan, static: SettlePoint, limits: StandLimits
+) -> tuple[RollingError, ...]:
+    """Each point of the envelope: rock, wait for the transient, take the readings (each a mean
+    over whole rocking periods), stop; a point beyond the stand is left to the forecast."""
+    out = []
+    n, interval = proc.readings, proc.interval_s
+    assert n is not None and interval is not None and proc.points is not None  # resolved
+    for point in proc.points:
+        if limits.broken(point):
+            out.append(
+                RollingError(
+                    point.direction_deg, point.amplitude_cm, point.period_s, None, None, True
+                )
+            )
+            continue
+        codec = runup.codec
+        runup.command(
+            codec.encode_command_set(point.direction_deg, point.amplitude_cm, point.period_s)
+        )
+        runup.command(codec.encode_command_start())
+        first = runup.now_s + proc.wait_s
+        width = ROLLING_WINDOW_PERIODS * point.period_s
+        runup.advance(first + (n - 1) * interval + width + 1.0)
+        record = runup.record()
+        means = []
+        for i in range(n):
+            a = first + i * interval
+            inside = (record.t_s >= a) & (record.t_s < a + width)
+            means.append(float(record.heading_deg[inside].mean()))
+        runup.command(codec.encode_command_stop())
+        out.append(
+            rolling_error(
+                point.direction_deg, point.amplitude_cm, point.period_s, np.array(means), static
+            )
+        )
+    return tuple(out)
+
+
+def run_procedures(
+    config: SimConfig,
+    procedures: tuple[ResolvedProcedure, ...],
+    reference: ReferencePlan | None,
+    model: TransientModel,
+    limits: StandLimits,
+    latitude_deg: float,
+) -> ProcedureResults:
+    """The plan's procedures on the simulated compass, in stand time: run-up 1 from switch-on
+    (settling), its settle point after the settling record, the rolling points, then the
+    further run-ups of the repeatability, each after the compass was off for `off_s`."""
+    by_kind = {p.kind: p.plan for p in procedures}
+    settling = by_kind["settling"]
+    assert settling.max_wait_s is not None and settling.band_deg is not None  # resolved
+    first = RunUp(config, 1, 0.0)
+    first.advance(settling.max_wait_s)
+    record = first.record()
+    settled = settling_time(
+        record.t_s,
+        record.heading_deg,
+        settling.band_deg / 2,
+        model.w,
+        model.xi,
+        settling.fit_from_s or 0.0,
+    )
+    readings = by_kind.get("settle_point") or by_kind.get("repeatability")
+    # the readings after settling: from the record's end, or the settling time (+ U) if later
+    start_s = settling.max_wait_s
+    if settled.settled:
+        start_s = max(start_s, settled.value_s + settled.expanded_s)
+    static = None
+    if readings is not None:
+        static = _settle_point(first, readings, start_s, reference)
+    rolling: tuple[RollingError, ...] = ()
+    if "rolling" in by_kind and static is not None:
+        rolling = _rolling(first, by_kind["rolling"], static, limits)
+    repeat = None
+    if "repeatability" in by_kind and static is not None:
+        proc = by_kind["repeatability"]
+        points, at_s = [static], first.at_s + first.now_s
+        for k in range(2, proc.runups + 1):
+            at_s += proc.off_s
+            runup = RunUp(config, k, at_s)
+            points.append(_settle_point(runup, proc, start_s, reference))
+            at_s += runup.now_s
+        repeat = repeatability(points)
+    return ProcedureResults(
+        settling=settled,
+        settle_point=static if "settle_point" in by_kind else None,
+        repeatability=repeat,
+        rolling=rolling,
+        reference_deg=None if reference is None else reference.heading_deg,
+        latitude_deg=latitude_deg,
+        departures=tuple((p.kind, d) for p in procedures for d in p.departures),
+    )
+
+
+def store_procedures(
+    sessions: sessionmaker[Session], campaign_id: int, results: ProcedureResults
+) -> None:
+    """Store the campaign's procedure results (once: a resumed campaign keeps them)."""
+    with writer(sessions).begin() as session:
+        session.add(
+            ProcedureRun(
+                campaign_id=campaign_id,
+                results_json=results.to_dict(),
+                software_version=SOFTWARE_VERSION,
+            )
+        )
+
+
+def procedures_stored(sessions: sessionmaker[Session], campaign_id: int) -> bool:
+    """Whether the campaign's procedures were run and stored (a resumed campaign skips them)."""
+    with sessions() as session:
+        found = session.scalar(
+            select(ProcedureRun.id).where(ProcedureRun.campaign_id == campaign_id)
+        )
+    return found is not None

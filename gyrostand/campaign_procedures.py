@@ -1,0 +1,76 @@
+"""The standard's procedures of a campaign plan ([[procedure]]): resolved against the plan's
+compliance profile ([standard] profile), run on the simulated compass before the trials, and
+stored with the campaign; a resumed campaign keeps the stored results."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from gyrostand.errors import fail
+
+if TYPE_CHECKING:
+    from gyrostand.acquisition.store import CampaignStore
+    from gyrostand.plan.model import Plan
+    from gyrostand.plan.procedures import ResolvedProcedure
+
+
+def resolved(plan: Plan) -> tuple[ResolvedProcedure, ...]:
+    """The plan's procedures filled from its profile (one-line error: no such profile)."""
+    from gyrostand.report.compliance import load_profile
+    from gyrostand.report.errors import ReportError
+    from gyrostand.report.procedures import resolve
+
+    try:
+        return resolve(plan, load_profile(plan.standard.profile))
+    except ReportError as exc:
+        fail(f"[standard] profile: {exc}")
+
+
+def describe(procedure: ResolvedProcedure) -> str:
+    """One procedure in one line: its parameters and departures."""
+    p = procedure.plan
+    if p.kind == "settling":
+        text = (
+            f"settling: from switch-on, band {p.band_deg:g} deg, recorded {p.max_wait_s:g} s, "
+            f"fitted from {p.fit_from_s:g} s"
+        )
+    elif p.kind == "rolling":
+        text = (
+            f"rolling: {len(p.points or ())} envelope points, {p.readings} readings "
+            f"{p.interval_s:g} s apart after {p.wait_s:g} s, beyond the stand: {p.beyond_stand}"
+        )
+    else:
+        runs = (
+            f"{p.runups} run-ups, off {p.off_s:g} s between, " if p.kind == "repeatability" else ""
+        )
+        text = f"{p.kind}: {runs}{p.readings} readings {p.interval_s:g} s apart after settling"
+    departs = "; ".join(procedure.departures)
+    return text + (f" (departs from the standard: {departs})" if departs else "")
+
+
+def run_procedures_of(plan: Plan, store: CampaignStore, quiet: bool) -> None:
+    """Run and store the plan's procedures unless the campaign has them already."""
+    if not plan.procedure:
+        return
+    from gyrostand.acquisition.procedures import (
+        procedures_stored,
+        run_procedures,
+        store_procedures,
+    )
+    from gyrostand.stand.simconfig import simulator_config
+
+    if procedures_stored(store.sessions, store.campaign_id):
+        return
+    procedures = resolved(plan)
+    bus = plan.bus
+    config = simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
+    model = plan.settle.transient_model
+    assert model is not None  # the plan's check
+    results = run_procedures(
+        config, procedures, plan.reference, model, plan.stand_limits, plan.site.latitude_deg
+    )
+    store_procedures(store.sessions, store.campaign_id, results)
+    kinds = ", ".join(p.kind for p in procedures)
+    store.run_event("procedures", "info", f"the standard's procedures run and stored: {kinds}")
+    if not quiet:
+        print(f"campaign {store.campaign_id}: the standard's procedures done ({kinds})")

@@ -1,0 +1,73 @@
+"""`campaign run` of a plan with [[procedure]]: the procedures run before the trials on the
+simulated compass, their results stored (procedure_run, migration 0020) and judged in the
+report's clause table (the slow stage: a campaign and a report, ~20 s on a loaded machine)."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from gyrostand.cli import app
+from tests.acquisition.harness import FAST_SIM, plan_text
+from tests.db.test_meas_source import _downgrade
+
+PROCEDURES = """
+[reference]
+heading_deg = 120.0
+uncertainty_deg = 0.01
+[[procedure]]
+kind = "settling"
+max_wait_s = 1800.0
+[[procedure]]
+kind = "settle_point"
+interval_s = 30.0
+"""
+TRANSIENT = "max_wait_s = 3600.0\nundamped_period_s = 240.0\ndamping_ratio = 0.8"
+
+
+def plan(tmp_path: Path) -> str:
+    trials = [(45.0, 24.0, 6.0, "fit")]
+    text = plan_text(trials, database=str(tmp_path / "p.sqlite"), raw_dir=str(tmp_path / "raw"))
+    return text.replace("max_wait_s = 3600.0", TRANSIENT) + FAST_SIM + PROCEDURES
+
+
+def test_campaign_run_stores_the_procedures_and_the_report_judges_them(tmp_path: Path) -> None:
+    path = tmp_path / "p.toml"
+    path.write_text(plan(tmp_path))
+    checked = CliRunner().invoke(app, ["plan", "check", str(path)])
+    assert checked.exit_code == 0, checked.output
+    assert (
+        "procedure — settling: from switch-on, band 0.7 deg, recorded 1800 s, fitted from 60 s "
+        "(departs from the standard: max_wait_s 1800 s instead of the standard's 21600 s)"
+    ) in checked.output
+    run = CliRunner().invoke(app, ["campaign", "run", str(path), "--quiet"])
+    assert run.exit_code == 0, run.output
+    db = tmp_path / "p.sqlite"
+    with sqlite3.connect(db) as conn:
+        (stored,) = conn.execute("SELECT results_json FROM procedure_run").fetchone()
+        events = conn.execute("SELECT message FROM event WHERE kind = 'procedures'").fetchall()
+    results = json.loads(stored)
+    assert events == [("the standard's procedures run and stored: settling, settle_point",)]
+    out = tmp_path / "reports"
+    report = CliRunner().invoke(
+        app, ["report", "1", "--db", str(db), "--out", str(out), "-f", "json"]
+    )
+    assert report.exit_code == 0, report.output
+    items = {
+        i["id"]: i for i in json.loads(next(out.glob("*.json")).read_text())["compliance"]["items"]
+    }
+    settling = items["settling-time"]
+    assert settling["value_deg"] == pytest.approx(results["settling"]["value_s"] / 3600)
+    assert "departs from the standard's: max_wait_s 1800 s" in settling["detail"]
+    error = items["settle-point-error"]
+    assert error["value_deg"] == pytest.approx(abs(results["settle_point"]["error_deg"]))
+    assert items["heading-rms"]["value_deg"] == pytest.approx(results["settle_point"]["rms_deg"])
+    # the schema before 0020 has no procedure_run; the upgrade makes it, the downgrade drops it
+    _downgrade(db, "0015")
+    with sqlite3.connect(db) as conn:
+        tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+    assert "procedure_run" not in tables and "campaign" in tables
