@@ -382,9 +382,15 @@ VALUES = [
                 "[compass] interface: missing (the compass's own bus needs one)",
             ),
             (
-                "own bus beside the simulated stand",
+                "nmea2000 interface without channel",
+                'protocol = "nmea2000"\ninterface = "socketcan"',
+                '[compass] channel: missing (the compass\'s own bus, e.g. "can1")',
+            ),
+            (
+                "a real own bus beside the simulated stand",
                 'protocol = "nmea2000"\ninterface = "socketcan"\nchannel = "can1"',
-                "[compass] interface: the simulated compass sits on the simulated stand's bus",
+                "[compass] interface: beside the simulated stand the compass's own bus is "
+                '"virtual"',
             ),
             (
                 "cia406 without its node id",
