@@ -256,16 +256,16 @@ class LiveBus:
         self._buses: list[can.BusABC] = []  # to shut down, in order
         self._notifiers: list[can.Notifier] = []
         config = stand_config(plan) if plan.bus.simulated else None
-        self.bus = self._open(plan.bus)
+        self.bus, channel = self._open(plan.bus, "sim")
         try:
             if self.own_bus:
-                self.compass_bus = self._open_compass(plan.compass)
+                self.compass_bus, compass_channel = self._open(plan.compass, "compass")
             if config is not None:
-                self._sim_bus = SimulatorBus(channel=self._channel)
+                self._sim_bus = SimulatorBus(channel=channel)
                 self._buses.append(self._sim_bus)
                 sim_compass_bus = None
                 if self.own_bus:
-                    sim_compass_bus = SimulatorBus(channel=self._compass_channel)
+                    sim_compass_bus = SimulatorBus(channel=compass_channel)
                     self._buses.append(sim_compass_bus)
                 self.simulator = Simulator(
                     self._sim_bus,
@@ -308,26 +308,17 @@ class LiveBus:
             self._shutdown()
             raise
 
-    def _open(self, bus: BusPlan) -> can.BusABC:
-        if bus.simulated:
-            # a name not ending in digits: log writers would take those for a channel number
-            self._channel = f"gyrostand-{uuid.uuid4().hex}-sim"
-            opened = can.Bus(interface="virtual", channel=self._channel)
-        else:
-            opened = open_bus(bus)
-        self._buses.insert(0, opened)
-        return opened
-
-    def _open_compass(self, compass: CompassPlan) -> can.BusABC:
-        """The compass's own bus; beside the simulated stand an in-process virtual one of a
-        name of its own (the plan's channel names it in messages only)."""
+    def _open(self, bus: BusPlan | CompassPlan, role: str) -> tuple[can.BusABC, str]:
+        """One of the campaign's buses and its channel's name; beside the simulated stand an
+        in-process virtual one with a name of its own, ending in `role` (not in digits: log
+        writers would take those for a channel number; the plan's names it in messages only)."""
         if self.plan.bus.simulated:
-            self._compass_channel = f"gyrostand-{uuid.uuid4().hex}-compass"
-            opened = can.Bus(interface="virtual", channel=self._compass_channel)
+            channel = f"gyrostand-{uuid.uuid4().hex}-{role}"
+            opened = can.Bus(interface="virtual", channel=channel)
         else:
-            opened = open_bus(compass)
-        self._buses.insert(1, opened)
-        return opened
+            opened, channel = open_bus(bus), str(bus.channel)
+        self._buses.append(opened)
+        return opened, channel
 
     def close(self) -> None:
         """Stop the simulated stand, the notifiers (then the raw log), the buses."""

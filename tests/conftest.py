@@ -85,6 +85,7 @@ SLOW_FILES = frozenset(
         "db/test_merge.py",
         "db/test_wal.py",
         "devices/test_cia406_campaign.py",
+        "devices/test_n2k_processes.py",
         "devices/test_serial_resume.py",
         "devices/test_serial_run.py",
         "devices/test_simulate_cia406_cli.py",

@@ -221,11 +221,11 @@ def test_bus_error_fails_one_trial_and_the_campaign_continues(tmp_path: Path, mo
     bus's reason, recorded as a bus error event, and the following trials complete."""
     opened = LiveBus._open
 
-    def flaky(self: LiveBus, bus_plan) -> can.BusABC:
-        opened(self, bus_plan)
-        return LinkDropsAfterAcks(
-            self._channel, after=5
-        )  # trial 1: set, start, stop; 2: set, start
+    def flaky(self: LiveBus, bus_plan, role: str) -> tuple[can.BusABC, str]:
+        _, channel = opened(self, bus_plan, role)
+        link = LinkDropsAfterAcks(channel, after=5)  # trial 1: set, start, stop; 2: set, start
+        self._buses.append(link)
+        return link, channel
 
     monkeypatch.setattr(LiveBus, "_open", flaky)
     plan = parse_plan(paper_plan_text(tmp_path))

@@ -443,6 +443,12 @@ VALUES = [
         append='\n[compass]\nprotocol = "nmea2000"\n',
     ),
     plan_case(
+        "nmea2000 on a bus of its own that is the stand's",
+        "[compass] channel: the stand's bus ([bus]): leave interface and channel out",
+        ("simulated = true", 'simulated = false\ninterface = "virtual"\nchannel = "can0"'),
+        append='\n[compass]\nprotocol = "nmea2000"\ninterface = "virtual"\nchannel = "can0"\n',
+    ),
+    plan_case(
         "iec61162 on the simulated stand in real time",
         '[compass] protocol: "iec61162" on the simulated stand needs [bus] timing = "virtual"',
         ("simulated = true", 'simulated = true\ntiming = "realtime"'),
