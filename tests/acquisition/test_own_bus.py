@@ -7,6 +7,7 @@ log gives the live observations, and a compass bus without headings fails the tr
 from __future__ import annotations
 
 import hashlib
+import math
 import sqlite3
 from pathlib import Path
 
@@ -17,6 +18,9 @@ from typer.testing import CliRunner
 
 from gyrostand.cli import app
 from gyrostand.devices.nmea2000 import split_id
+from gyrostand.plan.codec import codec_for
+from gyrostand.plan.model import parse_plan
+from gyrostand.report.signal_record import heading_source, headings_in
 from tests.acquisition.harness import FAST_SIM, plan_text
 
 runner = CliRunner()
@@ -109,3 +113,33 @@ def test_a_compass_bus_without_headings_fails_the_trial_naming_it(tmp_path: Path
     reasons = [r for (r,) in query(tmp_path / "db.sqlite", failed)]
     why = "the compass's bus (virtual compass) silent: no heading frame for 6 s of stand time"
     assert reasons == [why] * len(TRIALS)
+
+
+def test_plan_check_names_the_compass_bus(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["plan", "check", str(write_plan(tmp_path))])
+    assert result.exit_code == 0, result.output
+    assert "compass on nmea2000 on its own bus (virtual compass)" in result.stdout
+
+
+def test_the_report_reads_the_headings_from_the_compass_bus(campaign: Path) -> None:
+    """The report's heading traces (`report.signal_record.headings_in`) take the compass's
+    headings from the second BLF channel: every PGN 127250 there inside trial 1's still series,
+    at its reception time (virtual time: its sample's stand time), 1e-4 rad each."""
+    plan = parse_plan(campaign.read_text())
+    (blf,) = (campaign.parent / "raw").glob("*.blf")
+    windows = [
+        o for o in query(campaign.with_name("db.sqlite"), OBSERVATIONS, 1) if o[:2] == (1, 1)
+    ]
+    span = (min(o[4] for o in windows), max(o[5] for o in windows))
+    t, h = headings_in([blf], codec_for(plan), {1: span}, heading_source(plan))[1]
+    with can.BLFReader(blf) as reader:
+        frames = [
+            (round(m.timestamp * 1000), bytes(m.data))
+            for m in reader
+            if m.channel == 1 and int(split_id(np.array([m.arbitration_id]))[0][0]) == 127250
+        ]
+    inside = [(ms, data) for ms, data in frames if span[0] <= ms < span[1]]
+    heading_deg = [math.degrees(int.from_bytes(d[1:3], "little") * 1e-4) for _, d in inside]
+    assert len(inside) == (span[1] - span[0]) // 500  # one every 0.5 s (2 Hz)
+    assert t.tolist() == [ms for ms, _ in inside]
+    assert h.tolist() == pytest.approx(heading_deg, abs=1e-9)
