@@ -1,4 +1,5 @@
-"""`VirtualMerge`: the frames of the stand's bus and the compass's own bus come through two
+"""Two buses: `OnBus` marks each frame with its bus and names it in its errors; `VirtualMerge`:
+the frames of the stand's bus and the compass's own bus come through two
 notifier threads in any interleaving and in drains of any size; the stream is always the one
 order of (stand time, bus), each bus's frames in the order they were sent."""
 
@@ -8,6 +9,7 @@ import can
 import numpy as np
 import pytest
 
+from gyrostand.acquisition.bus import BusFault, OnBus, Recorder
 from gyrostand.acquisition.bus_merge import VirtualMerge
 from gyrostand.frames.batch import COMPASS_BUS, STAND_BUS
 
@@ -72,3 +74,19 @@ def test_the_stream_is_the_order_of_stand_time_and_bus(seed: int) -> None:
     expected = sorted(frames, key=lambda m: (m.timestamp, m.channel))  # (stable: sent order)
     assert [m.arbitration_id for m in stream] == [m.arbitration_id for m in expected]
     assert merge.error is None
+
+
+def test_each_bus_marks_its_frames_and_names_itself_in_its_errors() -> None:
+    recorder = Recorder(10, None)
+    stand = OnBus(recorder, STAND_BUS, "the stand's bus (socketcan can0)")
+    compass = OnBus(recorder, COMPASS_BUS, "the compass's bus (socketcan can1)")
+    compass.on_message_received(can.Message(arbitration_id=1, channel="can1"))
+    stand.on_message_received(can.Message(arbitration_id=2, channel="can0"))
+    compass.on_error(can.CanOperationError("Network is down"))
+    drained = recorder.drain(10, 0.0)
+    assert [(m.arbitration_id, m.channel) for m in drained] == [(1, 1), (2, 0)]
+    (error,) = recorder.errors
+    assert isinstance(error, BusFault)
+    assert str(error) == (
+        "the compass's bus (socketcan can1): CanOperationError('Network is down')"
+    )
