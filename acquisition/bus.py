@@ -104,9 +104,12 @@ class Recorder(can.Listener):
     A deque with an explicit bound instead of `queue.Queue`: the notifier thread's cost per frame
     drops from a lock/condition round trip to one atomic append (about 3x the ingest rate)."""
 
-    def __init__(self, maxsize: int, log_path: Path | None, *, log_rest: bool = True) -> None:
+    def __init__(
+        self, maxsize: int, log_path: Path | None, *, log_rest: bool = True, channels: bool = False
+    ) -> None:
         self.maxsize = maxsize
         self.log_rest = log_rest  # on stop, log frames never drained (not in virtual time)
+        self.channels = channels  # two buses: each frame's `channel` says which (`OnBus`)
         self._frames: deque[can.Message | Overflow] = deque()
         self._ready = threading.Event()
         self.writer = raw_log_writer(log_path) if log_path is not None else None
@@ -180,7 +183,7 @@ class Recorder(can.Listener):
             return
         if self.log_rest:
             rest = self._unmark(list(self._frames))
-            self.log(RawFrames.from_messages(0, rest), rest)
+            self.log(RawFrames.from_messages(0, rest, channels=self.channels), rest)
         if self.writer is not None:
             try:
                 self.writer.stop()
@@ -275,7 +278,9 @@ class LiveBus:
                     transmitter=compass or transmitter(plan),
                     compass_bus=sim_compass_bus,
                 )
-            self.recorder = Recorder(plan.bus.queue_size, raw_log, log_rest=not self.virtual)
+            self.recorder = Recorder(
+                plan.bus.queue_size, raw_log, log_rest=not self.virtual, channels=self.own_bus
+            )
             stand_in: can.Listener = self.recorder
             compass_in: can.Listener = self.recorder
             if self.compass_bus is not None:
