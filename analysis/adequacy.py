@@ -11,7 +11,6 @@ compare with its example.
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from gyrostand.analysis.forecast import Predictor
 from gyrostand.analysis.gyro_model import Conditions
@@ -64,6 +63,8 @@ def adequacy_test(
     homogeneous: bool,
 ) -> Adequacy:
     """F_p = S^2_r / S^2_e (2.8) against F_T(1 - q; n - m, nu_e), and the trial-mean variant."""
+    from scipy import stats
+
     f_p = s2_r / s2_e  # eq 2.8
     f_p_mean = s2_r / s2_e_mean
     f_crit = float(stats.f.ppf(1 - q, dof_r, dof_e))
@@ -101,6 +102,8 @@ class ErrorAgreement:
 
 def error_agreement(adequacy: Adequacy) -> ErrorAgreement:
     """The lower-tail F test of S^2_r against the trial-mean error S^2_e/N of ``adequacy``."""
+    from scipy import stats
+
     f_p = adequacy.f_p_mean  # eq 2.8 on the trial-mean basis
     p_low = float(stats.f.cdf(f_p, adequacy.dof_r, adequacy.dof_e))
     return ErrorAgreement(
@@ -138,6 +141,8 @@ def judge_controls(
     dof_e: int,
 ) -> tuple[ControlResult, ...]:
     """Predict each control trial and judge its residual."""
+    from scipy import stats
+
     if not indices:
         return ()
     p = predictor.predict(conditions)

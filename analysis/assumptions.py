@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from gyrostand.analysis.cochran import CochranResult
 from gyrostand.analysis.trials import TrialInput
@@ -87,12 +86,17 @@ def _series_checks(
 
 def normality_check(trials: Sequence[TrialInput], q: float) -> AssumptionCheck:
     """Shapiro-Wilk per series, Fisher-combined."""
+    from scipy import stats
+
     method = "Shapiro-Wilk per series, Fisher-combined"
     groups = _raw_series(trials)
     if not groups:
         return _not_checked("normality", method, trials, "no series with N >= 3 and spread")
     checks = _series_checks(groups, lambda rows: stats.shapiro(rows, axis=-1))
-    combined = stats.combine_pvalues([c.p_value for c in checks], method="fisher")
+    # Shapiro-Wilk's p at N = 3 is 0 at W = 3/4 (two equal readings) and Fisher's -2 sum log p
+    # would be infinite: such a series counts as p = the smallest positive double.
+    p_values = np.maximum([c.p_value for c in checks], np.finfo(float).tiny)
+    combined = stats.combine_pvalues(p_values, method="fisher")
     rejected = sum(c.p_value < q for c in checks)
     return AssumptionCheck(
         "normality",
@@ -116,6 +120,8 @@ def ljung_box_lag1(x: np.ndarray) -> np.ndarray:
 
 def independence_check(trials: Sequence[TrialInput], q: float) -> AssumptionCheck:
     """Lag-1 Ljung-Box per series, summed over series."""
+    from scipy import stats
+
     method = "lag-1 autocorrelation (Ljung-Box Q) per series, summed"
     groups = _raw_series(trials)
     if not groups:

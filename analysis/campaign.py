@@ -58,7 +58,6 @@ from dataclasses import asdict, dataclass, fields, is_dataclass
 from typing import Any
 
 import numpy as np
-from scipy.stats import t as student_t
 
 from gyrostand.analysis.adequacy import (
     ADEQUACY_BASIS,
@@ -95,6 +94,7 @@ from gyrostand.analysis.forecast import (
 )
 from gyrostand.analysis.gyro_model import PARAMETERS, Conditions, KnownConstants, RollingErrorModel
 from gyrostand.analysis.nlsq import COND_LIMIT, FitResult, fit_nonlinear
+from gyrostand.analysis.quantiles import t_quantile
 from gyrostand.analysis.transient import TransientCheck
 from gyrostand.analysis.trials import TrialInput, TrialStats, trial_statistics
 
@@ -168,7 +168,7 @@ class CampaignAnalysis:
     def confidence_intervals(self) -> dict[str, tuple[float, float]]:
         """Each parameter's (1 - q) confidence interval: a +- t(1 - q/2; n - 2) S{a}, S{a} by
         eq 1.10 and the t quantile as eq 2.11 takes it."""
-        t = float(student_t.ppf(1 - self.q / 2, self.fit.dof))
+        t = t_quantile(1 - self.q / 2, self.fit.dof)
         return {
             name: (value - t * self.fit.std_errors[name], value + t * self.fit.std_errors[name])
             for name, value in self.fit.estimates.items()

@@ -4,7 +4,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from gyrostand.analysis.errors import (
     AnalysisError,
@@ -23,6 +22,8 @@ def cochran_critical(q: float, nu: int, k: int) -> float:
     > g), and each ratio is a Beta(nu/2, (k-1)nu/2) variable); below 1/2 it is the Bonferroni
     bound used by the classical tables, conservative by far less than their rounding at q <= 0.1.
     """
+    from scipy import stats
+
     if not 0 < q < 1:
         raise AnalysisError(f"significance level q = {q} must lie in (0, 1)")
     if int(nu) != nu or nu < 1:

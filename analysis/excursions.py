@@ -24,9 +24,6 @@ on K, and the result says which method gave it and how far it can be trusted:
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.linalg import eigh_tridiagonal
-from scipy.optimize import brentq
-from scipy.stats import norm
 
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.noise import CorrelationModel
@@ -144,6 +141,9 @@ def _markov_no_excursion(a: float, b: float, s: float) -> float:
     start. With v = sqrt(phi) u the operator is the symmetric -v'' + (z^2/4 - 1/2) v, so
     alpha = sum_k c_k^2 e^(-lambda_k s), c_k = <sqrt(phi), psi_k>: the eigenpairs of its
     finite-difference matrix (tridiagonal, scipy.linalg.eigh_tridiagonal)."""
+    from scipy.linalg import eigh_tridiagonal
+    from scipy.stats import norm
+
     # Kolmogorov's backward equation (Sveshnikov §8.3 before eq 8.80, his eq 1.147), seed 004
     a, b = max(a, -_FAR), min(b, _FAR)
     if not b > a:
@@ -226,6 +226,8 @@ def excursion_acceptance(
     the band) inside (``lower``, ``upper``) for ``duration_s`` (Sveshnikov §8.3, eqs 8.79-8.89),
     starting from the stationary distribution (a start outside the band counts as an
     excursion). The white part of the model is left out."""
+    from scipy.stats import norm
+
     if not upper > lower:
         raise ValueError(f"tolerance band ({lower}, {upper}) is empty")
     if not duration_s > 0:
@@ -270,6 +272,8 @@ def tolerance_for_risk(
 
     With mean_offset = 0 this is the book's setting; an offset at the edge of the technical
     conditions gives the risk of accepting an instrument that is out of them."""
+    from scipy.optimize import brentq
+
     if not 0 < p_no_excursion < 1:
         raise ValueError(f"p_no_excursion must be in (0, 1), got {p_no_excursion}")
     sigma = float(np.sqrt(model.variance))

@@ -13,10 +13,10 @@ from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy import stats
 
 from gyrostand.analysis.errors import AnalysisError, NonFiniteError
 from gyrostand.analysis.gyro_model import Conditions, KnownConstants, RollingErrorModel
+from gyrostand.analysis.quantiles import t_quantile
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -64,7 +64,7 @@ class Predictor:
         leverage = np.einsum("...i,ij,...j->...", x_p, np.asarray(self.xtx_inv), x_p)
         var = self.s2_r * (1 + leverage)  # eq 2.10
         var_mean = self.s2_r * (1 / self.n_repeat + leverage)  # eq 2.10 with 1/N
-        t = float(stats.t.ppf(1 - self.q / 2, self.dof))  # eq 2.11, two-sided (1 - q)
+        t = t_quantile(1 - self.q / 2, self.dof)  # eq 2.11, two-sided (1 - q)
         return Prediction(alpha, var, var_mean, t, t * np.sqrt(var), t * np.sqrt(var_mean))
 
     def to_dict(self) -> dict[str, Any]:

@@ -40,8 +40,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import linalg
-from scipy.optimize import least_squares
 
 from gyrostand.analysis.errors import AnalysisError, NonFiniteError, TooFewTrialsError
 
@@ -213,6 +211,8 @@ class _Linearisation:
 
 def _linearise(problem: _Problem, theta: np.ndarray) -> _Linearisation | str:
     """Solve A = (X^T X)^-1 X^T Y (1.6) by QR of the column-equilibrated X; a string on failure."""
+    from scipy import linalg
+
     values = problem.values(theta)
     jac = problem.jacobian(theta)
     if not (np.all(np.isfinite(values)) and np.all(np.isfinite(jac))):
@@ -301,6 +301,8 @@ def _trust_region(
 ) -> tuple[np.ndarray, int, str]:
     """Bounded trust-region reflective fit from theta0 (clipped into the bounds): the point where
     the solver stopped, its function evaluations and its stopping message (not yet verified)."""
+    from scipy.optimize import least_squares
+
     lo, hi = bounds
     start = np.clip(theta0.astype(float), lo, hi)  # trf moves it strictly inside itself
     jac = "3-point" if problem.analytic is None else (lambda th: -problem.jacobian(th))

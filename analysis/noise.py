@@ -7,9 +7,6 @@ from dataclasses import dataclass
 from itertools import pairwise
 
 import numpy as np
-from scipy import signal, stats
-from scipy.integrate import quad
-from scipy.optimize import brentq, curve_fit
 
 from gyrostand.analysis.allan import AllanDeviation, allan_deviation
 from gyrostand.analysis.errors import AnalysisError
@@ -50,6 +47,8 @@ def correlation_function(
 ) -> CorrelationEstimate:
     """K^(l dt) = 1/(N - l) sum_j (x_j - x_mean)(x_(j+l) - x_mean) (seed 004 eq 8.92, the sampled
     form of 8.93), by FFT. Default lags up to a tenth of the record, where it is still steady."""
+    from scipy import signal
+
     x = np.asarray(reading, dtype=float).reshape(-1)
     n = x.size
     max_lag = n // 10 if max_lag_s is None else int(round(max_lag_s / dt_s))
@@ -102,6 +101,8 @@ class CorrelationModel:
     def correlation_time_s(self) -> float:
         """tau_k = (1/sigma^2) integral_0^inf |K(tau)| d tau (seed 004 eq 8.89); 1/mu for the
         exponential, by quadrature between the zeros of K for the smooth model."""
+        from scipy.integrate import quad
+
         if not self.is_smooth or self.frequency_rad_s == 0:
             return (1.0 if not self.is_smooth else 2.0) / self.decay_per_s
         mu, beta = self.decay_per_s, self.frequency_rad_s
@@ -133,6 +134,8 @@ def _efolding_decay(est: CorrelationEstimate) -> float:
 def fit_correlation(est: CorrelationEstimate, smooth: bool = False) -> CorrelationModel:
     """Least-squares fit of the exponential (seed 004, before 8.79 and 8.89) or smooth model to
     K^ at lags dt .. 5/mu. Lag 0 is left out: its excess over the fit is ``white_variance``."""
+    from scipy.optimize import curve_fit
+
     mu0 = _efolding_decay(est)
     last = min(est.lag_s.size - 1, max(5, int(np.ceil(5.0 / (mu0 * est.dt_s)))))
     tau, k = est.lag_s[1 : last + 1], est.covariance[1 : last + 1]
@@ -211,6 +214,8 @@ class HarmonicSearch:
 def _refine_frequency(x: np.ndarray, dt_s: float, f0: float, half_width_hz: float) -> float:
     """Peak of the 4x zero-padded Hann periodogram of the whole record within f0 +- half_width,
     with parabolic interpolation of log power: resolution far below the Welch bin."""
+    from scipy import signal
+
     f, p = signal.periodogram(x, fs=1 / dt_s, window="hann", nfft=4 * x.size)
     near = np.flatnonzero(np.abs(f - f0) <= half_width_hz)
     i = near[np.argmax(p[near])]
@@ -264,6 +269,8 @@ def find_harmonics(
     does, from K^(tau) at lags in the second half of ``correlation`` (default:
     ``correlation_function`` of the reading), where the noise part must have died out.
     """
+    from scipy import signal, stats
+
     x = np.asarray(reading, dtype=float).reshape(-1)
     if nperseg is None:
         nperseg = min(x.size, max(256, 2 ** int(np.log2(max(x.size // 8, 1)))))
@@ -317,6 +324,8 @@ def correlation_estimate_variance(
 
     D = (1/L^2) sum/integral over pairs of K^2(t - s) + K(t - s + tau) K(t - s - tau), L = T - tau.
     The white part of the model is left out (it does not depend on the interval)."""
+    from scipy.integrate import quad
+
     length = record_s - lag_s
 
     def pair_term(eta: np.ndarray | float) -> np.ndarray:
@@ -339,6 +348,8 @@ def max_sampling_interval(
     """Largest interval Delta for which the variance of the sampled estimate 8.92 stays within
     ``factor`` of that of the continuous one 8.93 (seed 004 eq 8.94), searched from
     tau_k / 1000 up to a tenth of the record (returned when never exceeded)."""
+    from scipy.optimize import brentq
+
     if factor <= 1:
         raise ValueError(f"variance factor must exceed 1, got {factor}")
     continuous = correlation_estimate_variance(model, record_s, lag_s)

@@ -22,8 +22,6 @@ from dataclasses import asdict, dataclass
 from typing import Self
 
 import numpy as np
-from scipy import fft as sp_fft
-from scipy.integrate import quad
 
 from gyrostand.analysis.errors import NonFiniteError, SingularDesignError
 from gyrostand.analysis.nlsq import fit_nonlinear
@@ -206,6 +204,8 @@ def variance_inflation(residuals: np.ndarray) -> float:
     lose part of the slow noise, so the SE comes out low on short records: by ~10 % over 70
     noise correlation times, ~25 % over 20-35 (simulated exponential + white noise).
     Autocorrelation by FFT: BLAS dot products were 200x slower on a loaded machine."""
+    from scipy import fft as sp_fft
+
     n = residuals.size
     power = np.abs(sp_fft.rfft(residuals, sp_fft.next_fast_len(2 * n, real=True))) ** 2
     acf = sp_fft.irfft(power)[: max(n // 4, 3)]
@@ -348,6 +348,8 @@ def disturbance_limit(
     disturbance_deg: Callable[[float], float], omega0_rad_s: float, record_s: float
 ) -> float:
     """dR5^ for a disturbance eps(t) of the law of motion, Delta t -> 0 (seed 003 eq 13)."""
+    from scipy.integrate import quad
+
     u = omega0_rad_s * record_s
 
     def integral(weight: Callable[[float], float]) -> float:

@@ -28,7 +28,6 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from gyrostand.analysis.errors import SingularDesignError
 from gyrostand.analysis.settle import variance_inflation
@@ -224,6 +223,7 @@ def fit_transient(model: TransientModel, seg: Segments, data: Windows) -> Transi
 def fit_transient_free(start: TransientModel, seg: Segments, data: Windows) -> TransientFit:
     """``fit_transient`` with the period and damping ratio estimated too (variable projection:
     theta is solved for each (period, ratio), scipy's least_squares moves the pair)."""
+    from scipy.optimize import least_squares
 
     def residuals(q: np.ndarray) -> np.ndarray:
         model = TransientModel(start.undamped_period_s * q[0], q[1])

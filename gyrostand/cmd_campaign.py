@@ -274,9 +274,15 @@ def run_campaign(
             mark("interrupted", "warning", "stopped by signal before acquiring", "stopped")
             return result(store, "stopped", None, None)
         terminal = sys.stdin if interactive() else None
-        return run_live(
+        outcome = run_live(
             plan, store, start=start, quiet=quiet, stop=stop, answers=answers, terminal=terminal
         )
+        if outcome.outcome == "completed" and not plan.campaign.acquisition_only:
+            # the analysis recorded now: the campaign's first report rebuilds it
+            from gyrostand.report.stored import record_analysis
+
+            record_analysis(store.sessions, store.campaign_id)
+        return outcome
     except ReRunMismatch as exc:
         mark("resume", "error", str(exc), "stopped")
         fail(f"campaign {store.campaign_id}: {exc}", code=EXIT_FAILED)

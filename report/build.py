@@ -17,6 +17,7 @@ from gyrostand.analysis.forecast import (
     acceleration_direction_deg,
     forecast_grid,
 )
+from gyrostand.analysis.quantiles import t_quantile
 from gyrostand.report.compliance import (
     INCONCLUSIVE,
     NOT_ASSESSED,
@@ -154,14 +155,12 @@ class DegreesOfFreedom:
 
 
 def degrees_of_freedom(analysis: CampaignAnalysis) -> DegreesOfFreedom:
-    from scipy import stats
-
     fit = [t for t in analysis.trials if t.index in set(analysis.fit_indices)]
     nu = tuple(int(t.dof) for t in fit if t.dof)
     n_obs = fit[0].n_under if fit and len({t.n_under for t in fit}) == 1 else None
     a, q, m = analysis.adequacy, analysis.q, len(analysis.fit.names)
-    t_pred = float(stats.t.ppf(1 - q / 2, a.dof_r))
-    t_bound = float(stats.t.ppf(1 - q / 2, a.dof_e))
+    t_pred = t_quantile(1 - q / 2, a.dof_r)
+    t_bound = t_quantile(1 - q / 2, a.dof_e)
     each = (f"nu_i = {nu[0]} for each fit trial" if len(set(nu)) == 1 else f"nu_i = {list(nu)}") + (
         f": S^2{{<delta_i>}} (eq 2.3) adds the variances of two series of N = {n_obs} readings, "
         f"N - 1 = {n_obs - 1} each (eq 2.4)"

@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gyrostand.analysis.quantiles import t_quantile
 from gyrostand.report import SHIPPED, SHIPPED_PROFILES
 from gyrostand.report.errors import ReportError
 
@@ -597,9 +598,7 @@ def _mean_variance(trial: Any, analysis: CampaignAnalysis) -> tuple[float, int, 
 
 
 def _t975(dof: float) -> float:
-    from scipy import stats
-
-    return float(stats.t.ppf(0.975, dof))
+    return t_quantile(0.975, dof)
 
 
 def _rolling_error_forecast(req: Requirement, e: Evidence) -> Finding:

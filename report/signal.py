@@ -16,7 +16,6 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy.integrate import quad
 
 from gyrostand.analysis.angles import about
 from gyrostand.analysis.assumptions import AssumptionCheck
@@ -118,6 +117,7 @@ def window_mean_correlation(
         cov = (1/W^2) integral_{-W}^{W} (W - |u|) K(D + u) du,
 
     the variance the same at D = 0 plus the white part s_w^2 dt / W."""
+    from scipy.integrate import quad
 
     def averaged(d: float) -> float:
         points = sorted(u for u in {0.0, -d} if -window_s < u < window_s)  # kinks of |u|, K

@@ -19,11 +19,12 @@ acquiring into the same SQLite file meanwhile only delays the write (the busy ti
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -45,6 +46,7 @@ from gyrostand.analysis.gyro_model import KnownConstants
 from gyrostand.analysis.measured_motion import PREFERENCE
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.trials import SeriesSummary, TrialInput, series_moments
+from gyrostand.analysis.typed_json import decode, encode
 from gyrostand.db.models import AnalysisRun, Campaign, Series, Trial
 from gyrostand.db.queries import campaign_constants, current_trials, load_campaign, sign_offs
 from gyrostand.db.session import writer
@@ -80,6 +82,7 @@ from gyrostand.report.signal_record import (
 from gyrostand.report.signal_record import heading_source as heading_source_of
 from gyrostand.report.transient import transient_check
 
+STORED_SCHEMA = "gyrostand.stored-analysis/1"  # results_json["stored"]: `record_run`
 TRACE_BINS = 600  # per trial: enough for a page-wide plot, small enough for inline SVG
 
 
@@ -95,11 +98,39 @@ class StoredInputs:
     settings: AnalysisSettings
     left_out: tuple[LeftOutTrial, ...]
     notes: tuple[str, ...]
+    sources: dict[str, Any] = field(default_factory=dict)  # `analysis_sources`
 
     def sha256(self) -> str:
-        """Hash of the analysed inputs (trials as given to the analysis, and the settings)."""
-        document = json_safe({"trials": self.trials, "settings": self.settings})
+        """Hash of everything the analysis depends on: the trials as given to the fit, the
+        settings, the trials left out, and `sources` (plan, raw logs, series, events)."""
+        document = json_safe(
+            {
+                "trials": self.trials,
+                "settings": self.settings,
+                "left_out": self.left_out,
+                "sources": self.sources,
+            }
+        )
         return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
+
+
+def analysis_sources(campaign: Campaign) -> dict[str, Any]:
+    """What besides the trial inputs the stored analysis is computed from: the stored plan,
+    the raw log segments as recorded and as they check out now (the reading's signal section),
+    every series' settle record and observation windows (observation correlations, the
+    transient check) and the events (the transient check's runs)."""
+    check, _ = _raw_log_check(campaign)
+    return {
+        "plan_sha256": hashlib.sha256(campaign.plan_toml.encode()).hexdigest(),
+        "raw_logs": [(s.sha256, s.frames, s.start, s.ending) for s in campaign.raw_logs],
+        "raw_log_check": check,
+        "series": [
+            (t.index, t.attempt, s.j, s.compensation_se_deg, s.settle_outcome, record)
+            for t in current_trials(campaign.trials)
+            for s, record in zip(t.series, _series_records(t), strict=True)
+        ],
+        "events": [(e.kind, e.stand_time_ms, e.trial_id, e.series_id) for e in campaign.events],
+    }
 
 
 @dataclass(frozen=True)
@@ -279,19 +310,20 @@ def stored_inputs(campaign: Campaign) -> StoredInputs:
     """The analysis inputs of a loaded campaign (see `db.queries.load_campaign`)."""
     trials, left_out = trial_inputs(campaign)
     settings, notes = stored_settings(campaign)
-    return StoredInputs(trials, settings, left_out, notes)
+    return StoredInputs(trials, settings, left_out, notes, analysis_sources(campaign))
 
 
 @dataclass(frozen=True)
 class StoredAnalysis:
     """The analysis of a stored campaign, its inputs, the recorded run (None: not recorded
-    yet), and the signal analysis of its reading (section 10), whose independence check the
-    analysis uses."""
+    yet), the signal analysis of its reading (section 10), whose independence check the
+    analysis uses, and the trials' heading traces from the same raw log."""
 
     analysis: CampaignAnalysis
     inputs: StoredInputs
     run_id: int | None
     signal: SignalSection
+    traces: dict[int, HeadingTrace | None]  # `campaign_traces`: the report's heading plots
 
 
 def read_campaign(sessions: sessionmaker[Session], campaign_id: int) -> Campaign:
@@ -304,10 +336,10 @@ def read_campaign(sessions: sessionmaker[Session], campaign_id: int) -> Campaign
     return campaign
 
 
-def compute_stored(campaign: Campaign) -> StoredAnalysis:
+def compute_stored(campaign: Campaign, inputs: StoredInputs | None = None) -> StoredAnalysis:
     """Analyse a campaign read by `read_campaign` (AnalysisError for unusable data,
     LogFileError for a raw log that verifies but cannot be read); nothing is recorded."""
-    inputs = stored_inputs(campaign)
+    inputs = stored_inputs(campaign) if inputs is None else inputs
     signal = _signal(campaign)
     s = inputs.settings
     analysis = analyze_campaign(
@@ -336,7 +368,7 @@ def compute_stored(campaign: Campaign) -> StoredAnalysis:
     if not isinstance(check, str):
         warnings = analysis.warnings + check.warnings(analysis.cochran.s_e)
         analysis = replace(analysis, transient=check, warnings=warnings)
-    return StoredAnalysis(analysis, inputs, None, signal)
+    return StoredAnalysis(analysis, inputs, None, signal, campaign_traces(campaign))
 
 
 def record_run(
@@ -344,8 +376,20 @@ def record_run(
 ) -> StoredAnalysis:
     """Record the analysis run in one short write transaction (on SQLite BEGIN IMMEDIATE: it
     waits the store's busy timeout for a campaign acquiring into the same file); an unchanged
-    result of the same inputs and software reuses the run already stored."""
-    results, digest, version = stored.analysis.to_dict(), stored.inputs.sha256(), SOFTWARE_VERSION
+    result of the same inputs and software reuses the run already stored, and a run rebuilt
+    from its record (`run_id` set) is not recorded again. The run's results are the analysis's
+    JSON document with, under "stored", the typed analysis and signal section to rebuild."""
+    if stored.run_id is not None:
+        return stored
+    results = stored.analysis.to_dict() | {
+        "stored": {
+            "schema": STORED_SCHEMA,
+            "analysis": encode(stored.analysis),
+            "signal": encode(stored.signal),
+            "traces": encode(stored.traces),
+        }
+    }
+    digest, version = stored.inputs.sha256(), SOFTWARE_VERSION
     with writer(sessions).begin() as session:
         run = session.scalars(
             select(AnalysisRun)
@@ -368,11 +412,62 @@ def record_run(
         return replace(stored, run_id=run.id)
 
 
+def stored_analysis(sessions: sessionmaker[Session], campaign_id: int) -> StoredAnalysis:
+    """The analysis of a stored campaign: rebuilt from its latest recorded run whose inputs
+    hash (`StoredInputs.sha256`) and software version match the campaign as it is now (then
+    `run_id` is set), else computed and not recorded yet (`run_id` None). Errors as
+    `compute_stored`."""
+    campaign = read_campaign(sessions, campaign_id)
+    inputs = stored_inputs(campaign)
+    with sessions() as session:
+        run = session.scalars(
+            select(AnalysisRun)
+            .where(
+                AnalysisRun.campaign_id == campaign_id,
+                AnalysisRun.inputs_hash == inputs.sha256(),
+                AnalysisRun.software_version == SOFTWARE_VERSION,
+            )
+            .order_by(AnalysisRun.id.desc())
+        ).first()
+        rebuilt = None if run is None else _rebuilt(run, inputs)
+    return compute_stored(campaign, inputs) if rebuilt is None else rebuilt
+
+
+def _rebuilt(run: AnalysisRun, inputs: StoredInputs) -> StoredAnalysis | None:
+    """The typed analysis of a recorded run (None: recorded without it, or by another schema)."""
+    typed = run.results_json.get("stored")
+    if not isinstance(typed, dict) or typed.get("schema") != STORED_SCHEMA:
+        return None
+    try:
+        analysis = decode(CampaignAnalysis, typed["analysis"])
+        signal = decode(SignalSection, typed["signal"])
+        traces = decode(dict[int, HeadingTrace | None], typed["traces"])
+    except (TypeError, KeyError, ValueError):
+        return None
+    return StoredAnalysis(analysis, inputs, run.id, signal, traces)
+
+
 def analyze_stored(sessions: sessionmaker[Session], campaign_id: int) -> StoredAnalysis:
-    """Analyse a stored campaign and record the run (AnalysisError for unusable data,
-    CampaignNotFound for a wrong id, LogFileError for a raw log that verifies but cannot be
-    read): a read, the computation outside any transaction, then one short write."""
-    return record_run(sessions, campaign_id, compute_stored(read_campaign(sessions, campaign_id)))
+    """The analysis of a stored campaign, recorded (`stored_analysis`, then `record_run`):
+    AnalysisError for unusable data, CampaignNotFound for a wrong id, LogFileError for a raw
+    log that verifies but cannot be read; a read, any computation outside a transaction, then
+    one short write when it was computed."""
+    return record_run(sessions, campaign_id, stored_analysis(sessions, campaign_id))
+
+
+def record_analysis(sessions: sessionmaker[Session], campaign_id: int) -> str | None:
+    """`analyze_stored` for a campaign that just completed, so that its first report rebuilds
+    the analysis instead of computing it: None, or why it cannot be analysed (its report says
+    so in its place, or the database refused the run: the report records it)."""
+    from sqlalchemy.exc import OperationalError
+
+    from gyrostand.frames.logfile import LogFileError
+
+    try:
+        analyze_stored(sessions, campaign_id)
+    except (AnalysisError, LogFileError, OperationalError) as exc:  # the report tries again
+        return str(exc)
+    return None
 
 
 # -------------------------------------------------------------------------- report inputs
@@ -410,7 +505,8 @@ def _raw_log_check(campaign: Campaign) -> tuple[str, list[Path]]:
         path = Path(s.path)
         if not path.is_file():
             return "file not found" + (f" ({path.name})" if len(segments) > 1 else ""), []
-        actual = sha256_of(path)
+        stat = path.stat()
+        actual = _sha256_of(str(path), stat.st_size, stat.st_mtime_ns)
         if s.sha256 is None:
             return f"unverified: no SHA-256 recorded for {path.name}", []
         if actual != s.sha256:
@@ -418,6 +514,13 @@ def _raw_log_check(campaign: Campaign) -> tuple[str, list[Path]]:
     if any(s.start == "restarted" for s in segments):
         return RESTARTED, []
     return "verified", [Path(s.path) for s in segments]
+
+
+@functools.lru_cache(maxsize=16)
+def _sha256_of(path: str, size: int, mtime_ns: int) -> str:
+    """A raw log's SHA-256, hashed once per process while the file is unchanged (its size and
+    modification time): the inputs hash, the signal section and the report all check it."""
+    return sha256_of(Path(path))
 
 
 def is_simulated(campaign: Campaign, plan: Plan | PartialPlan | None = None) -> bool:
@@ -651,18 +754,25 @@ def heading_traces(
     return {index: _binned(spans[index], *found[index], bins) for index in spans}
 
 
+def campaign_traces(campaign: Campaign) -> dict[int, HeadingTrace | None]:
+    """Per trial index its binned heading trace from the raw log (`heading_traces`); empty
+    without a usable raw log or a whole plan."""
+    _, logs = _raw_log_check(campaign)
+    plan, spans = _plan(campaign), trial_stand_spans(campaign)
+    return heading_traces(logs, plan, spans) if logs and plan is not None and spans else {}
+
+
 def _records(
-    campaign: Campaign, plan: Plan | None, logs: Sequence[Path], check: str
+    campaign: Campaign,
+    traces: dict[int, HeadingTrace | None],
+    check: str,
 ) -> tuple[tuple[TrialRecord, ...], str]:
-    """Per trial its series and (from the raw log) its heading trace; and how the plots were
+    """Per trial its series and (`campaign_traces`) its heading trace; and how the plots were
     made."""
     current = current_trials(campaign.trials)
     series = {t.index: _series_records(t) for t in current}
     has_observations = any(s.observations for rows in series.values() for s in rows)
-    spans = trial_stand_spans(campaign)
-    traces: dict[int, HeadingTrace | None] = {}
-    if logs and plan is not None and spans:
-        traces = heading_traces(logs, plan, spans)
+    if traces:
         frames = sum(t.frames for t in traces.values() if t is not None)
         note = (
             f"Heading from the raw CAN log ({frames} valid heading frames within the trials), "
@@ -746,7 +856,8 @@ def report_inputs(
     unused = {(t.index, t.attempt) for t in left_out}
     plan = _plan(campaign)
     check, logs = _raw_log_check(campaign)
-    records, note = _records(campaign, plan, logs, check)
+    traces = campaign_traces(campaign) if stored is None else stored.traces
+    records, note = _records(campaign, traces, check)
     if stored is None:
         reading, reading_note, acceptance = _reading(plan, logs, check, records)
     else:  # the record the analysis's signal section was made from: not read again
@@ -822,13 +933,14 @@ def campaign_report(
     report_number: str | None = None,
     final: bool = False,
 ) -> Report:
-    """Analyse the stored campaign, assemble its report and record the analysis run (reads,
-    the computation outside any transaction, then one short write). A campaign that cannot be
+    """The stored campaign's analysis (`stored_analysis`: its recorded run when the inputs are
+    unchanged, else computed and recorded: reads, the computation outside any transaction,
+    then one short write) and its report. A campaign that cannot be
     analysed (e.g. every trial failed) still gets its report: plan, acquisition and events,
     with the reason in place of the results. ``final``: NotFinal, nothing recorded, when the
     report lacks an item of ISO/IEC 17025 7.8.2."""
     try:
-        stored: StoredAnalysis | None = compute_stored(read_campaign(sessions, campaign_id))
+        stored: StoredAnalysis | None = stored_analysis(sessions, campaign_id)
     except AnalysisError as exc:
         stored, reason = None, str(exc)
     with sessions() as session:

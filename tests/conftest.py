@@ -93,6 +93,7 @@ SLOW_FILES = frozenset(
         "plugin/test_pytest_plugin.py",
         "report/test_signal_early.py",
         "report/test_signal_report.py",
+        "report/test_stored_reuse.py",
         "station/test_browser.py",
         "station/test_campaign_page.py",
         "station/test_operator.py",

@@ -30,16 +30,19 @@ ROOT = Path(__file__).resolve().parents[1]
 TRUTH = {"C_gcm2s2": CompassParams.C_gcm2s2, "T_s": CompassParams.T_s}
 
 
-def campaign(seed: int, folder: Path) -> Path:
-    """Run the paper campaign with the 3 % amplitude error and an inclinometer; its database."""
+def campaign(seed: int, folder: Path, tables: dict[str, dict] | None = None) -> Path:
+    """Run the paper campaign with the 3 % amplitude error and an inclinometer, its tables
+    overridden key by key by `tables` (the test's short version); its database."""
     db = folder / "c.sqlite"
-    keys = {
+    keys: dict[str, dict] = {
         "campaign": {"database": str(db)},
         "bus": {"seed": seed},
         "bus.simulator.faults": {"amplitude_factor": 1.03, "amplitude_unreported": True},
         "stand": {"arm_length_cm": 100.0},
         "inclinometer": {"protocol": "cia410", "node_id": 4},
     }
+    for table, values in (tables or {}).items():
+        keys[table] = keys.get(table, {}) | values
     plan = folder / "plan.toml"
     plan.write_text(with_keys((ROOT / "examples" / "paper.toml").read_text(), keys))
     result = CliRunner().invoke(app, ["campaign", "run", str(plan)])

@@ -210,8 +210,10 @@ def test_command_line_bus_options_are_stored_with_the_plan(tmp_path: Path) -> No
     engine = create_engine(f"sqlite:///{tmp_path / 'db.sqlite'}")
     with engine.connect() as conn:
         stored = conn.execute(text("SELECT plan_toml FROM campaign")).scalar_one()
+        runs = conn.execute(text("SELECT count(*) FROM analysis_run")).scalar_one()
     engine.dispose()
     assert parse_plan(stored).bus.seed == 5
+    assert runs == 0  # an acquisition-only campaign: no analysis recorded when it completes
     file_lines, stored_lines = plan.read_text().splitlines(), stored.splitlines()
     changed = [(a, b) for a, b in zip(file_lines, stored_lines, strict=True) if a != b]
     assert changed == [("seed = 1", "seed = 5")]

@@ -5,15 +5,16 @@ exactly the same campaign."""
 
 import errno
 from pathlib import Path
+from typing import Any
 
 import can
 import numpy as np
 import pytest
-from can.interfaces.virtual import VirtualBus
 from scipy import stats
 from sqlalchemy import select
 
-from gyrostand.acquisition.bus import LiveBus
+from gyrostand.acquisition import bus
+from gyrostand.acquisition.bus import Recorder
 from gyrostand.acquisition.runner import replay, run_live
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.analysis.campaign import analyze_campaign
@@ -198,36 +199,38 @@ def test_asc_raw_log_replays_to_the_same_campaign(tmp_path: Path) -> None:
     assert len(observations(sessions, live.campaign_id)) == 2 * 2 * 3
 
 
-class LinkDropsAfterAcks(VirtualBus):
-    """The campaign's bus: after the stand's `after`-th ack, one receive fails with ENETDOWN, as
-    python-can's SocketCAN bus does when the link goes down."""
+DOWN = "Error receiving: Network is down"  # python-can's SocketCAN bus, ENETDOWN
 
-    def __init__(self, channel: str, after: int) -> None:
-        super().__init__(channel=channel)
-        self.acks, self.after, self.failed = 0, after, False
 
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        if self.acks == self.after and not self.failed:
-            self.failed = True
-            raise can.CanOperationError("Error receiving: Network is down", errno.ENETDOWN)
-        msg, filtered = super()._recv_internal(timeout)
-        if msg is not None and msg.arbitration_id == ACK_ID:
-            self.acks += 1
-        return msg, filtered
+class LinkDropsAfterAcks(Recorder):
+    """The campaign's receiving end: after the stand's 5th ack, the bus reports ENETDOWN once,
+    as python-can's SocketCAN bus does when the link goes down (its notifier hands the error to
+    `on_error`). In virtual time the simulated stand hands its frames over a batch at a time
+    (`SimulatorBus.send_batch` -> `on_messages`): the failure comes after the ack in the batch
+    (trial 1: set, start, stop; 2: set, start)."""
+
+    after = 5
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.acks, self.failed = 0, False
+
+    def on_messages(self, msgs: list[can.Message]) -> None:
+        for i, msg in enumerate(msgs):
+            self.acks += msg.arbitration_id == ACK_ID
+            if self.acks == self.after and not self.failed:
+                self.failed = True
+                super().on_messages(msgs[: i + 1])
+                self.on_error(can.CanOperationError(DOWN, errno.ENETDOWN))
+                super().on_messages(msgs[i + 1 :])
+                return
+        super().on_messages(msgs)
 
 
 def test_bus_error_fails_one_trial_and_the_campaign_continues(tmp_path: Path, monkeypatch) -> None:
     """on_trial_failure = "continue": the trial running when the bus fails is failed with the
     bus's reason, recorded as a bus error event, and the following trials complete."""
-    opened = LiveBus._open
-
-    def flaky(self: LiveBus, bus_plan, role: str) -> tuple[can.BusABC, str]:
-        _, channel = opened(self, bus_plan, role)
-        link = LinkDropsAfterAcks(channel, after=5)  # trial 1: set, start, stop; 2: set, start
-        self._buses.append(link)
-        return link, channel
-
-    monkeypatch.setattr(LiveBus, "_open", flaky)
+    monkeypatch.setattr(bus, "Recorder", LinkDropsAfterAcks)
     plan = parse_plan(paper_plan_text(tmp_path))
     sessions = open_database(sqlite_url(tmp_path / "live.sqlite"))
     store = CampaignStore.create(sessions, plan)

@@ -8,51 +8,45 @@ moves C of model 1.1, not T). Virtual time: no wall clock involved."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import sqlite3
 from pathlib import Path
 
 from typer.testing import CliRunner
 
-from gyrostand.analysis.campaign import analyze_campaign
 from gyrostand.cli import app
-from gyrostand.db.queries import load_campaign
-from gyrostand.db.session import open_database
-from gyrostand.plan.overrides import with_keys
-from gyrostand.report.stored import commanded_motion, stored_inputs
 from gyrostand.stand.simconfig import CompassParams
 
 ROOT = Path(__file__).resolve().parents[2]
 TRUE_C, TRUE_T = CompassParams.C_gcm2s2, CompassParams.T_s
 MODEL_ONLY = ("expected_se_deg", "tolerance_fraction", "stable_estimates", "transient_fraction")
+SHORT_LOW_NOISE = {
+    "campaign": {"n_obs": 3},
+    "observation": {"still_window_s": 30.0, "rocking_window_periods": 4},
+    "settle": {"method": "band", "band_deg": 0.002, "drift_deg": 0.0005, "hold_s": 240.0}
+    | {"max_wait_s": 3600.0}
+    | dict.fromkeys(MODEL_ONLY),
+    "bus.simulator": {"heading_rate_hz": 2.0, "status_rate_hz": 0.5},
+    "bus.simulator.compass": {"undamped_period_s": 240.0, "damping_ratio": 0.8},
+    "bus.simulator.noise": {"corr_sigma_deg": 0.001, "white_sigma_deg": 0.0005, "quantum_deg": 0.0},
+    "bus.simulator.inclinometer": {"rate_hz": 4.0},
+}
 
 
-def plan(folder: Path) -> Path:
-    keys = {
-        "campaign": {"n_obs": 3, "database": str(folder / "c.sqlite")},
-        "observation": {"still_window_s": 30.0, "rocking_window_periods": 4},
-        "settle": {"method": "band", "band_deg": 0.002, "drift_deg": 0.0005, "hold_s": 240.0}
-        | {"max_wait_s": 3600.0}
-        | dict.fromkeys(MODEL_ONLY),
-        "bus.simulator": {"heading_rate_hz": 2.0, "status_rate_hz": 0.5},
-        "bus.simulator.compass": {"undamped_period_s": 240.0, "damping_ratio": 0.8},
-        "bus.simulator.noise": {"corr_sigma_deg": 0.001, "white_sigma_deg": 0.0005}
-        | {"quantum_deg": 0.0},
-        "bus.simulator.faults": {"amplitude_factor": 1.03, "amplitude_unreported": True},
-        "bus.simulator.inclinometer": {"rate_hz": 4.0},
-        "stand": {"arm_length_cm": 100.0},
-        "inclinometer": {"protocol": "cia410", "node_id": 4},
-    }
-    path = folder / "plan.toml"
-    path.write_text(with_keys((ROOT / "examples" / "paper.toml").read_text(), keys))
-    return path
+def load_script():  # type: ignore[no-untyped-def]
+    """validation/measured_amplitude.py, the paper-scale run this test shortens."""
+    path = ROOT / "validation" / "measured_amplitude.py"
+    spec = importlib.util.spec_from_file_location("measured_amplitude", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def test_measured_amplitude_gives_c_and_t_the_commanded_does_not(tmp_path: Path) -> None:
+    script = load_script()
+    db = script.campaign(1, tmp_path, SHORT_LOW_NOISE)
     runner = CliRunner()
-    run = runner.invoke(app, ["campaign", "run", str(plan(tmp_path))])
-    assert run.exit_code == 0, run.output
-    db = tmp_path / "c.sqlite"
 
     analyzed = runner.invoke(app, ["analyze", "1", "--db", str(db), "--json"])
     assert analyzed.exit_code == 0, analyzed.stderr
@@ -69,15 +63,8 @@ def test_measured_amplitude_gives_c_and_t_the_commanded_does_not(tmp_path: Path)
     assert abs(estimates["T_s"] - TRUE_T) < errors["T_s"]
 
     # the same observations with the commanded motion
-    with open_database(f"sqlite:///{db}", upgrade=False, create=False)() as session:
-        campaign = load_campaign(session, 1)
-        inputs = stored_inputs(campaign)
-        commanded = commanded_motion(campaign, inputs.trials)
-    s = inputs.settings
-    naive = analyze_campaign(
-        commanded, s.constants, q=s.q, start=s.start, admissible=s.admissible, forecast=s.forecast
-    ).fit
-    assert abs(naive.estimates["C_gcm2s2"] - TRUE_C) > 3 * naive.std_errors["C_gcm2s2"]
+    c, c_se = script.fits(db)["commanded"]["C_gcm2s2"]
+    assert abs(c - TRUE_C) > 3 * c_se
 
     # stored with the series: both sources of each rocking series
     connection = sqlite3.connect(db)

@@ -1,5 +1,7 @@
 """Assumption checks of section 2 against data built to satisfy or violate them."""
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -46,6 +48,19 @@ def test_skewed_readings_fail_normality() -> None:
     rng = np.random.default_rng(6)
     check = normality_check(trials_from(rng.exponential(0.01, (20, 30))), 0.05)
     assert check.holds is False and check.p_value < 1e-6
+
+
+def test_a_series_with_p_zero_rejects_with_a_finite_statistic() -> None:
+    # N = 3 with two equal readings: Shapiro-Wilk's W = 3/4 and p = 0 (here, in floating point)
+    series = np.tile([[1.5, -1.3, 1.5], [0.1, 0.2, 0.3]], (2, 1))
+    assert stats.shapiro(series[0]).pvalue == 0.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        check = normality_check(trials_from(series), 0.05)
+    assert np.isfinite(check.statistic) and check.holds is False
+    tiny = np.finfo(float).tiny
+    p = [max(c.p_value, tiny) for c in check.series]
+    assert check.statistic == pytest.approx(-2 * np.log(p).sum())
 
 
 def test_correlated_readings_fail_independence() -> None:

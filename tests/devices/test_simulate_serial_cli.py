@@ -4,22 +4,19 @@ stand's headings), live sentences on a pseudo-terminal it opens, one-line errors
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 import typer
 from typer.testing import CliRunner
 
 from gyrostand import cmd_simulate
 from gyrostand.devices.iec61162 import Iec61162Source
-from gyrostand.devices.serial_port import SerialReader
 from gyrostand.devices.tagblock import read_tag_log
+from tests.devices.serial_reading import HANG_GUARD_S, ReceptionClock, read_headings
 
 app = typer.Typer()
 cmd_simulate.register(app)
-HANG_GUARD_S = 120.0
 
 
 @app.callback()
@@ -31,11 +28,6 @@ def invoke(*args: str):  # type: ignore[no-untyped-def]
     return CliRunner().invoke(app, ["simulate", "--protocol", "iec61162", *args])
 
 
-class Clock:
-    def to_campaign_ms(self, pos: np.ndarray, rx_s: np.ndarray) -> np.ndarray:
-        return np.rint(rx_s * 1000).astype(np.int64) - 1_700_000_000_000
-
-
 def test_schedule_into_a_tag_block_log_is_reproducible(tmp_path: Path) -> None:
     args = ["--step", "still 20", "--step", "rock 45 20 8 30", "--start-epoch", "1700000000"]
     a, b = tmp_path / "a.nmea", tmp_path / "b.nmea"
@@ -44,7 +36,8 @@ def test_schedule_into_a_tag_block_log_is_reproducible(tmp_path: Path) -> None:
         assert result.exit_code == 0, result.output
     assert a.read_bytes() == b.read_bytes()
     assert "501 lines (sentences and junk), 50 s of stand time" in result.output
-    out = Iec61162Source(4800).decode_pieces(list(read_tag_log(a)), Clock())
+    epoch = ReceptionClock(1_700_000_000_000)  # --start-epoch
+    out = Iec61162Source(4800).decode_pieces(list(read_tag_log(a)), epoch)
     assert out.invalid == () and len(out.headings) == 501
     assert out.headings.t_ms.tolist() == list(range(0, 50_001, 100))
     # the stand's headings: at rest, the simulated compass's true heading plus its noise
@@ -83,14 +76,7 @@ def test_live_on_a_pseudo_terminal_it_opens() -> None:
         assert proc.stdout is not None
         path = proc.stdout.readline().strip()  # the path, alone on its line
         assert path.startswith("/dev/pts/")
-        source = Iec61162Source(4800, path)
-        headings: list[float] = []
-        deadline = time.monotonic() + HANG_GUARD_S
-        with SerialReader(path, 4800) as reader:
-            while len(headings) < 5 and time.monotonic() < deadline:
-                out = source.decode(reader.take(wait_s=1.0), Clock())
-                headings += out.headings.heading_deg.tolist()
-                assert out.invalid == ()
+        headings, _ = read_headings(path, 4800, 5)
         assert len(headings) >= 5 and all(abs(h - 120.0) < 1.0 for h in headings)
     finally:
         proc.terminate()
