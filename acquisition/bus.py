@@ -1,5 +1,6 @@
-"""The bus side of a live campaign: open the bus (or the in-process simulated stand), one
-`can.Notifier` feeding a bounded queue, the raw log, and the stand controller.
+"""The bus side of a live campaign: open the bus (or the in-process simulated stand) and the
+compass's own bus if it has one, a `can.Notifier` per bus feeding one bounded queue, the raw log,
+and the stand controller.
 
 Every listener runs on the notifier's thread; the campaign thread only drains the queue. A full
 queue or a listener error is counted and reported as an event, never dropped silently."""
@@ -18,13 +19,14 @@ from typing import Any
 import can
 from can.interfaces.virtual import VirtualBus
 
+from gyrostand.acquisition.bus_merge import VirtualMerge
 from gyrostand.devices.nmea2000 import iso_requests
 from gyrostand.devices.sim_cia406 import Cia406Encoder
 from gyrostand.devices.sim_nmea2000 import simulated_compass
-from gyrostand.frames.batch import RawFrames
+from gyrostand.frames.batch import COMPASS_BUS, STAND_BUS, RawFrames
 from gyrostand.frames.logfile import BatchBLFWriter, raw_log_writer
 from gyrostand.plan.codec import codec_for, stand_config
-from gyrostand.plan.model import BusPlan, Plan
+from gyrostand.plan.model import BusPlan, CompassPlan, Plan
 from gyrostand.stand.controller import StandController
 from gyrostand.stand.engine import HeadingTransmitter
 from gyrostand.stand.protocol import Codec
@@ -42,7 +44,7 @@ def transmitter(plan: Plan) -> HeadingTransmitter | None:
     return simulated_compass(model, serial, plan.compass.name, plan.bus.seed)
 
 
-def open_bus(bus: BusPlan) -> can.BusABC:
+def open_bus(bus: BusPlan | CompassPlan) -> can.BusABC:
     """The plan's python-can bus (a real one: interface, channel, bit rate as given; without
     them python-can's config file / environment)."""
     kwargs: dict[str, Any] = {}
@@ -75,9 +77,12 @@ class SimulatorBus(VirtualBus):
     receiving bus's queue and the notifier thread (two lock round trips and a listener call a
     frame, ~3 us: 4 s of the paper campaign). The stand still receives commands on the bus."""
 
-    def __init__(self, channel: str, sink: Recorder | None = None) -> None:
+    def __init__(self, channel: str, sink: Recorder | None = None, mark: int | None = None) -> None:
+        """`mark`: with a `sink`, the `RawFrames.channel` its frames get (two buses: `OnBus`'s
+        mark, as the notifier does not see them)."""
         super().__init__(channel=channel)
         self.sink = sink
+        self.mark = mark
 
     def send_batch(self, msgs: list[can.Message]) -> None:
         """Every frame of `msgs`, in order (as `send` one by one)."""
@@ -86,8 +91,9 @@ class SimulatorBus(VirtualBus):
                 self.send(msg)
             return
         self._check_if_open()
+        channel = self.channel_id if self.mark is None else self.mark
         for msg in msgs:
-            msg.channel, msg.is_rx = self.channel_id, True
+            msg.channel, msg.is_rx = channel, True
         self.sink.on_messages(msgs)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
@@ -125,9 +131,12 @@ class Recorder(can.Listener):
     A deque with an explicit bound instead of `queue.Queue`: the notifier thread's cost per frame
     drops from a lock/condition round trip to one atomic append (about 3x the ingest rate)."""
 
-    def __init__(self, maxsize: int, log_path: Path | None, *, log_rest: bool = True) -> None:
+    def __init__(
+        self, maxsize: int, log_path: Path | None, *, log_rest: bool = True, channels: bool = False
+    ) -> None:
         self.maxsize = maxsize
         self.log_rest = log_rest  # on stop, log frames never drained (not in virtual time)
+        self.channels = channels  # two buses: each frame's `channel` says which (`OnBus`)
         self._frames: deque[can.Message | Overflow] = deque()
         self._ready = threading.Event()
         self.writer = raw_log_writer(log_path) if log_path is not None else None
@@ -212,7 +221,7 @@ class Recorder(can.Listener):
             return
         if self.log_rest:
             rest = self._unmark(list(self._frames))
-            self.log(RawFrames.from_messages(0, rest), rest)
+            self.log(RawFrames.from_messages(0, rest, channels=self.channels), rest)
         if self.writer is not None:
             try:
                 self.writer.stop()
@@ -221,10 +230,29 @@ class Recorder(can.Listener):
         self._stopped = True
 
 
+class BusFault(can.CanError):
+    """An error of one of a campaign's two buses, naming it."""
+
+
+class OnBus(can.Listener):
+    """One of two buses into the recorder: each frame marked with its bus (`RawFrames.channel`,
+    set on the notifier's thread as it arrives), each error naming it (`BusFault`)."""
+
+    def __init__(self, recorder: Recorder, channel: int, label: str) -> None:
+        self.recorder, self.channel, self.label = recorder, channel, label
+
+    def on_message_received(self, msg: can.Message) -> None:
+        msg.channel = self.channel
+        self.recorder.on_message_received(msg)
+
+    def on_error(self, exc: Exception) -> None:
+        self.recorder.on_error(BusFault(f"{self.label}: {exc!r}"))
+
+
 class RecordedSend:
     """The bus as the controller sees it: every frame it sends also enters the stream."""
 
-    def __init__(self, bus: can.BusABC, recorder: Recorder) -> None:
+    def __init__(self, bus: can.BusABC, recorder: can.Listener) -> None:
         self._bus, self._recorder = bus, recorder
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
@@ -262,56 +290,101 @@ class LiveBus:
         simulated compass when it is not on the bus (a serial line's)."""
         self.plan = plan
         self.virtual = plan.bus.timing == "virtual"
+        self.own_bus = plan.compass.own_bus  # the compass on a bus of its own: two buses
         self.simulator: Simulator | None = None
+        self.merge: VirtualMerge | None = None
+        self.compass_bus: can.BusABC | None = None
+        self._buses: list[can.BusABC] = []  # to shut down, in order
+        self._notifiers: list[can.Notifier] = []
         config = stand_config(plan) if plan.bus.simulated else None
-        self.bus = self._open(plan.bus)
+        self.bus, channel = self._open(plan.bus, "sim")
         try:
-            self.recorder = Recorder(plan.bus.queue_size, raw_log, log_rest=not self.virtual)
+            self.recorder = Recorder(
+                plan.bus.queue_size, raw_log, log_rest=not self.virtual, channels=self.own_bus
+            )
+            if self.own_bus:
+                self.compass_bus, compass_channel = self._open(plan.compass, "compass")
             if config is not None:
                 sink = self.recorder if self.virtual else None
-                self._sim_bus = SimulatorBus(channel=self._channel, sink=sink)
+                mark = STAND_BUS if self.own_bus else None
+                self._sim_bus = SimulatorBus(channel=channel, sink=sink, mark=mark)
+                self._buses.append(self._sim_bus)
+                sim_compass_bus = None
+                if self.own_bus:
+                    sim_compass_bus = SimulatorBus(compass_channel, sink, mark=COMPASS_BUS)
+                    self._buses.append(sim_compass_bus)
                 self.simulator = Simulator(
                     self._sim_bus,
                     config,
                     codec=codec_for(plan),
                     clock_ms=clock_ms,
                     transmitter=compass or transmitter(plan),
+                    compass_bus=sim_compass_bus,
                 )
+            stand_in: can.Listener = self.recorder
+            compass_in: can.Listener = self.recorder
+            if self.compass_bus is not None:
+                stand_in = OnBus(self.recorder, STAND_BUS, f"the stand's bus ({_label(plan.bus)})")
+                compass_in = OnBus(self.recorder, COMPASS_BUS, plan.compass.bus_label)
+                self._notifiers.append(can.Notifier(self.compass_bus, [compass_in], 0.05))
+                if self.virtual and self.simulator is not None:
+                    self.merge = VirtualMerge(self.simulator, self.recorder)
             # in virtual time the stand repeats each command in the stream at the stand time it
             # takes effect (stand.virtual_time); otherwise the stream records what we send
-            sender = self.bus if self.virtual else RecordedSend(self.bus, self.recorder)
+            sender = self.bus if self.virtual else RecordedSend(self.bus, stand_in)
             self.controller = StandController(
                 sender,  # type: ignore[arg-type]
                 codec,  # it only encodes (the campaign decodes the stream)
                 ack_timeout_s=plan.timeouts.ack_s,
             )
             # the campaign judges acks from the stream: the controller only sends
-            self.notifier = can.Notifier(self.bus, [self.recorder], timeout=0.05)
+            self.notifier = can.Notifier(self.bus, [stand_in], timeout=0.05)
+            self._notifiers.insert(0, self.notifier)
             if plan.compass.protocol == "nmea2000":
-                request_identity(sender)
+                to_compass = self.compass_bus or self.bus
+                if not self.virtual:
+                    to_compass = RecordedSend(to_compass, compass_in)  # type: ignore[assignment]
+                request_identity(to_compass)
             if self.simulator is not None:
                 self.simulator.start()
         except BaseException:
-            self.bus.shutdown()
+            for notifier in self._notifiers:
+                notifier.stop()
+            self._shutdown()
             raise
 
-    def _open(self, bus: BusPlan) -> can.BusABC:
-        if bus.simulated:
-            # a name not ending in digits: log writers would take those for a channel number
-            self._channel = f"gyrostand-{uuid.uuid4().hex}-sim"
-            return can.Bus(interface="virtual", channel=self._channel)
-        return open_bus(bus)
+    def _open(self, bus: BusPlan | CompassPlan, role: str) -> tuple[can.BusABC, str]:
+        """One of the campaign's buses and its channel's name; beside the simulated stand an
+        in-process virtual one with a name of its own, ending in `role` (not in digits: log
+        writers would take those for a channel number; the plan's names it in messages only)."""
+        if self.plan.bus.simulated:
+            channel = f"gyrostand-{uuid.uuid4().hex}-{role}"
+            opened = can.Bus(interface="virtual", channel=channel)
+        else:
+            opened, channel = open_bus(bus), str(bus.channel)
+        self._buses.append(opened)
+        return opened, channel
 
     def close(self) -> None:
-        """Stop the simulated stand, the notifier (which stops the raw log), the buses."""
+        """Stop the simulated stand, the notifiers (then the raw log), the buses."""
         try:
             if self.simulator is not None:
                 self.simulator.stop()
         finally:
             try:
-                self.notifier.stop()
+                for notifier in self._notifiers:
+                    notifier.stop()
                 self.recorder.stop()
             finally:
-                self.bus.shutdown()
-                if self.simulator is not None:
-                    self._sim_bus.shutdown()
+                self._shutdown()
+
+    def _shutdown(self) -> None:
+        for bus in self._buses:
+            bus.shutdown()
+
+
+def _label(bus: BusPlan) -> str:
+    """The stand's bus in messages."""
+    if bus.simulated:
+        return "simulated"
+    return " ".join(str(k) for k in (bus.interface, bus.channel) if k) or "python-can's default"

@@ -12,7 +12,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import chain, count
 from pathlib import Path
 from typing import IO
@@ -22,7 +22,7 @@ import numpy as np
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from gyrostand.acquisition.bus import LiveBus
+from gyrostand.acquisition.bus import BusFault, LiveBus
 from gyrostand.acquisition.engine import Command, CommandNotSent, Engine, Phase, TrialState
 from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
@@ -40,9 +40,10 @@ from gyrostand.db.queries import (
     stand_campaign,
 )
 from gyrostand.db.wal import checkpoint
-from gyrostand.devices.decoder import frame_decoder, source_info
+from gyrostand.devices.decoder import SourceDecoder, frame_decoder, source_info
 from gyrostand.devices.serial_replay import logged_pieces, serial_log_path
-from gyrostand.frames.batch import Headings, RawFrames
+from gyrostand.devices.source import SourceInfo
+from gyrostand.frames.batch import BatchDecoder, Headings, RawFrames
 from gyrostand.frames.logfile import LogFileError, read_raw_frames, read_segments, sha256_of
 from gyrostand.frames.stream_clock import StreamClock
 from gyrostand.plan.codec import codec_for
@@ -175,10 +176,9 @@ def run_live(
     display = ProgressDisplay(quiet=quiet)
     operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)
     commander = LiveCommander(live.controller, grants)
-    heading, encoder = plan.heading_source, plan.compass.encoder()
-    source = serial.info if serial else source_info(codec, plan.compass.protocol, encoder=encoder)
+    source = serial.info if serial else _can_source_info(plan, codec)
     engine = Engine(plan, store, commander, progress, operator, source, start_ms=clock_ms)
-    decoder = serial.decoder if serial else frame_decoder(codec, *heading, plan.inclinometer_mount)
+    decoder = serial.decoder if serial else _can_decoder(plan, codec)
     if grants is None:
         silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
         silence = f"bus silence: no frame at all for {silence_wall_s:g} s (wall clock)"
@@ -200,6 +200,11 @@ def run_live(
                     engine.interrupt(why)
                     break
                 msgs = live.recorder.drain(BATCH_FRAMES, 0.05)
+                if live.merge is not None:  # (virtual time: no overflow, the stand waits)
+                    msgs = live.merge.order(msgs)
+                    if live.merge.error is not None:
+                        engine.interrupt(live.merge.error)
+                        break
                 if live.recorder.dropped > dropped:
                     lost = live.recorder.dropped - dropped
                     dropped = live.recorder.dropped
@@ -215,7 +220,8 @@ def run_live(
                 while errors < len(live.recorder.errors):
                     exc = live.recorder.errors[errors]
                     errors += 1
-                    engine.fail(f"bus or listener error: {exc!r}", kind="bus error")
+                    what = str(exc) if isinstance(exc, BusFault) else repr(exc)
+                    engine.fail(f"bus or listener error: {what}", kind="bus error")
                 if live.simulator is not None and live.simulator.error is not None:
                     engine.interrupt(f"simulated stand failed: {live.simulator.error!r}")
                     break
@@ -224,7 +230,7 @@ def run_live(
                     break
                 if msgs:
                     last_frame = time.monotonic()
-                    raw = RawFrames.from_messages(position, msgs)
+                    raw = RawFrames.from_messages(position, msgs, channels=live.own_bus)
                     batch = decoder.decode(raw)
                     for before, overflow in overflows:
                         at = position + before  # (a serial line's pieces among the frames)
@@ -310,6 +316,21 @@ def mark_run_start(store: CampaignStore, headings: Headings) -> bool:
     first = f"this run's first heading at stand time {t_ms / 1000:g} s"
     store.run_event(RUN_START, "info", first, t_ms)
     return True
+
+
+def _can_decoder(plan: Plan, codec: Codec) -> BatchDecoder | SourceDecoder:
+    """The decoder of a compass on CAN (live and replay)."""
+    own_bus = plan.compass.own_bus
+    return frame_decoder(codec, *plan.heading_source, plan.inclinometer_mount, own_bus=own_bus)
+
+
+def _can_source_info(plan: Plan, codec: Codec) -> SourceInfo:
+    """A compass on CAN as the engine and the campaign record take it (live and replay): on a
+    bus of its own, its silence names that bus."""
+    info = source_info(codec, plan.compass.protocol, encoder=plan.compass.encoder())
+    if plan.compass.own_bus:
+        return replace(info, silence=f"{plan.compass.bus_label} silent")
+    return info
 
 
 def _serial_input(
@@ -512,10 +533,9 @@ def replay(
             raise ReplayLogError(str(exc)) from exc
         info = decoder.source.info
     else:
-        heading, encoder = plan.heading_source, plan.compass.encoder()
-        decoder = frame_decoder(codec, *heading, plan.inclinometer_mount)
+        decoder = _can_decoder(plan, codec)
         stream = read_segments(paths)
-        info = source_info(codec, plan.compass.protocol, encoder=encoder)
+        info = _can_source_info(plan, codec)
     store = CampaignStore.create(sessions, plan, source="replay")
     engine = Engine(plan, store, _NoCommands(), source=info)
     position = 0

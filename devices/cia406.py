@@ -36,8 +36,10 @@ def encoder_info(encoder: Encoder, virtual: bool = False) -> SourceInfo:
 class Cia406Heading:
     """The TPDO position of one encoder -> `Headings` on the campaign clock."""
 
-    def __init__(self, encoder: Encoder) -> None:
+    def __init__(self, encoder: Encoder, bus: int | None = None) -> None:
+        """`bus`: the `RawFrames.channel` the encoder is on (None: any, a one-bus stream)."""
         self.encoder = encoder
+        self.bus = bus
         self.info = encoder_info(encoder)
         self._ids = np.array(encoder.ids, dtype=np.uint32)
         self._state: int | None = None  # the last NMT state its heartbeat gave
@@ -47,7 +49,7 @@ class Cia406Heading:
 
     def claims(self, raw: RawFrames) -> np.ndarray:
         """Rows that are this encoder's (its TPDO, EMCY and heartbeat; 11-bit identifiers)."""
-        ok = ~(raw.is_extended | raw.is_error | raw.is_remote)
+        ok = ~(raw.is_extended | raw.is_error | raw.is_remote) & raw.on_bus(self.bus)
         return ok & np.isin(raw.arbitration_id, self._ids)
 
     def decode(self, raw: RawFrames, clock: CampaignClock) -> SourceOutput:

@@ -14,29 +14,34 @@ from gyrostand.devices.inclinometer import InclinometerDecoder, Mount
 from gyrostand.devices.n2k_heading import Nmea2000Heading
 from gyrostand.devices.source import SourceInfo
 from gyrostand.devices.stand_frames import stand_source_info
-from gyrostand.frames.batch import BatchDecoder, FrameBatch, RawFrames
+from gyrostand.frames.batch import COMPASS_BUS, BatchDecoder, FrameBatch, RawFrames
 from gyrostand.stand.encoder import Encoder
 from gyrostand.stand.protocol import Codec
 
 
 class SourceDecoder:
     """A CAN heading source and/or an inclinometer beside the stand's frames (same stream: one
-    bus, or the merged stream of the stand's and the compass's buses); without a heading
-    source the headings are the stand DBC's."""
+    bus, or the merged stream of the stand's and the compass's buses, `own_bus`: then every
+    frame of the compass's bus is the source's or nobody's, but its error frames, which count
+    as the stand's do); without a heading source the headings are the stand DBC's."""
 
     def __init__(
         self,
         codec: Codec,
         source: Nmea2000Heading | Cia406Heading | None,
         inclinometer: InclinometerDecoder | None = None,
+        own_bus: bool = False,
     ) -> None:
         self.stand = BatchDecoder(codec)
+        self.own_bus = own_bus
         self.source = source
         self.inclinometer = inclinometer
         self.clock = ReceptionClock()
 
     def decode(self, raw: RawFrames) -> FrameBatch:
         claimed = np.zeros(len(raw), dtype=bool)
+        if self.own_bus:  # (the inclinometer is on the stand's bus)
+            claimed |= (raw.channel == COMPASS_BUS) & ~raw.is_error
         for device in (self.source, self.inclinometer):
             if device is not None:
                 claimed |= device.claims(raw)
@@ -61,18 +66,22 @@ def frame_decoder(
     product: tuple[str, str] | None = None,
     encoder: Encoder | None = None,
     inclinometer: tuple[str, int, str, float] | None = None,
+    own_bus: bool = False,
 ) -> BatchDecoder | SourceDecoder:
     """The decoder of a plan's [compass] (`Plan.heading_source`: `name`, NMEA 2000 NAME in
-    hexadecimal; `product`, [instrument] model and serial; `encoder`, the CiA 406 encoder) and
-    [inclinometer] (`Plan.inclinometer_mount`)."""
+    hexadecimal; `product`, [instrument] model and serial; `encoder`, the CiA 406 encoder;
+    `own_bus`, on a CAN bus of its own, `RawFrames.channel` COMPASS_BUS) and [inclinometer]
+    (`Plan.inclinometer_mount`)."""
     sensor = None if inclinometer is None else InclinometerDecoder(Mount(*inclinometer))
     if protocol in ("gyrostand", "dbc"):
         return BatchDecoder(codec) if sensor is None else SourceDecoder(codec, None, sensor)
+    bus = COMPASS_BUS if own_bus else None
     if protocol == "nmea2000":
         wanted = int(name, 16) if name is not None else None
-        return SourceDecoder(codec, Nmea2000Heading(wanted, None if wanted else product), sensor)
+        source = Nmea2000Heading(wanted, None if wanted else product, bus)
+        return SourceDecoder(codec, source, sensor, own_bus)
     if protocol == "cia406" and encoder is not None:
-        return SourceDecoder(codec, Cia406Heading(encoder), sensor)
+        return SourceDecoder(codec, Cia406Heading(encoder, bus), sensor, own_bus)
     raise ValueError(f"heading source {protocol!r} is not runnable yet")
 
 

@@ -57,8 +57,15 @@ class Nmea2000Heading:
 
     info = INFO
 
-    def __init__(self, name: int | None = None, product: tuple[str, str] | None = None) -> None:
-        """`name`: the compass's NAME; else `product` (model, serial number) picks it."""
+    def __init__(
+        self,
+        name: int | None = None,
+        product: tuple[str, str] | None = None,
+        bus: int | None = None,
+    ) -> None:
+        """`name`: the compass's NAME; else `product` (model, serial number) picks it; `bus`:
+        the `RawFrames.channel` it is on (None: any, a one-bus stream)."""
+        self.bus = bus
         if name is None and product is None:
             raise ValueError("the compass needs a NAME or a product (model, serial number)")
         self.wanted_name = name
@@ -73,7 +80,7 @@ class Nmea2000Heading:
     def claims(self, raw: RawFrames) -> np.ndarray:
         """Rows that are this source's business (NMEA 2000 PGNs of a heading sensor)."""
         pgn, _ = split_id(raw.arbitration_id)
-        ok = raw.is_extended & ~(raw.is_error | raw.is_remote)
+        ok = raw.is_extended & ~(raw.is_error | raw.is_remote) & raw.on_bus(self.bus)
         return ok & np.isin(pgn, HANDLED)
 
     def _address(self) -> int | None:

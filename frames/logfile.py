@@ -58,7 +58,7 @@ _ZLIB_DEFLATE = 2  # LOG_CONTAINER method: zlib
 ZLIB_LEVEL = 1
 _CAN_MESSAGE = 1  # object type of a classic CAN frame (CAN_MESSAGE)
 _CAN_ERROR_EXT = 73  # object type of an error frame (CAN_ERROR_EXT)
-_CHANNEL = 1  # BLF channel of every frame we write (BLF counts channels from 1)
+_FIRST_CHANNEL = 1  # BLF channel of RawFrames.channel 0, the stand's bus (BLF counts from 1)
 _CAN_MSG_EXT = 0x80000000  # identifier bit: 29-bit identifier
 _REMOTE_FLAG = 0x80  # CAN_MESSAGE flags bit: remote frame
 _TIME_TEN_MICS = 0x1  # object header v1 flags: timestamp in 10 us units
@@ -109,7 +109,7 @@ def read_raw_frames(path: Path, chunk: int = CHUNK_FRAMES) -> Iterator[RawFrames
                 ) from exc
             if not batch:
                 return
-            yield RawFrames.from_messages(start, batch)
+            yield RawFrames.from_messages(start, batch, channels=True)
             start += len(batch)
     finally:
         reader.stop()
@@ -158,6 +158,7 @@ def _concat(start: int, parts: list[RawFrames]) -> RawFrames:
         np.concatenate([p.is_remote for p in parts]),
         np.concatenate([p.is_extended for p in parts]),
         np.concatenate([p.timestamp for p in parts]),
+        np.concatenate([p.channel for p in parts]),
     )
 
 
@@ -211,7 +212,7 @@ def _blf_parts(path: Path) -> Iterator[RawFrames]:
                 break  # an object continues in the next container
             pos += consumed
             if frames:
-                yield RawFrames.from_messages(0, frames)
+                yield RawFrames.from_messages(0, frames, channels=True)
         tail = data[pos:]
 
 
@@ -254,6 +255,7 @@ def _frames_of(objs: np.ndarray) -> RawFrames:
         is_remote=(objs["msg_flags"] & _REMOTE_FLAG).astype(bool),
         is_extended=(can_id & _CAN_MSG_EXT).astype(bool),
         timestamp=objs["timestamp"].astype(np.float64) * factor,
+        channel=(np.maximum(objs["channel"], 1) - 1).astype(np.uint8),
     )
 
 
@@ -349,9 +351,10 @@ def _container_object(method: int, payload: bytes, uncompressed: int) -> bytes:
     )
 
 
-def _error_object(timestamp_ns: int, can_id: int, payload: bytes) -> bytes:
-    """A CAN_ERROR_EXT object (an error frame) on our channel, dlc the payload length."""
-    body = _CAN_ERROR_EXT_BODY.pack(_CHANNEL, 0, 0, 0, 0, len(payload), 0, can_id, 0, payload)
+def _error_object(timestamp_ns: int, channel: int, can_id: int, payload: bytes) -> bytes:
+    """A CAN_ERROR_EXT object (an error frame) on BLF channel `channel`, dlc the payload
+    length."""
+    body = _CAN_ERROR_EXT_BODY.pack(channel, 0, 0, 0, 0, len(payload), 0, can_id, 0, payload)
     size = _OBJ_HEADER_SIZE + len(body)
     return (
         _OBJ_HEADER_BASE.pack(b"LOBJ", _OBJ_HEADER_SIZE, 1, size, _CAN_ERROR_EXT)
@@ -362,7 +365,8 @@ def _error_object(timestamp_ns: int, can_id: int, payload: bytes) -> bytes:
 
 class BatchBLFWriter(BinaryIOMessageWriter):
     """A BLF log written a whole `RawFrames` batch at a time: classic CAN frames and error
-    frames, all on channel 1, as received frames (what `can.BLFWriter` writes for such frames).
+    frames, as received frames (what `can.BLFWriter` writes for such frames), on BLF channel 1
+    (the stand's bus) or 2 (the compass's own bus), python-can's `channel` 0 and 1.
 
     Why ours rather than `can.BLFWriter`: it packs one frame per call, ~6 us a frame, more than
     the rest of the ingest path together; here a batch is one numpy array. Its reader,
@@ -394,7 +398,7 @@ class BatchBLFWriter(BinaryIOMessageWriter):
 
     def on_message_received(self, msg: can.Message) -> None:
         """One frame (as a batch: at most 8 data bytes)."""
-        self.write_frames(RawFrames.from_messages(0, [msg]))
+        self.write_frames(RawFrames.from_messages(0, [msg], channels=True))
 
     def write_frames(self, raw: RawFrames) -> None:
         """Append every frame of the batch, in order; write the containers it fills."""
@@ -417,7 +421,7 @@ class BatchBLFWriter(BinaryIOMessageWriter):
         objs["obj_type"] = _CAN_MESSAGE
         objs["flags"] = _TIME_ONE_NANS
         objs["timestamp"] = ns
-        objs["channel"] = _CHANNEL
+        objs["channel"] = raw.channel.astype(np.uint16) + _FIRST_CHANNEL
         objs["msg_flags"] = np.where(raw.is_remote, _REMOTE_FLAG, 0)
         objs["dlc"] = raw.dlc
         objs["can_id"] = can_id
@@ -426,7 +430,8 @@ class BatchBLFWriter(BinaryIOMessageWriter):
         for row in np.flatnonzero(raw.is_error).tolist():  # rare: one struct each
             payload = raw.data[row, : int(raw.dlc[row])].tobytes()
             self._pending += objs[lo:row].tobytes()
-            self._pending += _error_object(int(ns[row]), int(can_id[row]), payload)
+            channel = int(objs["channel"][row])
+            self._pending += _error_object(int(ns[row]), channel, int(can_id[row]), payload)
             lo = row + 1
         self._pending += objs[lo:].tobytes()
         self.object_count += n

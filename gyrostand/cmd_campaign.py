@@ -142,25 +142,25 @@ def checked_answers(plan: Plan, given: Sequence[str], new: bool = True) -> dict[
 
 def preflight(plan: Plan) -> None:
     """Before anything is written (a campaign row, an event): the raw log folder takes a file,
-    a real bus opens, and an NMEA 2000 compass on it is the plan's instrument (one-line errors,
-    exit code 1: the environment refuses)."""
+    a real bus opens (and the compass's own bus, if it has one), and an NMEA 2000 compass on its
+    bus is the plan's instrument (one-line errors, exit code 1: the environment refuses)."""
     import can
 
     from gyrostand.acquisition.bus import check_raw_log_dir, open_bus
     from gyrostand.devices.n2k_identify import IdentificationError, identify
 
-    if not plan.bus.simulated:
-        bus = plan.bus
+    real = [] if plan.bus.simulated else [plan.bus, plan.compass][: 1 + plan.compass.own_bus]
+    for bus in real:  # (the compass is on the last)
+        what = "the compass's CAN bus" if bus is plan.compass else "the CAN bus"
         try:
             opened = open_bus(bus)
         except (can.CanError, OSError, ValueError) as exc:
             fail(
-                f"cannot open the CAN bus (interface {bus.interface!r}, channel {bus.channel!r}):"
-                f" {exc}",
+                f"cannot open {what} (interface {bus.interface!r}, channel {bus.channel!r}): {exc}",
                 code=EXIT_FAILED,
             )
         try:
-            if plan.compass.protocol == "nmea2000":
+            if plan.compass.protocol == "nmea2000" and bus is real[-1]:
                 _, name, instrument, _ = plan.heading_source
                 identify(opened, None if name is None else int(name, 16), instrument)
         except IdentificationError as exc:

@@ -75,11 +75,6 @@ def prepare(plan: Plan) -> None:
     compass = plan.compass
     if compass.protocol == "iec61162":
         problems += _serial_problems(plan)
-    elif compass.own_bus:
-        problems.append(
-            "[compass] interface: a compass on a CAN bus of its own is not runnable yet (put it "
-            "on the stand's bus: leave interface and channel out)"
-        )
     inclinometer = plan.inclinometer
     if plan.bus.simulated and inclinometer is not None and inclinometer.protocol != "cia410":
         problems.append(

@@ -618,6 +618,8 @@ class CompassPlan(_Table):
             problems += [(k, f'not with protocol = "{self.protocol}" (CAN)') for k in unused]
             if self.channel is not None and self.interface is None:
                 problems.append(("interface", "missing (the compass's own bus needs one)"))
+            if self.interface is not None and self.channel is None:
+                problems.append(("channel", 'missing (the compass\'s own bus, e.g. "can1")'))
         if self.protocol == "cia406":
             if self.node_id is None:
                 problems.append(("node_id", 'missing (protocol = "cia406")'))
@@ -656,6 +658,11 @@ class CompassPlan(_Table):
     def own_bus(self) -> bool:
         """The compass on a CAN bus of its own (not the stand's)."""
         return self.interface is not None
+
+    @property
+    def bus_label(self) -> str:
+        """Its own bus in messages, e.g. "the compass's bus (socketcan can1)"."""
+        return f"the compass's bus ({self.interface} {self.channel})"
 
 
 InclinometerProtocol = Literal["cia410", "j1939"]
@@ -1053,9 +1060,19 @@ class Plan(_Table):
                 "in virtual time there runs unrelated to the reception clock)"
             )
             errors.append(_error("compass", ("compass", "protocol"), message))
-        if self.bus.simulated and compass.own_bus:
-            message = "the simulated compass sits on the simulated stand's bus ([bus])"
+        if self.bus.simulated and compass.own_bus and compass.interface != "virtual":
+            message = (
+                "beside the simulated stand the compass's own bus is \"virtual\" (python-can's "
+                "in-process bus: the simulated compass on a bus of its own)"
+            )
             errors.append(_error("compass", ("compass", "interface"), message))
+        same = (compass.interface, compass.channel) == (self.bus.interface, self.bus.channel)
+        if compass.own_bus and same:
+            message = (
+                "the stand's bus ([bus]): leave interface and channel out for a compass on the "
+                "stand's bus"
+            )
+            errors.append(_error("compass", ("compass", "channel"), message))
         return errors
 
     def _bad_inclinometer(self) -> list[InitErrorDetails]:

@@ -27,6 +27,8 @@ def describe(plan: Plan) -> str:
         where += f", CiA 402 drive node {plan.stand.node_id} (K set by hand: {k_prompts} prompts)"
     if plan.compass.protocol != "gyrostand":
         where += f", compass on {plan.compass.protocol}"
+    if plan.compass.own_bus:
+        where += f" on its own bus ({plan.compass.interface} {plan.compass.channel})"
     if plan.inclinometer_mount is not None:
         protocol, address, axis, _ = plan.inclinometer_mount
         where += f", roll measured by a {protocol} inclinometer ({address}, axis {axis})"

@@ -36,9 +36,10 @@ from gyrostand.stand.protocol import Codec, SignalMap
 
 Span = tuple[float, float]  # stand ms, [start, end)
 SerialLine = tuple[int, bool]  # an IEC 61162 compass's baud rate; virtual time
-# `Plan.heading_source` and, for a serial compass, its line (its sentences in the serial logs)
-HeadingSource = tuple[str, str | None, tuple[str, str], Encoder | None, SerialLine | None]
-GYROSTAND: HeadingSource = ("gyrostand", None, ("", ""), None, None)
+# `Plan.heading_source`, for a serial compass its line (its sentences in the serial logs), and
+# whether the compass is on a CAN bus of its own
+HeadingSource = tuple[str, str | None, tuple[str, str], Encoder | None, SerialLine | None, bool]
+GYROSTAND: HeadingSource = ("gyrostand", None, ("", ""), None, None, False)
 
 
 def heading_source(plan: Plan) -> HeadingSource:
@@ -46,7 +47,7 @@ def heading_source(plan: Plan) -> HeadingSource:
     line = None
     if plan.compass.protocol == "iec61162":
         line = (plan.compass.baud, plan.bus.timing == "virtual")
-    return (*plan.heading_source, line)
+    return (*plan.heading_source, line, plan.compass.own_bus)
 
 
 def headings_in(
@@ -78,11 +79,11 @@ def _valid_headings(
     Kept for the next call with the same files: the analysis and the report's plots of one
     campaign read its log once (a changed file has another size or mtime; the report verifies
     each log's SHA-256 before reading it)."""
-    protocol, name, product, encoder, line = source
+    protocol, name, product, encoder, line, own_bus = source
     codec, paths = Codec(dbc_path, signal_map), [Path(path) for path, _, _ in stamps]
     decoder: BatchDecoder | SourceDecoder | SerialSourceDecoder
     if line is None:
-        decoder = frame_decoder(codec, protocol, name, product, encoder)
+        decoder = frame_decoder(codec, protocol, name, product, encoder, own_bus=own_bus)
         stream = read_segments(paths)
     else:  # LogFileError for serial logs missing or unreadable
         check_serial_logs(paths, line[1])

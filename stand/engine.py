@@ -27,6 +27,7 @@ from gyrostand.stand.simconfig import FaultParams, SimConfig
 _DROP, _JUMP, _JUMP_SIZE, _INVALID, _OOR, _OOR_VALUE, _CORRUPT, _CORRUPT_BIT, _ERROR = range(9)
 _N_FAULT_DRAWS = 9
 _EPS = 1e-9  # tolerance when turning stand times into sample indices
+COMPASS_FRAME = "compass"  # `can.Message.channel` of the transmitter's frames (`Simulator`)
 
 
 @dataclass(frozen=True)
@@ -212,7 +213,7 @@ class StandEngine:
         u = self._fault_rng.random((n, _N_FAULT_DRAWS))
         if self.transmitter is not None:  # its own frames: the stand's DBC faults do not apply
             sent = (u[:, _DROP] >= f.drop_rate) & ~self._silent(t)
-            return self.transmitter.frames(t[sent], readings[sent], index[sent])
+            return _compass(self.transmitter.frames(t[sent], readings[sent], index[sent]))
         jumps = np.where(u[:, _JUMP] < f.counter_jump_rate, 1 + (u[:, _JUMP_SIZE] * 14), 0)
         counter = (self._counter + np.arange(n) + np.cumsum(jumps.astype(np.int64))) % 16
         self._counter = int(counter[-1] + 1) % 16
@@ -298,7 +299,7 @@ class StandEngine:
         """Handle a frame from the bus at the current stand time; return the ack (or the
         compass's answer) to send."""
         if isinstance(self.transmitter, Answering) and self.transmitter.answers(msg):
-            return self.transmitter.answer(msg, self._time_s)
+            return _compass(self.transmitter.answer(msg, self._time_s))
         frame = self.codec.decode(msg)
         if not isinstance(frame, CommandFrame):
             return []
@@ -346,6 +347,13 @@ class StandEngine:
         if self.config.compass.transient:
             self._precession.shift_equilibrium(math.radians(shift_deg - self._equilibrium_deg))
         self._equilibrium_deg = shift_deg
+
+
+def _compass(frames: list[can.Message]) -> list[can.Message]:
+    """The transmitter's frames, marked as the compass's (a bus of its own may carry them)."""
+    for msg in frames:
+        msg.channel = COMPASS_FRAME
+    return frames
 
 
 def _within(t: np.ndarray | float, start_s: float | None, length_s: float) -> np.ndarray:

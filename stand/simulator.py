@@ -21,7 +21,7 @@ from types import TracebackType
 
 import can
 
-from gyrostand.stand.engine import HeadingTransmitter, StandEngine
+from gyrostand.stand.engine import COMPASS_FRAME, HeadingTransmitter, StandEngine
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import (
     CompassParams,
@@ -50,7 +50,9 @@ _SEND_RETRY_WALL_S = 0.2  # how long to retry a frame on a full transmit queue
 
 class Simulator:
     """Run the simulated unit on `bus` in a background thread: `start()` ... `stop()`, or
-    `with Simulator(bus, config):`. `recorder` (e.g. a `can.Logger`) gets every frame sent."""
+    `with Simulator(bus, config):`. `recorder` (e.g. a `can.Logger`) gets every frame sent.
+    `compass_bus`: the compass's own bus (its transmitter's frames, the requests it answers);
+    by default the stand's."""
 
     def __init__(
         self,
@@ -62,10 +64,13 @@ class Simulator:
         start_epoch_s: float | None = None,
         clock_ms: int = 0,
         transmitter: HeadingTransmitter | None = None,
+        compass_bus: can.BusABC | None = None,
     ) -> None:
         """`clock_ms`: the stand clock at power-up (a resumed campaign's: a stand's clock goes
         on counting); the simulation itself starts at 0 as after a power-up."""
         self.bus = bus
+        self.compass_bus = compass_bus
+        self.compass_frames_sent = 0  # on `compass_bus`, counted once each is on it
         self.config = config
         self.engine = StandEngine(config, codec, clock_ms, transmitter)
         self._recorder = recorder
@@ -177,6 +182,8 @@ class Simulator:
                 self._send(self._advance(wall0))
                 self._send(self.engine.receive(msg))
                 msg = self._recv(0)
+            for request in self._compass_requests():
+                self._send(self.engine.receive(request))
 
     def _run_virtual(self) -> None:
         while not self._stop.is_set():
@@ -184,7 +191,12 @@ class Simulator:
             while msg is not None:
                 self._on_virtual(msg)
                 msg = self._recv(0)
+            for request in self._compass_requests():
+                self._on_virtual(request)
             self._take_faults()
+            # in stand-time order: a compass's request (answered now) may have come after a
+            # command for later (its own bus, polled second)
+            self._commands.sort(key=lambda c: c[0])
             for at_ms, command in self._commands:
                 self._run_to(at_ms / 1000)
                 # the command on the bus at the stand time it takes effect, then the answer
@@ -193,6 +205,7 @@ class Simulator:
                     is_extended_id=command.is_extended_id,
                     data=command.data,
                     timestamp=self.engine.stand_time_s,
+                    channel=command.channel,  # (on the bus it came from)
                 )
                 self._send([echo, *self.engine.receive(command)])
             self._commands.clear()
@@ -234,6 +247,16 @@ class Simulator:
         frames.sort(key=lambda m: m.timestamp)  # stable: a tick after the stand's same-instant
         self._send(frames)
 
+    def _compass_requests(self) -> list[can.Message]:
+        """What came on the compass's own bus (none without one), marked as the compass's."""
+        if self.compass_bus is None:
+            return []
+        frames = []
+        while (msg := self.compass_bus.recv(0)) is not None:
+            msg.channel = COMPASS_FRAME
+            frames.append(msg)
+        return frames
+
     def _recv(self, timeout_s: float) -> can.Message | None:
         """The next command, or None. A receive error (e.g. the kernel's ENETDOWN while the link
         is down) is logged and counted and the stand keeps running, as a real stand does."""
@@ -251,25 +274,40 @@ class Simulator:
     def _send(self, msgs: list[can.Message]) -> None:
         for msg in msgs:
             msg.timestamp += self._epoch_s
-        # an in-process bus that takes a batch at once (`acquisition.bus.SimulatorBus`)
-        send_batch = getattr(self.bus, "send_batch", None)
-        if send_batch is not None and self._recorder is None:
-            send_batch(msgs)
-            self.frames_sent += len(msgs)
+        # an in-process bus that takes a batch at once (`acquisition.bus.SimulatorBus`): each
+        # run of frames of one bus, in order
+        if getattr(self.bus, "send_batch", None) is not None and self._recorder is None:
+            for bus, run in self._runs(msgs):
+                bus.send_batch(run)  # type: ignore[attr-defined]
+                self.frames_sent += len(run)
+                self.compass_frames_sent += len(run) * (bus is self.compass_bus)
             return
         for msg in msgs:
-            if self._send_one(msg):
+            on_compass_bus = self.compass_bus is not None and msg.channel == COMPASS_FRAME
+            if self._send_one(self.compass_bus if on_compass_bus else self.bus, msg):
                 self.frames_sent += 1
+                self.compass_frames_sent += on_compass_bus
                 if self._recorder is not None:
                     self._recorder.on_message_received(msg)
             else:
                 self.frames_failed += 1
 
-    def _send_one(self, msg: can.Message) -> bool:
+    def _runs(self, msgs: list[can.Message]) -> list[tuple[can.BusABC, list[can.Message]]]:
+        """The frames as runs of one bus each, in order (the compass's on its own bus)."""
+        runs: list[tuple[can.BusABC, list[can.Message]]] = []
+        for msg in msgs:
+            on_compass_bus = self.compass_bus is not None and msg.channel == COMPASS_FRAME
+            bus = self.compass_bus if on_compass_bus else self.bus
+            if not runs or runs[-1][0] is not bus:
+                runs.append((bus, []))
+            runs[-1][1].append(msg)
+        return runs
+
+    def _send_one(self, bus: can.BusABC, msg: can.Message) -> bool:
         deadline = time.monotonic() + _SEND_RETRY_WALL_S
         while True:
             try:
-                self.bus.send(msg)
+                bus.send(msg)
                 return True
             except can.CanOperationError as exc:
                 queue_full = exc.error_code in (None, errno.ENOBUFS)  # worth retrying

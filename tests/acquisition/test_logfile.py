@@ -270,3 +270,29 @@ def test_asc_goes_through_python_can(tmp_path: Path) -> None:
         for m in messages:
             writer.on_message_received(m)
     assert flat(read_raw_frames(path, chunk=64)) == expected(messages)
+
+
+def test_two_buses_channels_as_python_can_writes_and_reads_them(tmp_path: Path) -> None:
+    """Frames of a compass on its own bus (`RawFrames.channel` 1) among the stand's (0), error
+    frames on both: the objects python-can's BLFWriter writes for messages of `channel` 0 and 1,
+    byte for byte (BLF channels 1 and 2); python-can's BLFReader and ours give the channels back;
+    a one-bus batch (all 0) is what python-can writes for messages without a channel."""
+    messages = sample_messages(3000)
+    for i, m in enumerate(messages):
+        m.timestamp = 1_700_000_000.0 + i * 0.001
+        m.channel = i % 3 % 2  # two of three on the stand's bus
+    ours, theirs = tmp_path / "ours.blf", tmp_path / "theirs.blf"
+    with BatchBLFWriter(ours) as writer:
+        for start in range(0, len(messages), 777):
+            batch = messages[start : start + 777]
+            writer.write_frames(RawFrames.from_messages(start, batch, channels=True))
+    with can.BLFWriter(theirs, compression_level=ZLIB_LEVEL) as writer:
+        for m in messages:
+            writer.on_message_received(m)
+    assert ours.read_bytes()[144:] == theirs.read_bytes()[144:]
+    sent = [m.channel for m in messages]
+    assert [m.channel for m in can.BLFReader(ours)] == sent
+    assert np.concatenate([raw.channel for raw in read_blf(ours)]).tolist() == sent
+    assert np.concatenate([raw.channel for raw in read_raw_frames(ours)]).tolist() == sent
+    one_bus = RawFrames.from_messages(0, messages)
+    assert not one_bus.channel.any()

@@ -396,9 +396,15 @@ VALUES = [
                 "[compass] interface: missing (the compass's own bus needs one)",
             ),
             (
-                "own bus beside the simulated stand",
+                "nmea2000 interface without channel",
+                'protocol = "nmea2000"\ninterface = "socketcan"',
+                '[compass] channel: missing (the compass\'s own bus, e.g. "can1")',
+            ),
+            (
+                "a real own bus beside the simulated stand",
                 'protocol = "nmea2000"\ninterface = "socketcan"\nchannel = "can1"',
-                "[compass] interface: the simulated compass sits on the simulated stand's bus",
+                "[compass] interface: beside the simulated stand the compass's own bus is "
+                '"virtual"',
             ),
             (
                 "cia406 without its node id",
@@ -449,6 +455,12 @@ VALUES = [
         '[compass] protocol: a compass timed by reception needs timing = "realtime" on a real bus',
         ("simulated = true", 'simulated = false\ninterface = "virtual"\ntiming = "virtual"'),
         append='\n[compass]\nprotocol = "nmea2000"\n',
+    ),
+    plan_case(
+        "nmea2000 on a bus of its own that is the stand's",
+        "[compass] channel: the stand's bus ([bus]): leave interface and channel out",
+        ("simulated = true", 'simulated = false\ninterface = "virtual"\nchannel = "can0"'),
+        append='\n[compass]\nprotocol = "nmea2000"\ninterface = "virtual"\nchannel = "can0"\n',
     ),
     plan_case(
         "iec61162 on the simulated stand in real time",
