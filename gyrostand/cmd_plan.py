@@ -42,7 +42,7 @@ def register(app: typer.Typer) -> None:
         one summary line, or every problem one per line (exit code 1)."""
         from gyrostand.plan.codec import prepare
         from gyrostand.plan.model import PlanError, load_plan
-        from gyrostand.plan.summary import design_warning
+        from gyrostand.plan.summary import design_warning, old_spellings
 
         try:
             checked = load_plan(plan)
@@ -54,6 +54,8 @@ def register(app: typer.Typer) -> None:
         typer.echo(f"{plan}: ok — {summary(checked)}")
         if warning := design_warning(checked):
             typer.echo(f"{plan}: warning — {warning}")
+        for note in old_spellings(checked):
+            typer.echo(f"{plan}: note — {note}")
 
     @plan_app.command("schema")
     def schema(

@@ -1,9 +1,12 @@
 """A checked plan in words: its design, N, settle method and bus on one line (`gyrostand plan
-check`, the station's start form), and why a design is fragile."""
+check`, the station's start form), why a design is fragile, and keys in an old spelling."""
 
 from __future__ import annotations
 
+import tomllib
+
 from gyrostand.plan.model import FEW_RESIDUAL_DOF, FIT_PARAMETERS, K_PROMPT, Plan
+from gyrostand.stand.simconfig import renamed_knobs
 
 
 def describe(plan: Plan) -> str:
@@ -40,3 +43,12 @@ def design_warning(plan: Plan) -> str | None:
         f"(fit trials minus the {FIT_PARAMETERS} parameters): its t({dof}) intervals are wide, "
         "and a residual variance near 0 by chance goes unnoticed in them; add fit trials"
     )
+
+
+def old_spellings(plan: Plan) -> list[str]:
+    """A note per `[bus.simulator]` knob the plan's text spells the old way (still read)."""
+    simulator = tomllib.loads(plan.text).get("bus", {}).get("simulator", {})
+    return [
+        f"[bus.simulator.{table}] {old} is spelled {new} now (the old spelling is still read)"
+        for table, old, new in renamed_knobs(simulator)
+    ]

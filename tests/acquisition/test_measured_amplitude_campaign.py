@@ -23,7 +23,7 @@ from gyrostand.report.stored import commanded_motion, stored_inputs
 from gyrostand.stand.simconfig import CompassParams
 
 ROOT = Path(__file__).resolve().parents[2]
-TRUE_C, TRUE_T = CompassParams.C_gcm2s2, CompassParams.T_s
+TRUE_C, TRUE_T = CompassParams.c_gcm2s2, CompassParams.t_s
 MODEL_ONLY = ("expected_se_deg", "tolerance_fraction", "stable_estimates", "transient_fraction")
 
 

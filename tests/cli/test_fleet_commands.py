@@ -94,7 +94,7 @@ def test_each_campaign_stores_the_plan_it_ran(fleet: Fleet) -> None:
             assert plan.instrument.model == MODEL
             serial = plan.instrument.serial
             compass = plan.bus.simulator.compass
-            assert compass.C_gcm2s2 == pytest.approx(printed[serial], rel=1e-3)
+            assert compass.c_gcm2s2 == pytest.approx(printed[serial], rel=1e-3)
     assert len(printed) == 6
 
 
