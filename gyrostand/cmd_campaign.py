@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 
+from gyrostand import cmd_campaign_remove
 from gyrostand.cmd_data import DEFAULT_DB, CampaignId, JsonOption, TagOption, open_db, parse_tags
 from gyrostand.db.url import DB_ENV, shown_url
 from gyrostand.errors import EXIT_FAILED, fail, printable
@@ -484,6 +485,7 @@ def register(app: typer.Typer) -> None:
         help="Run, resume, retry, inspect and list campaigns.", no_args_is_help=True
     )
     app.add_typer(campaign_app, name="campaign")
+    cmd_campaign_remove.register(campaign_app)
 
     @campaign_app.command("run")
     def campaign_run(
