@@ -58,10 +58,12 @@ def register(campaign_app: typer.Typer) -> None:
             ),
         ] = False,
     ) -> None:
-        """Remove campaigns from a database: their trials, observations, events, analyses and
-        sign-offs go, in one transaction; a removal record stays with each one's content
-        SHA-256, what it was (instrument, status, labels, origin, raw logs), who removed it,
-        when and why. Asks first, on a terminal; elsewhere give --yes."""
+        """Remove campaigns from a database, keeping a record of each removal.
+
+        Their trials, observations, events, analyses and sign-offs go, in one transaction; a
+        removal record stays with each one's content SHA-256, what it was (instrument, status,
+        labels, origin, raw logs), who removed it, when and why. Asks first, on a terminal;
+        elsewhere give --yes."""
         from gyrostand import SOFTWARE_VERSION
         from gyrostand.db.models import Campaign
         from gyrostand.db.removal import RemovalRefused, remove_campaigns

@@ -1,6 +1,7 @@
 """`gyrostand report` and `gyrostand analyze CAMPAIGN_ID --db`: files, JSON, one-line errors."""
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -36,7 +37,8 @@ def test_report_writes_the_asked_formats(stored: Stored, tmp_path: Path) -> None
     html = runner.invoke(app, [*args, "--format", "html"])
     stages = [line for line in html.stderr.splitlines() if line.startswith("report: ")]
     assert stages[1].startswith("report: a DRAFT: it lacks report number, laboratory, ")
-    assert stages[2:] == [f"report: writing html to {out}", "report: drawing the figures"]
+    assert stages[2:-1] == [f"report: writing html to {out}", "report: drawing the figures"]
+    assert re.fullmatch(rf"report: campaign 1: 1 files written in {out} \(\d+\.\d s\)", stages[-1])
 
 
 @pytest.mark.parametrize(
