@@ -324,7 +324,7 @@ def test_resume_retry_failed_retries_every_failed_trial(runs: Runs, tmp_path: Pa
     assert query(db, "SELECT count(*) FROM trial WHERE attempt = 1 AND status = 'failed'") == [(2,)]
 
     code, out, err = invoke("analyze", "1", "--db", str(db), "--json")
-    assert code == 0 and err == ""
+    assert code == 0 and all(line.startswith("analyze: ") for line in err.splitlines()), err
     analysis = json.loads(out)
     assert [(t["index"], t["attempt"], t["superseded_by"]) for t in analysis["left_out"]] == [
         (3, 1, 2),
