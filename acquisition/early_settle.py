@@ -250,9 +250,11 @@ def describe(outcome: SettleOutcome, check: SettleCheck) -> str:
     if outcome.band_s is None:
         return text + "band criterion not predicted within max_wait_s: time saved unknown"
     how = "held" if outcome.band_measured else "predicted"
-    return (
-        text + f"band criterion {how} after {outcome.band_s:.1f} s: {outcome.saved_s:.1f} s saved"
-    )
+    text += f"band criterion {how} after {outcome.band_s:.1f} s: "
+    saved = outcome.band_s - outcome.settle_s
+    if saved < 0:  # the estimate became stable only after the band criterion held
+        return text + f"no time saved (settled {-saved:.1f} s after it)"
+    return text + f"{saved:.1f} s saved"
 
 
 class EarlySettle:

@@ -42,6 +42,7 @@ from gyrostand.db.models import (
     Campaign,
     CampaignLabel,
     CampaignOrigin,
+    CampaignRemoval,
     Event,
     Instrument,
     MeasuredMotionRow,
@@ -71,7 +72,7 @@ COPIED = (
 key to the campaign or to another of them."""
 DERIVED = (AnalysisRun,)  # copied, but no part of the content
 MATCHED = (Instrument,)  # the lab's own row of the same model, serial and constants
-PER_DATABASE = (CampaignOrigin,)  # never copied
+PER_DATABASE = (CampaignOrigin, CampaignRemoval)  # never copied
 MERGE_LOCK = 0x67796D7267  # PostgreSQL advisory lock key of merges ("gymrg")
 LOCATION = {"raw_log_segment": "path"}  # where a file is kept: no part of the content
 LATER = ("measured_motion",)  # tables added since content hashes were first recorded: in the

@@ -523,3 +523,28 @@ class CampaignOrigin(Base):
     merged_from: Mapped[str] = mapped_column(Text)
     merged_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
     software_version: Mapped[str] = mapped_column(String(64))
+
+
+class CampaignRemoval(Base):
+    """A campaign removed from the database (`gyrostand campaign remove`), kept as provenance:
+    its id here, the SHA-256 of its content (`db.merge.content_sha256`: the same as a copy
+    kept elsewhere), what it was (`record`: instrument, status, source, operator, dates,
+    plan hash, labels, origin, raw logs with their SHA-256), who removed it, when, why, by
+    which software, and what became of its raw log files (`raw_logs`: kept or deleted)."""
+
+    __tablename__ = "campaign_removal"
+    __table_args__ = (
+        CheckConstraint("length(content_sha256) = 64", name="content_sha256"),
+        CheckConstraint("length(removed_by) > 0", name="removed_by"),
+        CheckConstraint(one_of("raw_logs", ("kept", "deleted", "none")), name="raw_logs"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(Integer, index=True)
+    content_sha256: Mapped[str] = mapped_column(String(64))
+    record: Mapped[dict[str, Any]] = mapped_column(JSON)
+    removed_by: Mapped[str] = mapped_column(String(200))
+    reason: Mapped[str | None] = mapped_column(Text)
+    raw_logs: Mapped[str] = mapped_column(String(16))
+    removed_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utc_now)
+    software_version: Mapped[str] = mapped_column(String(64))

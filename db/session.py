@@ -64,6 +64,12 @@ class DatabaseUnusable(Exception):
 _NOT_A_DATABASE = ("SQLITE_NOTADB", "SQLITE_CORRUPT")  # sqlite3 error names (and extended)
 
 
+POSTGRES_DRIVER = (
+    "; gyrostand's PostgreSQL driver is psycopg: pip install 'gyrostand[postgres]' and give a "
+    "postgresql+psycopg:// URL"
+)
+
+
 def unusable(exc: DBAPIError, where: str | None = None) -> DatabaseUnusable:
     """What a driver's error says about the database `where` (its file or URL): a file that is
     not a SQLite database or is damaged is bad input; anything else (a read-only folder, a full
@@ -137,7 +143,8 @@ def open_database(url: str, *, upgrade: bool = True, create: bool = True) -> ses
         ) from None
     except ImportError as exc:
         raise DatabaseUnusable(
-            f"{where}: the database driver for {parsed.drivername} is not installed ({exc})",
+            f"{where}: the database driver for {parsed.drivername} is not installed ({exc})"
+            + (POSTGRES_DRIVER if parsed.get_backend_name() == "postgresql" else ""),
             bad_input=False,
         ) from None
     if engine.dialect.name == "sqlite":
@@ -149,7 +156,14 @@ def open_database(url: str, *, upgrade: bool = True, create: bool = True) -> ses
             checkpoint_at_exit(engine)
     except DBAPIError as exc:
         engine.dispose()
-        raise unusable(exc, where) from None
+        problem = unusable(exc, where)
+        if f'database "{parsed.database}" does not exist' in str(exc.orig):  # PostgreSQL's
+            problem = DatabaseUnusable(
+                f"{problem}; gyrostand makes its tables, not the database: create it first "
+                f"(createdb {parsed.database}, as a role allowed to)",
+                bad_input=False,
+            )
+        raise problem from None
     except BaseException:
         engine.dispose()
         raise

@@ -24,7 +24,9 @@ import typer
 
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.cmd_data import DEFAULT_DB, MAX_CAMPAIGN_ID, DbOption, JsonOption, open_db
+from gyrostand.db.url import shown_url
 from gyrostand.errors import fail, printable, printable_lines
+from gyrostand.stages import Stages
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -157,7 +159,16 @@ def register(app: typer.Typer) -> None:
         if campaign is not None:
             if csv is not None or plan is not None:
                 fail("give a CAMPAIGN id or --csv FILE [--plan PLAN], not both")
-            analysis, heading, motion = analyze_stored_campaign(db, campaign)
+            from gyrostand.db.models import Campaign
+
+            with open_db(db, must_exist=True)() as session:  # bad input: one line, no stage
+                if session.get(Campaign, campaign) is None:
+                    fail(f"no campaign {campaign} in the database")
+            with Stages("analyze") as stage:
+                stage(f"campaign {campaign} in {shown_url(db)}: analysing it (the run is recorded)")
+                analysis, heading, motion = analyze_stored_campaign(db, campaign)
+                fitted = len(analysis.fit_indices)
+                stage.done(f"campaign {campaign}: {fitted} trials fitted, the analysis recorded")
             emit(analysis, as_json, heading, motion)
             return
         if csv is None:

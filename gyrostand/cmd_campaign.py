@@ -14,9 +14,11 @@ from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 
+from gyrostand import cmd_campaign_remove
 from gyrostand.cmd_data import DEFAULT_DB, CampaignId, JsonOption, TagOption, open_db, parse_tags
 from gyrostand.db.url import DB_ENV, shown_url
 from gyrostand.errors import EXIT_FAILED, fail, printable
+from gyrostand.stages import Stages
 from gyrostand.stand.simconfig import TIMINGS
 
 if TYPE_CHECKING:
@@ -490,6 +492,7 @@ def register(app: typer.Typer) -> None:
         help="Run, resume, retry, inspect and list campaigns.", no_args_is_help=True
     )
     app.add_typer(campaign_app, name="campaign")
+    cmd_campaign_remove.register(campaign_app)
 
     @campaign_app.command("run")
     def campaign_run(
@@ -768,9 +771,12 @@ def register(app: typer.Typer) -> None:
                 readable.append(check_replay_log(log))
             except ReplayLogError as exc:
                 fail(f"cannot replay {exc}")
-        sessions = open_db(checked.database, must_exist=False)
-        try:
-            result = replay(checked, sessions, logs, readable)
-        except (ReplayLogError, ValueError, OSError, can.CanError) as exc:  # changed meanwhile
-            fail(f"replay of {printable(logs[-1])} failed: {exc}", code=EXIT_FAILED)
+        with Stages("replay") as stage:
+            sessions = open_db(checked.database, must_exist=False)
+            stage(f"logs read; re-deriving the observations into {shown_url(checked.database)}")
+            try:
+                result = replay(checked, sessions, logs, readable)
+            except (ReplayLogError, ValueError, OSError, can.CanError) as exc:  # changed since
+                fail(f"replay of {printable(logs[-1])} failed: {exc}", code=EXIT_FAILED)
+            stage.done(f"campaign {result.campaign_id}: {result.observations} observations")
         print_outcome(result, checked.database, resumable=False)

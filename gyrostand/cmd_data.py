@@ -11,6 +11,7 @@ import typer
 from gyrostand import SOFTWARE_VERSION
 from gyrostand.db.url import DB_ENV
 from gyrostand.errors import EXIT_BAD_INPUT, EXIT_FAILED, fail
+from gyrostand.stages import Stages
 
 if TYPE_CHECKING:
     from sqlalchemy.orm import Session, sessionmaker
@@ -181,14 +182,17 @@ def register(app: typer.Typer) -> None:
         fmt = format.value
         out = out or Path("runs/export") / f"campaign-{campaign}.{fmt}"
         sessions = open_db(db, must_exist=True)
-        try:
-            with sessions() as session:
-                frames = export_campaign(session, campaign, fmt, out)
-        except CampaignNotFound as error:
-            fail(str(error))
-        except OSError as error:
-            fail(f"cannot write {out}: {error.strerror or error}")
-        tables = frames.tables()
+        with Stages("export") as stage:  # (bad input is found as it runs: one line, no stage)
+            try:
+                with sessions() as session:
+                    frames = export_campaign(session, campaign, fmt, out)
+            except CampaignNotFound as error:
+                fail(str(error))
+            except OSError as error:
+                fail(f"cannot write {out}: {error.strerror or error}")
+            tables = frames.tables()
+            rows = sum(len(t) for t in tables.values())
+            stage.done(f"campaign {campaign}: {rows} rows in {len(tables)} tables written")
         for table, path in export_paths(out, fmt).items():
             where = f"{path} [{table}]" if fmt == "xlsx" else str(path)
             typer.echo(f"wrote {where}: {len(tables[table])} {table}")

@@ -17,6 +17,7 @@ import typer
 from gyrostand.cmd_data import DEFAULT_DB, DbOption, JsonOption, open_db
 from gyrostand.db.url import DB_ENV, shown_url
 from gyrostand.errors import fail, printable_lines
+from gyrostand.stages import Stages
 
 if TYPE_CHECKING:
     from gyrostand.analysis.fleet import FleetAnalysis
@@ -233,14 +234,24 @@ def register(app: typer.Typer) -> None:
             f"factory {shift_group}'s C shifted by {shift:+.0%}; one campaign a unit into {shown}"
         )
         started = time.monotonic()
+        units = groups * units_per_group
 
-        def done(unit: SimulatedUnit) -> None:
-            typer.echo(
-                f"  campaign {unit.campaign_id}: {unit.serial} (factory {unit.group}), true "
-                f"C = {unit.true_c_gcm2s2 / 1e7:.3f}e7 g·cm²·s⁻², T = {unit.true_t_s:.3f} s"
-            )
+        with Stages("fleet simulate") as stage:
 
-        simulate_fleet(base, db, design, "factory", done)
+            def done(unit: SimulatedUnit) -> None:
+                typer.echo(
+                    f"  campaign {unit.campaign_id}: {unit.serial} (factory {unit.group}), true "
+                    f"C = {unit.true_c_gcm2s2 / 1e7:.3f}e7 g·cm²·s⁻², T = {unit.true_t_s:.3f} s"
+                )
+                finished = len(made) + 1
+                made.append(unit)
+                if finished < units:
+                    stage(f"unit {finished}/{units} done; running unit {finished + 1}")
+
+            made: list[SimulatedUnit] = []
+            stage(f"running and analysing unit 1/{units} on the simulated stand")
+            simulate_fleet(base, db, design, "factory", done)
+            stage.done(f"{units} campaigns run and analysed")
         where = f"--model {shlex.quote(base.instrument.model)} --by factory"
         where += f" --db {shlex.quote(shown)}"
         typer.echo(

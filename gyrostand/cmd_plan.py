@@ -45,7 +45,7 @@ def register(app: typer.Typer) -> None:
         from gyrostand.campaign_procedures import describe, resolved
         from gyrostand.plan.codec import prepare
         from gyrostand.plan.model import PlanError, load_plan
-        from gyrostand.plan.summary import design_warning, spacing
+        from gyrostand.plan.summary import design_warning, old_spellings, spacing
 
         try:
             checked = load_plan(plan)
@@ -68,6 +68,8 @@ def register(app: typer.Typer) -> None:
         else:
             kind = "note" if observed.independent else "warning"
             typer.echo(f"{plan}: {kind} — {observed.describe()}")
+        for note in old_spellings(checked):
+            typer.echo(f"{plan}: note — {note}")
 
     @plan_app.command("schema")
     def schema(

@@ -24,6 +24,7 @@ from gyrostand.cmd_data import DEFAULT_DB, CampaignId, DbOption, open_db
 from gyrostand.db.url import shown_url
 from gyrostand.errors import fail, printable
 from gyrostand.report import FORMATS, SHIPPED, SHIPPED_PROFILES
+from gyrostand.stages import Stages
 
 DEFAULT_OUT = Path("runs/reports")
 
@@ -157,7 +158,8 @@ def register(app: typer.Typer) -> None:
             fail("--number: the report number is empty")
         if draft and final:
             fail("--draft and --final: give one of them")
-        for kind, path in write_campaign_report(
-            db, campaign, out, formats, profile, number, draft, final
-        ).items():
+        progress = Stages("report")  # its stages: `stage`, plain lines
+        written = write_campaign_report(db, campaign, out, formats, profile, number, draft, final)
+        for kind, path in written.items():
             typer.echo(f"wrote {kind}: {path}")
+        progress.done(f"campaign {campaign}: {len(written)} files written in {out}")

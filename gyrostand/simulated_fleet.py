@@ -70,7 +70,7 @@ def unit_plan(plan: Plan, serial: str, c: float, t: float, seed: int) -> Plan:
         {
             "instrument": {"serial": serial},
             "bus": {"seed": seed},
-            "bus.simulator.compass": {"C_gcm2s2": c, "T_s": t},
+            "bus.simulator.compass": {"c_gcm2s2": c, "t_s": t},
         },
     )
 

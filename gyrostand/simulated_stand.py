@@ -9,6 +9,7 @@ from __future__ import annotations
 import threading
 import tomllib
 import uuid
+import warnings
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
@@ -29,6 +30,7 @@ from gyrostand.stand.simconfig import (
     FaultParams,
     SimConfig,
     SimConfigError,
+    renamed_knobs,
     simulator_config,
     simulator_tables,
 )
@@ -69,6 +71,13 @@ class StandSpec:
     def config(self) -> SimConfig:
         """The SimConfig (StandSetupError naming every unknown or inconsistent knob)."""
         tables = simulator_tables()
+        for table, old, new in renamed_knobs(self.simulator):
+            warnings.warn(
+                f"simulated stand: {table}.{old} is spelled {new} now (the old spelling is "
+                "still read)",
+                DeprecationWarning,
+                stacklevel=2,
+            )
         try:
             return simulator_config(tables.model_validate(dict(self.simulator)))
         except ValidationError as exc:
@@ -294,8 +303,8 @@ class SimulatedStand:
 
 
 def _known_knobs(tables: type[BaseModel], loc: tuple[Any, ...]) -> str:
-    """For an unknown knob at `loc`: the one meant when only its case differs (the plan's
-    [instrument] lp_gcm2s2 is the simulator's compass lP_gcm2s2), and the valid names."""
+    """For an unknown knob at `loc`: the one meant when only its case differs (LP_gcm2s2 for
+    lp_gcm2s2), and the valid names."""
     model: Any = tables
     for key in loc[:-1]:
         table = model.model_fields.get(key) if isinstance(key, str) else None

@@ -1,6 +1,6 @@
 """A plan file's text with some keys of some tables set, the rest of the file (comments, order)
 as it was: ``with_keys(text, {"settle": {"hold_s": 2700.0}, "bus.simulator.compass":
-{"T_s": 0.9}})``. A key found in its table's header section is replaced (its line, comment and
+{"t_s": 0.9}})``. A key found in its table's header section is replaced (its line, comment and
 all), a missing key is added under the table's header, a missing table is appended at the end;
 a key set to None is removed.
 

@@ -1,13 +1,15 @@
 """A checked plan in words: its design, N, settle method and bus on one line (`gyrostand plan
-check`, the station's start form), why a design is fragile, and whether its observations are
-spaced to be independent."""
+check`, the station's start form), why a design is fragile, whether its observations are
+spaced to be independent, and keys in an old spelling."""
 
 from __future__ import annotations
 
 import math
+import tomllib
 from dataclasses import dataclass
 
 from gyrostand.plan.model import FEW_RESIDUAL_DOF, FIT_PARAMETERS, K_PROMPT, Plan
+from gyrostand.stand.simconfig import renamed_knobs
 
 
 def describe(plan: Plan) -> str:
@@ -100,3 +102,12 @@ def spacing(plan: Plan) -> Spacing | None:
     rho = touching_correlation(window, tau) * math.exp(-obs.spacing_s / tau)  # rho(W + s)
     needed = independent_spacing_s(window, tau)
     return Spacing(tau, window, obs.spacing_s, rho, needed, MAX_CORRELATION)
+
+
+def old_spellings(plan: Plan) -> list[str]:
+    """A note per `[bus.simulator]` knob the plan's text spells the old way (still read)."""
+    simulator = tomllib.loads(plan.text).get("bus", {}).get("simulator", {})
+    return [
+        f"[bus.simulator.{table}] {old} is spelled {new} now (the old spelling is still read)"
+        for table, old, new in renamed_knobs(simulator)
+    ]

@@ -1,9 +1,12 @@
-"""Write a report's files: HTML, PDF, JSON and the trial-table CSV, named after the campaign."""
+"""Write a report's files: HTML, PDF, JSON and the trial-table CSV, named after the campaign
+and, for any but the default limits profile, the profile (a report against another profile does
+not overwrite the default one)."""
 
+import re
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from gyrostand.report import FORMATS
+from gyrostand.report import FORMATS, SHIPPED
 from gyrostand.report.build import Report
 from gyrostand.report.csv_table import trial_table_csv
 from gyrostand.report.errors import ReportError
@@ -12,9 +15,13 @@ from gyrostand.report.json_doc import report_json
 from gyrostand.report.pdf import Attachment, write_pdf
 
 
-def report_paths(out_dir: Path, campaign_id: int) -> dict[str, Path]:
-    """Where each format goes: campaign-ID.html/.pdf/.json and campaign-ID-trials.csv."""
+def report_paths(out_dir: Path, campaign_id: int, profile_id: str = SHIPPED) -> dict[str, Path]:
+    """Where each format goes: campaign-ID.html/.pdf/.json and campaign-ID-trials.csv for the
+    default profile; campaign-ID-PROFILE.html, ... and campaign-ID-PROFILE-trials.csv for
+    another (its id, characters a file name cannot carry as '_')."""
     stem = f"campaign-{campaign_id}"
+    if profile_id != SHIPPED:
+        stem += "-" + re.sub(r"[^A-Za-z0-9._-]", "_", profile_id)
     return {
         "html": out_dir / f"{stem}.html",
         "pdf": out_dir / f"{stem}.pdf",
@@ -52,7 +59,8 @@ def write_report(
     unknown = [f for f in wanted if f not in FORMATS]
     if unknown:
         raise ReportError(f"unknown report format {unknown[0]!r} (known: {', '.join(FORMATS)})")
-    paths = report_paths(out_dir, report.inputs.identification.campaign_id)
+    campaign_id, profile_id = report.inputs.identification.campaign_id, report.compliance.profile_id
+    paths = report_paths(out_dir, campaign_id, profile_id)
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         written: dict[str, Path] = {}

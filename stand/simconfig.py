@@ -6,6 +6,7 @@ from __future__ import annotations
 import functools
 import math
 import typing
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING, Any
 
@@ -25,15 +26,15 @@ def param(default: Any, help: str) -> Any:
 class CompassParams:
     """The simulated gyrocompass. C and T are the unit's hidden truth that a campaign estimates."""
 
-    C_gcm2s2: float = param(
+    c_gcm2s2: float = param(
         6.0e7, "true reduced elastic compliance C of the gyrosphere, g*cm^2*s^-2 (hidden)"
     )
-    T_s: float = param(
+    t_s: float = param(
         1.1, "true time constant T of the gyrosphere's mass-centre shift, s (hidden)"
     )
-    lP_gcm2s2: float = param(6.57e6, "maximum pendulous moment lP, g*cm^2*s^-2")
-    H1_gcm2s: float = param(1.55e8, "angular momentum H1 of the gyrosphere along N-S, g*cm^2/s")
-    U_rad_s: float = param(7.3e-5, "Earth rotation rate U, rad/s")
+    lp_gcm2s2: float = param(6.57e6, "maximum pendulous moment lP, g*cm^2*s^-2")
+    h1_gcm2s: float = param(1.55e8, "angular momentum H1 of the gyrosphere along N-S, g*cm^2/s")
+    u_rad_s: float = param(7.3e-5, "Earth rotation rate U, rad/s")
     g_cm_s2: float = param(981.0, "gravity g, cm/s^2")
     latitude_deg: float = param(46.5, "latitude phi of the stand, deg")
     rolling_error: bool = param(
@@ -81,11 +82,11 @@ class CompassParams:
             direction_deg,
             amplitude_cm,
             period_s,
-            C_gcm2s2=self.C_gcm2s2,
-            T_s=self.T_s,
-            lP_gcm2s2=self.lP_gcm2s2,
-            H1_gcm2s=self.H1_gcm2s,
-            U_rad_s=self.U_rad_s,
+            C_gcm2s2=self.c_gcm2s2,
+            T_s=self.t_s,
+            lP_gcm2s2=self.lp_gcm2s2,
+            H1_gcm2s=self.h1_gcm2s,
+            U_rad_s=self.u_rad_s,
             g_cm_s2=self.g_cm_s2,
             latitude_deg=self.latitude_deg,
         )
@@ -199,10 +200,10 @@ class SimConfig:
             "heading_rate_hz": self.heading_rate_hz,
             "status_rate_hz": self.status_rate_hz,
             "compass.undamped_period_s": compass.undamped_period_s,
-            "compass.C_gcm2s2": compass.C_gcm2s2,
-            "compass.lP_gcm2s2": compass.lP_gcm2s2,
-            "compass.H1_gcm2s": compass.H1_gcm2s,
-            "compass.U_rad_s": compass.U_rad_s,
+            "compass.c_gcm2s2": compass.c_gcm2s2,
+            "compass.lp_gcm2s2": compass.lp_gcm2s2,
+            "compass.h1_gcm2s": compass.h1_gcm2s,
+            "compass.u_rad_s": compass.u_rad_s,
             "compass.g_cm_s2": compass.g_cm_s2,
             "noise.corr_mu_per_s": noise.corr_mu_per_s,
             "noise.spurious_period_s": noise.spurious_period_s,
@@ -218,7 +219,7 @@ class SimConfig:
             if not (value > 0 and math.isfinite(value))
         ]
         not_negative = {
-            "compass.T_s": compass.T_s,
+            "compass.t_s": compass.t_s,
             "noise.corr_sigma_deg": noise.corr_sigma_deg,
             "noise.white_sigma_deg": noise.white_sigma_deg,
             "noise.quantum_deg": noise.quantum_deg,
@@ -321,19 +322,53 @@ _TABLES = {
 }
 
 
+RENAMED_KNOBS = {
+    "compass": {
+        "C_gcm2s2": "c_gcm2s2",
+        "T_s": "t_s",
+        "lP_gcm2s2": "lp_gcm2s2",
+        "H1_gcm2s": "h1_gcm2s",
+        "U_rad_s": "u_rad_s",
+    }
+}
+"""Knobs spelled as physics symbols before one spelling (lower case, as the plan's
+[instrument] lp_gcm2s2 and the CLI's --lp-gcm2s2) was chosen: table -> {old: new}. The old
+spelling is still read (`renamed_knobs` says what to write instead)."""
+
+
+def renamed_knobs(simulator: Mapping[str, Any]) -> list[tuple[str, str, str]]:
+    """(table, old, new) for each knob of `[bus.simulator]` tables (or of a plugin's stand) in
+    its old spelling."""
+    return [
+        (table, old, new)
+        for table, renamed in RENAMED_KNOBS.items()
+        if isinstance(given := simulator.get(table), Mapping)
+        for old, new in renamed.items()
+        if old in given
+    ]
+
+
 @functools.cache
 def simulator_tables() -> type[BaseModel]:
     """The pydantic model of a plan's `[bus.simulator]` overrides (tables compass, noise,
     faults, stand and the scalar fields of SimConfig), generated from the dataclasses: their
     defaults, and their help texts as descriptions; unknown keys refused."""
-    from pydantic import Field, create_model
+    from pydantic import AliasChoices, Field, create_model
 
     from gyrostand.stand.tables import TABLE_CONFIG
 
-    def model(cls: type, name: str, doc: str, **nested: Any) -> type[BaseModel]:
+    def model(cls: type, name: str, doc: str, table: str = "", **nested: Any) -> type[BaseModel]:
         hints = typing.get_type_hints(cls)
+        old = {new: old for old, new in RENAMED_KNOBS.get(table, {}).items()}
         scalars: dict[str, Any] = {
-            f.name: (hints[f.name], Field(f.default, description=f.metadata["help"]))
+            f.name: (
+                hints[f.name],
+                Field(
+                    f.default,
+                    description=f.metadata["help"],
+                    validation_alias=AliasChoices(f.name, old[f.name]) if f.name in old else None,
+                ),
+            )
             for f in fields(cls)
             if f.name not in nested
         }
@@ -341,7 +376,7 @@ def simulator_tables() -> type[BaseModel]:
 
     nested: dict[str, Any] = {}
     for name, cls in _TABLES.items():
-        table = model(cls, f"Simulator{name.title()}", cls.__doc__ or name)
+        table = model(cls, f"Simulator{name.title()}", cls.__doc__ or name, name)
         nested[name] = (table, Field(default_factory=table))
     return model(SimConfig, "SimulatorTables", "[bus.simulator]: the simulated stand.", **nested)
 

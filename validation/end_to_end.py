@@ -11,8 +11,8 @@ before the compass's damped transient has died out (the settle point of a damped
 oscillation, Bezvesilna & Gura) carries part of it into <delta> and biases C and T.
 
 Each campaign draws the compass's true C uniformly in 3-12 x 10^7 g cm^2 s^-2 and T in 0.4-1.4 s
-(inside the plan's admissible ranges; set in the plan as [bus.simulator.compass] C_gcm2s2 and
-T_s) and a simulator seed of its own ([bus] seed), and runs in a fresh temporary folder (plan,
+(inside the plan's admissible ranges; set in the plan as [bus.simulator.compass] c_gcm2s2 and
+t_s) and a simulator seed of its own ([bus] seed), and runs in a fresh temporary folder (plan,
 database, raw CAN logs; deleted afterwards). Every criterion of CRITERIA runs on the same draws
 (a paired comparison). A failed trial is counted and the campaign goes on (the analysis uses the
 trials it has); a campaign that raises is counted with its error and the run goes on.
@@ -135,7 +135,7 @@ def plan_text(criterion: str, draw: Draw, folder: Path, base: str | None = None)
             "campaign": {"raw_log_dir": str(folder / "raw")},
             "settle": settle,
             "bus": {"seed": draw.bus_seed},
-            "bus.simulator.compass": {"C_gcm2s2": draw.C_gcm2s2, "T_s": draw.T_s},
+            "bus.simulator.compass": {"c_gcm2s2": draw.C_gcm2s2, "t_s": draw.T_s},
         },
     )
 

@@ -27,7 +27,7 @@ from gyrostand.report.stored import commanded_motion, stored_inputs
 from gyrostand.stand.simconfig import CompassParams
 
 ROOT = Path(__file__).resolve().parents[1]
-TRUTH = {"C_gcm2s2": CompassParams.C_gcm2s2, "T_s": CompassParams.T_s}
+TRUTH = {"C_gcm2s2": CompassParams.c_gcm2s2, "T_s": CompassParams.t_s}
 
 
 def campaign(seed: int, folder: Path, tables: dict[str, dict] | None = None) -> Path:

@@ -23,8 +23,10 @@ from sqlalchemy import select
 from gyrostand.acquisition.early_settle import (
     MIN_BLOCKS,
     EarlySettle,
+    SettleCheck,
     TransientRecord,
     band_settled,
+    describe,
     hold_blocks,
     predict_band_settle_s,
 )
@@ -140,6 +142,21 @@ def test_the_state_carries_over_a_step() -> None:
     fit, j = record.fit(ESTIMATE.model)
     assert j == 1 and fit.settle_point(j)[0] == pytest.approx(second, abs=1e-9)
     assert fit.settle_point(0)[0] == pytest.approx(first, abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("settle_s", "band_s", "ending"),
+    [(60.0, 900.0, "band criterion held after 900.0 s: 840.0 s saved"),
+     (900.0, 60.0, "band criterion held after 60.0 s: no time saved (settled 840.0 s after it)")],
+)  # fmt: skip
+def test_the_event_never_reads_a_negative_saving(
+    settle_s: float, band_s: float, ending: str
+) -> None:
+    """Before: a series whose estimate became stable after the band criterion held read
+    "-840.0 s saved"."""
+    outcome = SettleOutcome("estimate", settle_s, 0.3, 0.002, settle_s, 0.3, band_s=band_s)
+    check = SettleCheck(settle_s, 0.3, 0.002, 0.001, 0.004, ESTIMATE, chained=False)
+    assert describe(outcome, check).endswith(ending)
 
 
 def test_band_time_predicted_from_the_fit_is_the_band_criterion_on_the_true_means() -> None:

@@ -133,10 +133,10 @@ def test_fitted_c_and_t_cover_the_simulators_truth(campaign) -> None:
     fit = analysis.fit
     t95 = stats.t.ppf(0.975, fit.dof)
     truth = CompassParams()
-    for name, true in (("C_gcm2s2", truth.C_gcm2s2), ("T_s", truth.T_s)):
+    for name, true in (("C_gcm2s2", truth.c_gcm2s2), ("T_s", truth.t_s)):
         est, se = fit.estimates[name], fit.std_errors[name]
         assert abs(est - true) <= t95 * se, (name, est, se, true)
-    assert fit.std_errors["C_gcm2s2"] < 0.2 * truth.C_gcm2s2  # a real estimate, not a shrug
+    assert fit.std_errors["C_gcm2s2"] < 0.2 * truth.c_gcm2s2  # a real estimate, not a shrug
 
 
 def test_replay_of_the_raw_log_gives_the_same_campaign(campaign) -> None:

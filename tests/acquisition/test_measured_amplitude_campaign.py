@@ -19,7 +19,7 @@ from gyrostand.cli import app
 from gyrostand.stand.simconfig import CompassParams
 
 ROOT = Path(__file__).resolve().parents[2]
-TRUE_C, TRUE_T = CompassParams.C_gcm2s2, CompassParams.T_s
+TRUE_C, TRUE_T = CompassParams.c_gcm2s2, CompassParams.t_s
 MODEL_ONLY = ("expected_se_deg", "tolerance_fraction", "stable_estimates", "transient_fraction")
 SHORT_LOW_NOISE = {
     "campaign": {"n_obs": 3},

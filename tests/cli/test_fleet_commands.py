@@ -4,6 +4,7 @@ set B apart and no other (`fleet analyze`, text and JSON); each campaign stores 
 the one-line refusals of analyze, report and simulate."""
 
 import json
+import re
 import shlex
 import sqlite3
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ class Fleet:
     db: str
     folder: Path
     output: str
+    progress: str  # stderr
 
 
 def gyrostand(*args: str) -> str:
@@ -49,11 +51,15 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Fleet:
     text = plan_text(TRIALS, n_obs=10, database=db, raw_dir=str(folder / "raw")) + FAST_SIM
     plan = folder / "plan.toml"
     plan.write_text(text.replace("acquisition_only = true", "acquisition_only = false"))
-    output = gyrostand(
-        *("fleet", "simulate", "--db", db, "--plan", str(plan), "--model", MODEL),
-        *("--groups", "3", "--units-per-group", "2", "--shift", "0.4", "--seed", "3"),
+    result = CliRunner().invoke(
+        app,
+        [
+            *("fleet", "simulate", "--db", db, "--plan", str(plan), "--model", MODEL),
+            *("--groups", "3", "--units-per-group", "2", "--shift", "0.4", "--seed", "3"),
+        ],
     )
-    return Fleet(db, folder, output)
+    assert result.exit_code == 0, result.output
+    return Fleet(db, folder, result.stdout, result.stderr)
 
 
 def analysis(fleet: Fleet) -> dict[str, object]:
@@ -81,6 +87,17 @@ def test_simulate_says_what_it_made_and_what_to_run_next(fleet: Fleet) -> None:
     assert f"  gyrostand fleet report {where} -o fleet.pdf" in lines
 
 
+def test_simulate_tells_its_progress_on_stderr(fleet: Fleet) -> None:
+    """Off a terminal: a plain line per unit, then the summary with the time taken."""
+    lines = fleet.progress.splitlines()
+    assert "\x1b" not in fleet.progress
+    assert lines[:-1] == [
+        "fleet simulate: running and analysing unit 1/6 on the simulated stand",
+        *(f"fleet simulate: unit {k}/6 done; running unit {k + 1}" for k in range(1, 6)),
+    ]
+    assert re.fullmatch(r"fleet simulate: 6 campaigns run and analysed \(\d+\.\d s\)", lines[-1])
+
+
 def test_each_campaign_stores_the_plan_it_ran(fleet: Fleet) -> None:
     printed = {
         line.split(":")[1].split()[0]: float(line.split("C = ")[1].split("e7")[0]) * 1e7
@@ -94,7 +111,7 @@ def test_each_campaign_stores_the_plan_it_ran(fleet: Fleet) -> None:
             assert plan.instrument.model == MODEL
             serial = plan.instrument.serial
             compass = plan.bus.simulator.compass
-            assert compass.C_gcm2s2 == pytest.approx(printed[serial], rel=1e-3)
+            assert compass.c_gcm2s2 == pytest.approx(printed[serial], rel=1e-3)
     assert len(printed) == 6
 
 

@@ -62,7 +62,8 @@ def test_report_says_what_it_is_doing(stand: Stand, tmp_path: Path) -> None:
     stages = [line for line in result.stderr.splitlines() if line.startswith("report: ")]
     assert len(stages) >= 2, result.stderr
     assert "campaign 1" in stages[0] and "analys" in stages[0]
-    assert "json, csv" in stages[-1] and str(tmp_path) in stages[-1]
+    assert "json, csv" in stages[-2] and str(tmp_path) in stages[-2]
+    assert stages[-1].startswith(f"report: campaign 1: 2 files written in {tmp_path} (")
     assert "wrote json" in result.stdout
 
 

@@ -37,7 +37,7 @@ def test_two_campaigns_into_one_database_at_once(tmp_path: Path, db_url: str) ->
     campaign = str(row["id"])  # (which stand stored its campaign first is a race)
     analysed = cli.invoke(app, ["analyze", campaign, "--json", "--db", db_url])
     assert analysed.exit_code == 0, analysed.output
-    fit = json.loads(analysed.output)["fit"]
+    fit = json.loads(analysed.stdout)["fit"]
     assert fit["converged"] and fit["trial_indices"] == [1, 2, 3]
     out = tmp_path / "reports"
     args = ["report", campaign, "--db", db_url, "--out", str(out), "--format", "json,html"]

@@ -119,7 +119,7 @@ def content(url: str, campaign_id: int) -> tuple[str, list[tuple[Any, ...]], lis
 def fit_of(args: list[str]) -> dict[str, Any]:
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
-    return json.loads(result.output)["fit"]["estimates"]
+    return json.loads(result.stdout)["fit"]["estimates"]
 
 
 def test_every_table_is_handled_by_merge() -> None:

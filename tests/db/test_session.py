@@ -3,6 +3,7 @@
 import json
 import shutil
 import sqlite3
+import sys
 from pathlib import Path
 
 import pytest
@@ -12,7 +13,9 @@ from alembic.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import create_engine, text
 from sqlalchemy.orm import Session, sessionmaker
+from typer.testing import CliRunner
 
+from gyrostand.cli import app
 from gyrostand.db.models import Base, Event, Observation
 from gyrostand.db.session import (
     MIGRATIONS_DIR,
@@ -25,6 +28,7 @@ from gyrostand.db.session import (
     sqlite_url,
 )
 from tests.db.conftest import make_campaign
+from tests.postgres import Server
 
 HEAD = ScriptDirectory.from_config(alembic_config()).get_current_head()
 NEXT = f"{int(HEAD) + 1:04d}"  # a future release's revision
@@ -261,3 +265,33 @@ def test_0010_states_the_heading_source_of_earlier_campaigns(db_path: Path) -> N
     engine.dispose()
     with sqlite3.connect(db_path) as conn:
         assert conn.execute("SELECT count(*) FROM trial").fetchone() == (3,)
+
+
+@pytest.mark.parametrize(
+    "url", ["postgresql+psycopg://lab@/lab?host=/run/postgresql", "postgresql://lab@/lab"]
+)
+def test_a_missing_postgresql_driver_names_the_install(
+    url: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Before: "the database driver for postgresql+psycopg is not installed (...)", no more."""
+    monkeypatch.setitem(sys.modules, "psycopg", None)  # `import psycopg` fails, as uninstalled
+    result = CliRunner().invoke(app, ["campaign", "list", "--db", url])
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert result.stderr.startswith(f"gyrostand: error: {url}: the database driver for ")
+    assert result.stderr.rstrip().endswith(
+        "is not installed (import of psycopg halted; None in sys.modules); gyrostand's "
+        "PostgreSQL driver is psycopg: pip install 'gyrostand[postgres]' and give a "
+        "postgresql+psycopg:// URL"
+    )
+
+
+def test_a_missing_postgresql_database_says_to_create_it(postgres_server: Server) -> None:
+    url = postgres_server.url("nosuchlab")
+    result = CliRunner().invoke(app, ["campaign", "list", "--db", url])
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert 'FATAL:  database "nosuchlab" does not exist; gyrostand makes its tables, not the ' in (
+        result.stderr
+    )
+    assert result.stderr.rstrip().endswith(
+        "create it first (createdb nosuchlab, as a role allowed to)"
+    )

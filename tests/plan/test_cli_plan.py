@@ -315,3 +315,27 @@ def test_the_summary_names_the_simulated_stand_s_pace(tmp_path: Path, bus: str, 
     plan.write_text(PAPER.read_text().replace('timing = "virtual"', bus, 1))
     code, out = gyrostand("plan", "check", plan)
     assert code == 0 and said in out and "realtime time" not in out, out
+
+
+def test_the_compass_knobs_have_one_spelling_the_old_one_read_with_a_note(tmp_path: Path) -> None:
+    """c_gcm2s2, t_s, lp_gcm2s2 as [instrument] and the CLI's --c-gcm2s2 spell them; before,
+    [bus.simulator.compass] refused them (only C_gcm2s2, T_s, lP_gcm2s2 were known)."""
+    for spelling, notes in (("c_gcm2s2", False), ("C_gcm2s2", True)):
+        plan = tmp_path / f"{spelling}.toml"
+        t = "T_s" if notes else "t_s"
+        compass = f"\n[bus.simulator.compass]\n{spelling} = 5.0e7\n{t} = 0.9\n"
+        plan.write_text(PAPER.read_text().replace("\n[[trials]]", compass + "\n[[trials]]", 1))
+        code, out = gyrostand("plan", "check", plan)
+        assert code == 0, out
+        simulator = parse_plan(plan.read_text()).bus.simulator
+        assert (simulator.compass.c_gcm2s2, simulator.compass.t_s) == (5.0e7, 0.9)
+        lines = [line for line in out.splitlines() if ": note — " in line]
+        assert lines == (
+            [
+                f"{plan}: note — [bus.simulator.compass] {old} is spelled {new} now (the old "
+                "spelling is still read)"
+                for old, new in (("C_gcm2s2", "c_gcm2s2"), ("T_s", "t_s"))
+            ]
+            if notes
+            else []
+        )

@@ -23,12 +23,12 @@ def test_keys_are_set_added_and_removed_and_the_rest_kept() -> None:
         TEXT,
         {
             "settle": {"method": "band", "expected_se_deg": None, "band_deg": 0.02},
-            "bus.simulator.compass": {"T_s": 0.9},
+            "bus.simulator.compass": {"t_s": 0.9},
         },
     )
     doc = tomllib.loads(out)
     assert doc["settle"] == {"method": "band", "band_deg": 0.02, "hold_s": 1800.0}
-    assert doc["bus"] == {"seed": 1, "simulator": {"compass": {"T_s": 0.9}}}
+    assert doc["bus"] == {"seed": 1, "simulator": {"compass": {"t_s": 0.9}}}
     assert out.startswith("# a plan\n[settle]  # when to observe\n")
     assert with_keys(TEXT, {"settle": {"absent_key": None}}) == TEXT
 

@@ -1,6 +1,7 @@
 """`gyrostand report` and `gyrostand analyze CAMPAIGN_ID --db`: files, JSON, one-line errors."""
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -36,7 +37,8 @@ def test_report_writes_the_asked_formats(stored: Stored, tmp_path: Path) -> None
     html = runner.invoke(app, [*args, "--format", "html"])
     stages = [line for line in html.stderr.splitlines() if line.startswith("report: ")]
     assert stages[1].startswith("report: a DRAFT: it lacks report number, laboratory, ")
-    assert stages[2:] == [f"report: writing html to {out}", "report: drawing the figures"]
+    assert stages[2:-1] == [f"report: writing html to {out}", "report: drawing the figures"]
+    assert re.fullmatch(rf"report: campaign 1: 1 files written in {out} \(\d+\.\d s\)", stages[-1])
 
 
 @pytest.mark.parametrize(
@@ -75,7 +77,8 @@ def test_report_takes_each_shipped_profile(stored: Stored, tmp_path: Path, profi
     args = ["report", "1", "--db", stored.url, "--out", str(out), "-f", "json"]
     result = runner.invoke(app, [*args, "--profile", profile])
     assert result.exit_code == 0, result.output
-    compliance = json.loads((out / "campaign-1.json").read_text())["compliance"]
+    name = "campaign-1.json" if profile == "imo-a424" else f"campaign-1-{profile}.json"
+    compliance = json.loads((out / name).read_text())["compliance"]
     assert compliance["profile_id"] == profile
     # no shipped limit is verified by a laboratory; the ISO draft's stand test moves 3 axes
     decision = "NOT ASSESSED" if profile == "iso-22090-1" else "INCONCLUSIVE"
@@ -83,6 +86,24 @@ def test_report_takes_each_shipped_profile(stored: Stored, tmp_path: Path, profi
     assert compliance["decision_rule"] == "guarded"
     worst = next(i["worst"] for i in compliance["predictions"] if i["worst"] is not None)
     assert worst["angle_deg"] == pytest.approx(20.0) and worst["period_s"] > 10.0
+
+
+def test_a_report_against_another_profile_keeps_the_earlier_one(
+    stored: Stored, tmp_path: Path
+) -> None:
+    """Before: every profile wrote campaign-1.json, the last overwriting the first."""
+    out = tmp_path / "out"
+    args = ["report", "1", "--db", stored.url, "--out", str(out), "-f", "json,csv"]
+    for profile in ("imo-a424", "imo-a821"):
+        assert runner.invoke(app, [*args, "--profile", profile]).exit_code == 0
+    assert sorted(p.name for p in out.iterdir()) == [
+        "campaign-1-imo-a821-trials.csv",
+        "campaign-1-imo-a821.json",
+        "campaign-1-trials.csv",
+        "campaign-1.json",
+    ]
+    for name, profile in (("campaign-1", "imo-a424"), ("campaign-1-imo-a821", "imo-a821")):
+        assert json.loads((out / f"{name}.json").read_text())["compliance"]["profile_id"] == profile
 
 
 def test_report_help_lists_the_shipped_profiles() -> None:

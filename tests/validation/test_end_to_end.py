@@ -56,8 +56,8 @@ def test_a_campaign_row_agrees_with_the_database(tmp_path: Path) -> None:
         connection.close()
     stored = tomllib.loads(plan_toml)
     assert stored["bus"]["seed"] == draw.bus_seed
-    assert stored["bus"]["simulator"]["compass"]["C_gcm2s2"] == draw.C_gcm2s2 == row["C"]["true"]
-    assert stored["bus"]["simulator"]["compass"]["T_s"] == draw.T_s == row["T"]["true"]
+    assert stored["bus"]["simulator"]["compass"]["c_gcm2s2"] == draw.C_gcm2s2 == row["C"]["true"]
+    assert stored["bus"]["simulator"]["compass"]["t_s"] == draw.T_s == row["T"]["true"]
     assert stored["campaign"]["n_obs"] == 3
 
     result = CliRunner().invoke(

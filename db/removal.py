@@ -1,0 +1,118 @@
+"""Removing campaigns from a database (`gyrostand campaign remove`): in one transaction, each
+campaign's rows go (the database's foreign keys cascade) and a `CampaignRemoval` row stays,
+with the SHA-256 of its content and a record of what it was; its raw log files are kept, or
+deleted once the removal is committed when no campaign left refers to them."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+
+from gyrostand.db.lease import held_elsewhere
+from gyrostand.db.merge import campaign_rows, content_sha256
+from gyrostand.db.models import (
+    Campaign,
+    CampaignOrigin,
+    CampaignRemoval,
+    Instrument,
+    RawLogSegment,
+)
+from gyrostand.db.queries import as_utc
+from gyrostand.db.session import writer
+from gyrostand.devices.serial_replay import serial_log_path
+
+
+class RemovalRefused(ValueError):
+    """Nothing was removed (one line naming the campaign and why)."""
+
+
+@dataclass(frozen=True)
+class Removed:
+    """A removed campaign: its id, the SHA-256 of its content, the id of its removal record,
+    and its raw log files (deleted, or kept where they are)."""
+
+    campaign_id: int
+    content_sha256: str
+    removal_id: int
+    raw_logs: tuple[str, ...]
+
+
+def _record(session: Session, campaign: Campaign) -> dict[str, Any]:
+    """What the campaign was, for its removal record."""
+    instrument = session.get_one(Instrument, campaign.instrument_id)
+    origin = session.scalar(select(CampaignOrigin).where(CampaignOrigin.campaign_id == campaign.id))
+    return {
+        "instrument": {"model": instrument.model, "serial": instrument.serial},
+        "status": campaign.status,
+        "source": campaign.source,
+        "operator": campaign.operator,
+        "created_at": as_utc(campaign.created_at).isoformat(),
+        "finished_at": None
+        if campaign.finished_at is None
+        else as_utc(campaign.finished_at).isoformat(),
+        "plan_hash": campaign.plan_hash,
+        "labels": {label.key: label.value for label in campaign.labels},
+        "origin": None
+        if origin is None
+        else {
+            "source_database": origin.source_database,
+            "source_campaign_id": origin.source_campaign_id,
+            "merged_from": origin.merged_from,
+        },
+        "raw_logs": [
+            {"path": log.path, "sha256": log.sha256, "frames": log.frames}
+            for log in campaign.raw_logs
+        ],
+        "analysis_runs": len(campaign.analysis_runs),
+    }
+
+
+def remove_campaigns(
+    sessions: sessionmaker[Session],
+    campaign_ids: Sequence[int],
+    *,
+    removed_by: str,
+    reason: str | None,
+    delete_raw_logs: bool,
+    software_version: str,
+) -> list[Removed]:
+    """Remove the campaigns in one transaction (RemovalRefused, nothing removed: a campaign
+    that is not there, or that a live process is acquiring), recording each removal; then,
+    with `delete_raw_logs`, delete their raw log files no remaining campaign refers to."""
+    ids = list(dict.fromkeys(campaign_ids))
+    removed: list[Removed] = []
+    with writer(sessions).begin() as session:
+        for campaign_id in ids:
+            campaign = session.get(Campaign, campaign_id)
+            if campaign is None:
+                raise RemovalRefused(f"no campaign {campaign_id} in the database; nothing removed")
+            if held_elsewhere(sessions, campaign_id):
+                raise RemovalRefused(
+                    f"campaign {campaign_id} is being acquired by a live process: stop it "
+                    "first; nothing removed"
+                )
+            logs = tuple(log.path for log in campaign.raw_logs)
+            record = CampaignRemoval(
+                campaign_id=campaign_id,
+                content_sha256=content_sha256(campaign_rows(session, campaign_id)),
+                record=_record(session, campaign),
+                removed_by=removed_by,
+                reason=reason,
+                raw_logs=("deleted" if delete_raw_logs else "kept") if logs else "none",
+                software_version=software_version,
+            )
+            session.add(record)
+            session.delete(campaign)
+            session.flush()
+            removed.append(Removed(campaign_id, record.content_sha256, record.id, logs))
+        still_used = set(session.scalars(select(RawLogSegment.path)))
+    if delete_raw_logs:
+        for log in {p for r in removed for p in r.raw_logs} - still_used:
+            Path(log).unlink(missing_ok=True)
+            serial_log_path(log).unlink(missing_ok=True)
+    return removed
