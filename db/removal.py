@@ -5,7 +5,7 @@ deleted once the removal is committed when no campaign left refers to them."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,7 +24,6 @@ from gyrostand.db.models import (
 )
 from gyrostand.db.queries import as_utc
 from gyrostand.db.session import writer
-from gyrostand.devices.serial_replay import serial_log_path
 
 
 class RemovalRefused(ValueError):
@@ -80,10 +79,12 @@ def remove_campaigns(
     reason: str | None,
     delete_raw_logs: bool,
     software_version: str,
+    files_of: Callable[[str], Sequence[Path]] = lambda log: (Path(log),),
 ) -> list[Removed]:
     """Remove the campaigns in one transaction (RemovalRefused, nothing removed: a campaign
     that is not there, or that a live process is acquiring), recording each removal; then,
-    with `delete_raw_logs`, delete their raw log files no remaining campaign refers to."""
+    with `delete_raw_logs`, delete the files (`files_of` a raw log: it and the logs beside
+    it) of their raw logs no remaining campaign refers to."""
     ids = list(dict.fromkeys(campaign_ids))
     removed: list[Removed] = []
     with writer(sessions).begin() as session:
@@ -113,6 +114,6 @@ def remove_campaigns(
         still_used = set(session.scalars(select(RawLogSegment.path)))
     if delete_raw_logs:
         for log in {p for r in removed for p in r.raw_logs} - still_used:
-            Path(log).unlink(missing_ok=True)
-            serial_log_path(log).unlink(missing_ok=True)
+            for path in files_of(log):
+                path.unlink(missing_ok=True)
     return removed

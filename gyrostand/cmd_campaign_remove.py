@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import getpass
 import sys
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -67,6 +68,7 @@ def register(campaign_app: typer.Typer) -> None:
         from gyrostand import SOFTWARE_VERSION
         from gyrostand.db.models import Campaign
         from gyrostand.db.removal import RemovalRefused, remove_campaigns
+        from gyrostand.devices.serial_replay import serial_log_path
 
         remover = (by if by is not None else _login()).strip()
         if not remover:
@@ -101,6 +103,7 @@ def register(campaign_app: typer.Typer) -> None:
                 reason=None if reason is None else reason.strip(),
                 delete_raw_logs=delete_raw_logs,
                 software_version=SOFTWARE_VERSION,
+                files_of=lambda log: (Path(log), serial_log_path(log)),  # a serial log beside
             )
         except RemovalRefused as error:
             fail(str(error))

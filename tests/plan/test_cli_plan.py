@@ -329,7 +329,7 @@ def test_the_compass_knobs_have_one_spelling_the_old_one_read_with_a_note(tmp_pa
         assert code == 0, out
         simulator = parse_plan(plan.read_text()).bus.simulator
         assert (simulator.compass.c_gcm2s2, simulator.compass.t_s) == (5.0e7, 0.9)
-        lines = [line for line in out.splitlines() if ": note — " in line]
+        lines = [line for line in out.splitlines() if " is spelled " in line]
         assert lines == (
             [
                 f"{plan}: note — [bus.simulator.compass] {old} is spelled {new} now (the old "
