@@ -771,6 +771,14 @@ def register(app: typer.Typer) -> None:
                 readable.append(check_replay_log(log))
             except ReplayLogError as exc:
                 fail(f"cannot replay {exc}")
+        if checked.compass.protocol == "iec61162":  # its serial logs, before any progress line
+            from gyrostand.devices.serial_replay import check_serial_logs
+            from gyrostand.frames.logfile import LogFileError
+
+            try:
+                check_serial_logs(logs, checked.bus.timing == "virtual")
+            except LogFileError as exc:
+                fail(f"cannot replay {exc}")
         with Stages("replay") as stage:
             sessions = open_db(checked.database, must_exist=False)
             stage(f"logs read; re-deriving the observations into {shown_url(checked.database)}")
