@@ -35,6 +35,11 @@ test-slow: $(STAMP)
 bench: $(STAMP)
 	@for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
+# The two-process NMEA 2000 campaign over udp_multicast on the host (real time; not in CI's budget)
+.PHONY: test-processes
+test-processes: $(STAMP)
+	GYROSTAND_PROCESS_TESTS=1 $(VENV)/bin/pytest -m slow tests/devices/test_n2k_processes.py
+
 # The `socketcan` tests on a real SocketCAN bus: in a small Linux VM with vcan0 (tools/vcan-vm,
 # docs/socketcan.md). On a machine that has vcan0 itself: .venv/bin/pytest -m socketcan
 .PHONY: test-socketcan

@@ -4,10 +4,15 @@ time, sped up) and `gyrostand campaign run` as separate processes, the compass t
 reception of its frames, another heading sensor on the bus and an address change mid-campaign.
 As short as a campaign the analysis can fit gets: the suite's three fit trials, three
 observations a series and short windows, shorter settling (the stand's speed-up is the highest
-the reception timing allows, the suite's 25x)."""
+the reception timing allows, the suite's 25x).
+
+Opt-in (`make test-processes`, GYROSTAND_PROCESS_TESTS=1): a real-time campaign at 25x with the
+shortest windows the fit allows. In CI beside the other slow tests it took 27 s of the 15-minute
+budget and, with the other core busy, once left T unidentifiable (the fit failed)."""
 
 from __future__ import annotations
 
+import os
 import socket
 import uuid
 
@@ -30,6 +35,10 @@ def multicast_group() -> str:
     return f"239.74.{uuid.uuid4().int % 250 + 1}.{uuid.uuid4().int % 250 + 1}"
 
 
+@pytest.mark.skipif(
+    os.environ.get("GYROSTAND_PROCESS_TESTS") != "1",
+    reason="opt-in: make test-processes (a real-time two-process campaign, ~30 s idle)",
+)
 def test_nmea2000_campaign_in_two_processes_over_udp_multicast(tmp_path) -> None:
     try:
         import msgpack  # noqa: F401  (python-can's udp_multicast needs it)
