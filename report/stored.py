@@ -460,21 +460,6 @@ def analyze_stored(sessions: sessionmaker[Session], campaign_id: int) -> StoredA
     return record_run(sessions, campaign_id, stored_analysis(sessions, campaign_id))
 
 
-def record_analysis(sessions: sessionmaker[Session], campaign_id: int) -> str | None:
-    """`analyze_stored` for a campaign that just completed, so that its first report rebuilds
-    the analysis instead of computing it: None, or why it cannot be analysed (its report says
-    so in its place, or the database refused the run: the report records it)."""
-    from sqlalchemy.exc import OperationalError
-
-    from gyrostand.frames.logfile import LogFileError
-
-    try:
-        analyze_stored(sessions, campaign_id)
-    except (AnalysisError, LogFileError, OperationalError) as exc:  # the report tries again
-        return str(exc)
-    return None
-
-
 # -------------------------------------------------------------------------- report inputs
 
 

@@ -95,7 +95,7 @@ class OtherSensor(threading.Thread):
     reason="too slow for the software-emulated VM (no usable KVM, tools/vcan-vm): a compass "
     "timed by reception needs the stand in real time, and at 25x emulated Python did not finish "
     "within the VM's 1500 s; the same two-process campaign runs on the host over python-can's "
-    "udp_multicast (tests/devices/test_n2k_processes.py)",
+    "udp_multicast (tests/devices/test_n2k_processes.py, make test-processes)",
 )
 def test_nmea2000_campaign_over_socketcan(tmp_path, channel) -> None:
     nmea2000_campaign(tmp_path, "socketcan", channel)
