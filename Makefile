@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 	@tools/system-deps
 	@test -x $(PY) || python3 -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q --no-compile -e '.[dev,pdf]'  # (bytecode: on first import)
+	$(PY) -m pip install -q -e '.[dev,pdf]'
 	@rm -f $(VENV)/.installed-* && touch $(STAMP)
 
 demo: $(STAMP)
