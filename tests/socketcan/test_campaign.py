@@ -73,6 +73,11 @@ class Run:
     capture: Path  # candump -L of everything on the bus during the campaign
     analyze: Process | None  # `gyrostand analyze 1 --json`, started when the campaign ended
 
+    def failures(self) -> str:
+        """The campaign's output and its failed trials' reasons, for an assertion's message."""
+        sql = "SELECT \"index\", failure_reason FROM trial WHERE status = 'failed'"
+        return f"{self.campaign.output()}\nfailed trials: {query(self.db, sql)}"
+
     def analysis(self) -> dict:
         assert self.analyze is not None, self.campaign.output()
         assert self.analyze.popen.wait(TIMEOUT_S) == 0, self.analyze.output()
@@ -165,7 +170,7 @@ def test_malformed_heading_frame_is_recorded_as_an_acquisition_event(run: Run) -
         trial,
     )
     assert ("warning", f"observation {k}: invalid_frame=1") in events
-    assert run.campaign.popen.returncode == 0
+    assert run.campaign.popen.returncode == 0, run.failures()
     assert "Traceback" not in run.campaign.stderr.read_text()
 
 
@@ -212,7 +217,7 @@ def test_interface_down_mid_campaign_fails_the_trial_and_pauses_resumably(
 
 def test_campaign_over_socketcan_completes_into_sqlite_and_is_analysed(run: Run) -> None:
     """Last in the module: by now the background analysis has had its time."""
-    assert run.campaign.popen.returncode == 0, run.campaign.output()
+    assert run.campaign.popen.returncode == 0, run.failures()
     assert query(run.db, "SELECT status FROM campaign") == [("completed",)]
     assert query(run.db, 'SELECT "index", status FROM trial ORDER BY "index"') == [
         (i, "completed") for i in range(1, len(TRIALS) + 1)
