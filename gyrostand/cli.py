@@ -20,7 +20,6 @@ from typer.core import TyperArgument, TyperCommand, TyperGroup
 from typer.models import DefaultPlaceholder
 
 from gyrostand import (
-    SOFTWARE_VERSION,
     cmd_analyze,
     cmd_campaign,
     cmd_data,
@@ -165,7 +164,9 @@ app = typer.Typer(
 
 
 def _version(value: bool) -> None:
-    if value:
+    if value:  # (read from the package's metadata only here: importlib.metadata costs)
+        from gyrostand import SOFTWARE_VERSION
+
         typer.echo(SOFTWARE_VERSION)
         raise typer.Exit()
 
