@@ -3,11 +3,12 @@ catch it): one line on stderr and exit code 130 (128 + SIGINT, as a shell report
 library only: it is imported first, before anything a Ctrl-C could interrupt."""
 
 import sys
+from typing import NoReturn
 
 EXIT_INTERRUPTED = 130
 
 
-def interrupted() -> None:
+def interrupted() -> NoReturn:
     """Say so in one line and exit with code 130."""
     sys.stderr.write("gyrostand: interrupted\n")
     sys.exit(EXIT_INTERRUPTED)
