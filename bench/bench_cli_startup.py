@@ -6,10 +6,14 @@ the heaviest top-level packages it imported.
 
 Target (issue 36): each <= 0.3 s on an idle machine: OK or NOT per command, on the best wall
 time (the load average is printed: on a busy machine the figures are not the idle ones).
-What the commands cannot do without: Python and typer (~0.1 s; typer coerces the arguments of a
-command with pydantic); `plan check` pydantic (the plan model) and python-can, cantools and
-numpy (the DBC's ranges, checked with the stand protocol's codec); `campaign status` and
-`campaign list` SQLAlchemy and Alembic (the schema version is checked before anything is read).
+What the commands cannot do without (each command line imports only its command's module):
+Python and typer (typer coerces a command's arguments with pydantic TypeAdapters, so every
+command but `--version` and `--help` imports pydantic); `--help` typer's rich help, whose module
+imports rich.markdown (markdown_it, pygments) and rich.traceback (attrs) though they are not
+used; `plan check` pydantic (the plan model's ~35 classes) and cantools (which imports
+python-can) for the DBC's ranges; `campaign status` and `campaign list` SQLAlchemy with its ORM
+(the models and their mapper configuration). A current database's schema version is read
+without Alembic. A development install (`pip install -e`) adds its import finder's start-up.
 
 The commands run with the bytecode cache allowed (PYTHONDONTWRITEBYTECODE removed from their
 environment, and each command run once before it is timed, which writes the cache), as on a

@@ -119,6 +119,7 @@ class _Commands(MutableMapping[str, Any]):
             return commands_of(module)[name]
         except KeyboardInterrupt:  # in the module's imports: as in the start-up's (__main__)
             interrupted()
+            raise  # (interrupted() exits)
 
     def __setitem__(self, name: str, command: Any) -> None:
         self._added[name] = command

@@ -3,12 +3,11 @@ catch it): one line on stderr and exit code 130 (128 + SIGINT, as a shell report
 library only: it is imported first, before anything a Ctrl-C could interrupt."""
 
 import sys
-from typing import NoReturn
 
 EXIT_INTERRUPTED = 130
 
 
-def interrupted() -> NoReturn:
+def interrupted() -> None:
     """Say so in one line and exit with code 130."""
     sys.stderr.write("gyrostand: interrupted\n")
     sys.exit(EXIT_INTERRUPTED)
