@@ -18,11 +18,11 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from gyrostand.analysis.errors import AnalysisError
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # numpy on demand too: `plan check` uses the closed forms, no arrays
+    import numpy as np
+
     from gyrostand.analysis.noise import CorrelationModel
 
 MAX_CORRELATION = 0.1  # successive observations more correlated break the tests' independence
@@ -31,6 +31,8 @@ MAX_CORRELATION = 0.1  # successive observations more correlated break the tests
 def variance_inflation(rho: np.ndarray, n: int) -> float:
     """f = 1 + 2 sum_{k=1}^{N-1} (1 - k/N) rho_k, rho[k - 1] the correlation at lag k (lags
     beyond the array count as uncorrelated)."""
+    import numpy as np
+
     rho = np.asarray(rho, dtype=float)[: n - 1]
     k = np.arange(1, rho.size + 1)
     return float(1.0 + 2.0 * np.sum((1.0 - k / n) * rho))

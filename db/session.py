@@ -2,6 +2,10 @@
 
 Any SQLAlchemy URL works; only `_configure_sqlite` is SQLite-specific and it is attached only for
 the SQLite dialect. The schema is owned by the Alembic migrations in `db/migrations`.
+
+Alembic is imported only to migrate (or refuse) a database whose schema is not `SCHEMA_HEAD`:
+opening a current one reads `alembic_version` with SQLAlchemy alone (a command that only reads,
+`campaign status`, starts without Alembic's import and its reading of every migration file).
 """
 
 from __future__ import annotations
@@ -9,12 +13,8 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from alembic import command
-from alembic.config import Config
-from alembic.runtime.migration import MigrationContext
-from alembic.script import ScriptDirectory
-from alembic.util import CommandError
 from sqlalchemy import Connection, Engine, create_engine, event, inspect, text
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
@@ -23,7 +23,15 @@ from sqlalchemy.orm import Session, sessionmaker
 from gyrostand.db.url import shown_url
 from gyrostand.db.wal import checkpoint_at_exit
 
+if TYPE_CHECKING:
+    from alembic.config import Config
+
 MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
+# The latest migration's revision, the schema this code reads and writes: a constant so that
+# opening a current database needs no Alembic (tests/db/test_session.py checks that it is the
+# head of MIGRATIONS_DIR; a new migration changes it).
+SCHEMA_HEAD = "0021"
+VERSION_TABLE = "alembic_version"  # Alembic's own, one row per head
 BUSY_TIMEOUT_MS = 10_000
 IMMEDIATE = "gyrostand_begin_immediate"  # execution option: SQLite write transactions
 MIGRATION_LOCK = 0x67796D6967  # PostgreSQL advisory lock key of migrations ("gymig")
@@ -99,6 +107,8 @@ def database_url(url_or_path: str) -> str:
 
 def alembic_config(script_location: Path = MIGRATIONS_DIR) -> Config:
     """An Alembic config without an ini file; env.py takes the connection from its attributes."""
+    from alembic.config import Config
+
     config = Config()
     config.set_main_option("script_location", str(script_location))
     return config
@@ -208,15 +218,26 @@ def _enable_wal(engine: Engine) -> None:
 
 def schema_heads(script_location: Path = MIGRATIONS_DIR) -> set[str]:
     """The schema revisions the code writes (one: the latest migration)."""
+    from alembic.script import ScriptDirectory
+
     return set(ScriptDirectory.from_config(alembic_config(script_location)).get_heads())
 
 
 def migrate(engine: Engine, *, upgrade: bool, script_location: Path = MIGRATIONS_DIR) -> None:
     """Bring the schema to the head revision of `script_location`, or refuse (see open_database)."""
+    if script_location == MIGRATIONS_DIR:
+        with engine.begin() as connection:  # the common case, a current schema: read only
+            if current_revisions(connection) == {SCHEMA_HEAD}:
+                return
+    from alembic import command
+    from alembic.runtime.migration import MigrationContext
+    from alembic.script import ScriptDirectory
+    from alembic.util import CommandError
+
     config = alembic_config(script_location)
     script = ScriptDirectory.from_config(config)
-    heads = schema_heads(script_location)
-    with engine.begin() as connection:  # the common case, a current schema: read only
+    heads = set(script.get_heads())
+    with engine.begin() as connection:
         if set(MigrationContext.configure(connection).get_current_heads()) == heads:
             return
     with (
@@ -262,6 +283,14 @@ def migrate(engine: Engine, *, upgrade: bool, script_location: Path = MIGRATIONS
                     f"the migration of {where} would leave {len(broken)} rows without the row "
                     f"they refer to (first: {tuple(broken[0])}); nothing was changed"
                 )
+
+
+def current_revisions(connection: Connection) -> set[str]:
+    """The database's schema revisions, as Alembic's `MigrationContext.get_current_heads` reads
+    them (none: no version table), without importing Alembic."""
+    if not inspect(connection).has_table(VERSION_TABLE):
+        return set()
+    return set(connection.execute(text(f"SELECT version_num FROM {VERSION_TABLE}")).scalars())
 
 
 @contextmanager

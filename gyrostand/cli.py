@@ -1,8 +1,10 @@
 """The `gyrostand` command line: a thin composition root over stand, db, acquisition, analysis.
 
-Each command lives in its own `cmd_*` module and registers itself here. The command modules
-import the analysis, database and acquisition layers inside the commands, so `--help` does not
-wait for scipy, matplotlib, pandas and SQLAlchemy (~2 s).
+Each command lives in its own `cmd_*` module (`COMMANDS`), imported when the command line names
+one of its commands (or `--help` lists them all): `gyrostand plan check` neither imports the
+other commands' modules nor has typer convert their parameters (~20 % of its start-up). The
+command modules import the analysis, database and acquisition layers inside the commands, so
+`--help` does not wait for scipy, matplotlib, pandas and SQLAlchemy (~2 s).
 
 Here too, for every command: how `--help` reads (`HelpCommand`, `HelpGroup`), and the CLI's
 one error boundary (`RootGroup`): a command line that does not parse is one line on stderr
@@ -10,31 +12,38 @@ one error boundary (`RootGroup`): a command line that does not parse is one line
 
 from __future__ import annotations
 
+import importlib
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, MutableMapping, Sequence
+from functools import cache
 from typing import Annotated, Any
 
 import typer
+import typer.main
 from typer.core import TyperArgument, TyperCommand, TyperGroup
 from typer.models import DefaultPlaceholder
 
-from gyrostand import (
-    SOFTWARE_VERSION,
-    cmd_analyze,
-    cmd_campaign,
-    cmd_data,
-    cmd_db,
-    cmd_demo,
-    cmd_fleet,
-    cmd_plan,
-    cmd_report,
-    cmd_simulate,
-    cmd_simulate_drive,
-    cmd_station,
-)
 from gyrostand.errors import unexpected, usage_error
 from gyrostand.interrupt import interrupted
+
+# Each top-level command and the `gyrostand.cmd_*` module whose `register(app)` adds it, in the
+# order `--help` lists them (tests/cli/test_cli.py checks it against what each module adds).
+COMMANDS = {
+    "simulate": "cmd_simulate",
+    "simulate-drive": "cmd_simulate_drive",
+    "replay": "cmd_campaign",
+    "analyze": "cmd_analyze",
+    "report": "cmd_report",
+    "import": "cmd_data",
+    "export": "cmd_data",
+    "demo": "cmd_demo",
+    "station": "cmd_station",
+    "plan": "cmd_plan",
+    "campaign": "cmd_campaign",
+    "db": "cmd_db",
+    "fleet": "cmd_fleet",
+}
 
 _NEXT_SENTENCE = re.compile(r"(?<=[.!?])\s+(?=[A-Z`\[(])")
 
@@ -86,10 +95,61 @@ class HelpGroup(_HelpLayout, TyperGroup):
     """A command group with the CLI's help layout."""
 
 
+@cache
+def commands_of(module: str) -> dict[str, Any]:
+    """The click commands that `gyrostand.<module>` registers, by name (imported once)."""
+    typer_app = typer.Typer()
+    importlib.import_module(f"gyrostand.{module}").register(typer_app)
+    use_help_layout(typer_app)
+    return dict(typer.main.get_group(typer_app).commands)
+
+
+class _Commands(MutableMapping[str, Any]):
+    """The root group's commands by name: a command's module is imported (and converted by
+    typer) when the command is first looked up (`COMMANDS`)."""
+
+    def __init__(self, added: Mapping[str, Any]) -> None:
+        self._added = dict(added)
+
+    def __getitem__(self, name: str) -> Any:
+        if name in self._added:
+            return self._added[name]
+        module = COMMANDS[name]
+        try:
+            return commands_of(module)[name]
+        except KeyboardInterrupt:  # in the module's imports: as in the start-up's (__main__)
+            interrupted()
+            raise  # (interrupted() exits)
+
+    def __setitem__(self, name: str, command: Any) -> None:
+        self._added[name] = command
+
+    def __delitem__(self, name: str) -> None:
+        del self._added[name]
+
+    def __iter__(self) -> Iterator[str]:
+        yield from COMMANDS
+        yield from (name for name in self._added if name not in COMMANDS)
+
+    def __len__(self) -> int:
+        return len(COMMANDS.keys() | self._added.keys())
+
+
 class RootGroup(HelpGroup):
     """`gyrostand` itself: the one error boundary of every command. A command line that does
     not parse is one line (exit code 2, as click's own), an unexpected exception one line and a
-    traceback file (exit code 1); a command's own `fail` already is one line."""
+    traceback file (exit code 1); a command's own `fail` already is one line. Its commands are
+    loaded when named (`_Commands`)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.commands = _Commands(self.commands)
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        """The help, once every command is loaded (a Ctrl-C meanwhile prints no half help)."""
+        for name in self.commands:
+            self.commands[name]
+        super().format_help(ctx, formatter)
 
     def main(
         self,
@@ -165,7 +225,9 @@ app = typer.Typer(
 
 
 def _version(value: bool) -> None:
-    if value:
+    if value:  # (read from the package's metadata only here: importlib.metadata costs)
+        from gyrostand import SOFTWARE_VERSION
+
         typer.echo(SOFTWARE_VERSION)
         raise typer.Exit()
 
@@ -177,20 +239,3 @@ def main(
     ] = False,
 ) -> None:
     """Rolling-stand tests of marine gyrocompasses."""
-
-
-for module in (
-    cmd_plan,
-    cmd_simulate,
-    cmd_simulate_drive,
-    cmd_campaign,
-    cmd_analyze,
-    cmd_report,
-    cmd_data,
-    cmd_db,
-    cmd_fleet,
-    cmd_demo,
-    cmd_station,
-):
-    module.register(app)
-use_help_layout(app)

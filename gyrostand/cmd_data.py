@@ -8,7 +8,6 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from gyrostand import SOFTWARE_VERSION
 from gyrostand.db.url import DB_ENV
 from gyrostand.errors import EXIT_BAD_INPUT, EXIT_FAILED, fail
 from gyrostand.stages import Stages
@@ -123,6 +122,7 @@ def register(app: typer.Typer) -> None:
         file is valid."""
         from sqlalchemy.exc import OperationalError
 
+        from gyrostand import SOFTWARE_VERSION
         from gyrostand.db.io import (
             SEED_000_METADATA,
             ImportFileError,

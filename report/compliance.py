@@ -45,8 +45,6 @@ from importlib.resources import files
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from gyrostand.analysis.quantiles import t_quantile
 from gyrostand.report import SHIPPED, SHIPPED_PROFILES
 from gyrostand.report.errors import ReportError
@@ -252,7 +250,10 @@ class Compliance:
 
 
 def secant_limit(limit_deg: float, latitude_deg: Any) -> Any:
-    """limit x sec(latitude)."""
+    """limit x sec(latitude) (of an array of latitudes too). numpy imported here: `plan check`
+    reads a profile's procedures and needs none."""
+    import numpy as np
+
     return limit_deg / np.cos(np.radians(latitude_deg))
 
 

@@ -12,8 +12,10 @@ from __future__ import annotations
 import configparser
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:  # imported where used: `plan check` reads an encoder's EDS without it
+    import numpy as np
 
 POSITION = (0x6004, 0)  # position value
 CPR = 0x6001  # measuring units per revolution
@@ -59,12 +61,16 @@ class Encoder:
 
     def heading_deg(self, counts: np.ndarray) -> np.ndarray:
         """Position values -> heading, degrees in [0, 360) (module docstring's equation)."""
+        import numpy as np
+
         steps = self.sign * (counts.astype(np.int64) - self.zero_counts)
         return (steps % self.counts_per_revolution) * self.resolution_deg
 
     def counts(self, heading_deg: np.ndarray) -> np.ndarray:
         """Heading -> the position value the encoder reads (inverse of `heading_deg`, rounded to
         its resolution; within 0 .. cpr - 1)."""
+        import numpy as np
+
         steps = np.round(np.asarray(heading_deg) / self.resolution_deg).astype(np.int64)
         return (self.sign * steps + self.zero_counts) % self.counts_per_revolution
 

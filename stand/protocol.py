@@ -14,12 +14,15 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, fields
 from enum import StrEnum
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import can
 import cantools
-import numpy as np
 from cantools.database.can import Message as DbcMessage
 from cantools.database.can import Signal
+
+if TYPE_CHECKING:  # numpy and python-can are imported where used: `plan check` reads the DBC's
+    import can  # ranges with this module and needs neither (~0.15 s of its start-up)
+    import numpy as np
 
 DBC_PATH: Path = Path(__file__).with_name("gyrostand.dbc")
 
@@ -38,7 +41,6 @@ def _crc8_table(poly: int) -> tuple[int, ...]:
 
 
 _CRC8_J1850 = _crc8_table(0x1D)  # SAE J1850 polynomial x^8 + x^4 + x^3 + x^2 + 1
-_CRC8_J1850_ARRAY = np.array(_CRC8_J1850, dtype=np.uint8)
 
 
 def crc8_sae_j1850(data: bytes) -> int:
@@ -54,9 +56,12 @@ def crc8_sae_j1850(data: bytes) -> int:
 
 def crc8_sae_j1850_rows(data: np.ndarray) -> np.ndarray:
     """`crc8_sae_j1850` of each row of an (n, k) uint8 array, as uint8."""
+    import numpy as np
+
+    table = np.array(_CRC8_J1850, dtype=np.uint8)
     crc = np.full(len(data), 0xFF, np.uint8)
     for column in range(data.shape[1]):
-        crc = _CRC8_J1850_ARRAY[crc ^ data[:, column]]
+        crc = table[crc ^ data[:, column]]
     return crc ^ np.uint8(0xFF)
 
 
@@ -152,6 +157,8 @@ class SignalLayout:
     def raw(self, little: np.ndarray, big: np.ndarray) -> np.ndarray:
         """Raw values (int64, uint64 for unsigned 64-bit, float for IEEE signals) from the
         payloads as little- and big-endian uint64 words."""
+        import numpy as np
+
         word = big if self.big_endian else little
         bits = (word >> np.uint64(self.shift)) & np.uint64(self.mask)
         if self.is_float:
@@ -170,6 +177,8 @@ class SignalLayout:
 
         Integer scale and offset keep integers exact (as cantools does); past 52 bits that
         needs Python integers."""
+        import numpy as np
+
         if isinstance(self.scale, int) and isinstance(self.offset, int) and not self.is_float:
             if self.length <= 52:
                 return raw.astype(np.int64) * self.scale + self.offset
@@ -179,6 +188,8 @@ class SignalLayout:
     def place(self, values: np.ndarray) -> np.ndarray:
         """Physical values as raw values (rounded as cantools rounds, two's complement) at
         their bit position in the uint64 word."""
+        import numpy as np
+
         raw = np.round((np.asarray(values, dtype=np.float64) - self.offset) / self.scale)
         bits = raw.astype(np.int64).view(np.uint64) & np.uint64(self.mask)
         return bits << np.uint64(self.shift)
@@ -542,6 +553,8 @@ class Codec:
                     dict(self._zero[bound.message.name]),
                 )
             entry[1][bound.signal.name] = value
+        import can
+
         return [
             can.Message(
                 arbitration_id=message.frame_id,

@@ -68,3 +68,31 @@ def test_help_does_not_load_the_heavy_libraries() -> None:
     code = f"import sys, gyrostand.cli; print([m for m in {heavy!r} if m in sys.modules])"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_each_command_is_loaded_from_the_module_that_registers_it() -> None:
+    """`cli.COMMANDS` (a command line imports only its command's module) names exactly the
+    commands each `cmd_*` module's `register` adds, and `--help` lists them all."""
+    import importlib
+    from pathlib import Path
+
+    from gyrostand.cli import COMMANDS, use_help_layout
+
+    folder = Path(importlib.import_module("gyrostand.cli").__file__ or "").parent
+    modules = {
+        path.stem
+        for path in folder.glob("cmd_*.py")
+        if "\ndef register(app: typer.Typer)" in path.read_text(encoding="utf-8")
+    }
+    assert modules == set(COMMANDS.values())
+    registered: dict[str, str] = {}
+    for module in modules:
+        typer_app = typer.Typer()
+        importlib.import_module(f"gyrostand.{module}").register(typer_app)
+        use_help_layout(typer_app)
+        names = typer.main.get_group(typer_app).commands
+        registered.update(dict.fromkeys(names, module))
+    assert registered == COMMANDS
+    assert list(typer.main.get_command(app).commands) == list(COMMANDS)
+    output = runner.invoke(app, ["--help"], terminal_width=200).output
+    assert [name for name in COMMANDS if f"│ {name} " in output] == list(COMMANDS)

@@ -19,9 +19,11 @@ from gyrostand.cli import app
 from gyrostand.db.models import Base, Event, Observation
 from gyrostand.db.session import (
     MIGRATIONS_DIR,
+    SCHEMA_HEAD,
     DatabaseVersionError,
     _configure_sqlite,
     alembic_config,
+    current_revisions,
     database_url,
     migrate,
     open_database,
@@ -62,6 +64,24 @@ def test_orm_metadata_matches_the_migrations(sessions: sessionmaker[Session]) ->
     with sessions() as session:
         context = MigrationContext.configure(session.connection(), opts={"compare_type": True})
         assert compare_metadata(context, Base.metadata) == []
+
+
+def test_the_schema_head_constant_is_the_latest_migration() -> None:
+    """`SCHEMA_HEAD` (opening a current database reads no migration file): a new migration in
+    db/migrations/versions changes it."""
+    assert ScriptDirectory.from_config(alembic_config()).get_heads() == [SCHEMA_HEAD]
+
+
+def test_current_revisions_read_as_alembic_reads_them(tmp_path: Path) -> None:
+    engine = create_engine(sqlite_url(tmp_path / "v.sqlite"))
+    with engine.begin() as connection:
+        assert current_revisions(connection) == set()
+        assert MigrationContext.configure(connection).get_current_heads() == ()
+    migrate(engine, upgrade=True)
+    with engine.begin() as connection:
+        alembic_reads = MigrationContext.configure(connection).get_current_heads()
+        assert current_revisions(connection) == set(alembic_reads) == {HEAD}
+    engine.dispose()
 
 
 def test_without_upgrade_a_missing_or_empty_database_is_refused(tmp_path: Path) -> None:
