@@ -7,7 +7,6 @@ campaign clock of the run's RUN record."""
 
 from __future__ import annotations
 
-import contextlib
 import uuid
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -17,7 +16,6 @@ import can
 import canopen
 
 from gyrostand.acquisition.cia402_log import (
-    DriveLogEnded,
     DriveLogError,
     LoggedDrive,
     LoggedRun,
@@ -41,6 +39,7 @@ if TYPE_CHECKING:
     from gyrostand.acquisition.runner import ReplayLog, RunResult
 
 LOG_ENDS = "the raw log's run ends here (stopped, or its writer killed)"
+LOG_CUT = "its raw log ends after its last batch, not with the axis brought to rest (killed?)"
 
 
 class _Answered:
@@ -122,8 +121,10 @@ def replay_runs(plan: Plan, store: CampaignStore, paths: Sequence[Path]) -> Engi
                     position += len(msgs)
                 if engine.phase is not Phase.DONE:
                     engine.interrupt(LOG_ENDS)
-                with contextlib.suppress(DriveLogEnded):  # (a killed run's log: in the ramp)
+                try:
                     _to_rest(sim, store)  # type: ignore[arg-type]
+                except DriveLogError as exc:  # (the live run went on: its log was cut here)
+                    store.run_event("raw log", "warning", f"run {n + 1}: {LOG_CUT}: {exc}")
         finally:
             sim.close()
     return engine

@@ -113,6 +113,18 @@ def test_replay_of_a_trial_failed_by_the_drives_emcy_equals_the_live_run(
     assert trials[0][6] == "drive position" and len(recorded["measured_motion"]) == 1
     assert len(recorded["observation"]) == 2 * 2 + 2  # trial 2: its still series
 
+    # the log cut in two mid-roll (a killed run's log and its continuation): the same run
+    frames = list(read_raw_frames(log, chunk=1000))
+    cut = len(frames) // 2
+    assert cut > 0
+    for name, part in (("a.blf", frames[:cut]), ("b.blf", frames[cut:])):
+        writer = BatchBLFWriter(tmp_path / name)
+        for raw in part:
+            writer.write_frames(raw)
+        writer.stop()
+    replay(plan, sessions, [tmp_path / "a.blf", tmp_path / "b.blf"])
+    assert record(tmp_path / "c.sqlite", 3) == recorded
+
 
 def test_a_stopped_and_resumed_campaign_replays_as_its_two_runs(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
