@@ -1,9 +1,11 @@
 """`campaign run` on a CiA 402 stand: the simulated one in virtual time (`acquisition.cia402_sim`).
 
-The same engine, store, operator link (prompts, stop requests) and raw log as `runner.run_live`;
-the stream is the stand adapter's acks and statuses and the compass's frames, fed in stand-time
-steps. A stop (Ctrl-C, SIGTERM, the station's stop request, the end of the campaign) brings the
-axis to rest by the roll's stop ramp, then disables it, before the run ends.
+The same engine, store and operator link (prompts, stop requests) as `runner.run_live`; the
+stream is the stand adapter's acks and statuses and the compass's frames, fed in stand-time
+steps; the raw log holds the drive's CANopen traffic instead of the acks and statuses
+(`acquisition.cia402_log`, replayed by `acquisition.cia402_replay`). A stop (Ctrl-C, SIGTERM,
+the station's stop request, the end of the campaign) brings the axis to rest by the roll's stop
+ramp, then disables it, before the run ends.
 
 A resumed campaign (`runner.resume_point`) starts its run on an axis at rest and enabled (the
 master's setup, `devices.cia402`): a killed run's simulation is run again from its start in

@@ -3,15 +3,16 @@
 On an in-process virtual CAN bus: the simulated drive (`devices.sim_drive`, its own canopen
 network) and gyrostand's master (`devices.cia402`, another one), the master sending every SYNC
 itself (`sync="lockstep"`): each SYNC is one communication cycle of stand time for the drive, so
-the roll is the same whatever the host's load. The compass on the platform is the stand
-simulator's compass physics (`stand.engine.StandEngine`, the plan's [bus.simulator]) speaking a
-real protocol timed by reception (NMEA 2000: a CiA 402 stand has no clock to put in a compass
-frame); its rolling error follows the platform's motion as the master commands it (the roll
-begins, the stop ramp begins), at the platform's true amplitude (the commanded one times the
-simulator's `faults.amplitude_factor`, which the drive's encoder does not see: its
-`platform_scale`). With a CiA 410 [inclinometer] in the plan, the simulated one
-(`stand.inclinometer`, [bus.simulator.inclinometer]'s noise, bias, rate and faults) sends the
-platform's true roll: the drive's position at each SYNC times that scale."""
+the roll is the same whatever the host's load; after each frame it sends the master waits for
+the drive's answers (`cia402_log.BusTap`, which records the traffic for the raw log). The
+compass on the platform is the stand simulator's compass physics (`stand.engine.StandEngine`,
+the plan's [bus.simulator]) speaking a real protocol timed by reception (NMEA 2000: a CiA 402
+stand has no clock to put in a compass frame); its rolling error follows the platform's motion
+as the master commands it (the roll begins, the stop ramp begins), at the platform's true
+amplitude (the commanded one times the simulator's `faults.amplitude_factor`, which the drive's
+encoder does not see: its `platform_scale`). With a CiA 410 [inclinometer] in the plan, the
+simulated one (`stand.inclinometer`, [bus.simulator.inclinometer]'s noise, bias, rate and
+faults) sends the platform's true roll: the drive's position at each SYNC times that scale."""
 
 from __future__ import annotations
 
