@@ -15,18 +15,18 @@ from typing import TYPE_CHECKING
 import can
 import canopen
 
-from gyrostand.acquisition.cia402_log import (
-    DriveLogError,
-    LoggedDrive,
-    LoggedRun,
-    logged_runs,
-)
 from gyrostand.acquisition.cia402_run import _to_rest
 from gyrostand.acquisition.cia402_sim import STEP_S, Cia402Lockstep, feed, merged
 from gyrostand.acquisition.cia402_stand import Cia402Stand
 from gyrostand.acquisition.engine import Engine, Phase
 from gyrostand.acquisition.store import CampaignStore
-from gyrostand.devices.cia402 import AxisConfig, Cia402Axis, DriveError
+from gyrostand.devices.cia402 import MASTER_NODE_ID, AxisConfig, Cia402Axis, DriveError
+from gyrostand.devices.cia402_log import (
+    DriveLogError,
+    LoggedDrive,
+    LoggedRun,
+    logged_runs,
+)
 from gyrostand.devices.decoder import source_info
 from gyrostand.devices.roll_trajectory import Kinematics
 from gyrostand.devices.sim_drive import SIM_DRIVE_EDS
@@ -98,7 +98,7 @@ def replay_runs(plan: Plan, store: CampaignStore, paths: Sequence[Path]) -> Engi
 
     s = plan.stand
     assert s.node_id is not None
-    engine, master_id = None, AxisConfig(s.node_id, SIM_DRIVE_EDS).master_node_id
+    engine, master_id = None, MASTER_NODE_ID
     for n, run in enumerate(logged_runs(paths, s.node_id, master_id)):
         if n:  # as a resumed run (`runner.resume_point`)
             store.redo_uncompensated()

@@ -3,7 +3,7 @@
 The same engine, store and operator link (prompts, stop requests) as `runner.run_live`; the
 stream is the stand adapter's acks and statuses and the compass's frames, fed in stand-time
 steps; the raw log holds the drive's CANopen traffic instead of the acks and statuses
-(`acquisition.cia402_log`, replayed by `acquisition.cia402_replay`). A stop (Ctrl-C, SIGTERM,
+(`devices.cia402_log`, replayed by `acquisition.cia402_replay`). A stop (Ctrl-C, SIGTERM,
 the station's stop request, the end of the campaign) brings the axis to rest by the roll's stop
 ramp, then disables it, before the run ends.
 

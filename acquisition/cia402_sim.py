@@ -26,11 +26,11 @@ import canopen
 import numpy as np
 
 from gyrostand.acquisition.bus import transmitter
-from gyrostand.acquisition.cia402_log import RUN, STEP, BusTap, record
 from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault, Motion
 from gyrostand.acquisition.engine import Command, Engine, Phase
 from gyrostand.analysis.measured_motion import DRIVE_POSITION
 from gyrostand.devices.cia402 import AxisConfig, Cia402Axis
+from gyrostand.devices.cia402_log import RUN, STEP, BusTap, record
 from gyrostand.devices.decoder import SourceDecoder, frame_decoder
 from gyrostand.devices.roll_trajectory import Kinematics
 from gyrostand.devices.sim_drive import SIM_DRIVE_EDS, DriveFaults, ServoModel, SimDrive

@@ -23,7 +23,7 @@ The frames' reception times are the SYNC count x cycle_ms of this run.
 The acks and statuses go into the engine's stream in the encoding of the plan's stand codec,
 never onto the CANopen bus (whose identifiers they would collide with) nor into the raw log,
 which holds the drive's CANopen traffic: a replay runs this adapter again against the logged
-drive (`acquisition.cia402_log`) and so derives them again. A drive fault, a lost drive
+drive (`devices.cia402_log`) and so derives them again. A drive fault, a lost drive
 heartbeat or a following-error trip is one `DriveFault` (`take_faults`) for the caller to fail
 the trial with.
 """

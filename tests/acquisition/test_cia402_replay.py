@@ -3,7 +3,7 @@ frame), and a replay runs gyrostand's master again against the logged drive, so 
 the same record as the live run: observations, the measured motion from the drive's actual
 position, and a trial failed by the drive's EMCY with the drive's error named. A stopped and
 resumed campaign's two logs replay as its two runs, the second on the campaign clock the live
-one went on with."""
+one went on with; the report reads the compass's frames of the logs on that clock."""
 
 from __future__ import annotations
 
@@ -16,15 +16,17 @@ import pytest
 from typer.testing import CliRunner
 
 from gyrostand.acquisition import cia402_run
-from gyrostand.acquisition.cia402_log import RECORD_BUS, RUN, DriveLogError
 from gyrostand.acquisition.cia402_sim import SimulatedCia402
 from gyrostand.acquisition.runner import replay, run_live
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.cli import app
 from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.devices.cia402_log import RECORD_BUS, RUN, DriveLogError
 from gyrostand.devices.sim_drive import EMCY_OVERCURRENT, DriveFaults
 from gyrostand.frames.logfile import BatchBLFWriter, read_raw_frames
+from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import Plan, parse_plan
+from gyrostand.report.signal_record import heading_source, headings_in
 
 from .harness import FAST_SIM, plan_text
 from .test_cia402_campaign import SERVO, STAND
@@ -56,6 +58,23 @@ RECORD = {
 def record(db: Path, campaign: int) -> dict[str, list[tuple]]:
     with sqlite3.connect(db) as conn:
         return {k: conn.execute(q.format(c=campaign)).fetchall() for k, q in RECORD.items()}
+
+
+def assert_the_logs_headings_make_the_observations(plan: Plan, logs: list[Path]) -> None:
+    """The report's reading of the logs (`signal_record.headings_in`: the compass's frames on the
+    campaign clock of the RUN and STEP records) finds in each observation window the frames the
+    live engine used, with their mean."""
+    with sqlite3.connect(plan.database) as conn:
+        rows = conn.execute(
+            "SELECT o.id, window_start_ms, window_end_ms, frames_used, value_deg FROM observation "
+            "o JOIN series s ON s.id = o.series_id JOIN trial t ON t.id = s.trial_id "
+            "WHERE campaign_id = 1"
+        ).fetchall()
+    spans = {r[0]: (r[1], r[2]) for r in rows}
+    found = headings_in(logs, codec_for(plan), spans, heading_source(plan))
+    for obs, _, _, used, value in rows:
+        t, h = found[obs]
+        assert len(t) == used and h.mean() == pytest.approx(value, abs=1e-9)
 
 
 def cia402_plan(tmp_path: Path) -> Plan:
@@ -102,6 +121,8 @@ def test_replay_of_a_trial_failed_by_the_drives_emcy_equals_the_live_run(
     # NMT, SYNC, EMCY, TPDO1, RPDO1, SDO, the drive's and gyrostand's heartbeats; nothing else
     assert ids == {0x000, 0x080, 0x082, 0x182, 0x202, 0x582, 0x602, 0x702, 0x77F}
     assert records > 70  # a RUN, then a STEP every 5 s of stand time (about 390 s)
+
+    assert_the_logs_headings_make_the_observations(plan, [log])
 
     result = replay(plan, sessions, [log])
     assert result.outcome == live.outcome
@@ -154,6 +175,7 @@ def test_a_stopped_and_resumed_campaign_replays_as_its_two_runs(
     assert resumed.exit_code == 0, resumed.output
     segments = logs(tmp_path)
     assert len(segments) == 2
+    assert_the_logs_headings_make_the_observations(plan, segments)
 
     outcome = replay(plan, sessions, segments)
     assert outcome.outcome == "completed"

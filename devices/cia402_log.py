@@ -22,13 +22,15 @@ from __future__ import annotations
 import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import can
 import canopen
 import numpy as np
 
+from gyrostand.devices.clock import ReceptionClock
+from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import read_raw_frames
 
 RECORD_BUS = 2  # RawFrames.channel of the master's records (BLF channel 3): no bus frame
@@ -95,6 +97,7 @@ class _Counter(can.Listener):
 
 def _wrap_send(network: canopen.Network, after: Callable[[can.Message], None]) -> None:
     bus = network.bus
+    assert bus is not None  # (connected)
     send = bus.send
 
     def sending(msg: can.Message, timeout: float | None = None) -> None:
@@ -118,6 +121,7 @@ class BusTap:
         self._master_sent = 0
         self._taken = _Counter(self._cond, lambda m: self.frames.append(_copy(m, self.clock())))
         self._acted = _Counter(self._cond, lambda m: None)
+        assert master.notifier is not None and drive.notifier is not None  # (connected)
         master.notifier.add_listener(self._taken)
         drive.notifier.add_listener(self._acted)
         _wrap_send(drive, self._on_drive_sent)
@@ -160,6 +164,7 @@ class LoggedDrive:
         self._cond = threading.Condition()
         self._sent = 0
         self._taken = _Counter(self._cond, lambda m: None)
+        assert master.notifier is not None  # (connected)
         master.notifier.add_listener(self._taken)
         _wrap_send(master, self._on_master_sent)
 
@@ -216,6 +221,54 @@ class LoggedRun:
     steps: Iterator[list[can.Message]]
 
 
+def _record(data: np.ndarray) -> tuple[int, int]:
+    """A master's record: its kind and value."""
+    return int(data[0]), int.from_bytes(bytes(data[1:8]), "little")
+
+
+def _offset(path: Path) -> float:
+    """The run's stand time minus the log's time: the BLF times of a virtual-time log count
+    from its first frame (from its first record)."""
+    for raw in read_raw_frames(path):
+        rows = np.flatnonzero(raw.channel == RECORD_BUS)
+        if len(rows):
+            kind, value = _record(raw.data[int(rows[0])])
+            return (0.0 if kind == RUN else value / 1e6) - float(raw.timestamp[int(rows[0])])
+    return 0.0
+
+
+def compass_frames(
+    paths: Sequence[Path], node_id: int, master_id: int, clock: ReceptionClock
+) -> Iterator[RawFrames]:
+    """The logs' frames but the drive's traffic and the records, as a compass's decoder reads
+    them (the report's heading record): times restored to each run's stand time, and `clock`
+    (the decoder's) told the campaign clock at each record, as the live statuses told it (a
+    run's campaign ms = its RUN clock + its stand time)."""
+    ids = np.array(sorted(drive_ids(node_id, master_id)), dtype=np.uint32)
+    position, clock_ms = 0, 0
+    for path in paths:
+        offset = _offset(path)
+        for raw in read_raw_frames(path):
+            records = raw.channel == RECORD_BUS
+            keep = ~records & (raw.is_extended | ~np.isin(raw.arbitration_id, ids))
+            cuts = [*np.flatnonzero(records).tolist(), len(raw)]
+            start = 0
+            for cut in cuts:  # the frames up to each record, then the record's clock
+                rows = np.flatnonzero(keep[start:cut]) + start
+                part = RawFrames(position, *(getattr(raw, f.name)[rows] for f in fields(raw)[1:]))
+                part.timestamp[:] = np.round(part.timestamp + offset, 6)
+                position += len(part)
+                yield part
+                if cut < len(raw):
+                    kind, value = _record(raw.data[cut])
+                    clock_ms, t_s = (value, 0.0) if kind == RUN else (clock_ms, value / 1e6)
+                    if kind == RUN:
+                        clock.restart()
+                    ms, s = np.array([clock_ms + t_s * 1000.0]), np.array([t_s])
+                    clock.observe(np.array([position - 1]), ms, s)  # (frames after it see it)
+                start = cut + 1
+
+
 class _Items:
     """The logs' frames in order as (kind, payload), times restored to the run's stand time."""
 
@@ -225,32 +278,17 @@ class _Items:
         self.others: list[can.Message] = []
         self.steps: deque[list[can.Message]] = deque()
         self.runs: deque[int] = deque()  # RUN records not yet taken
-        self.done = False
-
-    @staticmethod
-    def _offset(path: Path) -> float:
-        """Stand time minus the log's time: the BLF times of a virtual-time log count from its
-        first frame (from its first record)."""
-        for raw in read_raw_frames(path):
-            rows = np.flatnonzero(raw.channel == RECORD_BUS)
-            if len(rows):
-                r = int(rows[0])
-                data = raw.data[r]
-                value = int.from_bytes(bytes(data[1:8]), "little")
-                t_s = 0.0 if data[0] == RUN else value / 1e6
-                return t_s - float(raw.timestamp[r])
-        return 0.0
 
     def _read(self, paths: Sequence[Path], ids: frozenset[int]) -> Iterator[tuple[str, object]]:
         for path in paths:
-            offset = self._offset(path)
+            offset = _offset(path)
             for raw in read_raw_frames(path):
                 for row in range(len(raw)):
                     msg = raw.message(row)
                     msg.timestamp = round(msg.timestamp + offset, 6)
                     if int(raw.channel[row]) == RECORD_BUS:
-                        value = int.from_bytes(bytes(msg.data[1:8]), "little")
-                        yield ("run" if msg.data[0] == RUN else "step"), value
+                        kind, value = _record(raw.data[row])
+                        yield ("run" if kind == RUN else "step"), value
                     elif not msg.is_extended_id and msg.arbitration_id in ids:
                         yield "drive", msg
                     else:
@@ -261,7 +299,6 @@ class _Items:
         """Read one item; False at the end of the logs."""
         item = next(self._it, None)
         if item is None:
-            self.done = True
             return False
         kind, value = item
         if kind == "drive":
