@@ -26,6 +26,7 @@ from gyrostand.devices.cia402_log import (
     LoggedDrive,
     LoggedRun,
     logged_runs,
+    starts_a_run,
 )
 from gyrostand.devices.decoder import source_info
 from gyrostand.devices.roll_trajectory import Kinematics
@@ -138,6 +139,12 @@ def replay_cia402(
     a ValueError) and the new campaign is marked failed."""
     from gyrostand.acquisition.runner import _judged, replayed_segments, result
 
+    if not starts_a_run(checked[0].path):  # (before the database is written)
+        raise DriveLogError(
+            f"{checked[0].path}: not a CiA 402 stand's raw log from its start (no RUN record "
+            "first: another stand's, a later segment, or written before gyrostand logged the "
+            "drive's traffic)"
+        )
     store = CampaignStore.create(sessions, plan, source="replay")
     try:
         with store.deferred():
@@ -146,8 +153,7 @@ def replay_cia402(
     except BaseException:
         store.set_status("failed")
         raise
-    if engine is None:
-        raise DriveLogError(f"{checked[0].path}: no run of a CiA 402 stand in the raw log")
+    assert engine is not None  # (the first log starts a run)
     outcome = engine.outcome if engine.outcome != "completed" else _judged(store, plan)
     store.set_status(outcome)
     return result(store, outcome, checked[-1].path, checked[-1].sha256)

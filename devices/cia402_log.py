@@ -95,12 +95,17 @@ class _Counter(can.Listener):
             self.cond.notify_all()
 
 
-def _wrap_send(network: canopen.Network, after: Callable[[can.Message], None]) -> None:
+def _wrap_send(
+    network: canopen.Network,
+    after: Callable[[can.Message], None],
+    before: Callable[[can.Message], None] = lambda msg: None,
+) -> None:
     bus = network.bus
     assert bus is not None  # (connected)
     send = bus.send
 
     def sending(msg: can.Message, timeout: float | None = None) -> None:
+        before(msg)
         send(msg, timeout)
         after(msg)
 
@@ -125,17 +130,21 @@ class BusTap:
         master.notifier.add_listener(self._taken)
         drive.notifier.add_listener(self._acted)
         _wrap_send(drive, self._on_drive_sent)
-        _wrap_send(master, self._on_master_sent)
+        _wrap_send(master, self._on_master_sent, self._master_sends)
 
     def _on_drive_sent(self, msg: can.Message) -> None:
         with self._cond:
             self._drive_sent += 1
 
-    def _on_master_sent(self, msg: can.Message) -> None:
-        """Wait until the drive has acted on it and the master has taken every answer."""
+    def _master_sends(self, msg: can.Message) -> None:
+        """Recorded before it is on the bus: before any answer to it."""
         with self._cond:
             self.frames.append(_copy(msg, self.clock()))
             self._master_sent += 1
+
+    def _on_master_sent(self, msg: can.Message) -> None:
+        """Wait until the drive has acted on it and the master has taken every answer."""
+        with self._cond:
             done = self._cond.wait_for(
                 lambda: (
                     self._acted.count >= self._master_sent and self._taken.count >= self._drive_sent
@@ -235,6 +244,12 @@ def _offset(path: Path) -> float:
             kind, value = _record(raw.data[int(rows[0])])
             return (0.0 if kind == RUN else value / 1e6) - float(raw.timestamp[int(rows[0])])
     return 0.0
+
+
+def starts_a_run(path: Path) -> bool:
+    """Whether a raw log begins with a run's RUN record (a campaign's first log does)."""
+    first = next(read_raw_frames(path, chunk=1), None)
+    return first is not None and first.channel[0] == RECORD_BUS and first.data[0, 0] == RUN
 
 
 def compass_frames(

@@ -218,3 +218,16 @@ def test_a_log_of_another_drive_is_refused_in_one_line(
     writer.stop()
     with pytest.raises(DriveLogError, match=r"the master sends 0x202 .* where the raw log holds"):
         replay(plan, sessions, [tampered])
+
+    # without its RUN record (a later segment alone, a log of before): refused, nothing written
+    headless = tmp_path / "headless.blf"
+    writer = BatchBLFWriter(headless)
+    for raw in read_raw_frames(log):
+        writer.write_frames(raw.tail(1) if raw.start == 0 else raw)
+    writer.stop()
+    with sqlite3.connect(tmp_path / "c.sqlite") as conn:
+        before = conn.execute("SELECT count(*) FROM campaign").fetchall()
+    with pytest.raises(DriveLogError, match="no RUN record first"):
+        replay(plan, sessions, [headless])
+    with sqlite3.connect(tmp_path / "c.sqlite") as conn:
+        assert conn.execute("SELECT count(*) FROM campaign").fetchall() == before
