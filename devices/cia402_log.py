@@ -137,21 +137,24 @@ class BusTap:
             self._drive_sent += 1
 
     def _master_sends(self, msg: can.Message) -> None:
-        """Recorded before it is on the bus: before any answer to it."""
+        """Recorded before it is on the bus (before any answer to it), after every frame the
+        drive sent before (its boot-up)."""
         with self._cond:
+            self._wait(lambda: self._taken.count >= self._drive_sent)
             self.frames.append(_copy(msg, self.clock()))
             self._master_sent += 1
 
     def _on_master_sent(self, msg: can.Message) -> None:
         """Wait until the drive has acted on it and the master has taken every answer."""
         with self._cond:
-            done = self._cond.wait_for(
+            self._wait(
                 lambda: (
                     self._acted.count >= self._master_sent and self._taken.count >= self._drive_sent
-                ),
-                WAIT_S,
+                )
             )
-        if not done:
+
+    def _wait(self, done: Callable[[], bool]) -> None:
+        if not self._cond.wait_for(done, WAIT_S):
             raise can.CanOperationError(f"the simulated drive did not answer within {WAIT_S:g} s")
 
     def take(self) -> list[can.Message]:
