@@ -1,9 +1,11 @@
 """`campaign run` on a CiA 402 stand: the simulated one in virtual time (`acquisition.cia402_sim`).
 
-The same engine, store, operator link (prompts, stop requests) and raw log as `runner.run_live`;
-the stream is the stand adapter's acks and statuses and the compass's frames, fed in stand-time
-steps. A stop (Ctrl-C, SIGTERM, the station's stop request, the end of the campaign) brings the
-axis to rest by the roll's stop ramp, then disables it, before the run ends.
+The same engine, store and operator link (prompts, stop requests) as `runner.run_live`; the
+stream is the stand adapter's acks and statuses and the compass's frames, fed in stand-time
+steps; the raw log holds the drive's CANopen traffic instead of the acks and statuses
+(`devices.cia402_log`, replayed by `acquisition.cia402_replay`). A stop (Ctrl-C, SIGTERM,
+the station's stop request, the end of the campaign) brings the axis to rest by the roll's stop
+ramp, then disables it, before the run ends.
 
 A resumed campaign (`runner.resume_point`) starts its run on an axis at rest and enabled (the
 master's setup, `devices.cia402`): a killed run's simulation is run again from its start in
@@ -16,6 +18,8 @@ from __future__ import annotations
 import threading
 from collections.abc import Mapping
 from typing import IO
+
+import can
 
 from gyrostand.acquisition.bus import Recorder
 from gyrostand.acquisition.cia402_sim import Cia402Lockstep, SimulatedCia402, feed
@@ -78,7 +82,7 @@ def run_cia402(
     run_start = start == "restarted"  # a boundary of the compass's record
     recorder = Recorder(plan.bus.queue_size, raw_log, log_rest=False)
     live_file = LiveFile(live_file_of(raw_log))
-    position = 0
+    position = logged = 0  # frames fed to the engine; frames of this run's raw log
     try:
         with _stop_on_signals(stop), display:
             operator.waiting = lambda: _show(engine, display, live_file)
@@ -90,11 +94,11 @@ def run_cia402(
                 for batch in feed(engine, decoder, position, msgs, sim.stand.take_faults()):
                     live_file.headings(batch.headings)
                     run_start = run_start and not mark_run_start(store, batch.headings)
-                skip = min(max(first_frame - position, 0), len(msgs))  # in earlier logs
-                recorder.log(RawFrames.from_messages(position + skip, msgs[skip:]), msgs[skip:])
                 position += len(msgs)
+                logged = _log(recorder, sim.take_logged(), logged, first_frame)
                 _show(engine, display, live_file)
             _to_rest(sim, store)
+            _log(recorder, sim.take_logged(step=False), logged, first_frame)
     finally:
         sim.close()
         live_file.close()
@@ -108,6 +112,16 @@ def run_cia402(
         store.set_status(outcome)
         checkpoint(store.sessions.kw["bind"])
     return result(store, outcome, raw_log, sha)
+
+
+def _log(recorder: Recorder, frames: list[can.Message], logged: int, first_frame: int) -> int:
+    """Log the run's raw frames (`SimulatedCia402.take_logged`) from stream position `logged`
+    but those in earlier logs (a killed run's, re-run: before `first_frame`); the position
+    after them."""
+    skip = min(max(first_frame - logged, 0), len(frames))
+    rest = frames[skip:]
+    recorder.log(RawFrames.from_messages(logged + skip, rest, channels=True), rest)
+    return logged + len(frames)
 
 
 def _to_rest(sim: SimulatedCia402, store: CampaignStore) -> None:

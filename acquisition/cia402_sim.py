@@ -3,15 +3,16 @@
 On an in-process virtual CAN bus: the simulated drive (`devices.sim_drive`, its own canopen
 network) and gyrostand's master (`devices.cia402`, another one), the master sending every SYNC
 itself (`sync="lockstep"`): each SYNC is one communication cycle of stand time for the drive, so
-the roll is the same whatever the host's load. The compass on the platform is the stand
-simulator's compass physics (`stand.engine.StandEngine`, the plan's [bus.simulator]) speaking a
-real protocol timed by reception (NMEA 2000: a CiA 402 stand has no clock to put in a compass
-frame); its rolling error follows the platform's motion as the master commands it (the roll
-begins, the stop ramp begins), at the platform's true amplitude (the commanded one times the
-simulator's `faults.amplitude_factor`, which the drive's encoder does not see: its
-`platform_scale`). With a CiA 410 [inclinometer] in the plan, the simulated one
-(`stand.inclinometer`, [bus.simulator.inclinometer]'s noise, bias, rate and faults) sends the
-platform's true roll: the drive's position at each SYNC times that scale."""
+the roll is the same whatever the host's load; after each frame it sends the master waits for
+the drive's answers (`cia402_log.BusTap`, which records the traffic for the raw log). The
+compass on the platform is the stand simulator's compass physics (`stand.engine.StandEngine`,
+the plan's [bus.simulator]) speaking a real protocol timed by reception (NMEA 2000: a CiA 402
+stand has no clock to put in a compass frame); its rolling error follows the platform's motion
+as the master commands it (the roll begins, the stop ramp begins), at the platform's true
+amplitude (the commanded one times the simulator's `faults.amplitude_factor`, which the drive's
+encoder does not see: its `platform_scale`). With a CiA 410 [inclinometer] in the plan, the
+simulated one (`stand.inclinometer`, [bus.simulator.inclinometer]'s noise, bias, rate and
+faults) sends the platform's true roll: the drive's position at each SYNC times that scale."""
 
 from __future__ import annotations
 
@@ -29,6 +30,7 @@ from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault, Motion
 from gyrostand.acquisition.engine import Command, Engine, Phase
 from gyrostand.analysis.measured_motion import DRIVE_POSITION
 from gyrostand.devices.cia402 import AxisConfig, Cia402Axis
+from gyrostand.devices.cia402_log import RUN, STEP, BusTap, record
 from gyrostand.devices.decoder import SourceDecoder, frame_decoder
 from gyrostand.devices.roll_trajectory import Kinematics
 from gyrostand.devices.sim_drive import SIM_DRIVE_EDS, DriveFaults, ServoModel, SimDrive
@@ -61,6 +63,9 @@ class SimulatedCia402:
             net.NOTIFIER_CYCLE = 0.05  # a quick disconnect
             net.connect(interface="virtual", channel=channel)
         drive_net, master_net = self._networks
+        self.tap = BusTap(master_net, drive_net, self._stand_s)
+        self._others: list[can.Message] = []  # the compass's and inclinometer's, not yet logged
+        self._run_record: can.Message | None = record(RUN, clock_ms, 0.0)
         try:
             scale = drive_faults.platform_scale * config.faults.amplitude_factor
             self.drive = SimDrive(
@@ -104,6 +109,11 @@ class SimulatedCia402:
 
             self.axis.on_cycle = on_cycle
 
+    def _stand_s(self) -> float:
+        """The run's stand time (0 while the drive boots and is set up)."""
+        axis = self.__dict__.get("axis")
+        return axis.t_s if axis is not None else 0.0
+
     def _sample_platform(self, counts_per_degree: float) -> None:
         """The platform's true roll at the SYNC whose TPDO the master just took."""
         t, deg = self._platform
@@ -136,16 +146,43 @@ class SimulatedCia402:
         return [m for m in msgs if m.is_extended_id]
 
     def advance_to(self, t_s: float) -> list[can.Message]:
-        """Every frame of the stand, the compass and the inclinometer up to stand time `t_s`,
-        in time order."""
-        frames = self.stand.advance_to(t_s) + self._inclinometer_frames()
-        compass = self._compass_frames + self._compass_only(self.compass.advance_to(t_s))
+        """Every frame of the stand (the master's acks and statuses), the compass and the
+        inclinometer up to stand time `t_s`, in time order: what the engine takes."""
+        frames = self.stand.advance_to(t_s)
+        others = self._inclinometer_frames() + self._compass_frames
+        others += self._compass_only(self.compass.advance_to(t_s))
         self._compass_frames = []
-        return sorted(frames + compass, key=lambda m: m.timestamp)
+        return merged(frames, others, self._others)
+
+    def take_logged(self, step: bool = True) -> list[can.Message]:
+        """The raw log's frames since the last call (`cia402_log`): the drive's CANopen
+        traffic, the compass's and inclinometer's frames, and the master's records (RUN first,
+        STEP at the end of a batch the engine was fed; `step` False after the last one)."""
+        frames = sorted(self.tap.take() + self._others, key=lambda m: m.timestamp)
+        self._others = []
+        if self._run_record is not None:
+            frames.insert(0, self._run_record)
+            self._run_record = None
+        if step:
+            frames.append(record(STEP, round(self.stand.t_s * 1e6), self.stand.t_s))
+        return frames
 
     def close(self) -> None:
         for net in self._networks:
             net.disconnect()
+
+
+def merged(
+    stand: list[can.Message], others: list[can.Message], logged: list[can.Message]
+) -> list[can.Message]:
+    """The master's frames and the others (compass, inclinometer; also appended to `logged`)
+    in time order, the master's first at a tie; times to the microsecond (as the raw log's
+    replay restores them)."""
+    for msg in stand + others:
+        msg.timestamp = round(msg.timestamp, 6)
+    others = sorted(others, key=lambda m: m.timestamp)
+    logged += others
+    return sorted(stand + others, key=lambda m: m.timestamp)
 
 
 def feed(

@@ -1,8 +1,8 @@
 """A CiA 402 roll axis as the campaign engine's stand.
 
 The engine commands a stand that takes "set K, A, tau", "start" and "stop", acknowledges each at
-its clock and reports its motion every 500 ms (STAND_MOTION / STAND_STATUS). A CiA 402 drive does
-none of that: gyrostand is its master (`devices.cia402`). This adapter is that stand:
+its clock and reports its motion every 500 ms (STAND_MOTION / STAND_STATUS). A CiA 402 drive
+does none of that: gyrostand is its master (`devices.cia402`). This adapter is that stand:
 
 - "set" keeps K, A, tau (A in cm becomes a roll angle by the plan's kinematics); K is the
   operator's (a single-axis stand is turned by hand, confirmed at a prompt before the trial).
@@ -20,10 +20,12 @@ time; stored with the campaign's time base, `devices.clock.CIA402_STAND_CLOCK`),
 and a compass timed by reception is put on it by its statuses (`devices.clock.ReceptionClock`).
 The frames' reception times are the SYNC count x cycle_ms of this run.
 
-The acks and statuses go into the campaign's stream (and raw log) in the encoding of the plan's
-stand codec, never onto the CANopen bus (whose identifiers they would collide with): a replay of
-the log takes the engine's decisions again. A drive fault, a lost drive heartbeat or a
-following-error trip is one `DriveFault` (`take_faults`) for the caller to fail the trial with.
+The acks and statuses go into the engine's stream in the encoding of the plan's stand codec,
+never onto the CANopen bus (whose identifiers they would collide with) nor into the raw log,
+which holds the drive's CANopen traffic: a replay runs this adapter again against the logged
+drive (`devices.cia402_log`) and so derives them again. A drive fault, a lost drive
+heartbeat or a following-error trip is one `DriveFault` (`take_faults`) for the caller to fail
+the trial with.
 """
 
 from __future__ import annotations

@@ -526,6 +526,10 @@ def replay(
     codec = codec_for(plan)
     checked = checked or [check_replay_log(log) for log in logs]
     paths = [log.path for log in checked]
+    if plan.stand.protocol == "cia402":  # the drive's CANopen traffic, through our master
+        from gyrostand.acquisition.cia402_replay import replay_cia402
+
+        return replay_cia402(plan, sessions, checked)
     if plan.compass.protocol == "iec61162":  # its sentences from the serial logs beside
         try:
             decoder, stream = replay_stream(plan, codec, paths)
@@ -538,22 +542,9 @@ def replay(
         info = _can_source_info(plan, codec)
     store = CampaignStore.create(sessions, plan, source="replay")
     engine = Engine(plan, store, _NoCommands(), source=info)
-    position = 0
     try:
         with store.deferred():
-            for log in checked:
-                seq = store.open_segment(
-                    str(log.path.resolve()), "continued" if position else "new", position
-                )
-                store.close_segment(seq, log.frames, log.sha256, serial=serial_log_of(log.path))
-                position += log.frames
-                if log.truncated is not None:
-                    store.run_event(
-                        "raw log",
-                        "warning",
-                        f"raw log {log.path.name} truncated after {log.frames} frames "
-                        f"({log.truncated}): replayed up to there",
-                    )
+            replayed_segments(store, checked)
             for raw in stream:
                 engine.feed(decoder.decode(raw))
                 if engine.phase is Phase.DONE:
@@ -566,6 +557,24 @@ def replay(
     outcome = engine.outcome if engine.outcome != "completed" else _judged(store, plan)
     store.set_status(outcome)
     return result(store, outcome, checked[-1].path, checked[-1].sha256)
+
+
+def replayed_segments(store: CampaignStore, checked: Sequence[ReplayLog]) -> None:
+    """The replayed campaign's raw log segments, with a warning for each that ends early."""
+    position = 0
+    for log in checked:
+        seq = store.open_segment(
+            str(log.path.resolve()), "continued" if position else "new", position
+        )
+        store.close_segment(seq, log.frames, log.sha256, serial=serial_log_of(log.path))
+        position += log.frames
+        if log.truncated is not None:
+            store.run_event(
+                "raw log",
+                "warning",
+                f"raw log {log.path.name} truncated after {log.frames} frames "
+                f"({log.truncated}): replayed up to there",
+            )
 
 
 def resume_store(sessions: sessionmaker[Session], campaign_id: int) -> tuple[Plan, CampaignStore]:

@@ -47,6 +47,7 @@ _SUPPORTS = {CSP: 1 << 7, PP: 1 << 0}  # 0x6502 bits
 SW_FOLLOWING_ERROR = 1 << 13
 ANSWER_TIMEOUT_S = 2.0  # wall-clock bound on a drive's answer (a dead drive, not a timing)
 HEARTBEAT_MISSES = 3  # a heartbeat is lost after this many producer periods
+MASTER_NODE_ID = 127  # the node id of gyrostand's heartbeat (the drive consumes it)
 
 
 class DriveError(RuntimeError):
@@ -66,7 +67,7 @@ class AxisConfig:
     node_id: int
     eds: Path
     cycle_ms: int = 10
-    master_node_id: int = 127  # the node id of gyrostand's heartbeat (the drive consumes it)
+    master_node_id: int = MASTER_NODE_ID
     heartbeat_ms: int = 100  # gyrostand's and the drive's heartbeat producer period
     drive_timeout_ms: int = 300  # the drive's consumer time of gyrostand's heartbeat
     sync: Literal["lockstep", "periodic"] = "lockstep"

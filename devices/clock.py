@@ -53,6 +53,11 @@ class ReceptionClock:
 
     def __init__(self, window: int = WINDOW) -> None:
         self.window = window
+        self.restart()
+
+    def restart(self) -> None:
+        """From no status (also: a new run of the campaign, whose reception times count anew,
+        in a CiA 402 stand's raw log, `devices.cia402_log`)."""
         self._pos = np.zeros(0, dtype=np.int64)  # the last statuses: stream positions ...
         self._rx = np.zeros(0)  # ... reception ms
         self._stand = np.zeros(0)  # ... and stand ms

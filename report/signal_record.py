@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from gyrostand.analysis.errors import AnalysisError
+from gyrostand.devices.cia402 import MASTER_NODE_ID
+from gyrostand.devices.cia402_log import compass_frames
 from gyrostand.devices.decoder import SourceDecoder, frame_decoder
 from gyrostand.devices.iec61162 import Iec61162Source
 from gyrostand.devices.serial_decoder import SerialSourceDecoder
@@ -36,18 +38,23 @@ from gyrostand.stand.protocol import Codec, SignalMap
 
 Span = tuple[float, float]  # stand ms, [start, end)
 SerialLine = tuple[int, bool]  # an IEC 61162 compass's baud rate; virtual time
-# `Plan.heading_source`, for a serial compass its line (its sentences in the serial logs), and
-# whether the compass is on a CAN bus of its own
-HeadingSource = tuple[str, str | None, tuple[str, str], Encoder | None, SerialLine | None, bool]
-GYROSTAND: HeadingSource = ("gyrostand", None, ("", ""), None, None, False)
+Drive = tuple[int, int]  # a CiA 402 stand's drive and master node ids (`devices.cia402_log`)
+# `Plan.heading_source`, for a serial compass its line (its sentences in the serial logs),
+# whether the compass is on a CAN bus of its own, and a CiA 402 stand's drive
+HeadingSource = tuple[
+    str, str | None, tuple[str, str], Encoder | None, SerialLine | None, bool, Drive | None
+]
+GYROSTAND: HeadingSource = ("gyrostand", None, ("", ""), None, None, False, None)
 
 
 def heading_source(plan: Plan) -> HeadingSource:
     """The plan's heading source as its raw logs are read back."""
-    line = None
+    line = drive = None
     if plan.compass.protocol == "iec61162":
         line = (plan.compass.baud, plan.bus.timing == "virtual")
-    return (*plan.heading_source, line, plan.compass.own_bus)
+    if plan.stand.protocol == "cia402" and plan.stand.node_id is not None:
+        drive = (plan.stand.node_id, MASTER_NODE_ID)
+    return (*plan.heading_source, line, plan.compass.own_bus, drive)
 
 
 def headings_in(
@@ -79,12 +86,14 @@ def _valid_headings(
     Kept for the next call with the same files: the analysis and the report's plots of one
     campaign read its log once (a changed file has another size or mtime; the report verifies
     each log's SHA-256 before reading it)."""
-    protocol, name, product, encoder, line, own_bus = source
+    protocol, name, product, encoder, line, own_bus, drive = source
     codec, paths = Codec(dbc_path, signal_map), [Path(path) for path, _, _ in stamps]
     decoder: BatchDecoder | SourceDecoder | SerialSourceDecoder
     if line is None:
         decoder = frame_decoder(codec, protocol, name, product, encoder, own_bus=own_bus)
         stream = read_segments(paths)
+        if drive is not None and isinstance(decoder, SourceDecoder):  # no stand frames
+            stream = compass_frames(paths, *drive, decoder.clock)
     else:  # LogFileError for serial logs missing or unreadable
         check_serial_logs(paths, line[1])
         decoder, stream = serial_replay(codec, Iec61162Source(line[0]), paths, line[1])

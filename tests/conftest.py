@@ -66,6 +66,7 @@ SLOW_FILES = frozenset(
     {
         "acquisition/test_cia402_campaign.py",
         "acquisition/test_cia402_run.py",
+        "acquisition/test_cia402_replay.py",
         "acquisition/test_cia402_resume.py",
         "acquisition/test_cli_campaign.py",
         "acquisition/test_identify_campaign.py",
