@@ -37,6 +37,11 @@ from gyrostand.stand.runup import switch_on
 from gyrostand.stand.simconfig import SimConfig
 
 CHUNK_S = 1800.0  # stand seconds of frames decoded at once (bounds the memory)
+# Between a procedure's readings nobody listens: the simulated compass runs on (`pass_to`) but
+# builds and decodes no frames (the type-approval example's 32 h of stand time: 3 s of CPU
+# before, most of it frames nobody read)
+LISTEN_S = 1.0  # stand seconds listened for at a reading (more while none valid arrives)
+LISTEN_EPS_S = 1e-6  # a wait ends this short of the reading time: its sample is heard
 
 
 @dataclass(frozen=True)
@@ -80,13 +85,33 @@ class RunUp:
         return self.engine.stand_time_s
 
     def advance(self, until_s: float) -> None:
-        """Record the compass's frames up to `until_s` seconds after switch-on."""
+        """Record the compass's heading frames up to `until_s` seconds after switch-on."""
         while self.now_s < until_s:
-            frames = self.engine.advance_to(min(self.now_s + CHUNK_S, until_s))
+            frames = self.engine.advance_to(min(self.now_s + CHUNK_S, until_s), compass_only=True)
+            if not frames:
+                continue
             batch = self._decoder.decode(RawFrames.from_messages(0, frames)).headings
             ok = batch.valid.astype(bool)
             self._t.append((batch.t_ms[ok] - self.engine.clock_ms) / 1000.0)
             self._heading.append(batch.heading_deg[ok])
+
+    def listen(self, from_s: float, until_s: float) -> None:
+        """Record from `from_s` to `until_s` after switch-on, the time before it passed unheard
+        (the compass's physics and noise run on: only the frames are not built and decoded)."""
+        if from_s > self.now_s:
+            self.engine.pass_to(from_s - LISTEN_EPS_S)
+        self.advance(until_s)
+
+    def listen_for_reading(self, at_s: float) -> None:
+        """Record from `at_s` until the compass has sent a valid heading at or after it (the
+        reading indicated then; `RunUpRecord.readings` picks it)."""
+        self.listen(at_s, at_s + LISTEN_S)
+        while not (self._t and self._t[-1].size and self._t[-1][-1] >= at_s - 1e-9):
+            self.advance(self.now_s + LISTEN_S)
+
+    def pass_to(self, until_s: float) -> None:
+        """Let stand time run to `until_s` after switch-on with nobody listening."""
+        self.engine.pass_to(until_s)
 
     def command(self, message: can.Message) -> None:
         """A stand command at the current stand time; an error unless the stand accepts it."""
@@ -118,7 +143,9 @@ def _settle_point(
     """The proc's readings from `start_s` after switch-on, and the settle point they give."""
     n, interval = proc.readings, proc.interval_s
     assert n is not None and interval is not None  # resolved
-    runup.advance(start_s + (n - 1) * interval + 1.0)
+    for i in range(n):
+        runup.listen_for_reading(start_s + i * interval)
+    runup.pass_to(start_s + (n - 1) * interval + 1.0)
     _, values = runup.record().readings(start_s, n, interval)
     if reference is None:
         return settle_point(values, interval)
@@ -148,7 +175,9 @@ def _rolling(
         runup.command(codec.encode_command_start())
         first = runup.now_s + proc.wait_s
         width = ROLLING_WINDOW_PERIODS * point.period_s
-        runup.advance(first + (n - 1) * interval + width + 1.0)
+        for i in range(n):
+            runup.listen(first + i * interval, first + i * interval + width)
+        runup.pass_to(first + (n - 1) * interval + width + 1.0)
         record = runup.record()
         means = []
         for i in range(n):
