@@ -57,8 +57,10 @@ def main() -> int:
     print(f"report (JSON): {report[0]:.1f} s wall, {report[1]:.1f} s CPU")
     for item in doc["compliance"]["items"]:
         value = item["value_deg"]
-        shown = "-" if value is None else f"{value:.3f} +/- {item['uncertainty_deg']:.3f}"
-        print(f"  {item['id']:<22} {item['verdict']:<13} {shown:<18} limit {item['limit_text']}")
+        shown = "-"
+        if value is not None:
+            shown = f"{value:.3f} +/- {item['uncertainty_deg']:.3f} {item['unit']}"
+        print(f"  {item['id']:<22} {item['verdict']:<13} {shown:<22} limit {item['limit_text']}")
     print(f"after: {load()}")
     ok = run[0] < TARGET_S
     verdict = "OK" if ok else "NOT"

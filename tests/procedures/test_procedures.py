@@ -201,6 +201,17 @@ def test_a_compass_failing_one_limit_fails_that_clause_only(
     assert changed == {clause} and after[clause] == FAIL
 
 
+def test_the_settling_time_is_judged_in_hours_and_says_so(results, a821) -> None:
+    plan, out = results
+    items = {i.id: i for i in assess(a821, paper_analysis(), procedures=out).items}
+    settling = items["settling-time"]
+    assert settling.unit == "h" and settling.value_deg == pytest.approx(out.settling.value_s / 3600)
+    assert (
+        settling.limit_text == "6 h" and f"{settling.acceptance_limit_deg:.3f} h" in settling.detail
+    )
+    assert {i.unit for k, i in items.items() if k != "settling-time"} == {"deg"}
+
+
 def test_no_reference_heading_leaves_the_settle_point_error_not_assessed(a821) -> None:
     plan = fast_plan(reference=False)
     out = run(plan, a821)
