@@ -9,6 +9,8 @@ from typing import TYPE_CHECKING
 from gyrostand.errors import fail
 
 if TYPE_CHECKING:
+    from threading import Event
+
     from gyrostand.acquisition.store import CampaignStore
     from gyrostand.plan.model import Plan
     from gyrostand.plan.procedures import ResolvedProcedure
@@ -48,29 +50,57 @@ def describe(procedure: ResolvedProcedure) -> str:
     return text + (f" (departs from the standard: {departs})" if departs else "")
 
 
-def run_procedures_of(plan: Plan, store: CampaignStore, quiet: bool) -> None:
-    """Run and store the plan's procedures unless the campaign has them already."""
+def run_procedures_of(plan: Plan, store: CampaignStore, quiet: bool, stop: Event) -> bool:
+    """Run and store the plan's procedures unless the campaign has them already; the stages an
+    interrupted run did are kept, the one interrupted is redone. False: stopped part-way (by
+    `stop`, at the end of a stage; the stages done are kept for `campaign resume`)."""
     if not plan.procedure:
-        return
+        return True
     from gyrostand.acquisition.procedures import (
-        procedures_stored,
+        Progress,
         run_procedures,
+        save_progress,
         store_procedures,
+        stored_progress,
     )
     from gyrostand.stand.simconfig import simulator_config
 
-    if procedures_stored(store.sessions, store.campaign_id):
-        return
+    complete, done = stored_progress(store.sessions, store.campaign_id)
+    if complete:
+        return True
     procedures = resolved(plan)
     bus = plan.bus
     config = simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
     model = plan.settle.transient_model
     assert model is not None  # the plan's check
-    results = run_procedures(
-        config, procedures, plan.reference, model, plan.stand_limits, plan.site.latitude_deg
-    )
+    if done:
+        kept = ", ".join(k for k in done if not k.endswith("_s"))
+        store.run_event("procedures", "info", f"the standard's procedures resumed: kept {kept}")
+
+    def saved(stages: dict[str, object]) -> None:
+        save_progress(store.sessions, store.campaign_id, stages)
+        if stop.is_set():
+            raise Stopped
+
+    try:
+        results = run_procedures(
+            config,
+            procedures,
+            plan.reference,
+            model,
+            plan.stand_limits,
+            plan.site.latitude_deg,
+            Progress(done, saved),
+        )
+    except Stopped:
+        return False
     store_procedures(store.sessions, store.campaign_id, results)
     kinds = ", ".join(p.kind for p in procedures)
     store.run_event("procedures", "info", f"the standard's procedures run and stored: {kinds}")
     if not quiet:
         print(f"campaign {store.campaign_id}: the standard's procedures done ({kinds})")
+    return True
+
+
+class Stopped(Exception):
+    """A stop asked for while the procedures ran (raised once a stage is saved)."""

@@ -277,7 +277,10 @@ def run_campaign(
             mark("interrupted", "warning", "stopped by signal before acquiring", "stopped")
             return result(store, "stopped", None, None)
         terminal = sys.stdin if interactive() else None
-        run_procedures_of(plan, store, quiet)
+        if not run_procedures_of(plan, store, quiet, stop):
+            why = "stopped by signal during the standard's procedures (the stages done are kept)"
+            mark("interrupted", "warning", why, "stopped")
+            return result(store, "stopped", None, None)
         # (the analysis is recorded by the first `analyze` or `report`, not here: computing it
         # at the end of every run cost ~45 s of the SocketCAN suite's emulated campaign)
         return run_live(

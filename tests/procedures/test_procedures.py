@@ -4,12 +4,18 @@ stated uncertainty; a compass made to fail one limit fails that clause only; no 
 heading leaves the settle point error not assessed. A fast compass (20-min precession period,
 2 Hz readings) keeps the run-ups to a few seconds."""
 
+import json
 import math
+import threading
 
 import pytest
 
-from gyrostand.acquisition.procedures import run_procedures
+from gyrostand.acquisition.operator import messages
+from gyrostand.acquisition.procedures import Progress, run_procedures, stored_progress
+from gyrostand.acquisition.store import CampaignStore
 from gyrostand.analysis.procedures import ProcedureResults
+from gyrostand.campaign_procedures import run_procedures_of
+from gyrostand.db.session import open_database
 from gyrostand.plan.model import Plan, PlanError, parse_plan
 from gyrostand.report.compliance import (
     FAIL,
@@ -20,6 +26,7 @@ from gyrostand.report.compliance import (
     load_profile,
 )
 from gyrostand.report.procedures import envelope_points, resolve
+from gyrostand.report.stored import stored_procedures
 from gyrostand.stand.runup import (
     runup_config,
     settle_scatter_deg,
@@ -210,6 +217,75 @@ def test_the_settling_time_is_judged_in_hours_and_says_so(results, a821) -> None
         settling.limit_text == "6 h" and f"{settling.acceptance_limit_deg:.3f} h" in settling.detail
     )
     assert {i.unit for k, i in items.items() if k != "settling-time"} == {"deg"}
+
+
+class Killed(Exception):
+    """The acquisition killed once a stage was committed."""
+
+
+def run_until(plan: Plan, profile, kill_at: str, done: dict | None = None) -> dict:
+    """The procedures run until stage `kill_at` is saved, then killed: what the database
+    holds (JSON, as stored)."""
+    stored: dict = {}
+
+    def saved(stages: dict) -> None:
+        stored.clear()
+        stored.update(json.loads(json.dumps(stages)))
+        if kill_at in stages:
+            raise Killed
+
+    with pytest.raises(Killed):
+        resume(plan, profile, Progress(done or {}, saved))
+    return stored
+
+
+def resume(plan: Plan, profile, progress: Progress) -> ProcedureResults:
+    model = plan.settle.transient_model
+    assert model is not None
+    return run_procedures(
+        config(plan),
+        resolve(plan, profile),
+        plan.reference,
+        model,
+        plan.stand_limits,
+        plan.site.latitude_deg,
+        progress,
+    )
+
+
+def test_killed_part_way_the_stages_done_are_kept_and_the_rest_redone(results, a821) -> None:
+    plan, whole = results
+    stored = run_until(plan, a821, "static")  # killed during the rolling's first point
+    assert set(stored) == {"settling", "static_end_s", "static"}
+    stored["settling"]["u_s"] = 12.5  # kept, not measured again: the tampered value stays
+    stored = run_until(plan, a821, "runup 2", stored)  # then killed during run-up 3
+    assert set(stored) == {"settling", "static_end_s", "static", "rolling", "runup 2"}
+    out = resume(plan, a821, Progress(stored))
+    assert out.settling.u_s == 12.5
+    # the rest as in the run never interrupted: the compass brought through the kept stages
+    # unheard is the same compass, to the bit
+    assert {**out.to_dict(), "settling": None} == {**whole.to_dict(), "settling": None}
+
+
+def test_a_stop_during_the_procedures_keeps_the_stages_done_for_resume(tmp_path) -> None:
+    plan = fast_plan()
+    sessions = open_database(f"sqlite:///{tmp_path / 'p.sqlite'}")
+    store = CampaignStore.create(sessions, plan)
+    stop = threading.Event()
+    stop.set()  # asked for before the first stage ends: the procedures stop once it is saved
+    assert run_procedures_of(plan, store, True, stop) is False
+    complete, done = stored_progress(sessions, store.campaign_id)
+    assert not complete and set(done) == {"settling"}
+    with sessions() as session:
+        assert stored_procedures(session, store.campaign_id) is None  # no results yet
+    assert run_procedures_of(plan, store, True, threading.Event()) is True
+    with sessions() as session:
+        out = stored_procedures(session, store.campaign_id)
+        events = messages(session, store.campaign_id, "procedures")
+    assert out is not None and out.settling.to_dict() == done["settling"]
+    assert out.repeatability is not None and len(out.rolling) == 3
+    assert events[0] == "the standard's procedures resumed: kept settling"
+    assert stored_progress(sessions, store.campaign_id) == (True, {})
 
 
 def test_no_reference_heading_leaves_the_settle_point_error_not_assessed(a821) -> None:
