@@ -9,10 +9,12 @@ from typing import TYPE_CHECKING
 from gyrostand.errors import fail
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping
     from threading import Event
+    from typing import IO
 
     from gyrostand.acquisition.store import CampaignStore
-    from gyrostand.plan.model import Plan
+    from gyrostand.plan.model import Plan, PromptPlan
     from gyrostand.plan.procedures import ResolvedProcedure
 
 
@@ -46,16 +48,58 @@ def describe(procedure: ResolvedProcedure) -> str:
             f"{p.runups} run-ups, off {p.off_s:g} s between, " if p.kind == "repeatability" else ""
         )
         text = f"{p.kind}: {runs}{p.readings} readings {p.interval_s:g} s apart after settling"
+    if p.power == "manual":
+        text += ", switched on and off by hand (the operator is prompted)"
     departs = "; ".join(procedure.departures)
     return text + (f" (departs from the standard: {departs})" if departs else "")
 
 
-def run_procedures_of(plan: Plan, store: CampaignStore, quiet: bool, stop: Event) -> bool:
+def power_prompts(plan: Plan) -> dict[int, tuple[PromptPlan, ...]]:
+    """By run-up, the operator's prompts to switch a compass powered by hand (`power =
+    "manual"`): on for run-up 1 (settling); off, then on, for each further one (repeatability)."""
+    from gyrostand.plan.model import PromptPlan
+
+    out: dict[int, tuple[PromptPlan, ...]] = {}
+    for p in plan.procedure:
+        if p.power != "manual":
+            continue
+        if p.kind == "settling":
+            text = "switch the compass on: run-up 1 (settling from switch-on) starts"
+            out[1] = (PromptPlan(id="switch_on_1", text=text, before="campaign"),)
+        for k in range(2, p.runups + 1) if p.kind == "repeatability" else ():
+            off = f"switch the compass off: run-up {k - 1} of {p.runups} is done"
+            on = f"switch the compass on after {p.off_s:g} s off: run-up {k} of {p.runups}"
+            out[k] = (
+                PromptPlan(id=f"switch_off_{k}", text=off, before="campaign"),
+                PromptPlan(id=f"switch_on_{k}", text=on, before="campaign"),
+            )
+    return out
+
+
+def all_prompts(plan: Plan) -> tuple[PromptPlan, ...]:
+    """Every prompt a campaign of the plan may ask: the plan's ([[prompt]]) and the power
+    switchings of its procedures (what `--answer` and the station may answer)."""
+    return (*plan.prompt, *(p for ps in power_prompts(plan).values() for p in ps))
+
+
+def run_procedures_of(
+    plan: Plan,
+    store: CampaignStore,
+    quiet: bool,
+    stop: Event,
+    answers: Mapping[str, str] | None = None,
+    terminal: IO[str] | None = None,
+) -> bool:
     """Run and store the plan's procedures unless the campaign has them already; the stages an
-    interrupted run did are kept, the one interrupted is redone. False: stopped part-way (by
-    `stop`, at the end of a stage; the stages done are kept for `campaign resume`)."""
+    interrupted run did are kept, the one interrupted is redone. A compass powered by hand is
+    switched when the operator answers the prompts (`answers`, the station or `terminal`).
+    False: stopped part-way (by `stop` at the end of a stage, or a stop request while a prompt
+    waits; the stages done are kept for `campaign resume`)."""
     if not plan.procedure:
         return True
+    from rich.console import Console
+
+    from gyrostand.acquisition.operator import OperatorLink
     from gyrostand.acquisition.procedures import (
         Progress,
         run_procedures,
@@ -82,6 +126,15 @@ def run_procedures_of(plan: Plan, store: CampaignStore, quiet: bool, stop: Event
         if stop.is_set():
             raise Stopped
 
+    prompts = power_prompts(plan)
+    console = None if quiet else Console(stderr=True)
+    link = OperatorLink(store, plan, stop, answers or {}, terminal, console)
+
+    def switch_on(k: int) -> None:
+        for prompt in prompts.get(k, ()):
+            if link.ask(prompt, "the standard's procedures") is not None:
+                raise Stopped
+
     try:
         results = run_procedures(
             config,
@@ -91,6 +144,7 @@ def run_procedures_of(plan: Plan, store: CampaignStore, quiet: bool, stop: Event
             plan.stand_limits,
             plan.site.latitude_deg,
             Progress(done, saved),
+            switch_on,
         )
     except Stopped:
         return False

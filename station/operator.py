@@ -11,6 +11,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from gyrostand.campaign_procedures import all_prompts
 from gyrostand.db.models import Event
 from gyrostand.db.queries import stand_campaign
 from gyrostand.plan.model import Plan, PromptPlan, parse_plan
@@ -47,7 +48,7 @@ def waiting_for(session: Session, campaign_id: int) -> dict[str, Any] | None:
 
 def _prompt(session: Session, campaign_id: int, prompt_id: str) -> PromptPlan:
     plan = parse_plan(stand_campaign(session, campaign_id).plan_toml)
-    prompt = next((p for p in plan.prompt if p.id == prompt_id), None)
+    prompt = next((p for p in all_prompts(plan) if p.id == prompt_id), None)
     if prompt is None:
         raise ActionRefused(f"the campaign's plan has no prompt {prompt_id!r}")
     return prompt
