@@ -49,7 +49,8 @@ def describe(procedure: ResolvedProcedure) -> str:
         )
         text = f"{p.kind}: {runs}{p.readings} readings {p.interval_s:g} s apart after settling"
     if p.power == "manual":
-        text += ", switched on and off by hand (the operator is prompted)"
+        how = "on" if p.kind == "settling" else "off and on"
+        text += f", switched {how} by hand (the operator is prompted)"
     departs = "; ".join(procedure.departures)
     return text + (f" (departs from the standard: {departs})" if departs else "")
 
