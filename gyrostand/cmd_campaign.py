@@ -115,7 +115,7 @@ def checked_answers(plan: Plan, given: Sequence[str], new: bool = True) -> dict[
     """`--answer ID=VALUE` checked against the plan's prompts; for a `new` campaign, a prompt
     before the campaign left out is asked on the terminal, or is one error line when there is
     none (a resumed campaign's were answered when it started)."""
-    from gyrostand.campaign_procedures import all_prompts
+    from gyrostand.plan.switching import all_prompts
 
     prompts = {p.id: p for p in all_prompts(plan)}
     answers: dict[str, str] = {}

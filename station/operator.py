@@ -11,11 +11,11 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from gyrostand.campaign_procedures import all_prompts
 from gyrostand.db.models import Event
 from gyrostand.db.queries import stand_campaign
 from gyrostand.plan.model import Plan, PromptPlan, parse_plan
 from gyrostand.plan.prompts import ANSWER, PROMPT, STOP_REQUEST, message, pending
+from gyrostand.plan.switching import all_prompts
 
 FIELD = "answer-"
 """The start form's field of a prompt's answer: answer-ID."""
