@@ -4,8 +4,8 @@ acquisition's `BatchDecoder`), in stand time (virtual: as fast as the machine al
 deterministic).
 
 Each stage is saved as it ends (`Progress`: `campaign resume` keeps the stages done); a compass
-powered by hand is switched by the operator, prompted (`switch_on`). Not yet here: the live bus
-(`acquisition.engine`): a real compass needs it.
+powered by hand is switched by the operator, prompted (`before_switch_on`). Not yet here: the
+live bus (`acquisition.engine`): a real compass needs it.
 """
 
 from __future__ import annotations
@@ -231,7 +231,7 @@ def run_procedures(
     limits: StandLimits,
     latitude_deg: float,
     progress: Progress | None = None,
-    switch_on: Callable[[int], None] = lambda k: None,
+    before_switch_on: Callable[[int], None] = lambda k: None,
 ) -> ProcedureResults:
     """The plan's procedures on the simulated compass, in stand time: run-up 1 from switch-on
     (settling), its settle point after the settling record, the rolling points, then the
@@ -239,14 +239,14 @@ def run_procedures(
 
     `progress`: the stages done before an interruption are kept, not measured again; the
     simulated compass is brought through them unheard (`RunUp.pass_to`: the same draws), so the
-    stage interrupted is redone on the compass it would have met. `switch_on(k)`: before run-up
-    k is switched on (a compass powered by hand: the operator's prompts)."""
+    stage interrupted is redone on the compass it would have met. `before_switch_on(k)`: called
+    before run-up k is switched on (a compass powered by hand: the operator's prompts)."""
     progress = progress or Progress()
     done = progress.done
     by_kind = {p.kind: p.plan for p in procedures}
     settling = by_kind["settling"]
     assert settling.max_wait_s is not None and settling.band_deg is not None  # resolved
-    switch_on(1)
+    before_switch_on(1)
     first = RunUp(config, 1, 0.0)
     if "settling" in done:
         first.pass_to(settling.max_wait_s)
@@ -287,7 +287,7 @@ def run_procedures(
             at_s += proc.off_s
             stage = f"runup {k}"
             if stage not in done:  # a run-up interrupted is redone from switch-on
-                switch_on(k)
+                before_switch_on(k)
                 runup = RunUp(config, k, at_s)
                 point = _settle_point(runup, proc, start_s, reference)
                 progress.save(stage, {"settle_point": asdict(point), "end_s": runup.now_s})

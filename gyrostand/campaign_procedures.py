@@ -104,7 +104,7 @@ def run_procedures_of(
     console = None if quiet else Console(stderr=True)
     link = OperatorLink(store, plan, stop, answers or {}, terminal, console)
 
-    def switch_on(k: int) -> None:
+    def prompted(k: int) -> None:
         for prompt in prompts.get(k, ()):
             if link.ask(prompt, "the standard's procedures") is not None:
                 raise Stopped
@@ -118,7 +118,7 @@ def run_procedures_of(
             plan.stand_limits,
             plan.site.latitude_deg,
             Progress(done, saved),
-            switch_on,
+            prompted,
         )
     except Stopped:
         return False
