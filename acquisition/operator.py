@@ -94,21 +94,26 @@ class OperatorLink:
 
     def before_trial(self, trial: int) -> str | None:
         for prompt in self.plan.prompts_before(trial):
-            with self.store.sessions() as session:
-                if prompt.id in answers(session, self.store.campaign_id):
-                    continue  # answered in an earlier run of the campaign
-            self.store.run_event(PROMPT, "info", message(prompt.id, prompt.text))
-            stopped = self._wait(prompt)
+            stopped = self.ask(prompt, "before the next trial")
             if stopped is not None:
                 return stopped
         return None
 
-    def _wait(self, prompt: PromptPlan) -> str | None:
+    def ask(self, prompt: PromptPlan, when: str) -> str | None:
+        """Ask `prompt` (said to come `when`) and wait for its answer (None), unless answered
+        in an earlier run of the campaign; or why the campaign is to stop."""
+        with self.store.sessions() as session:
+            if prompt.id in answers(session, self.store.campaign_id):
+                return None
+        self.store.run_event(PROMPT, "info", message(prompt.id, prompt.text))
+        return self._wait(prompt, when)
+
+    def _wait(self, prompt: PromptPlan, when: str) -> str | None:
         """Until `prompt` is answered (None) or the campaign is to stop (why)."""
         if prompt.id in self.given:
             self.store.run_event(ANSWER, "info", message(prompt.id, self.given[prompt.id]))
             return None
-        self._say(f"before the next trial: {prompt.text} ({self._how(prompt)})")
+        self._say(f"{when}: {prompt.text} ({self._how(prompt)})")
         while True:
             self.waiting()
             if (why := self.stop_requested()) is not None:

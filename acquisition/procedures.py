@@ -3,13 +3,16 @@ compass's own CAN frames (the simulated compass's `StandEngine` frames, decoded 
 acquisition's `BatchDecoder`), in stand time (virtual: as fast as the machine allows,
 deterministic).
 
-Not yet here: the live bus (`acquisition.engine`), storage in the campaign database, resume
-after a kill, operator prompts for a compass switched by hand; a real compass needs them.
+Each stage is saved as it ends (`Progress`: `campaign resume` keeps the stages done); a compass
+powered by hand is switched by the operator, prompted (`before_switch_on`). Not yet here: the
+live bus (`acquisition.engine`): a real compass needs it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import can
 import numpy as np
@@ -18,9 +21,11 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand import SOFTWARE_VERSION
 from gyrostand.analysis.procedures import (
+    PROGRESS,
     ProcedureResults,
     RollingError,
     SettlePoint,
+    SettlingTime,
     repeatability,
     rolling_error,
     settle_point,
@@ -37,6 +42,11 @@ from gyrostand.stand.runup import switch_on
 from gyrostand.stand.simconfig import SimConfig
 
 CHUNK_S = 1800.0  # stand seconds of frames decoded at once (bounds the memory)
+# Between a procedure's readings nobody listens: the simulated compass runs on (`pass_to`) but
+# builds and decodes no frames (the type-approval example's 32 h of stand time: 3 s of CPU
+# before, most of it frames nobody read)
+LISTEN_S = 1.0  # stand seconds listened for at a reading (more while none valid arrives)
+LISTEN_EPS_S = 1e-6  # a wait ends this short of the reading time: its sample is heard
 
 
 @dataclass(frozen=True)
@@ -80,13 +90,33 @@ class RunUp:
         return self.engine.stand_time_s
 
     def advance(self, until_s: float) -> None:
-        """Record the compass's frames up to `until_s` seconds after switch-on."""
+        """Record the compass's heading frames up to `until_s` seconds after switch-on."""
         while self.now_s < until_s:
-            frames = self.engine.advance_to(min(self.now_s + CHUNK_S, until_s))
+            frames = self.engine.advance_to(min(self.now_s + CHUNK_S, until_s), compass_only=True)
+            if not frames:
+                continue
             batch = self._decoder.decode(RawFrames.from_messages(0, frames)).headings
             ok = batch.valid.astype(bool)
             self._t.append((batch.t_ms[ok] - self.engine.clock_ms) / 1000.0)
             self._heading.append(batch.heading_deg[ok])
+
+    def listen(self, from_s: float, until_s: float) -> None:
+        """Record from `from_s` to `until_s` after switch-on, the time before it passed unheard
+        (the compass's physics and noise run on: only the frames are not built and decoded)."""
+        if from_s > self.now_s:
+            self.engine.pass_to(from_s - LISTEN_EPS_S)
+        self.advance(until_s)
+
+    def listen_for_reading(self, at_s: float) -> None:
+        """Record from `at_s` until the compass has sent a valid heading at or after it (the
+        reading indicated then; `RunUpRecord.readings` picks it)."""
+        self.listen(at_s, at_s + LISTEN_S)
+        while not (self._t and self._t[-1].size and self._t[-1][-1] >= at_s - 1e-9):
+            self.advance(self.now_s + LISTEN_S)
+
+    def pass_to(self, until_s: float) -> None:
+        """Let stand time run to `until_s` after switch-on with nobody listening."""
+        self.engine.pass_to(until_s)
 
     def command(self, message: can.Message) -> None:
         """A stand command at the current stand time; an error unless the stand accepts it."""
@@ -118,7 +148,9 @@ def _settle_point(
     """The proc's readings from `start_s` after switch-on, and the settle point they give."""
     n, interval = proc.readings, proc.interval_s
     assert n is not None and interval is not None  # resolved
-    runup.advance(start_s + (n - 1) * interval + 1.0)
+    for i in range(n):
+        runup.listen_for_reading(start_s + i * interval)
+    runup.pass_to(start_s + (n - 1) * interval + 1.0)
     _, values = runup.record().readings(start_s, n, interval)
     if reference is None:
         return settle_point(values, interval)
@@ -126,11 +158,17 @@ def _settle_point(
 
 
 def _rolling(
-    runup: RunUp, proc: ProcedurePlan, static: SettlePoint, limits: StandLimits
+    runup: RunUp,
+    proc: ProcedurePlan,
+    static: SettlePoint,
+    limits: StandLimits,
+    progress: Progress,
 ) -> tuple[RollingError, ...]:
     """Each point of the envelope: rock, wait for the transient, take the readings (each a mean
-    over whole rocking periods), stop; a point beyond the stand is left to the forecast."""
-    out = []
+    over whole rocking periods), stop; a point beyond the stand is left to the forecast. A point
+    done before an interruption is kept (its rocking replayed unheard: the compass the same)."""
+    out: list[RollingError] = []
+    kept = [RollingError(**r) for r in progress.done.get("rolling", [])]
     n, interval = proc.readings, proc.interval_s
     assert n is not None and interval is not None and proc.points is not None  # resolved
     for point in proc.points:
@@ -141,6 +179,7 @@ def _rolling(
                 )
             )
             continue
+        heard = len(out) >= len(kept)
         codec = runup.codec
         runup.command(
             codec.encode_command_set(point.direction_deg, point.amplitude_cm, point.period_s)
@@ -148,20 +187,40 @@ def _rolling(
         runup.command(codec.encode_command_start())
         first = runup.now_s + proc.wait_s
         width = ROLLING_WINDOW_PERIODS * point.period_s
-        runup.advance(first + (n - 1) * interval + width + 1.0)
+        for i in range(n if heard else 0):
+            runup.listen(first + i * interval, first + i * interval + width)
+        runup.pass_to(first + (n - 1) * interval + width + 1.0)
+        runup.command(codec.encode_command_stop())
+        if not heard:
+            out.append(kept[len(out)])
+            continue
         record = runup.record()
         means = []
         for i in range(n):
             a = first + i * interval
             inside = (record.t_s >= a) & (record.t_s < a + width)
             means.append(float(record.heading_deg[inside].mean()))
-        runup.command(codec.encode_command_stop())
         out.append(
             rolling_error(
                 point.direction_deg, point.amplitude_cm, point.period_s, np.array(means), static
             )
         )
+        progress.save("rolling", [asdict(r) for r in out])
     return tuple(out)
+
+
+@dataclass
+class Progress:
+    """What the procedures have done so far, by stage (JSON-ready: "settling", "static" and
+    "static_end_s", "rolling", "runup K"), and where each new stage is saved (`save`: the
+    campaign database's checkpoint, so that a resumed campaign keeps them)."""
+
+    done: dict[str, Any] = field(default_factory=dict)
+    saved: Callable[[dict[str, Any]], None] = lambda done: None
+
+    def save(self, stage: str, value: Any) -> None:
+        self.done[stage] = value
+        self.saved(self.done)
 
 
 def run_procedures(
@@ -171,44 +230,69 @@ def run_procedures(
     model: TransientModel,
     limits: StandLimits,
     latitude_deg: float,
+    progress: Progress | None = None,
+    before_switch_on: Callable[[int], None] = lambda k: None,
 ) -> ProcedureResults:
     """The plan's procedures on the simulated compass, in stand time: run-up 1 from switch-on
     (settling), its settle point after the settling record, the rolling points, then the
-    further run-ups of the repeatability, each after the compass was off for `off_s`."""
+    further run-ups of the repeatability, each after the compass was off for `off_s`.
+
+    `progress`: the stages done before an interruption are kept, not measured again; the
+    simulated compass is brought through them unheard (`RunUp.pass_to`: the same draws), so the
+    stage interrupted is redone on the compass it would have met. `before_switch_on(k)`: called
+    before run-up k is switched on (a compass powered by hand: the operator's prompts)."""
+    progress = progress or Progress()
+    done = progress.done
     by_kind = {p.kind: p.plan for p in procedures}
     settling = by_kind["settling"]
     assert settling.max_wait_s is not None and settling.band_deg is not None  # resolved
+    before_switch_on(1)
     first = RunUp(config, 1, 0.0)
-    first.advance(settling.max_wait_s)
-    record = first.record()
-    settled = settling_time(
-        record.t_s,
-        record.heading_deg,
-        settling.band_deg / 2,
-        model.w,
-        model.xi,
-        settling.fit_from_s or 0.0,
-    )
+    if "settling" in done:
+        first.pass_to(settling.max_wait_s)
+        settled = SettlingTime.from_dict(done["settling"])
+    else:
+        first.advance(settling.max_wait_s)
+        record = first.record()
+        settled = settling_time(
+            record.t_s,
+            record.heading_deg,
+            settling.band_deg / 2,
+            model.w,
+            model.xi,
+            settling.fit_from_s or 0.0,
+        )
+        progress.save("settling", settled.to_dict())
     readings = by_kind.get("settle_point") or by_kind.get("repeatability")
     # the readings after settling: from the record's end, or the settling time (+ U) if later
     start_s = settling.max_wait_s
     if settled.settled:
         start_s = max(start_s, settled.value_s + settled.expanded_s)
     static = None
-    if readings is not None:
+    if readings is not None and "static" in done:
+        first.pass_to(done["static_end_s"])
+        static = SettlePoint.from_dict(done["static"])
+    elif readings is not None:
         static = _settle_point(first, readings, start_s, reference)
+        progress.save("static_end_s", first.now_s)
+        progress.save("static", asdict(static))
     rolling: tuple[RollingError, ...] = ()
     if "rolling" in by_kind and static is not None:
-        rolling = _rolling(first, by_kind["rolling"], static, limits)
+        rolling = _rolling(first, by_kind["rolling"], static, limits, progress)
     repeat = None
     if "repeatability" in by_kind and static is not None:
         proc = by_kind["repeatability"]
         points, at_s = [static], first.at_s + first.now_s
         for k in range(2, proc.runups + 1):
             at_s += proc.off_s
-            runup = RunUp(config, k, at_s)
-            points.append(_settle_point(runup, proc, start_s, reference))
-            at_s += runup.now_s
+            stage = f"runup {k}"
+            if stage not in done:  # a run-up interrupted is redone from switch-on
+                before_switch_on(k)
+                runup = RunUp(config, k, at_s)
+                point = _settle_point(runup, proc, start_s, reference)
+                progress.save(stage, {"settle_point": asdict(point), "end_s": runup.now_s})
+            points.append(SettlePoint.from_dict(done[stage]["settle_point"]))
+            at_s += done[stage]["end_s"]
         repeat = repeatability(points)
     return ProcedureResults(
         settling=settled,
@@ -225,20 +309,36 @@ def store_procedures(
     sessions: sessionmaker[Session], campaign_id: int, results: ProcedureResults
 ) -> None:
     """Store the campaign's procedure results (once: a resumed campaign keeps them)."""
+    _store(sessions, campaign_id, results.to_dict())
+
+
+def save_progress(sessions: sessionmaker[Session], campaign_id: int, done: dict[str, Any]) -> None:
+    """The stages done so far (`Progress.done`), in the campaign's procedure row until the
+    results replace them."""
+    _store(sessions, campaign_id, {PROGRESS: done})
+
+
+def _store(sessions: sessionmaker[Session], campaign_id: int, record: dict[str, Any]) -> None:
     with writer(sessions).begin() as session:
-        session.add(
-            ProcedureRun(
-                campaign_id=campaign_id,
-                results_json=results.to_dict(),
-                software_version=SOFTWARE_VERSION,
-            )
-        )
+        row = session.scalar(select(ProcedureRun).where(ProcedureRun.campaign_id == campaign_id))
+        if row is None:
+            row = ProcedureRun(campaign_id=campaign_id, results_json=record)
+            session.add(row)
+        row.results_json = record
+        row.software_version = SOFTWARE_VERSION
 
 
-def procedures_stored(sessions: sessionmaker[Session], campaign_id: int) -> bool:
-    """Whether the campaign's procedures were run and stored (a resumed campaign skips them)."""
+def stored_progress(
+    sessions: sessionmaker[Session], campaign_id: int
+) -> tuple[bool, dict[str, Any]]:
+    """Whether the campaign's procedures were all run and stored (a resumed campaign skips
+    them), and else the stages an interrupted run did (empty: none)."""
     with sessions() as session:
-        found = session.scalar(
-            select(ProcedureRun.id).where(ProcedureRun.campaign_id == campaign_id)
+        record = session.scalar(
+            select(ProcedureRun.results_json).where(ProcedureRun.campaign_id == campaign_id)
         )
-    return found is not None
+    if record is None:
+        return False, {}
+    if PROGRESS in record:
+        return False, dict(record[PROGRESS])
+    return True, {}

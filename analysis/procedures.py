@@ -27,6 +27,7 @@ GRID_S = 1.0  # the fitted reading's grid when searching the last band exit, s
 MAX_HORIZON = 10.0  # the fitted transient is followed past the record to at most 10x its length
 MAX_FIT_READINGS = 20_000  # a longer record is thinned evenly to about this many readings
 COVERAGE = 0.95  # expanded uncertainties: about 95 %
+PROGRESS = "progress"  # the key of a stored procedure record of stages done, not results
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,15 @@ class SettlingTime:
     def extrapolated(self) -> bool:
         """Whether the settling time lies after the record's end (predicted by the fit)."""
         return self.value_s > self.record_s
+
+    def to_dict(self) -> dict[str, Any]:
+        """As stored (JSON: a settling time not reached is null)."""
+        return {**asdict(self), "value_s": self.value_s if self.settled else None}
+
+    @classmethod
+    def from_dict(cls, record: dict[str, Any]) -> SettlingTime:
+        value = record["value_s"]
+        return cls(**{**record, "value_s": math.inf if value is None else value})
 
 
 def _last_exit_s(theta: np.ndarray, t_s: np.ndarray, half_band_deg: float) -> float:
@@ -150,6 +160,10 @@ class SettlePoint:
     @property
     def n(self) -> int:
         return len(self.readings_deg)
+
+    @classmethod
+    def from_dict(cls, record: dict[str, Any]) -> SettlePoint:
+        return cls(**{**record, "readings_deg": tuple(record["readings_deg"])})
 
 
 def settle_point(
@@ -270,22 +284,18 @@ class ProcedureResults:
     def to_dict(self) -> dict[str, Any]:
         """The stored record (JSON: a settling time not reached is null)."""
         record = asdict(self)
-        if self.settling is not None and not self.settling.settled:
-            record["settling"]["value_s"] = None
+        if self.settling is not None:
+            record["settling"] = self.settling.to_dict()
         return record
 
     @classmethod
     def from_dict(cls, record: dict[str, Any]) -> ProcedureResults:
         settling = record["settling"]
-        if settling is not None and settling["value_s"] is None:
-            settling = {**settling, "value_s": math.inf}
         point = record["settle_point"]
         repeat = record["repeatability"]
         return cls(
-            settling=None if settling is None else SettlingTime(**settling),
-            settle_point=None
-            if point is None
-            else SettlePoint(**{**point, "readings_deg": tuple(point["readings_deg"])}),
+            settling=None if settling is None else SettlingTime.from_dict(settling),
+            settle_point=None if point is None else SettlePoint.from_dict(point),
             repeatability=None
             if repeat is None
             else Repeatability(

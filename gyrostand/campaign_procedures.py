@@ -9,6 +9,10 @@ from typing import TYPE_CHECKING
 from gyrostand.errors import fail
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping
+    from threading import Event
+    from typing import IO
+
     from gyrostand.acquisition.store import CampaignStore
     from gyrostand.plan.model import Plan
     from gyrostand.plan.procedures import ResolvedProcedure
@@ -44,33 +48,87 @@ def describe(procedure: ResolvedProcedure) -> str:
             f"{p.runups} run-ups, off {p.off_s:g} s between, " if p.kind == "repeatability" else ""
         )
         text = f"{p.kind}: {runs}{p.readings} readings {p.interval_s:g} s apart after settling"
+    if p.power == "manual":
+        how = "on" if p.kind == "settling" else "off and on"
+        text += f", switched {how} by hand (the operator is prompted)"
     departs = "; ".join(procedure.departures)
     return text + (f" (departs from the standard: {departs})" if departs else "")
 
 
-def run_procedures_of(plan: Plan, store: CampaignStore, quiet: bool) -> None:
-    """Run and store the plan's procedures unless the campaign has them already."""
+def run_procedures_of(
+    plan: Plan,
+    store: CampaignStore,
+    quiet: bool,
+    stop: Event,
+    answers: Mapping[str, str] | None = None,
+    terminal: IO[str] | None = None,
+) -> bool:
+    """Run and store the plan's procedures unless the campaign has them already; the stages an
+    interrupted run did are kept, the one interrupted is redone. A compass powered by hand is
+    switched when the operator answers the prompts (`answers`, the station or `terminal`).
+    False: stopped part-way (by `stop` at the end of a stage, or a stop request while a prompt
+    waits; the stages done are kept for `campaign resume`)."""
     if not plan.procedure:
-        return
+        return True
+    from rich.console import Console
+
+    from gyrostand.acquisition.operator import OperatorLink
     from gyrostand.acquisition.procedures import (
-        procedures_stored,
+        Progress,
         run_procedures,
+        save_progress,
         store_procedures,
+        stored_progress,
     )
+    from gyrostand.plan.switching import power_prompts
     from gyrostand.stand.simconfig import simulator_config
 
-    if procedures_stored(store.sessions, store.campaign_id):
-        return
+    complete, done = stored_progress(store.sessions, store.campaign_id)
+    if complete:
+        return True
     procedures = resolved(plan)
     bus = plan.bus
     config = simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
     model = plan.settle.transient_model
     assert model is not None  # the plan's check
-    results = run_procedures(
-        config, procedures, plan.reference, model, plan.stand_limits, plan.site.latitude_deg
-    )
+    if done:
+        kept = ", ".join(k for k in done if not k.endswith("_s"))
+        store.run_event("procedures", "info", f"the standard's procedures resumed: kept {kept}")
+
+    def saved(stages: dict[str, object]) -> None:
+        save_progress(store.sessions, store.campaign_id, stages)
+        if stop.is_set():
+            raise Stopped
+
+    prompts = power_prompts(plan)
+    console = None if quiet else Console(stderr=True)
+    link = OperatorLink(store, plan, stop, answers or {}, terminal, console)
+
+    def prompted(k: int) -> None:
+        for prompt in prompts.get(k, ()):
+            if link.ask(prompt, "the standard's procedures") is not None:
+                raise Stopped
+
+    try:
+        results = run_procedures(
+            config,
+            procedures,
+            plan.reference,
+            model,
+            plan.stand_limits,
+            plan.site.latitude_deg,
+            Progress(done, saved),
+            prompted,
+        )
+    except Stopped:
+        return False
     store_procedures(store.sessions, store.campaign_id, results)
     kinds = ", ".join(p.kind for p in procedures)
     store.run_event("procedures", "info", f"the standard's procedures run and stored: {kinds}")
     if not quiet:
         print(f"campaign {store.campaign_id}: the standard's procedures done ({kinds})")
+    return True
+
+
+class Stopped(Exception):
+    """A stop asked for while the procedures ran (raised once a stage is saved)."""

@@ -115,7 +115,9 @@ def checked_answers(plan: Plan, given: Sequence[str], new: bool = True) -> dict[
     """`--answer ID=VALUE` checked against the plan's prompts; for a `new` campaign, a prompt
     before the campaign left out is asked on the terminal, or is one error line when there is
     none (a resumed campaign's were answered when it started)."""
-    prompts = {p.id: p for p in plan.prompt}
+    from gyrostand.plan.switching import all_prompts
+
+    prompts = {p.id: p for p in all_prompts(plan)}
     answers: dict[str, str] = {}
     for item in given:
         key, sep, value = item.partition("=")
@@ -277,7 +279,10 @@ def run_campaign(
             mark("interrupted", "warning", "stopped by signal before acquiring", "stopped")
             return result(store, "stopped", None, None)
         terminal = sys.stdin if interactive() else None
-        run_procedures_of(plan, store, quiet)
+        if not run_procedures_of(plan, store, quiet, stop, answers, terminal):
+            why = "stopped during the standard's procedures (the stages done are kept)"
+            mark("interrupted", "warning", why, "stopped")
+            return result(store, "stopped", None, None)
         # (the analysis is recorded by the first `analyze` or `report`, not here: computing it
         # at the end of every run cost ~45 s of the SocketCAN suite's emulated campaign)
         return run_live(

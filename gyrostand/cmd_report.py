@@ -34,27 +34,35 @@ def write_campaign_report(
     campaign_id: int,
     out: Path = DEFAULT_OUT,
     formats: tuple[str, ...] = FORMATS,
-    profile: str = SHIPPED,
+    profile: str | None = None,
     number: str | None = None,
     draft: bool = False,
     final: bool = False,
 ) -> dict[str, Path]:
     """Analyse and report one campaign; the files written by format (one-line CLI errors,
-    every input checked before the analysis run is recorded). ``final``: refuse (one line, the
-    database unchanged) a report that would be a DRAFT. A line on stderr per stage: the
-    analysis and the PDF take seconds."""
+    every input checked before the analysis run is recorded). ``profile`` None: the one the
+    campaign's plan names ([standard] profile), else the shipped default. ``final``: refuse
+    (one line, the database unchanged) a report that would be a DRAFT. A line on stderr per
+    stage: the analysis and the PDF take seconds."""
     from gyrostand.analysis.errors import AnalysisError
     from gyrostand.db.models import Campaign
-    from gyrostand.report.compliance import load_profile
 
     sessions = open_db(db, must_exist=True)
+    with sessions() as session:
+        campaign = session.get(Campaign, campaign_id)
+        if campaign is None:
+            fail(f"no campaign {campaign_id} in the database")
+        plan_toml = campaign.plan_toml
+    if profile is None:
+        profile = plan_profile(plan_toml)
+        if profile != SHIPPED:
+            stage(f"profile {profile}: the one the campaign's plan names ([standard] profile)")
+    from gyrostand.report.compliance import load_profile
+
     try:
         limits = load_profile(profile)
     except AnalysisError as error:
         fail(str(error))
-    with sessions() as session:
-        if session.get(Campaign, campaign_id) is None:
-            fail(f"no campaign {campaign_id} in the database")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:
@@ -104,6 +112,20 @@ def write_campaign_report(
         fail(f"the database refused the analysis run: {error.orig}")
 
 
+def plan_profile(plan_toml: str) -> str:
+    """The compliance profile a stored plan names ([standard] profile; the procedures were run
+    by it), else the shipped default."""
+    from gyrostand.plan.model import Plan, PlanError, parse_any_plan
+
+    try:
+        plan = parse_any_plan(plan_toml)
+    except PlanError:  # the report says what is wrong with it
+        return SHIPPED
+    if isinstance(plan, Plan) and "standard" in plan.model_fields_set:
+        return plan.standard.profile
+    return SHIPPED
+
+
 def stage(what: str) -> None:
     """One line on stderr: what the report is doing now."""
     typer.echo(f"report: {printable(what)}", err=True)
@@ -121,14 +143,16 @@ def register(app: typer.Typer) -> None:
             str, typer.Option("--format", "-f", help="Comma-separated: html,pdf,json,csv.")
         ] = ",".join(FORMATS),
         profile: Annotated[
-            str,
+            str | None,
             typer.Option(
                 help=(
                     f"Compliance limits: a shipped profile ({', '.join(SHIPPED_PROFILES)}) "
-                    "or a profile TOML file."
-                )
+                    "or a profile TOML file (default: the plan's \\[standard] profile, else "
+                    f"{SHIPPED})."
+                ),
+                show_default=False,
             ),
-        ] = SHIPPED,
+        ] = None,
         number: Annotated[
             str | None,
             typer.Option("--number", help="Report number (default: the plan's \\[report] number)."),

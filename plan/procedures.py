@@ -19,9 +19,9 @@ KINDS: tuple[Kind, ...] = ("settling", "settle_point", "repeatability", "rolling
 Text = Annotated[str, StringConstraints(pattern=r"\S")]
 
 _KEYS: dict[str, tuple[str, ...]] = {  # the keys each kind takes, besides kind
-    "settling": ("band_deg", "max_wait_s", "fit_from_s"),
+    "settling": ("band_deg", "max_wait_s", "fit_from_s", "power"),
     "settle_point": ("readings", "interval_s"),
-    "repeatability": ("runups", "off_s", "readings", "interval_s"),
+    "repeatability": ("runups", "off_s", "readings", "interval_s", "power"),
     "rolling": ("points", "beyond_stand", "wait_s", "readings", "interval_s"),
 }
 
@@ -62,6 +62,9 @@ class ProcedurePlan(_Table):
     """repeatability: run-ups, each from switch-on (the first is the settling run-up's)."""
     off_s: float = Field(600.0, gt=0)
     """repeatability: how long the compass stays off between run-ups, s."""
+    power: Literal["stand", "manual"] = "stand"
+    """settling, repeatability: who switches the compass on and off: the stand's power control,
+    or the operator by hand, prompted (at the station, on the terminal or `--answer`)."""
     points: tuple[RollingPoint, ...] | None = Field(None, strict=False)
     """rolling: the envelope's points (default: the profile's envelope periods at its largest
     horizontal acceleration, K = 45 deg)."""

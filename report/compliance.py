@@ -184,6 +184,7 @@ class ComplianceItem:
     exceeds: bool | None
     worst: EnvelopeWorst | None
     extrapolation: Extrapolation | None  # a prediction beyond the trials' motion
+    unit: str = "deg"  # of the value, U, the limits: "h" for the settling time, else "deg"
 
 
 @dataclass(frozen=True)
@@ -865,6 +866,7 @@ def _judge(req: Requirement, finding: Finding, profile: Profile) -> ComplianceIt
         exceeds=exceeds,
         worst=finding.worst,
         extrapolation=finding.extrapolation,
+        unit=unit,
     )
 
 

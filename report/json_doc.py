@@ -55,10 +55,11 @@ extrapolation of every forecast beyond the trials' motion (``forecast.tested``, 
   decision per measured requirement: id, clause, requirement, evidence, source, verified,
   verified_by (who at the laboratory, when, against which edition; null: nobody), stated_limit_deg,
   secant_latitude, limit_deg, limit_text, value_deg, uncertainty_deg (expanded, about 95 %),
-  uncertainty_text, acceptance_limit_deg (limit - guard band), verdict (PASS, FAIL, UNVERIFIED or
-  NOT ASSESSED), detail, exceeds, worst: null), predictions (the forecasts, the same keys, verdict
-  PREDICTION, exceeds: the predicted bound beyond the limit, worst: the forecast's worst case
-  over the envelope {course_deg, direction_deg, angle_deg, period_s, acceleration_m_s2,
+  uncertainty_text, acceptance_limit_deg (limit - guard band), unit (of those values and limits,
+  whatever their keys say: "h" for the settling time, else "deg"), verdict (PASS, FAIL, UNVERIFIED
+  or NOT ASSESSED), detail, exceeds, worst: null), predictions (the forecasts, the same keys,
+  verdict PREDICTION, exceeds: the predicted bound beyond the limit, worst: the forecast's worst
+  case over the envelope {course_deg, direction_deg, angle_deg, period_s, acceleration_m_s2,
   latitude_deg, amplitude_cm, alpha_deg, half_width_deg, ratio, motion, arm_cm, q},
   extrapolation: {factor, text} when the worst case lies beyond the trials' motion);
 - ``signal`` (section 10, `report.signal.SignalSection.to_dict`): ``record`` {source,

@@ -44,7 +44,7 @@ from gyrostand.analysis.campaign import (
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.gyro_model import KnownConstants
 from gyrostand.analysis.measured_motion import PREFERENCE
-from gyrostand.analysis.procedures import ProcedureResults
+from gyrostand.analysis.procedures import PROGRESS, ProcedureResults
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.transient import PLAN_CONTRADICTED
 from gyrostand.analysis.trials import SeriesSummary, TrialInput, series_moments
@@ -902,7 +902,9 @@ def stored_procedures(session: Session, campaign_id: int) -> ProcedureResults | 
     record = session.scalar(
         select(ProcedureRun.results_json).where(ProcedureRun.campaign_id == campaign_id)
     )
-    return None if record is None else ProcedureResults.from_dict(record)
+    if record is None or PROGRESS in record:  # not run, or interrupted part-way
+        return None
+    return ProcedureResults.from_dict(record)
 
 
 def _signatures(session: Session, campaign: Campaign) -> Signatures:

@@ -147,15 +147,27 @@ class StandEngine:
         return _within(t_s, f.silence_at_s, f.silence_for_s)
 
     # ------------------------------------------------------------------------------ frames
-    def advance_to(self, t_s: float) -> list[can.Message]:
-        """Every frame due in (current stand time, t_s], in stand-time order."""
+    def advance_to(self, t_s: float, *, compass_only: bool = False) -> list[can.Message]:
+        """Every frame due in (current stand time, t_s], in stand-time order; `compass_only`:
+        the compass's heading frames alone (a listener that decodes nothing else need not pay
+        for the stand's status frames, three for every heading sample at 2 Hz)."""
+        return self._advance(t_s, heading=True, others=not compass_only)
+
+    def pass_to(self, t_s: float) -> None:
+        """Advance to stand time t_s with nobody listening (a procedure's wait): the physics and
+        every random draw as `advance_to` makes them, so what is heard afterwards is the same
+        to the bit; no frame is built."""
+        self._advance(t_s, heading=False, others=False)
+
+    def _advance(self, t_s: float, *, heading: bool, others: bool) -> list[can.Message]:
         heading_end = math.floor(t_s * self.config.heading_rate_hz + _EPS) + 1
         status_end = math.floor(t_s * self.config.status_rate_hz + _EPS) + 1
-        frames = self._heading_frames(self._next_heading, heading_end)
-        frames += self._status_frames(self._next_status, status_end)
-        if self._inclinometer is not None:
+        frames = self._heading_frames(self._next_heading, heading_end, build=heading)
+        if others:
+            frames += self._status_frames(self._next_status, status_end)
+        if self._inclinometer is not None:  # its noise drawn whether or not anyone listens
             sensed = self._inclinometer.frames(t_s, self._roll_rad)
-            frames += [m for m in sensed if not self._silent(m.timestamp)]
+            frames += [m for m in sensed if others and not self._silent(m.timestamp)]
         self._next_heading = max(self._next_heading, heading_end)
         self._next_status = max(self._next_status, status_end)
         self._time_s = max(self._time_s, t_s)
@@ -202,7 +214,8 @@ class StandEngine:
             reading = np.round(reading / noise.quantum_deg) * noise.quantum_deg
         return np.round(np.mod(reading, 360.0), 3) % 360.0  # on the frame's 0.001 deg grid
 
-    def _heading_frames(self, start: int, end: int) -> list[can.Message]:
+    def _heading_frames(self, start: int, end: int, *, build: bool = True) -> list[can.Message]:
+        """The heading frames of samples start..end-1 (`build` False: their draws only)."""
         n = end - start
         if n <= 0:
             return []
@@ -211,12 +224,14 @@ class StandEngine:
         t = index * self._dt
         readings = self._stick(t, self._readings_deg(t))
         u = self._fault_rng.random((n, _N_FAULT_DRAWS))
-        if self.transmitter is not None:  # its own frames: the stand's DBC faults do not apply
-            sent = (u[:, _DROP] >= f.drop_rate) & ~self._silent(t)
-            return _compass(self.transmitter.frames(t[sent], readings[sent], index[sent]))
         jumps = np.where(u[:, _JUMP] < f.counter_jump_rate, 1 + (u[:, _JUMP_SIZE] * 14), 0)
         counter = (self._counter + np.arange(n) + np.cumsum(jumps.astype(np.int64))) % 16
         self._counter = int(counter[-1] + 1) % 16
+        if not build:
+            return []
+        if self.transmitter is not None:  # its own frames: the stand's DBC faults do not apply
+            sent = (u[:, _DROP] >= f.drop_rate) & ~self._silent(t)
+            return _compass(self.transmitter.frames(t[sent], readings[sent], index[sent]))
         out_of_range = u[:, _OOR] < f.out_of_range_rate  # up to the 19-bit raw maximum
         readings = np.where(out_of_range, 360.0 + np.round(u[:, _OOR_VALUE] * 164.0, 3), readings)
         values = {

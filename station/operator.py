@@ -15,6 +15,7 @@ from gyrostand.db.models import Event
 from gyrostand.db.queries import stand_campaign
 from gyrostand.plan.model import Plan, PromptPlan, parse_plan
 from gyrostand.plan.prompts import ANSWER, PROMPT, STOP_REQUEST, message, pending
+from gyrostand.plan.switching import all_prompts
 
 FIELD = "answer-"
 """The start form's field of a prompt's answer: answer-ID."""
@@ -47,7 +48,7 @@ def waiting_for(session: Session, campaign_id: int) -> dict[str, Any] | None:
 
 def _prompt(session: Session, campaign_id: int, prompt_id: str) -> PromptPlan:
     plan = parse_plan(stand_campaign(session, campaign_id).plan_toml)
-    prompt = next((p for p in plan.prompt if p.id == prompt_id), None)
+    prompt = next((p for p in all_prompts(plan) if p.id == prompt_id), None)
     if prompt is None:
         raise ActionRefused(f"the campaign's plan has no prompt {prompt_id!r}")
     return prompt

@@ -16,6 +16,8 @@ from tests.acquisition.harness import FAST_SIM, plan_text
 from tests.db.test_meas_source import _downgrade
 
 PROCEDURES = """
+[standard]
+profile = "imo-a821"
 [reference]
 heading_deg = 120.0
 uncertainty_deg = 0.01
@@ -54,14 +56,20 @@ def test_campaign_run_stores_the_procedures_and_the_report_judges_them(tmp_path:
     assert events == [("the standard's procedures run and stored: settling, settle_point",)]
     out = tmp_path / "reports"
     report = CliRunner().invoke(
-        app, ["report", "1", "--db", str(db), "--out", str(out), "-f", "json"]
+        app, ["report", "1", "--db", str(db), "--out", str(out), "-f", "json,html"]
     )
     assert report.exit_code == 0, report.output
-    items = {
-        i["id"]: i for i in json.loads(next(out.glob("*.json")).read_text())["compliance"]["items"]
-    }
+    compliance = json.loads(next(out.glob("*.json")).read_text())["compliance"]
+    # no --profile: the plan's [standard] profile, not the shipped default (imo-a424)
+    assert compliance["profile_id"] == "imo-a821"
+    items = {i["id"]: i for i in compliance["items"]}
     settling = items["settling-time"]
     assert settling["value_deg"] == pytest.approx(results["settling"]["value_s"] / 3600)
+    # hours, and said so: in the JSON and in the report's clause table (not under "deg")
+    assert settling["unit"] == "h" and items["heading-rms"]["unit"] == "deg"
+    html = next(out.glob("*.html")).read_text()
+    hours = f"{settling['value_deg']:.3f} &plusmn; {settling['uncertainty_deg']:.3f} h</td>"
+    assert hours in html and "value &plusmn; U, deg" not in html
     assert "departs from the standard's: max_wait_s 1800 s" in settling["detail"]
     error = items["settle-point-error"]
     assert error["value_deg"] == pytest.approx(abs(results["settle_point"]["error_deg"]))

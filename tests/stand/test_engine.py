@@ -205,6 +205,25 @@ def test_frames_do_not_depend_on_how_time_is_chunked(cuts: list[float]) -> None:
     assert scripted(3, sorted(cuts)) == scripted(3, [])
 
 
+def test_an_unheard_wait_leaves_the_frames_heard_after_it_unchanged() -> None:
+    """`pass_to` (a procedure's wait) makes every draw `advance_to` makes: the frames heard
+    after it, all of them or the compass's alone, are those of an engine heard throughout."""
+    full = scripted(3, [])
+    heading_id = CODEC.heading_arbitration_id
+    engine = StandEngine(config(seed=3, faults=FAULTY))
+    engine.pass_to(200.0)
+    heard = engine.advance_to(300.0)
+    heard += engine.receive(CODEC.encode_command_set(31, 20, 6))
+    heard += engine.receive(CODEC.encode_command_start())
+    engine.pass_to(450.0)
+    compass = engine.advance_to(600.0, compass_only=True)
+    rows = [(m.timestamp, m.arbitration_id, bytes(m.data), m.is_error_frame) for m in heard]
+    assert rows == [f for f in full if 200.0 < f[0] <= 300.0]
+    rows = [(m.timestamp, m.arbitration_id, bytes(m.data), m.is_error_frame) for m in compass]
+    assert rows == [f for f in full if f[0] > 450.0 and (f[1] == heading_id or f[3])]
+    assert len(rows) > 250  # 150 s at 10 Hz, less the dropped
+
+
 # ---------------------------------------------------------------------------------- encoding
 @given(
     st.lists(
