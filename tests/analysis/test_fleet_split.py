@@ -1,0 +1,52 @@
+"""The measurement/type split of the within-group variance (analysis/fleet.py) against a Monte
+Carlo simulation of a fleet whose type scatter and measurement errors are known: unbiased when
+the units' SEs are right, even with unequal groups of unequal precision; biased by the SEs'
+shortfall when they understate the error."""
+
+import numpy as np
+import pytest
+
+from gyrostand.analysis.fleet import one_way_anova
+
+SIZES = (2, 3, 7)  # N = 12 units, k = 3 groups, N - k = 9
+SIGMA_TYPE = 1.0
+SIGMA_MEASUREMENT = (3.0, 0.5, 0.5)  # the small group measured far less precisely
+
+
+def mean_split(se_fraction: float, runs: int = 4000) -> tuple[float, float]:
+    """Over `runs` simulated fleets (true values: the type's normal scatter; estimates: the true
+    value plus a normal measurement error; SEs = se_fraction × the error's true SD): the mean
+    of S²_within - measurement share (unfloored) and the mean of the type's SD reported."""
+    rng = np.random.default_rng(7)
+    type_variance, type_sd = [], []
+    for _ in range(runs):
+        groups, ses = [], []
+        for n, sigma in zip(SIZES, SIGMA_MEASUREMENT, strict=True):
+            truth = 5.0 + SIGMA_TYPE * rng.standard_normal(n)
+            groups.append(truth + sigma * rng.standard_normal(n))
+            ses.append(np.full(n, se_fraction * sigma))
+        anova = one_way_anova(groups, ses, 0.05)
+        type_variance.append(anova.s2_within - anova.s2_measurement)
+        type_sd.append(anova.s2_type**0.5)
+    return float(np.mean(type_variance)), float(np.mean(type_sd))
+
+
+# the weighted measurement share: Σ (1 - 1/n_j) n_j σ_j² / (N - k)
+SHARE = sum((n - 1) * s**2 for n, s in zip(SIZES, SIGMA_MEASUREMENT, strict=True)) / 9
+
+
+def test_the_type_variance_is_unbiased_when_the_ses_are_right() -> None:
+    variance, sd = mean_split(1.0)
+    # the simulation's standard error of the mean is about 0.02: 4 of them
+    assert variance == pytest.approx(SIGMA_TYPE**2, abs=0.08)
+    # the plain mean of SE² (20.5 / 12 = 1.708, not 11 / 9 = 1.222) would give 0.51
+    assert SHARE == pytest.approx(11 / 9)
+    # the SD (square root, floored at 0) is biased low: Jensen, and the floor
+    assert 0.5 < sd < SIGMA_TYPE
+
+
+def test_ses_that_understate_the_error_move_their_shortfall_into_the_type() -> None:
+    variance, _ = mean_split(1 / 1.5)  # SEs 1.5 times too small
+    expected = SIGMA_TYPE**2 + (1 - 1 / 1.5**2) * SHARE  # the stated bias
+    assert variance == pytest.approx(expected, abs=0.08)
+    assert variance > SIGMA_TYPE**2 + 0.5
