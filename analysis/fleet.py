@@ -25,7 +25,9 @@ For each parameter:
   variance is unbiased only as far as the units' SE² are unbiased for their measurement error:
   SEs that understate it (a fit with few residual degrees of freedom, correlated readings, an
   inadequate model) move their shortfall into the type's share; its square root is biased low
-  and floored at 0 (see `fleet simulate`, which checks the split against the known truth);
+  and floored at 0; its 1 - q confidence interval is S²_within's chi-square interval
+  (Satterthwaite's degrees of freedom) less the measurement share (`fleet simulate` checks the
+  split against the known truth);
 - which groups differ, step down: while the F test of the groups still in (their means against
   the fleet's within-group mean square, N - k degrees of freedom) rejects at q, the group whose
   mean lies farthest from the others' (Student t of the contrast) is set apart; when the last
@@ -116,6 +118,12 @@ class Anova:
     within-group variance; their mean when the groups are equal)."""
     s2_type: float
     """S²_within - s2_measurement, floored at 0: the type's own unit-to-unit scatter."""
+    s2_type_dof: float
+    """Satterthwaite's degrees of freedom of S²_within (N - k when the units are measured
+    equally precisely; fewer when some are far less precise)."""
+    s2_type_interval: tuple[float, float]
+    """Its 1 - q confidence interval: S²_within's chi-square interval (`s2_type_dof`) less
+    the measurement share taken as known, floored at 0."""
 
     @property
     def verdict(self) -> str:
@@ -223,6 +231,22 @@ def one_way_anova(groups: Sequence[np.ndarray], ses: Sequence[np.ndarray], q: fl
     p_value = float(stats.f.sf(f, dof_between, dof_within))
     # E[Q2] = (N - k) σ²_type + Σ_j Σ_i (1 - 1/n_j) σ²_ji (Q2 about the group means)
     s2_measurement = float(sum(((1 - 1 / e.size) * e**2).sum() for e in ses) / dof_within)
+    # Satterthwaite's degrees of freedom of S²_within, each group's variance s2_type + its
+    # mean SE²: ν' = (Σ (n_j - 1) v_j)² / Σ (n_j - 1) v_j² (ν' = N - k for equal precision)
+    s2_type = max(0.0, s2_within - s2_measurement)
+    v = [s2_type + float(np.mean(e**2)) for e in ses]
+    weights = [g.size - 1 for g in groups]
+    dof_type = (
+        sum(w * x for w, x in zip(weights, v, strict=True)) ** 2
+        / sum(w * x**2 for w, x in zip(weights, v, strict=True))
+        if any(v)
+        else float(dof_within)
+    )
+    # ν' S²/χ²(1 - q/2; ν') .. ν' S²/χ²(q/2; ν'), less the measurement share (taken as known)
+    low, high = (
+        max(0.0, dof_type * s2_within / float(stats.chi2.ppf(p, dof_type)) - s2_measurement)
+        for p in (1 - q / 2, q / 2)
+    )
     return Anova(
         k=k,
         n=n,
@@ -239,7 +263,9 @@ def one_way_anova(groups: Sequence[np.ndarray], ses: Sequence[np.ndarray], q: fl
         q=q,
         groups_differ=bool(f > f_critical),
         s2_measurement=s2_measurement,
-        s2_type=max(0.0, s2_within - s2_measurement),
+        s2_type=s2_type,
+        s2_type_dof=dof_type,
+        s2_type_interval=(low, high),
     )
 
 
