@@ -106,6 +106,14 @@ def register(app: typer.Typer) -> None:
         draft: Annotated[
             bool, typer.Option("--draft", help="Mark every page DRAFT (not for issue).")
         ] = False,
+        number: Annotated[
+            str | None,
+            typer.Option("--number", help="The report's number (without it: a DRAFT)."),
+        ] = None,
+        laboratory: Annotated[
+            str | None,
+            typer.Option("--laboratory", help="The issuing laboratory (without it: a DRAFT)."),
+        ] = None,
         db: DbOption = DEFAULT_DB,
     ) -> None:
         """Write the fleet report (HTML, PDF or JSON) of a model's units grouped by a label.
@@ -137,8 +145,12 @@ def register(app: typer.Typer) -> None:
             database=shown_url(db),
             software=SOFTWARE_VERSION,
             simulated=simulated,
-            draft=draft,
+            marked_draft=draft,
+            number=number,
+            laboratory=laboratory,
         )
+        if report.missing:
+            stage(f"a DRAFT: it lacks {', '.join(report.missing)} (--number, --laboratory)")
         stage(f"fleet of {model} by {by}: {analysis.n_units} units; writing {path}")
         try:
             typer.echo(
