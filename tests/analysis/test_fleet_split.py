@@ -57,3 +57,25 @@ def test_ses_that_understate_the_error_move_their_shortfall_into_the_type() -> N
     assert variance == pytest.approx(expected, abs=0.08)
     assert variance > SIGMA_TYPE**2 + 0.5
     assert coverage < 0.9
+
+
+def test_fleet_simulate_checks_the_split_against_the_truth() -> None:
+    """`fleet simulate`'s check: each unit's actual error against its SE, by hand."""
+    from gyrostand.analysis.fleet import FleetUnit, analyze_fleet
+    from gyrostand.simulated_fleet import FleetDesign, SimulatedUnit, split_check
+
+    truth = [(6.0e7, 1.10), (6.2e7, 1.08), (5.9e7, 1.12), (6.1e7, 1.11), (6.0e7, 1.09)]
+    errors = [(0.02, 0.01), (-0.01, -0.02), (0.03, 0.0), (-0.02, 0.01), (0.0, -0.01)]
+    made, units = [], []
+    for i, ((c, t), (ec, et)) in enumerate(zip(truth, errors, strict=True), start=1):
+        made.append(SimulatedUnit(i, f"U{i}", "AB"[i % 2], c, t))
+        units.append(FleetUnit(i, f"U{i}", "AB"[i % 2], c * (1 + ec), 0.01 * c, t + et, 0.01))
+    analysis = analyze_fleet(units, factor="lot")
+    c, t = split_check(made, units, analysis, FleetDesign())
+    assert c.rms_error == pytest.approx(np.sqrt(np.mean(np.square([e[0] for e in errors]))))
+    assert t.rms_error == pytest.approx(np.sqrt(np.mean(np.square([e[1] for e in errors]))))
+    assert c.rms_se == pytest.approx(0.01) and t.rms_se == pytest.approx(0.01)
+    a = analysis.parameters[0].anova
+    assert c.type_sd == pytest.approx(a.s2_type**0.5 / a.grand_mean)
+    assert (c.drawn_sd, t.drawn_sd) == (0.03, 0.03)
+    assert t.line().startswith("  T: actual errors RMS 0.0118 s against the fits' SEs RMS 0.01 s (ratio 1.18)")
