@@ -78,4 +78,5 @@ def test_fleet_simulate_checks_the_split_against_the_truth() -> None:
     a = analysis.parameters[0].anova
     assert c.type_sd == pytest.approx(a.s2_type**0.5 / a.grand_mean)
     assert (c.drawn_sd, t.drawn_sd) == (0.03, 0.03)
-    assert t.line().startswith("  T: actual errors RMS 0.0118 s against the fits' SEs RMS 0.01 s (ratio 1.18)")
+    expected = "  T: actual errors RMS 0.0118 s against the fits' SEs RMS 0.01 s (ratio 1.18)"
+    assert t.line().startswith(expected)
