@@ -256,6 +256,14 @@ NOMENCLATURE = (
 """The report's symbols (its nomenclature table): one quantity each."""
 
 
+EVENTS_SUMMARISED = {
+    "command": "motion commands (the commanded motion of each trial: Acquisition per trial)",
+    "early settle": "settle points found by the transient model (Settle points)",
+}
+"""Event kinds the report's event table counts instead of listing (their information-only
+events; the JSON keeps them all): another table gives each."""
+
+
 def _heading_title(t: TrialAcquisition) -> str:
     return (
         f"Trial {t.index} ({t.role}): K = {t.cmd_direction_deg:g} deg, "
@@ -337,4 +345,5 @@ def render_html(report: Report) -> str:
         DECISIONS=DECISIONS,
         adequacy_basis=ADEQUACY_BASIS_TEXT,
         NOMENCLATURE=NOMENCLATURE,
+        EVENTS_SUMMARISED=EVENTS_SUMMARISED,
     )
