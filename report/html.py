@@ -36,7 +36,19 @@ def fmt(value: float | int | None, spec: str = "g", scale: float = 1.0) -> str:
     text = format(value / scale if scale != 1.0 else value, spec)
     if text[:1] in "+-" and not text.strip("+-0.e"):  # no signed zero: "-0.000" -> "0.000"
         text = text[1:]
-    return text
+    return E_NOTATION.sub(_power_of_ten, text)
+
+
+E_NOTATION = re.compile(r"(?<=\d)e([+-]?)0*(\d+)$")
+SUPERSCRIPT = str.maketrans(
+    "0123456789-", "\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079\u207b"
+)
+
+
+def _power_of_ten(match: re.Match[str]) -> str:
+    """'e-06' as '×10⁻⁶': a report prints no computer notation (2.23e-07)."""
+    sign = "-" if match[1] == "-" else ""
+    return "\u00d710" + (sign + match[2]).translate(SUPERSCRIPT)
 
 
 def sci(value: float | None, digits: int = 4) -> Markup:
