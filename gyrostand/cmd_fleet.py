@@ -265,13 +265,22 @@ def register(app: typer.Typer) -> None:
             stage(f"running and analysing unit 1/{units} on the simulated stand")
             simulate_fleet(base, db, design, "factory", done)
             stage.done(f"{units} campaigns run and analysed")
-        inputs, analysis = analysed_fleet(base.instrument.model, "factory", 0.05, db)
-        typer.echo(
-            "the measurement/type split (fleet analysis) against the known truth; "
-            "the type's SD with its 95 % interval:"
-        )
-        for check in split_check(made, inputs.units, analysis, design):
-            typer.echo(check.line())
+        from gyrostand.analysis.fleet import FleetError, analyze_fleet
+        from gyrostand.report.fleet import fleet_inputs
+
+        with open_db(db, must_exist=True)() as session:
+            inputs = fleet_inputs(session, base.instrument.model, "factory")
+        try:
+            analysis = analyze_fleet(inputs.units, factor="factory")
+        except FleetError as error:
+            typer.echo(f"the split cannot be checked: {error}")
+        else:
+            typer.echo(
+                "the measurement/type split (fleet analysis) against the known truth; "
+                "the type's SD with its 95 % interval:"
+            )
+            for check in split_check(made, inputs.units, analysis, design):
+                typer.echo(check.line())
         where = f"--model {shlex.quote(base.instrument.model)} --by factory"
         where += f" --db {shlex.quote(shown)}"
         typer.echo(
