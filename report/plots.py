@@ -202,7 +202,7 @@ def measured_vs_model(rows: Sequence[TrialRow]) -> Figure:
             ax.annotate(
                 str(r.index),
                 (r.alpha_deg, r.delta_deg),
-                xytext=(4, 3),
+                xytext=(4, 3) if r.index % 2 else (-9, -9),  # close points' labels apart
                 textcoords="offset points",
                 fontsize=7,
             )
@@ -439,8 +439,8 @@ def allan_plot(noise: NoiseCharacterisation) -> Figure:
     fig = _figure(2.5, HALF_IN)
     ax = fig.axes[0]
     ax.loglog(allan.tau_s, allan.deviation, "o-", color="#1f77b4", ms=3, lw=1.0)
-    ax.set_xlabel("averaging time tₐ, s")
-    ax.set_ylabel("Allan deviation σ_A(tₐ), deg")
+    ax.set_xlabel(r"averaging time $t_a$, s")
+    ax.set_ylabel(r"Allan deviation $\sigma_A(t_a)$, deg")
     ax.set_title("Allan deviation", loc="left")
     ax.grid(True, which="both", alpha=0.3)
     return fig
