@@ -440,9 +440,10 @@ def _warnings(
             lo, hi = getattr(admissible, name)
             value = fit.estimates[name]
             if not lo <= value <= hi:
+                symbol, unit = ("T", " s") if name == "T_s" else ("C", " g cm^2 s^-2")
                 found.append(
-                    f"{name} = {value:.6g} lies outside the admissible region [{lo:g}, {hi:g}] "
-                    f"{admissible.source}; reported unconstrained"
+                    f"{symbol} = {value:.6g}{unit} lies outside the admissible region "
+                    f"[{lo:g}, {hi:g}]{unit} {admissible.source}; reported unconstrained"
                 )
     if not cochran.homogeneous:
         found.append(

@@ -18,8 +18,16 @@ For each parameter:
   really (the type's scatter, Sveshnikov's "random scatter according to the parameter's
   distribution law"), and their estimates add measurement error on top; both are in the scatter,
   while the SEs hold only the second, so an F built on the SEs would call the type's own scatter
-  a group difference. The SEs give the split: mean SE² is the measurement share, the rest
-  (S²_within - mean SE², floored at 0) the type's scatter, both reported;
+  a group difference. The SEs give the split (Fisher's random-effects reading of the analysis of
+  variance): E[Q2] = (N - k) σ²_type + Σ_j Σ_i (1 - 1/n_j) σ²_ji, so the measurement share is
+  the units' SE² weighted by 1 - 1/n_j over N - k (the plain mean when the groups are equal),
+  the rest (S²_within minus it, floored at 0) the type's scatter, both reported. The type's
+  variance is unbiased only as far as the units' SE² are unbiased for their measurement error:
+  SEs that understate it (a fit with few residual degrees of freedom, correlated readings, an
+  inadequate model) move their shortfall into the type's share; its square root is biased low
+  and floored at 0; its 1 - q confidence interval is S²_within's chi-square interval
+  (Satterthwaite's degrees of freedom) less the measurement share (`fleet simulate` checks the
+  split against the known truth);
 - which groups differ, step down: while the F test of the groups still in (their means against
   the fleet's within-group mean square, N - k degrees of freedom) rejects at q, the group whose
   mean lies farthest from the others' (Student t of the contrast) is set apart; when the last
@@ -106,9 +114,16 @@ class Anova:
     q: float
     groups_differ: bool
     s2_measurement: float
-    """Mean of the units' SE² (the measurement share of the within-group variance)."""
+    """The units' SE² weighted by 1 - 1/n_j over N - k (the measurement share of the
+    within-group variance; their mean when the groups are equal)."""
     s2_type: float
-    """S²_within - mean SE², floored at 0: the type's own unit-to-unit scatter."""
+    """S²_within - s2_measurement, floored at 0: the type's own unit-to-unit scatter."""
+    s2_type_dof: float
+    """Satterthwaite's degrees of freedom of S²_within (N - k when the units are measured
+    equally precisely; fewer when some are far less precise)."""
+    s2_type_interval: tuple[float, float]
+    """Its 1 - q confidence interval: S²_within's chi-square interval (`s2_type_dof`) less
+    the measurement share taken as known, floored at 0."""
 
     @property
     def verdict(self) -> str:
@@ -214,7 +229,24 @@ def one_way_anova(groups: Sequence[np.ndarray], ses: Sequence[np.ndarray], q: fl
     f = s2_between / s2_within if s2_within > 0 else math.inf  # F = S1² / S2²
     f_critical = float(stats.f.ppf(1 - q, dof_between, dof_within))  # F*(1 - q; k-1, N-k)
     p_value = float(stats.f.sf(f, dof_between, dof_within))
-    s2_measurement = float(np.mean(np.concatenate(ses) ** 2))
+    # E[Q2] = (N - k) σ²_type + Σ_j Σ_i (1 - 1/n_j) σ²_ji (Q2 about the group means)
+    s2_measurement = float(sum(((1 - 1 / e.size) * e**2).sum() for e in ses) / dof_within)
+    # Satterthwaite's degrees of freedom of S²_within, each group's variance s2_type + its
+    # mean SE²: ν' = (Σ (n_j - 1) v_j)² / Σ (n_j - 1) v_j² (ν' = N - k for equal precision)
+    s2_type = max(0.0, s2_within - s2_measurement)
+    v = [s2_type + float(np.mean(e**2)) for e in ses]
+    weights = [g.size - 1 for g in groups]
+    dof_type = (
+        sum(w * x for w, x in zip(weights, v, strict=True)) ** 2
+        / sum(w * x**2 for w, x in zip(weights, v, strict=True))
+        if any(v)
+        else float(dof_within)
+    )
+    # ν' S²/χ²(1 - q/2; ν') .. ν' S²/χ²(q/2; ν'), less the measurement share (taken as known)
+    low, high = (
+        max(0.0, dof_type * s2_within / float(stats.chi2.ppf(p, dof_type)) - s2_measurement)
+        for p in (1 - q / 2, q / 2)
+    )
     return Anova(
         k=k,
         n=n,
@@ -231,7 +263,9 @@ def one_way_anova(groups: Sequence[np.ndarray], ses: Sequence[np.ndarray], q: fl
         q=q,
         groups_differ=bool(f > f_critical),
         s2_measurement=s2_measurement,
-        s2_type=max(0.0, s2_within - s2_measurement),
+        s2_type=s2_type,
+        s2_type_dof=dof_type,
+        s2_type_interval=(low, high),
     )
 
 

@@ -106,6 +106,14 @@ def register(app: typer.Typer) -> None:
         draft: Annotated[
             bool, typer.Option("--draft", help="Mark every page DRAFT (not for issue).")
         ] = False,
+        number: Annotated[
+            str | None,
+            typer.Option("--number", help="The report's number (without it: a DRAFT)."),
+        ] = None,
+        laboratory: Annotated[
+            str | None,
+            typer.Option("--laboratory", help="The issuing laboratory (without it: a DRAFT)."),
+        ] = None,
         db: DbOption = DEFAULT_DB,
     ) -> None:
         """Write the fleet report (HTML, PDF or JSON) of a model's units grouped by a label.
@@ -137,8 +145,12 @@ def register(app: typer.Typer) -> None:
             database=shown_url(db),
             software=SOFTWARE_VERSION,
             simulated=simulated,
-            draft=draft,
+            marked_draft=draft,
+            number=number,
+            laboratory=laboratory,
         )
+        if report.missing:
+            stage(f"a DRAFT: it lacks {', '.join(report.missing)} (--number, --laboratory)")
         stage(f"fleet of {model} by {by}: {analysis.n_units} units; writing {path}")
         try:
             typer.echo(
@@ -201,6 +213,7 @@ def register(app: typer.Typer) -> None:
             FleetDesign,
             SimulatedUnit,
             simulate_fleet,
+            split_check,
             with_tables,
         )
 
@@ -252,6 +265,22 @@ def register(app: typer.Typer) -> None:
             stage(f"running and analysing unit 1/{units} on the simulated stand")
             simulate_fleet(base, db, design, "factory", done)
             stage.done(f"{units} campaigns run and analysed")
+        from gyrostand.analysis.fleet import FleetError, analyze_fleet
+        from gyrostand.report.fleet import fleet_inputs
+
+        with open_db(db, must_exist=True)() as session:
+            inputs = fleet_inputs(session, base.instrument.model, "factory")
+        try:
+            analysis = analyze_fleet(inputs.units, factor="factory")
+        except FleetError as error:
+            typer.echo(f"the split cannot be checked: {error}")
+        else:
+            typer.echo(
+                "the measurement/type split (fleet analysis) against the known truth; "
+                "the type's SD with its 95 % interval:"
+            )
+            for check in split_check(made, inputs.units, analysis, design):
+                typer.echo(check.line())
         where = f"--model {shlex.quote(base.instrument.model)} --by factory"
         where += f" --db {shlex.quote(shown)}"
         typer.echo(

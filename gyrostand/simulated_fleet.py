@@ -5,13 +5,14 @@ so that `fleet analyze` has a fleet whose answer is known."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import typer
 
+from gyrostand.analysis.fleet import FleetAnalysis, FleetUnit
 from gyrostand.cmd_campaign import BusOptions, new_campaign
 from gyrostand.cmd_data import open_db
 from gyrostand.db.lease import take_lease
@@ -119,3 +120,66 @@ def simulate_fleet(
             if done is not None:
                 done(units[-1])
     return units
+
+
+@dataclass(frozen=True)
+class SplitCheck:
+    """The fleet analysis's measurement/type split against a simulated fleet's known truth, for
+    one parameter: the units' actual measurement errors (estimate - true value) against the SEs
+    their fits gave, and the type's SD the split estimated against the one the fleet was drawn
+    with (C relative to its mean, T in seconds)."""
+
+    symbol: str
+    rms_error: float
+    rms_se: float
+    type_sd: float
+    type_sd_interval: tuple[float, float]
+    drawn_sd: float
+
+    def line(self) -> str:
+        """One line: what the split assumed (SE) against what the errors were, and its result."""
+        unit, scale = ("%", 100.0) if self.symbol == "C" else (" s", 1.0)
+        low, high = (scale * x for x in self.type_sd_interval)
+        return (
+            f"  {self.symbol}: actual errors RMS {scale * self.rms_error:.3g}{unit} against the "
+            f"fits' SEs RMS {scale * self.rms_se:.3g}{unit} (ratio "
+            f"{self.rms_error / self.rms_se:.2f}); the type's SD from the split "
+            f"{scale * self.type_sd:.3g}{unit} ({low:.3g} to {high:.3g}), drawn with "
+            f"{scale * self.drawn_sd:.3g}{unit}"
+        )
+
+
+def split_check(
+    made: list[SimulatedUnit],
+    units: Sequence[FleetUnit],
+    analysis: FleetAnalysis,
+    design: FleetDesign,
+) -> tuple[SplitCheck, ...]:
+    """C (relative) and T of the fleet `analysis` of `units` against the truth of `made`."""
+    truth = {u.campaign_id: u for u in made}
+    measured = [u for u in units if u.campaign_id in truth]
+    checks = []
+    for p in analysis.parameters:
+        relative = p.symbol == "C"
+        errors, ses = [], []
+        for u in measured:
+            value, se = u.value(p.parameter)
+            true = truth[u.campaign_id].true_c_gcm2s2 if relative else truth[u.campaign_id].true_t_s
+            scale = true if relative else 1.0
+            errors.append((value - true) / scale)
+            ses.append(se / scale)
+        mean = p.anova.grand_mean if relative else 1.0
+        checks.append(
+            SplitCheck(
+                symbol=p.symbol,
+                rms_error=float(np.sqrt(np.mean(np.square(errors)))),
+                rms_se=float(np.sqrt(np.mean(np.square(ses)))),
+                type_sd=p.anova.s2_type**0.5 / mean,
+                type_sd_interval=(
+                    p.anova.s2_type_interval[0] ** 0.5 / mean,
+                    p.anova.s2_type_interval[1] ** 0.5 / mean,
+                ),
+                drawn_sd=design.c_sd_fraction if relative else design.t_sd_s,
+            )
+        )
+    return tuple(checks)

@@ -42,12 +42,90 @@ class FailedCheck:
 
 
 @dataclass(frozen=True)
+class ProgrammeTrial:
+    role: str
+    direction_deg: float
+    amplitude_cm: float
+    period_s: float
+
+
+@dataclass(frozen=True)
+class Programme:
+    """A test programme some units ran: their plan's trials (commanded motion, role), N and how
+    a series was observed; the same for every unit whose plan differs only in what identifies
+    the unit (serial, seed, a simulated compass's true C and T)."""
+
+    trials: tuple[ProgrammeTrial, ...]
+    n_obs: int | None
+    observation: str
+    campaign_ids: tuple[int, ...]
+
+    @property
+    def roles(self) -> str:
+        """'4 fit, 2 control'."""
+        counts: dict[str, int] = {}
+        for t in self.trials:
+            counts[t.role] = counts.get(t.role, 0) + 1
+        return ", ".join(f"{n} {role}" for role, n in counts.items())
+
+
+def programme_key(plan_toml: str, results: dict[str, Any]) -> tuple[object, ...]:
+    """(trials, N, observation) of a campaign: from its stored plan, or for an imported
+    campaign whose plan has no trials, from its analysis (the trials as the file gave them)."""
+    import tomllib
+
+    try:
+        plan = tomllib.loads(plan_toml)
+    except tomllib.TOMLDecodeError:
+        plan = {}
+    rows = plan.get("trials") or results.get("trials") or []
+    trials = tuple(
+        ProgrammeTrial(
+            str(t.get("role", "fit")),
+            float(t["direction_deg"]),
+            float(t["amplitude_cm"]),
+            float(t["period_s"]),
+        )
+        for t in rows
+    )
+    n_obs = (plan.get("campaign") or {}).get("n_obs")
+    if n_obs is None and results.get("trials"):
+        n_obs = results["trials"][0].get("n_before")
+    if "campaign" in plan:  # a plan the stand ran (defaults: plan/model.py ObservationPlan)
+        seen = plan.get("observation") or {}
+        settle = (plan.get("settle") or {}).get("method", "band")
+        observation = (
+            f"windows of {seen.get('still_window_s', 60.0):g} s still and "
+            f"{seen.get('rocking_window_periods', 10)} rocking periods; settle criterion: "
+            f"{settle}"
+        )
+    else:
+        observation = "imported measurements (no stand plan)"
+    return trials, n_obs, observation
+
+
+def programmes(session: Session, results: dict[int, dict[str, Any]]) -> tuple[Programme, ...]:
+    """The test programmes the units ran (`results`: each unit's campaign and its analysis),
+    each with its units' campaigns, most units first."""
+    by_key: dict[tuple[object, ...], list[int]] = {}
+    for campaign_id, analysis in sorted(results.items()):
+        key = programme_key(session.get_one(Campaign, campaign_id).plan_toml, analysis)
+        by_key.setdefault(key, []).append(campaign_id)
+    return tuple(
+        Programme(key[0], key[1], key[2], tuple(ids))  # type: ignore[arg-type]
+        for key, ids in sorted(by_key.items(), key=lambda item: -len(item[1]))
+    )
+
+
+@dataclass(frozen=True)
 class FleetInputs:
     model: str
     factor: str
     units: tuple[FleetUnit, ...]
     left_out: tuple[LeftOut, ...]
     failed_checks: tuple[FailedCheck, ...] = ()
+    programmes: tuple[Programme, ...] = ()
+    """The test programmes the units ran (`programmes`)."""
 
 
 def failed_checks(results: dict[str, Any]) -> str:
@@ -68,6 +146,7 @@ def fleet_inputs(session: Session, model: str, factor: str) -> FleetInputs:
     the model's other completed campaigns are left out with the reason, and the units whose run
     failed Cochran's or Fisher's test are named."""
     units: dict[str, FleetUnit] = {}
+    results: dict[int, dict[str, Any]] = {}
     left_out, failed = [], []
     for c in reversed(model_campaigns(session, model, factor)):  # latest first
         fit = (c.results or {}).get("fit") or {}
@@ -96,6 +175,7 @@ def fleet_inputs(session: Session, model: str, factor: str) -> FleetInputs:
                 t_se=float(errors["T_s"]),
                 when=c.started_at.isoformat(),
             )
+            results[c.campaign_id] = c.results
             if checks := failed_checks(c.results):
                 failed.append(FailedCheck(c.campaign_id, c.serial, checks))
             continue
@@ -107,6 +187,7 @@ def fleet_inputs(session: Session, model: str, factor: str) -> FleetInputs:
         tuple(ordered),
         tuple(reversed(left_out)),
         tuple(sorted(failed, key=lambda f: f.campaign_id)),
+        programmes(session, results),
     )
 
 
@@ -124,6 +205,20 @@ GROUP_HEADER = "  group      n  mean          sd            rms SE        t vs r
 
 def _number(value: float, symbol: str) -> str:
     return f"{value / 1e7:.3f}e7" if symbol == "C" else f"{value:.4f}"
+
+
+def _ids(ids: Sequence[int]) -> str:
+    return ", ".join(map(str, ids))
+
+
+def programme_text(p: Programme) -> str:
+    """A programme in one line: trials (role, K/A/τ), N, observation."""
+    trials = "; ".join(
+        f"{t.role} K {t.direction_deg:g} deg, A {t.amplitude_cm:g} cm, τ {t.period_s:g} s"
+        for t in p.trials
+    )
+    n = "N not stated" if p.n_obs is None else f"N = {p.n_obs}"
+    return f"{len(p.trials)} trials ({p.roles}): {trials}; {n}; {p.observation}"
 
 
 def fleet_text(inputs: FleetInputs, analysis: FleetAnalysis) -> str:
@@ -150,7 +245,8 @@ def fleet_text(inputs: FleetInputs, analysis: FleetAnalysis) -> str:
         lines += [
             f"  analysis of variance: S² between = {a.s2_between:.4g} (ν = {a.dof_between}), "
             f"S² within = {a.s2_within:.4g} (ν = {a.dof_within}; units' scatter: measurement "
-            f"{a.s2_measurement:.3g} + type {a.s2_type:.3g})",
+            f"{a.s2_measurement:.3g} + type {a.s2_type:.3g}, {100 * (1 - a.q):g} % interval "
+            f"{a.s2_type_interval[0]:.3g} to {a.s2_type_interval[1]:.3g})",
             f"  {a.verdict} (q = {a.q:g}, p = {a.p_value:.3g})",
         ]
         for s in p.smirnov:
@@ -164,6 +260,8 @@ def fleet_text(inputs: FleetInputs, analysis: FleetAnalysis) -> str:
             for u in p.outliers
         ]
         lines.append("  outside the type's prediction interval: " + ("; ".join(outside) or "none"))
+    for p in inputs.programmes:
+        lines.append(f"test programme, campaigns {_ids(p.campaign_ids)}: {programme_text(p)}")
     for f in inputs.failed_checks:
         lines.append(
             f"in the fleet, its own analysis failed: campaign {f.campaign_id} "
@@ -183,6 +281,7 @@ def fleet_document(inputs: FleetInputs, analysis: FleetAnalysis) -> dict[str, An
         "units": [asdict(u) for u in inputs.units],
         "left_out": [asdict(c) for c in inputs.left_out],
         "failed_checks": [asdict(f) for f in inputs.failed_checks],
+        "programmes": [asdict(p) for p in inputs.programmes],
     }
 
 
@@ -197,7 +296,28 @@ class FleetReport:
     software: str
     simulated: tuple[int, ...]
     """The units' campaigns that ran on the simulated stand (`simulated_campaigns`)."""
-    draft: bool = False
+    marked_draft: bool = False
+    """Marked DRAFT by the user (`fleet report --draft`)."""
+    number: str | None = None
+    laboratory: str | None = None
+
+    @property
+    def missing(self) -> tuple[str, ...]:
+        """What the report lacks to be issued (ISO/IEC 17025 7.8.2): its number, the laboratory."""
+        items = (("report number", self.number), ("laboratory", self.laboratory))
+        return tuple(name for name, value in items if not value)
+
+    @property
+    def draft(self) -> bool:
+        """DRAFT: marked so, or lacking an item it needs to be issued."""
+        return self.marked_draft or bool(self.missing)
+
+    @property
+    def title(self) -> str:
+        """The report's own title: its number, the model, the grouping."""
+        number = f"Fleet report {self.number}" if self.number else "Fleet report (unnumbered)"
+        draft = "DRAFT: " if self.draft else ""
+        return f"{draft}{number}: {self.inputs.model}, by {self.inputs.factor}"
 
     @property
     def ordered_units(self) -> tuple[FleetUnit, ...]:
@@ -214,6 +334,9 @@ def fleet_json(report: FleetReport) -> str:
         "software": report.software,
         "database": report.database,
         "draft": report.draft,
+        "missing": list(report.missing),
+        "number": report.number,
+        "laboratory": report.laboratory,
         "simulated_campaigns": list(report.simulated),
         **fleet_document(report.inputs, report.analysis),
     }

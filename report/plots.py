@@ -202,7 +202,7 @@ def measured_vs_model(rows: Sequence[TrialRow]) -> Figure:
             ax.annotate(
                 str(r.index),
                 (r.alpha_deg, r.delta_deg),
-                xytext=(4, 3),
+                xytext=(4, 3) if r.index % 2 else (-9, -9),  # close points' labels apart
                 textcoords="offset points",
                 fontsize=7,
             )
@@ -375,15 +375,15 @@ def correlation_plot(noise: NoiseCharacterisation) -> Figure:
         (exp_model(tau) + periodic) / K_UNIT,
         color="#1f77b4",
         lw=1.2,
-        label=f"σ² exp(−μτ), μ = {exp_model.decay_per_s:.3g} s⁻¹",
+        label=f"σ² exp(−μu), μ = {exp_model.decay_per_s:.3g} s⁻¹",
     )
     ax.plot(
         tau, (smooth(tau) + periodic) / K_UNIT, color="#d95f02", lw=1.0, ls="--", label="smooth"
     )
-    ax.axvline(tau_k, color="0.5", lw=0.8, ls=":", label=f"τₖ = {tau_k:.3g} s")
+    ax.axvline(tau_k, color="0.5", lw=0.8, ls=":", label=f"uₖ = {tau_k:.3g} s")
     ax.axhline(0, color="0.3", lw=0.6)
-    ax.set_xlabel("lag τ, s")
-    ax.set_ylabel("K(τ), 10⁻⁴ deg²")
+    ax.set_xlabel("lag u, s")
+    ax.set_ylabel("R(u), 10⁻⁴ deg²")
     ax.set_title("Correlation function (eqs 8.92, 8.89)", loc="left")
     ax.legend(loc="upper right")
     return fig
@@ -439,8 +439,8 @@ def allan_plot(noise: NoiseCharacterisation) -> Figure:
     fig = _figure(2.5, HALF_IN)
     ax = fig.axes[0]
     ax.loglog(allan.tau_s, allan.deviation, "o-", color="#1f77b4", ms=3, lw=1.0)
-    ax.set_xlabel("averaging time τ, s")
-    ax.set_ylabel("Allan deviation σ(τ), deg")
+    ax.set_xlabel(r"averaging time $t_a$, s")
+    ax.set_ylabel(r"Allan deviation $\sigma_A(t_a)$, deg")
     ax.set_title("Allan deviation", loc="left")
     ax.grid(True, which="both", alpha=0.3)
     return fig

@@ -41,9 +41,10 @@ TIME_SAVED_NOTE = (
     "band criterion held on the readings or, when observation began before that, is predicted "
     "to hold on the fitted transient (a noise-free continuation: the saving errs low). A series "
     "that waited for the band criterion saved nothing; unknown: the band criterion is not "
-    "predicted within the plan's max_wait_s; not recorded: no settle criterion is recorded."
+    "predicted within the plan's longest settle wait; not recorded: no settle criterion is "
+    "recorded."
 )
-NO_ACCEPTANCE = "The plan asks for no acceptance by excursions (no [acceptance] table)."
+NO_ACCEPTANCE = "The plan asks for no acceptance by excursions."
 RICE_NOTE = (
     "Computed on the smooth correlation model, whose crossings Rice's formula counts; the white "
     "part of the reading is left out (the excursions of uncorrelated sensor noise depend only on "

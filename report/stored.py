@@ -566,7 +566,10 @@ def _stand(campaign: Campaign, plan: Plan | None) -> str:
         else f"real time x{bus.speedup:g}"
     )
     if bus.simulated:
-        where = f"simulated stand (HIL twin), seed {bus.seed}, {timing}"
+        where = (
+            f"simulated gyrocompass and roll stand on a virtual CAN bus (a software model in "
+            f"place of the hardware), seed {bus.seed}, {timing}"
+        )
     else:
         where = (
             f"python-can interface {bus.interface or '(from python-can configuration)'}, "

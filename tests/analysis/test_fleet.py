@@ -41,8 +41,10 @@ def test_anova_equals_scipy_and_a_hand_computation() -> None:
     assert t.anova.groups_differ and not c.anova.groups_differ
     assert t.anova.verdict.endswith("the groups differ")
     ses = [0.02 + 0.001 * i for i in range(1, 11)]
-    assert t.anova.s2_measurement == pytest.approx(np.mean(np.square(ses)))
-    assert t.anova.s2_type == pytest.approx(max(0.0, q2 / 7 - np.mean(np.square(ses))))
+    sizes = [4] * 4 + [3] * 6  # each unit's group size: A, then B and C
+    share = sum((1 - 1 / n) * se**2 for n, se in zip(sizes, ses, strict=True)) / 7  # E[Q2]/(N-k)
+    assert t.anova.s2_measurement == pytest.approx(share)
+    assert t.anova.s2_type == pytest.approx(max(0.0, q2 / 7 - share))
 
 
 def test_smirnov_each_group_against_the_rest() -> None:

@@ -83,6 +83,9 @@ def test_simulate_says_what_it_made_and_what_to_run_next(fleet: Fleet) -> None:
         "C-002",
     ]
     where = f"--model {shlex.quote(MODEL)} --by factory --db {fleet.db}"
+    assert "the measurement/type split (fleet analysis) against the known truth; " in fleet.output
+    checks = [line for line in lines if re.match(r"  [CT]: actual errors RMS ", line)]
+    assert len(checks) == 2 and "drawn with 3%" in checks[0] and "drawn with 0.03 s" in checks[1]
     assert f"  gyrostand fleet analyze {where}" in lines
     assert f"  gyrostand fleet report {where} -o fleet.pdf" in lines
 
@@ -129,14 +132,16 @@ def test_the_shifted_factory_is_set_apart_in_c_and_no_factory_in_t(fleet: Fleet)
 def test_the_report_in_html_and_json(fleet: Fleet) -> None:
     args = ("fleet", "report", "--model", MODEL, "--by", "factory", "--db", fleet.db)
     html_path, json_path = fleet.folder / "out" / "fleet.html", fleet.folder / "fleet.json"
-    assert gyrostand(*args, "-o", str(html_path)) == f"wrote html: {html_path}\n"
+    identified = ("--number", "FL-1", "--laboratory", "Stand lab")
+    assert gyrostand(*args, *identified, "-o", str(html_path)) == f"wrote html: {html_path}\n"
     html = html_path.read_text(encoding="utf-8")
     assert "SIMULATION: the instruments and the stand were simulated" in html
     assert html.count("set apart: <b>factory B</b>") == 1 and html.count("set apart: <b>") == 1
-    assert "DRAFT" not in html
-    gyrostand(*args, "--out", str(json_path), "--draft")
+    assert "DRAFT" not in html and "<title>Fleet report FL-1: cli compass, by factory<" in html
+    gyrostand(*args, "--out", str(json_path), "--laboratory", "Stand lab")  # no number
     document = json.loads(json_path.read_text(encoding="utf-8"))
     assert document["schema"] == "gyrostand.fleet-report/1" and document["draft"] is True
+    assert document["missing"] == ["report number"]
     assert document["simulated_campaigns"] == [1, 2, 3, 4, 5, 6]
     assert document["parameters"] == analysis(fleet)["parameters"]
 

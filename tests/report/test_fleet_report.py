@@ -19,6 +19,8 @@ from gyrostand.report.fleet import (
     FleetInputs,
     FleetReport,
     LeftOut,
+    Programme,
+    ProgrammeTrial,
     fleet_json,
     render_fleet_html,
     write_fleet_report,
@@ -58,6 +60,14 @@ def units() -> tuple[FleetUnit, ...]:
     return tuple(made)
 
 
+PROGRAMME = Programme(
+    (ProgrammeTrial("fit", 332.0, 24.0, 8.0), ProgrammeTrial("control", 31.0, 23.5, 6.2)),
+    5,
+    "windows of 30 s still and 4 rocking periods; settle criterion: estimate",
+    tuple(range(1, 13)),
+)
+
+
 @pytest.fixture(scope="module")
 def report() -> FleetReport:
     fleet = units()
@@ -66,6 +76,7 @@ def report() -> FleetReport:
         "factory",
         fleet,
         (LeftOut(13, "A-001", "a later campaign of serial A-001 counts (1)"),),
+        programmes=(PROGRAMME,),
     )
     return FleetReport(
         inputs=inputs,
@@ -74,7 +85,7 @@ def report() -> FleetReport:
         database="sqlite:///lab.sqlite",
         software="gyrostand test",
         simulated=tuple(u.campaign_id for u in fleet),
-        draft=True,
+        marked_draft=True,
     )
 
 
@@ -154,7 +165,12 @@ def test_json_is_the_analysis_with_units_and_what_was_left_out(report: FleetRepo
 def test_pdf_has_the_sections_and_key_figures(report: FleetReport, pdf_text: str) -> None:
     c, t = report.analysis.parameters
     for needle in (
-        "Fleet report: test compass, units grouped by factory",
+        "Fleet report (unnumbered): test compass, units grouped by factory",
+        "DRAFT: not for issue; it lacks report number, laboratory",
+        "Table 1. The test programme: campaigns 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12; N = 5",
+        "8. Signatures",
+        "Approved by",
+        "End of report (unnumbered: a DRAFT)",
         "SIMULATION: the instruments and the stand were simulated",
         "DRAFT",
         "1. Identification",
@@ -172,7 +188,36 @@ def test_pdf_has_the_sections_and_key_figures(report: FleetReport, pdf_text: str
         "A-004 (A)",
         "Sveshnikov A. A.",
     ):
-        assert needle in pdf_text, needle
+        assert needle in " ".join(pdf_text.split()), needle  # lines joined: a title wraps
+
+
+def test_the_type_sd_with_its_interval(report: FleetReport, html: str) -> None:
+    """The type's SD of T (3 groups of 4, SEs 0.02 s): the split and its chi-square interval
+    computed here from the units' numbers."""
+    t = report.analysis.parameters[1]
+    within = sum(((np.array(v) - np.mean(v)) ** 2).sum() for v in T_S.values()) / 9
+    share = 0.02**2  # equal groups, equal SEs: the mean SE²
+    assert t.anova.s2_type == pytest.approx(within - share)
+    dof = t.anova.s2_type_dof
+    assert dof == pytest.approx(9)  # equal groups, equal precision: Satterthwaite's ν' = N - k
+    low = 9 * within / stats.chi2.ppf(0.975, 9) - share
+    high = 9 * within / stats.chi2.ppf(0.025, 9) - share
+    assert t.anova.s2_type_interval == pytest.approx((max(0.0, low), high))
+    sd = f"{(within - share) ** 0.5:.4g} ({max(0.0, low) ** 0.5:.4g} to {high**0.5:.4g}) s"
+    assert sd in html
+
+
+def test_an_identified_report_is_no_draft(report: FleetReport) -> None:
+    issued = replace(report, marked_draft=False, number="FL-7", laboratory="Stand lab")
+    assert issued.missing == () and not issued.draft
+    assert issued.title == "Fleet report FL-7: test compass, by factory"
+    document = json.loads(fleet_json(issued))
+    assert (document["draft"], document["missing"], document["number"]) == (False, [], "FL-7")
+    assert document["programmes"][0]["n_obs"] == 5
+    assert replace(issued, laboratory=None).missing == ("laboratory",)
+    html = render_fleet_html(issued)
+    assert "<title>Fleet report FL-7: test compass, by factory</title>" in html
+    assert "DRAFT" not in html.split("<body>")[1].split('<section id="method">')[0]
 
 
 def test_a_suffix_that_names_no_format_and_an_unwritable_file(

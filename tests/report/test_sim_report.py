@@ -45,7 +45,8 @@ def test_heading_records_come_from_the_raw_log(
     ident = simulated_report.inputs.identification
     assert ident.raw_log_check == "verified" and ident.source == "stand"
     assert ident.stand == (
-        "simulated stand (HIL twin), seed 1, "
+        "simulated gyrocompass and roll stand on a virtual CAN bus (a software model in place "
+        "of the hardware), seed 1, "
         "virtual time (stand time follows the acquisition: repeatable for a seed)"
     )
     assert len(simulated_report.inputs.records) == len(SIM_TRIALS)
