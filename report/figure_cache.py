@@ -3,8 +3,9 @@ from: a report made again from the same stored analysis (a DRAFT re-issued once 
 other formats, the station's button pressed again) takes its figures from here and neither
 imports matplotlib nor draws (about 1.8 s of CPU of the paper campaign's report).
 
-The key is the SHA-256 of the figure builder's name, its arguments (pickled: numbers and plain
-dataclasses), the report's plot style, matplotlib's version and the source of the plotting
+The key is the SHA-256 of the figure builder's name, its arguments (`canonical`: the same
+numbers give the same key whether the analysis was computed or rebuilt from its record), the
+report's plot style, matplotlib's version and the source of the plotting
 code (`SOURCES`): any change to one of them draws the figure anew. An entry is written whole
 (a temporary file renamed) and an unreadable one is drawn again; the folder keeps the
 `KEEP` newest entries. ``GYROSTAND_FIGURE_CACHE``: another folder, or "off" for none.
@@ -17,13 +18,15 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
-import pickle
 import tempfile
 from collections.abc import Callable
+from dataclasses import fields, is_dataclass
 from importlib.metadata import version
 from importlib.util import find_spec
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 ENV = "GYROSTAND_FIGURE_CACHE"
 KEEP = 400  # entries (about 100 kB each: the figures of some 30 reports)
@@ -62,9 +65,34 @@ def _code_digest() -> bytes:
     return digest.digest()
 
 
+def canonical(value: Any) -> Any:
+    """`value` as plain tuples, strings and floats: a dataclass by its name and fields, a dict
+    by its sorted items, any real number (Python or numpy) as a float, an array by its shape
+    and float64 bytes. Not `json_safe`: that one maps NaN and infinities alike to null and
+    passes unknown objects through. TypeError for anything else."""
+    if is_dataclass(value) and not isinstance(value, type):
+        return (type(value).__qualname__,) + tuple(
+            (f.name, canonical(getattr(value, f.name))) for f in fields(value)
+        )
+    if isinstance(value, dict):
+        return ("dict",) + tuple(sorted((repr(k), canonical(v)) for k, v in value.items()))
+    if isinstance(value, np.ndarray) and value.dtype.kind in "biuf":
+        return ("array", value.shape, value.astype(np.float64).tobytes())
+    if isinstance(value, list | tuple | np.ndarray):
+        return tuple(canonical(v) for v in value)
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | float | np.integer | np.floating):
+        return float(value)
+    if value is None or isinstance(value, str):
+        return value
+    raise TypeError(f"no cache key for a {type(value).__name__}")
+
+
 def key(name: str, args: tuple[Any, ...], kwargs: dict[str, Any], style: dict[str, Any]) -> str:
-    """The cache key of one figure (pickle's errors for arguments it cannot pickle)."""
-    document = pickle.dumps((name, args, sorted(kwargs.items()), sorted(style.items())), 5)
+    """The cache key of one figure (TypeError for an argument `canonical` cannot take)."""
+    # repr, not pickle: pickle's output depends on which equal objects are one object
+    document = repr(canonical((name, args, kwargs, style))).encode()
     return hashlib.sha256(_code_digest() + document).hexdigest()
 
 
@@ -81,7 +109,7 @@ def cached(
         return draw()
     try:
         path = where / f"{key(name, args, kwargs, style)}.html"
-    except (pickle.PicklingError, TypeError, AttributeError):  # not keyable: drawn every time
+    except TypeError:  # not keyable: drawn every time
         return draw()
     try:
         figure = path.read_text(encoding="utf-8")
