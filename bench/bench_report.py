@@ -13,17 +13,23 @@ this environment sets, removed) and warmed by one run first; the command is also
 without it (every gyrostand module compiled in the process).
 
 Target (issue 33): <= 3 s of CPU for all formats; the fleet report <= 2 s. Measured with the
-machine shared by about seven sessions (load 7-13; contention inflates CPU time too), CPU s:
-- before (last session, the analysis computed by the report): imports 3.0-3.5, analysis 0.9-1.05,
-  JSON + CSV 0.3, figures + HTML 2.8-3.1, PDF 1.0-1.2: 8.1-9.1 s;
-- before this change, the analysis recorded (load 10-13): imports 2.8-3.1, analysis 0.28-0.33,
-  JSON + CSV 0.06-0.07, figures + HTML 1.7-2.0, PDF 0.66-0.67: 5.5-5.9 s;
-- now, see the figures printed (and the note at the end of the issue's report). What is left:
-  the imports (the plan's pydantic models 0.4 s, SQLAlchemy 0.3 s, Alembic through open_db
-  0.15 s, numpy 0.1 s: the start-up work of issue 33's other helper removes Alembic and part
-  of the models' build), scipy.special for the t quantiles and scipy.optimize with the
-  envelope's worst case of the compliance section (0.25 s), Typst (0.6 s for 17 pages, the
-  figures 0.05 of it), and for a first report matplotlib (0.4 s import, 0.1-0.13 s a figure).
+machine shared by about seven sessions (load 8-14; contention inflates CPU time too), CPU s:
+- before (this bench as it was: .pyc not written, the first of three runs analysing; load 10):
+  imports 2.8-3.1, analysis 0.27-0.28 (rebuilt), JSON + CSV 0.06, figures + HTML 1.7-1.9,
+  PDF 0.68-0.72: median 5.9 s; `gyrostand report` 6.2 s (all formats), 6.1 s (PDF); the fleet
+  report 2.9 s (JSON), 4.0 s (HTML), 3.9 s (PDF);
+- now (load 8.7-14): the first report imports 1.15-1.28, analysis 0.68-0.71 (scipy.special and
+  scipy.optimize now load here, no longer at import), JSON + CSV 0.06, figures + HTML 1.8-1.9,
+  PDF 0.63-0.67: median 4.5 s, NOT; made again 1.2 + 0.67 + 0.06 + 0.04 + 0.65: median 2.6 s,
+  OK; `gyrostand report` 5.2 s first, 3.2 s made again (3.0 without .pyc), NOT: the CLI's own
+  start-up (typer, the command modules, the database models and Alembic for the campaign
+  check) adds about 0.6 s; the fleet report 2.4 s (JSON), 3.2 s (HTML), 2.7 s (PDF), NOT (the
+  fleet analysis imports scipy.stats, 0.85 s, for its Kolmogorov-Smirnov test).
+What is left, by size: the imports (the plan's pydantic models 0.4 s, SQLAlchemy 0.3 s, Alembic
+through open_db 0.15 s, numpy 0.1 s; the start-up work of issue 33's other helper removes
+Alembic and part of the models' build), Typst (0.6 s for 17 pages, of which the figures 0.05),
+scipy.special for the t quantiles and the envelope's worst case of the compliance section with
+scipy.optimize (0.25 s), and for a first report matplotlib (0.4 s import, 0.1-0.13 s a figure).
 
 Run: .venv/bin/python bench/bench_report.py"""
 
