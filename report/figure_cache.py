@@ -10,7 +10,7 @@ code (`SOURCES`): any change to one of them draws the figure anew. An entry is w
 (a temporary file renamed) and an unreadable one is drawn again; the folder keeps the
 `KEEP` newest entries. ``GYROSTAND_FIGURE_CACHE``: another folder, or "off" for none.
 
-    cached(name, args, kwargs, draw) -> str
+    cached(name, args, kwargs, style, draw) -> str
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ SOURCES = (
     "gyrostand.analysis.gyro_model",
     "gyrostand.analysis.noise",
     "gyrostand.analysis.campaign",
+    "gyrostand.analysis.fleet",
 )
 """The modules whose code draws the figures or computes what they show from their arguments."""
 
@@ -50,7 +51,10 @@ def folder() -> Path | None:
         return None
     if chosen:
         return Path(chosen)
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    try:
+        base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    except RuntimeError:  # no home folder: no cache
+        return None
     return Path(base) / "gyrostand" / "figures"
 
 
