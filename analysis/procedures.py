@@ -19,8 +19,8 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
+from gyrostand.analysis.quantiles import t_quantile
 from gyrostand.analysis.settle import _damped_jacobian, estimate_settle_point_free
 
 GRID_S = 1.0  # the fitted reading's grid when searching the last band exit, s
@@ -187,7 +187,7 @@ def settle_point(
         u2 = u_mean2 + u_ref2
         # nu_eff = u^4 / (u_mean^4 / (n - 1)), the reference's dof infinite: GUM G.4.1
         nu = math.inf if u_mean2 == 0 else u2**2 / (u_mean2**2 / (n - 1))
-        k = float(stats.t.ppf(0.5 + COVERAGE / 2, nu)) if math.isfinite(nu) else 1.96
+        k = t_quantile(0.5 + COVERAGE / 2, nu) if math.isfinite(nu) else 1.96
         error = (mean - reference_deg + 180.0) % 360.0 - 180.0
         expanded = k * math.sqrt(u2)
     return SettlePoint(
@@ -255,7 +255,7 @@ def rolling_error(
     u2 = u_roll2 + u_static2
     # Welch-Satterthwaite (GUM G.4.1) over the two means' variances
     nu = u2**2 / (u_roll2**2 / (r.size - 1) + u_static2**2 / (static.n - 1))
-    k = float(stats.t.ppf(0.5 + COVERAGE / 2, nu))
+    k = t_quantile(0.5 + COVERAGE / 2, nu)
     return RollingError(
         direction_deg,
         amplitude_cm,

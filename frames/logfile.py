@@ -21,13 +21,9 @@ import numpy as np
 from can.io.generic import BinaryIOMessageWriter, MessageWriter
 
 from gyrostand.frames.batch import RawFrames
+from gyrostand.frames.errors import LogFileError
 
 CHUNK_FRAMES = 200_000
-
-
-class LogFileError(ValueError):
-    """A raw log that cannot be read: not a log of its format, or corrupt. The message names the
-    file and where it goes wrong."""
 
 
 def sha256_of(path: Path) -> str:

@@ -72,7 +72,7 @@ def write_campaign_report(
     from sqlalchemy.exc import OperationalError
 
     from gyrostand.db.queries import CampaignNotFound
-    from gyrostand.frames.logfile import LogFileError
+    from gyrostand.frames.errors import LogFileError
     from gyrostand.report.stored import NotFinal, campaign_report
     from gyrostand.report.writer import write_report
 

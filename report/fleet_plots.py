@@ -1,13 +1,16 @@
 """The fleet report's figures (`report.plots`'s style and inline SVG): the control chart of one
 parameter over the fleet's units."""
 
-from collections.abc import Sequence
+from __future__ import annotations
 
-from matplotlib import colormaps
-from matplotlib.figure import Figure
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from gyrostand.analysis.fleet import ParameterAnalysis
 from gyrostand.report.plots import _figure, _styled
+
+if TYPE_CHECKING:  # matplotlib is imported where a figure is drawn: not for a cached one
+    from matplotlib.figure import Figure
 
 SCALE = {"C": (1e7, "C, 10⁷ g·cm²·s⁻²"), "T": (1.0, "T, s")}
 """How each parameter is plotted: the divisor and the axis label with the unit."""
@@ -73,5 +76,7 @@ def control_chart(p: ParameterAnalysis, order: Sequence[str], factor: str) -> Fi
 
 def _palette(n: int) -> list[tuple[float, float, float, float]]:
     """n colours, distinct up to 20 (matplotlib's tab10, tab20 for more groups)."""
+    from matplotlib import colormaps
+
     colours = colormaps["tab10" if n <= 10 else "tab20"]
     return [colours(i % colours.N) for i in range(n)]

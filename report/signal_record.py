@@ -17,24 +17,23 @@ from __future__ import annotations
 import functools
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gyrostand.analysis.errors import AnalysisError
-from gyrostand.devices.cia402 import MASTER_NODE_ID
-from gyrostand.devices.cia402_log import compass_frames
-from gyrostand.devices.decoder import SourceDecoder, frame_decoder
-from gyrostand.devices.iec61162 import Iec61162Source
-from gyrostand.devices.serial_decoder import SerialSourceDecoder
-from gyrostand.devices.serial_replay import check_serial_logs, serial_replay
-from gyrostand.frames.batch import BatchDecoder
-from gyrostand.frames.logfile import read_segments
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import Plan
 from gyrostand.report.model import ExcursionCriterion, ReadingRecord, TrialRecord
 from gyrostand.report.signal import SignalSection, signal_section, uniform_record
-from gyrostand.stand.encoder import Encoder
 from gyrostand.stand.protocol import Codec, SignalMap
+
+if TYPE_CHECKING:  # the log readers and decoders are imported where a log is read: a report
+    # rebuilt from its recorded analysis reads none (python-can, cantools, the device modules)
+    from gyrostand.devices.decoder import SourceDecoder
+    from gyrostand.devices.serial_decoder import SerialSourceDecoder
+    from gyrostand.frames.batch import BatchDecoder
+    from gyrostand.stand.encoder import Encoder
 
 Span = tuple[float, float]  # stand ms, [start, end)
 SerialLine = tuple[int, bool]  # an IEC 61162 compass's baud rate; virtual time
@@ -42,7 +41,7 @@ Drive = tuple[int, int]  # a CiA 402 stand's drive and master node ids (`devices
 # `Plan.heading_source`, for a serial compass its line (its sentences in the serial logs),
 # whether the compass is on a CAN bus of its own, and a CiA 402 stand's drive
 HeadingSource = tuple[
-    str, str | None, tuple[str, str], Encoder | None, SerialLine | None, bool, Drive | None
+    str, str | None, tuple[str, str], "Encoder | None", SerialLine | None, bool, Drive | None
 ]
 GYROSTAND: HeadingSource = ("gyrostand", None, ("", ""), None, None, False, None)
 
@@ -53,6 +52,8 @@ def heading_source(plan: Plan) -> HeadingSource:
     if plan.compass.protocol == "iec61162":
         line = (plan.compass.baud, plan.bus.timing == "virtual")
     if plan.stand.protocol == "cia402" and plan.stand.node_id is not None:
+        from gyrostand.devices.cia402 import MASTER_NODE_ID
+
         drive = (plan.stand.node_id, MASTER_NODE_ID)
     return (*plan.heading_source, line, plan.compass.own_bus, drive)
 
@@ -86,6 +87,12 @@ def _valid_headings(
     Kept for the next call with the same files: the analysis and the report's plots of one
     campaign read its log once (a changed file has another size or mtime; the report verifies
     each log's SHA-256 before reading it)."""
+    from gyrostand.devices.cia402_log import compass_frames
+    from gyrostand.devices.decoder import SourceDecoder, frame_decoder
+    from gyrostand.devices.iec61162 import Iec61162Source
+    from gyrostand.devices.serial_replay import check_serial_logs, serial_replay
+    from gyrostand.frames.logfile import read_segments
+
     protocol, name, product, encoder, line, own_bus, drive = source
     codec, paths = Codec(dbc_path, signal_map), [Path(path) for path, _, _ in stamps]
     decoder: BatchDecoder | SourceDecoder | SerialSourceDecoder
@@ -160,6 +167,9 @@ def still_series_record(
 def still_stretch(log: Path, codec: Codec) -> Span | None:
     """The longest run of stand status frames reporting no rocking, as a stand-time span
     [first, last]; None when the log has no status frame at all."""
+    from gyrostand.frames.batch import BatchDecoder
+    from gyrostand.frames.logfile import read_segments
+
     decoder = BatchDecoder(codec)
     times, rocking = [], []
     for raw in read_segments([log]):

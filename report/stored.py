@@ -52,7 +52,6 @@ from gyrostand.analysis.typed_json import decode, encode
 from gyrostand.db.models import AnalysisRun, Campaign, ProcedureRun, Series, Trial
 from gyrostand.db.queries import campaign_constants, current_trials, load_campaign, sign_offs
 from gyrostand.db.session import writer
-from gyrostand.frames.logfile import sha256_of
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import PartialPlan, Plan, PlanError, ReportPlan, parse_any_plan
 from gyrostand.report.build import Report, build_report, missing_items
@@ -510,6 +509,8 @@ def _raw_log_check(campaign: Campaign) -> tuple[str, list[Path]]:
 def _sha256_of(path: str, size: int, mtime_ns: int) -> str:
     """A raw log's SHA-256, hashed once per process while the file is unchanged (its size and
     modification time): the inputs hash, the signal section and the report all check it."""
+    from gyrostand.frames.logfile import sha256_of  # (python-can: not for the hash alone)
+
     return sha256_of(Path(path))
 
 

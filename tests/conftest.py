@@ -9,6 +9,7 @@ where none can be started)."""
 from __future__ import annotations
 
 import itertools
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +19,10 @@ import pytest
 from tests import postgres
 
 pytest_plugins = ["pytester"]
+
+# the report's figure cache (report.figure_cache) off: every test draws its figures, and none
+# writes into the user's cache folder (tests/report/test_figure_cache.py turns it on)
+os.environ.setdefault("GYROSTAND_FIGURE_CACHE", "off")
 
 BACKENDS = ("sqlite", "postgresql")
 
@@ -89,6 +94,7 @@ SLOW_FILES = frozenset(
         "db/test_merge.py",
         "db/test_wal.py",
         "devices/test_cia406_campaign.py",
+        "report/test_figure_cache_cli.py",
         "devices/test_n2k_processes.py",
         "devices/test_serial_resume.py",
         "devices/test_serial_run.py",

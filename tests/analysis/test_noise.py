@@ -57,9 +57,12 @@ def test_smooth_fit_recovers_oscillator_process() -> None:
     assert model.variance == pytest.approx(0.25, rel=0.15)
 
 
-@pytest.mark.parametrize(("mu", "beta"), [(0.5, 0.0), (0.3, 2.0), (1.0, 0.4)])
+@pytest.mark.parametrize(
+    ("mu", "beta"), [(0.5, 0.0), (0.3, 2.0), (1.0, 0.4), (0.0646, 2.2e-7), (0.01, 3.0)]
+)
 def test_correlation_time_is_integral_of_abs_k(mu: float, beta: float) -> None:
-    """8.89 vs a trapezoid of |K| on a fine grid (and 2/mu exactly when beta = 0)."""
+    """8.89 vs a trapezoid of |K| on a fine grid (and 2/mu exactly when beta = 0); beta near 0
+    as the paper campaign's smooth fit has it, and many zeros of K within the record."""
     model = CorrelationModel(variance=2.0, decay_per_s=mu, frequency_rad_s=beta)
     tau = np.linspace(0, 60 / mu, 600_001)
     assert model.correlation_time_s == pytest.approx(
