@@ -158,20 +158,31 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=300_000)
     parser.add_argument("--profile", action="store_true", help="the top costs, from cProfile")
+    parser.add_argument(
+        "--protocol",
+        default="gyrostand",
+        choices=("gyrostand", "nmea2000", "cia406"),
+        help="the compass's protocol of the profiled run",
+    )
     args = parser.parse_args()
     cpu = min(os.sched_getaffinity(0))
     os.sched_setaffinity(0, {cpu})
+    if args.profile:
+        plan = paper_plan(":memory:", protocol=args.protocol)
+        frames = list(itertools.islice(campaign_frames(plan), args.frames))
+        print(f"{len(frames):,} frames ({args.protocol}), pinned to CPU {cpu}")
+        profile = cProfile.Profile()
+        with tempfile.TemporaryDirectory() as folder:
+            ours(frames, Path(folder), True, args.protocol, profile=profile)
+        print_costs(
+            f"campaign thread ({args.protocol}: decode, check, aggregate, SQLite + raw BLF)",
+            profile,
+            len(frames),
+        )
+        return
     plan = paper_plan(":memory:")
     frames = list(itertools.islice(campaign_frames(plan), args.frames))
     print(f"{len(frames):,} frames of a simulated campaign, pinned to CPU {cpu}")
-    if args.profile:
-        profile = cProfile.Profile()
-        with tempfile.TemporaryDirectory() as folder:
-            ours(frames, Path(folder), True, profile=profile)
-        print_costs(
-            "campaign thread (decode, check, aggregate, SQLite + raw BLF)", profile, len(frames)
-        )
-        return
     with tempfile.TemporaryDirectory() as folder:
         tmp = Path(folder)
         rows = {
