@@ -7,12 +7,14 @@ consumer they are first queued on a python-can `virtual` bus (untimed), then the
 The process is pinned to one CPU. Targets: >= 180 000 frames/s (issue 37; twenty times a
 saturated 1 Mbit/s bus), zero loss, at least twice `can.Logger` -> .blf, and with the station's
 live view attached (the live file, a page watching) at most 10 % less. `--profile`: the top five
-costs per frame of the path with the raw BLF, from cProfile, instead. Last, the raw BLF writers
-alone (ours, python-can's)
-on the same frames, without a bus; and the same campaign with its compass speaking NMEA 2000
-(PGN 127250/127251/127257 decoded by the heading source, `devices`), then read by a CiA 406
-encoder (TPDO1, heartbeat): frames/s beside gyrostand's own heading frame (target: within 2x of
-its frame rate, none lost; headings/s printed beside).
+costs per frame of the path with the raw BLF, from cProfile, instead (`--protocol`: of that
+heading source's stream). Then the raw BLF writers alone (ours, python-can's) on the same frames,
+without a bus. Last, the same campaign with its compass speaking NMEA 2000 (PGN
+127250/127251/127257 decoded by the heading source, `devices`), then read by a CiA 406 encoder
+(TPDO1, heartbeat): frames/s and headings/s of each, taken in turn with gyrostand's own heading
+frame `--repeats` times (the best run of each: the machine is shared), and each one's ratio to
+gyrostand's in wall time and in the process's CPU time (target, issue 31: at or above 1.00,
+none lost; judged on CPU time, which other jobs on the shared core do not inflate).
 """
 
 from __future__ import annotations
@@ -20,10 +22,12 @@ from __future__ import annotations
 import argparse
 import cProfile
 import itertools
+import math
 import os
 import tempfile
 import time
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
 
 import can
@@ -46,6 +50,32 @@ DRAIN = 50_000  # frames drained (and logged) at a time
 TPDO = 0x185  # the CiA 406 encoder's TPDO1 (node 5, acquisition_stream.ENCODER)
 
 
+@dataclass(frozen=True)
+class Run:
+    """One consumer's run over the stream: wall seconds, frames processed and lost, and the
+    process's CPU seconds (both threads on the one pinned core; NaN where not measured)."""
+
+    seconds: float
+    done: int
+    lost: int
+    cpu_s: float = math.nan
+
+    @property
+    def rate(self) -> float:
+        return self.done / self.seconds
+
+    @property
+    def cpu_rate(self) -> float:
+        return self.done / self.cpu_s
+
+
+SOURCES = (
+    ("gyrostand", "gyrostand heading frame"),
+    ("nmea2000", "NMEA 2000 compass"),
+    ("cia406", "CiA 406 encoder"),
+)
+
+
 def loaded_bus(frames: list[can.Message]) -> tuple[can.BusABC, can.BusABC]:
     """A virtual bus whose receive queue already holds every frame (and its sender), each with
     its reception time in the stream (as a real bus delivers them): sources without a stand time
@@ -66,11 +96,11 @@ def ours(
     protocol: str = "gyrostand",
     live: bool = False,
     profile: cProfile.Profile | None = None,
-) -> tuple[float, int, int]:
+) -> Run:
     """gyrostand's live path: Notifier -> Recorder (bounded queue + raw log) -> batch decode ->
     engine -> SQLite (`live`: and the live file, a station page watching it, as `run_live`
-    keeps it). Returns (seconds, frames processed, frames lost)."""
-    db = tmp / f"ours-{raw_log}-{protocol}-{live}.sqlite"
+    keeps it)."""
+    db = tmp / f"ours-{uuid.uuid4().hex}.sqlite"  # (a new database for every run)
     plan = paper_plan(str(db), protocol=protocol)
     store = CampaignStore.create(open_database(sqlite_url(db)), plan)
     source = source_info(Codec(), protocol, True, encoder=plan.compass.encoder())
@@ -81,7 +111,7 @@ def ours(
     live_file = LiveFile(tmp / "ours.live.json") if live else None
     if live_file is not None:
         live_file.watch.touch()  # as the station does while a page shows the run
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     notifier = can.Notifier(rx, [recorder], timeout=0.05)
     position = 0
     if profile is not None:
@@ -103,13 +133,13 @@ def ours(
     notifier.stop()  # and the raw log (its last container written)
     if live_file is not None:
         live_file.close()
-    seconds = time.perf_counter() - t0
+    seconds, cpu_s = time.perf_counter() - t0, time.process_time() - cpu0
     rx.shutdown()
     tx.shutdown()
-    return seconds, position, len(frames) - position + recorder.dropped
+    return Run(seconds, position, len(frames) - position + recorder.dropped, cpu_s)
 
 
-def python_can_logger(frames: list[can.Message], path: Path) -> tuple[float, int, int]:
+def python_can_logger(frames: list[can.Message], path: Path) -> Run:
     """can.Logger(path) on a Notifier; stopped as soon as the bus backlog is drained."""
     rx, tx = loaded_bus(frames)
     logger = can.Logger(path)
@@ -123,7 +153,7 @@ def python_can_logger(frames: list[can.Message], path: Path) -> tuple[float, int
     tx.shutdown()
     with can.LogReader(path) as reader:
         stored = sum(1 for _ in reader)
-    return seconds, stored, len(frames) - stored
+    return Run(seconds, stored, len(frames) - stored)
 
 
 def writers_alone(frames: list[can.Message], tmp: Path) -> tuple[float, float]:
@@ -154,28 +184,67 @@ def _headings(frames: list[can.Message]) -> int:
     return n2k + sum(1 for m in frames if not m.is_extended_id and m.arbitration_id in ids)
 
 
+def by_protocol(streams: dict[str, list[can.Message]], tmp: Path, repeats: int) -> dict[str, Run]:
+    """`ours` (with the raw BLF) on each heading source's stream, the sources taken in turn
+    `repeats` times so that a spell of load on the shared machine hits them alike: the fastest
+    run of each (wall and CPU time apart), and the most frames any run lost."""
+    best: dict[str, Run] = {}
+    for _ in range(repeats):
+        for protocol, frames in streams.items():
+            run = ours(frames, tmp, True, protocol)
+            if protocol in best:
+                was = best[protocol]
+                run = Run(
+                    min(run.seconds, was.seconds),
+                    run.done,
+                    max(run.lost, was.lost),
+                    min(run.cpu_s, was.cpu_s),
+                )
+            best[protocol] = run
+    return best
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=300_000)
     parser.add_argument("--profile", action="store_true", help="the top costs, from cProfile")
+    parser.add_argument(
+        "--repeats", type=int, default=3, help="runs of each heading source (the best counts)"
+    )
+    parser.add_argument(
+        "--protocol",
+        default="gyrostand",
+        choices=("gyrostand", "nmea2000", "cia406"),
+        help="the compass's protocol of the profiled run",
+    )
     args = parser.parse_args()
     cpu = min(os.sched_getaffinity(0))
     os.sched_setaffinity(0, {cpu})
-    plan = paper_plan(":memory:")
-    frames = list(itertools.islice(campaign_frames(plan), args.frames))
-    print(f"{len(frames):,} frames of a simulated campaign, pinned to CPU {cpu}")
     if args.profile:
+        plan = paper_plan(":memory:", protocol=args.protocol)
+        frames = list(itertools.islice(campaign_frames(plan), args.frames))
+        print(f"{len(frames):,} frames ({args.protocol}), pinned to CPU {cpu}")
         profile = cProfile.Profile()
         with tempfile.TemporaryDirectory() as folder:
-            ours(frames, Path(folder), True, profile=profile)
+            ours(frames, Path(folder), True, args.protocol, profile=profile)
         print_costs(
-            "campaign thread (decode, check, aggregate, SQLite + raw BLF)", profile, len(frames)
+            f"campaign thread ({args.protocol}: decode, check, aggregate, SQLite + raw BLF)",
+            profile,
+            len(frames),
         )
         return
+    n = args.frames
+    streams = {
+        p: list(itertools.islice(campaign_frames(paper_plan(":memory:", protocol=p)), n))
+        for p, _ in SOURCES
+    }
+    frames = streams["gyrostand"]
+    print(f"{len(frames):,} frames of a simulated campaign, pinned to CPU {cpu}")
     with tempfile.TemporaryDirectory() as folder:
         tmp = Path(folder)
+        best = by_protocol(streams, tmp, args.repeats)
         rows = {
-            "gyrostand (decode, check, aggregate, SQLite + raw BLF)": ours(frames, tmp, True),
+            "gyrostand (decode, check, aggregate, SQLite + raw BLF)": best["gyrostand"],
             "gyrostand (... + raw BLF + the station's live view)": ours(
                 frames, tmp, True, live=True
             ),
@@ -185,34 +254,35 @@ def main() -> None:
         }
         ours_alone, theirs_alone = writers_alone(frames, tmp)
     width = max(map(len, rows))
-    for name, (seconds, done, lost) in rows.items():
-        print(f"{name:<{width}}  {done / seconds:>10,.0f} frames/s  {lost:>8,} lost")
+    for name, run in rows.items():
+        print(f"{name:<{width}}  {run.rate:>10,.0f} frames/s  {run.lost:>8,} lost")
     print(
         f"raw BLF writer alone: BatchBLFWriter {ours_alone:,.0f} frames/s "
         f"(batches of {DRAIN:,}), can.BLFWriter {theirs_alone:,.0f} frames/s"
     )
-    ours_rate = rows["gyrostand (decode, check, aggregate, SQLite + raw BLF)"]
-    rate = ours_rate[1] / ours_rate[0]
-    seconds, done, _ = rows["gyrostand (... + raw BLF + the station's live view)"]
-    live_rate = done / seconds
-    seconds, done, _ = rows["can.Logger -> .blf (BLFWriter)"]
-    blf_logger = done / seconds
-    per_heading = _headings(frames) / ours_rate[0]
-    for protocol, name in (("nmea2000", "NMEA 2000 compass"), ("cia406", "CiA 406 encoder")):
-        source_plan = paper_plan(":memory:", protocol=protocol)
-        source_frames = list(itertools.islice(campaign_frames(source_plan), args.frames))
-        with tempfile.TemporaryDirectory() as folder:
-            seconds, done, lost = ours(source_frames, Path(folder), True, protocol)
+    ours_run = rows["gyrostand (decode, check, aggregate, SQLite + raw BLF)"]
+    rate = ours_run.rate
+    live_rate = rows["gyrostand (... + raw BLF + the station's live view)"].rate
+    blf_logger = rows["can.Logger -> .blf (BLFWriter)"].rate
+    print(
+        f"heading sources, SQLite + raw BLF, best of {args.repeats} runs taken in turn; frames "
+        "per second of wall time, and per second of this process's CPU time (the work itself, "
+        "whatever else the shared core ran: the verdict's); target: each at or above the "
+        "gyrostand protocol's, none lost:"
+    )
+    base = best["gyrostand"]
+    for protocol, name in SOURCES:
+        run = best[protocol]
+        ratio, cpu_ratio = run.rate / base.rate, run.cpu_rate / base.cpu_rate
         print(
-            f"{name} ({len(source_frames):,} frames, SQLite + raw BLF): {done / seconds:,.0f} "
-            f"frames/s, {lost:,} lost; headings/s {_headings(source_frames) / seconds:,.0f} vs "
-            f"gyrostand's frame {per_heading:,.0f}: {done / seconds / rate:.2f}x its frame rate "
-            f"({'OK' if done / seconds >= rate / 2 and not lost else 'BELOW'}: "
-            "within 2x, none lost)"
+            f"  {name:<24} {run.rate:>9,.0f} frames/s ({ratio:.2f}x)  CPU {run.cpu_rate:>9,.0f} "
+            f"frames/s ({cpu_ratio:.2f}x)  {run.lost:,} lost  "
+            f"{_headings(streams[protocol]) / run.seconds:>7,.0f} headings/s  "
+            f"{'OK' if cpu_ratio >= 1.0 and not run.lost else 'BELOW'}"
         )
     print(
         f"target >= 180,000 frames/s: {'OK' if rate >= 180_000 else 'BELOW TARGET'}; "
-        f"zero loss: {'OK' if ours_rate[2] == 0 else 'FRAMES LOST'}; "
+        f"zero loss: {'OK' if ours_run.lost == 0 else 'FRAMES LOST'}; "
         f">= 2x can.Logger -> .blf ({rate / blf_logger:.2f}x): "
         f"{'OK' if rate >= 2 * blf_logger else 'BELOW TARGET'}; "
         f"live view attached <= 10 % less ({1 - live_rate / rate:.1%} less): "

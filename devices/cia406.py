@@ -52,8 +52,11 @@ class Cia406Heading:
         ok = ~(raw.is_extended | raw.is_error | raw.is_remote) & raw.on_bus(self.bus)
         return ok & np.isin(raw.arbitration_id, self._ids)
 
-    def decode(self, raw: RawFrames, clock: CampaignClock) -> SourceOutput:
-        claimed = self.claims(raw)
+    def decode(
+        self, raw: RawFrames, clock: CampaignClock, claimed: np.ndarray | None = None
+    ) -> SourceOutput:
+        """`claimed`: `claims(raw)`, when the caller has it already."""
+        claimed = self.claims(raw) if claimed is None else claimed
         tpdo, emcy, heartbeat = self.encoder.ids
         invalid: list[tuple[int, InvalidFrame]] = []
         events: list[tuple[int, DeviceEvent]] = []

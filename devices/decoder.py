@@ -42,15 +42,17 @@ class SourceDecoder:
         claimed = np.zeros(len(raw), dtype=bool)
         if self.own_bus:  # (the inclinometer is on the stand's bus)
             claimed |= (raw.channel == COMPASS_BUS) & ~raw.is_error
-        for device in (self.source, self.inclinometer):
-            if device is not None:
-                claimed |= device.claims(raw)
+        mine = None if self.source is None else self.source.claims(raw)  # (computed once)
+        if mine is not None:
+            claimed |= mine
+        if self.inclinometer is not None:
+            claimed |= self.inclinometer.claims(raw)
         stand = self.stand.decode(raw, skip=claimed)  # (its own heading frames, if any: unused)
         statuses = stand.statuses
         self.clock.observe(statuses.pos, statuses.t_ms, raw.timestamp[statuses.pos - raw.start])
         headings, others = stand.headings, list(stand.others)
         if self.source is not None:
-            out = self.source.decode(raw, self.clock)
+            out = self.source.decode(raw, self.clock, mine)
             headings = out.headings
             others += [*out.invalid, *out.events]
         if self.inclinometer is not None:

@@ -90,8 +90,11 @@ class Nmea2000Heading:
                 return address
         return None
 
-    def decode(self, raw: RawFrames, clock: CampaignClock) -> SourceOutput:
-        claimed = self.claims(raw)
+    def decode(
+        self, raw: RawFrames, clock: CampaignClock, claimed: np.ndarray | None = None
+    ) -> SourceOutput:
+        """`claimed`: `claims(raw)`, when the caller has it already."""
+        claimed = self.claims(raw) if claimed is None else claimed
         pgn, source = split_id(raw.arbitration_id)
         control = np.flatnonzero(claimed & np.isin(pgn, (ADDRESS_CLAIM, PRODUCT_INFORMATION)))
         heading = claimed & (pgn == VESSEL_HEADING)

@@ -70,9 +70,16 @@ class RawFrames:
         datas = list(map(_DATA, messages))
         dlc = np.fromiter(map(len, datas), np.int64, n)
         if n and bool((dlc == 8).all()):
-            payload = b"".join(datas)
-        else:
+            data = np.frombuffer(b"".join(datas), np.uint8).reshape(n, 8)
+        elif n and int(dlc.max()) <= 8:
+            # shorter payloads (a CiA 406 TPDO, a heartbeat): joined, then scattered into the
+            # zero-padded rows in one step (row-major order: row i's first dlc[i] bytes);
+            # 0.1 vs 1.1 us a frame padding each in Python
+            data = np.zeros((n, 8), np.uint8)
+            data[np.arange(8) < dlc[:, None]] = np.frombuffer(b"".join(datas), np.uint8)
+        else:  # (CAN FD payloads: their first 8 bytes)
             payload = b"".join(bytes(d[:8]).ljust(8, b"\0") for d in datas)
+            data = np.frombuffer(payload, np.uint8).reshape(n, 8)
 
         def column(name: str, dtype: type | str) -> np.ndarray:
             return np.fromiter(map(attrgetter(name), messages), dtype, n)
@@ -81,7 +88,7 @@ class RawFrames:
             start=start,
             arbitration_id=column("arbitration_id", np.uint32),
             dlc=dlc,
-            data=np.frombuffer(payload, np.uint8).reshape(n, 8),
+            data=data,
             is_error=column("is_error_frame", bool),
             is_remote=column("is_remote_frame", bool),
             is_extended=column("is_extended_id", bool),

@@ -28,9 +28,10 @@ FRAMES = 5_000
 def test_bench_row_loses_nothing_and_sees_no_gap(protocol: str, tmp_path: Path) -> None:
     plan = paper_plan(":memory:", protocol=protocol)
     frames = list(itertools.islice(campaign_frames(plan), FRAMES))
-    _, done, lost = ours(frames, tmp_path, True, protocol)
-    assert (done, lost) == (FRAMES, 0)
-    with closing(sqlite3.connect(tmp_path / f"ours-True-{protocol}-False.sqlite")) as db:
+    run = ours(frames, tmp_path, True, protocol)
+    assert (run.done, run.lost) == (FRAMES, 0)
+    (database,) = tmp_path.glob("ours-*.sqlite")  # (each run its own)
+    with closing(sqlite3.connect(database)) as db:
         kinds = dict(db.execute("SELECT kind, count(*) FROM event GROUP BY kind").fetchall())
         statuses = {s for (s,) in db.execute("SELECT status FROM trial")}
     assert kinds.get("frame gap", 0) == kinds.get("bus silence", 0) == 0, kinds

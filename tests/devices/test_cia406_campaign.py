@@ -6,42 +6,32 @@ from time, a silent encoder told by its missing heartbeat, an EMCY an event."""
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable
 
-import can
 import numpy as np
 import pytest
 
-from gyrostand.acquisition.engine import Engine, ObservationResult
+from gyrostand.acquisition.engine import ObservationResult
 from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.devices.cia406 import Cia406Heading, encoder_info
-from gyrostand.devices.decoder import SourceDecoder
 from gyrostand.devices.sim_cia406 import Cia406Encoder, Cia406Faults
 from gyrostand.stand.encoder import Encoder
-from gyrostand.stand.protocol import Codec
-from tests.acquisition.harness import Recorder, quick_config, small_plan
+from tests.acquisition.harness import Recorder
+from tests.devices.source_campaign import (
+    assert_as_gyrostand,
+    assert_window_means,
+    campaign,
+    stream_key,
+)
 
-PLAN = small_plan(n_obs=3)
 # 14-bit single turn (0.022 deg), read counter-clockwise from a zero at 5000 counts
 ENCODER = Encoder(5, 16384, zero_counts=5000, sign=-1, heartbeat_ms=1000)
 
 
 def run(faults: Cia406Faults | None = None, **stand_faults: float) -> tuple[Recorder, Lockstep]:
-    sink = Recorder()
-    config = quick_config(seed=1, **stand_faults)
     if faults is None:
-        stand = Lockstep(config, 5.0)
-        engine = Engine(PLAN, sink, stand)
-    else:
-        codec = Codec()
-        device = Cia406Encoder(ENCODER, faults)
-        decoder: Callable[[], SourceDecoder] = lambda: SourceDecoder(  # noqa: E731
-            codec, Cia406Heading(ENCODER)
-        )
-        stand = Lockstep(config, 5.0, codec, (device, decoder))
-        engine = Engine(PLAN, sink, stand, source=encoder_info(ENCODER))
-    stand.run(engine)
-    return sink, stand
+        return campaign(**stand_faults)
+    device = Cia406Encoder(ENCODER, faults)
+    return campaign(device, lambda: Cia406Heading(ENCODER), encoder_info(ENCODER), **stand_faults)
 
 
 @pytest.fixture(scope="module")
@@ -66,35 +56,17 @@ def tpdo_stream(stand: Lockstep) -> tuple[np.ndarray, np.ndarray]:
 def test_observations_as_with_the_gyrostand_heading_frame(
     gyrostand_run: list[ObservationResult], encoder_run: tuple[Recorder, Lockstep]
 ) -> None:
-    ours = encoder_run[0].observations
-    assert [(o.trial, o.j, o.k) for o in ours] == [(o.trial, o.j, o.k) for o in gyrostand_run]
-    assert len(ours) == 12
-    for a, b in zip(ours, gyrostand_run, strict=True):
-        assert (a.window_start_ms, a.window_end_ms) == (b.window_start_ms, b.window_end_ms)
-        assert abs(a.frames_used - b.frames_used) <= 1  # (the first heading: before any status)
-        assert abs(a.value_deg - b.value_deg) < ENCODER.resolution_deg / 2
-        assert a.frames_lost == 0 and "stuck" not in a.flags  # a still compass is not stuck
+    assert_as_gyrostand(encoder_run[0].observations, gyrostand_run, ENCODER.resolution_deg)
     assert encoder_run[0].of("trial_failed") == []
 
 
 def test_window_means_are_those_of_the_frames_sent(encoder_run: tuple[Recorder, Lockstep]) -> None:
     sink, stand = encoder_run
-    t_ms, deg = tpdo_stream(stand)
-    for obs in sink.observations:
-        inside = (t_ms >= obs.window_start_ms) & (t_ms < obs.window_end_ms)
-        assert obs.frames_used == inside.sum()
-        ref = deg[inside][0]  # deviations from one of them: no wrap at 360 inside a window
-        assert obs.value_deg == pytest.approx(ref + np.mean(deg[inside] - ref), abs=1e-9)
+    assert_window_means(sink, *tpdo_stream(stand))
 
 
 def test_byte_reproducible(encoder_run: tuple[Recorder, Lockstep]) -> None:
-    key: Callable[[can.Message], tuple[object, ...]] = lambda m: (  # noqa: E731
-        m.timestamp,
-        m.arbitration_id,
-        bytes(m.data),
-    )
-    again = run(Cia406Faults())[1].stream
-    assert [key(m) for m in again] == [key(m) for m in encoder_run[1].stream]
+    assert stream_key(run(Cia406Faults())[1]) == stream_key(encoder_run[1])
 
 
 def test_dropped_tpdos_are_counted_lost_from_time() -> None:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyrostand.devices.clock import NO_CLOCK, ReceptionClock
+from gyrostand.devices.clock import MIN_SPAN_MS, NO_CLOCK, RATE_SNAP, WINDOW, ReceptionClock
 
 EPOCH_S = 1_795_000_000.0
 
@@ -65,3 +65,37 @@ def test_before_the_first_status_there_is_no_clock() -> None:
     clock.observe(np.array([2]), np.array([1000]), np.array([EPOCH_S]))
     got = clock.to_campaign_ms(np.array([1, 3]), np.array([EPOCH_S - 0.1, EPOCH_S + 0.25]))
     assert got.tolist() == [NO_CLOCK, 1250]
+
+
+def _by_definition(rate: float) -> np.ndarray:
+    """Each heading's campaign ms as the module docstring defines it, frame by frame in plain
+    Python: the last status before it, that status's rate, the minimum over its window."""
+    pos, stand, rx_s, is_status = stream(rate)
+    rx_ms, stand_ms = rx_s[is_status] * 1000.0, stand[is_status]
+    statuses = [(float(r), float(s)) for r, s in zip(rx_ms, stand_ms, strict=True)]
+    first_rx, first_stand = statuses[0]
+    out, seen = [], 0
+    for p in range(len(pos)):
+        if is_status[p]:
+            seen += 1
+            continue
+        if seen == 0:
+            out.append(NO_CLOCK)
+            continue
+        rx, st = statuses[seen - 1]
+        span, elapsed = st - first_stand, rx - first_rx
+        r = span / elapsed if span >= MIN_SPAN_MS and elapsed > 0 else 1.0
+        r = 1.0 if abs(r - 1.0) < RATE_SNAP else r
+        window = statuses[max(seen - WINDOW, 0) : seen]
+        offset = min(r * w_rx - w_stand for w_rx, w_stand in window)
+        out.append(int(np.round(r * float(rx_s[p]) * 1000.0 - offset)))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("rate", [1.00005, 20.0])
+def test_the_offset_per_status_is_the_definition(rate: float) -> None:
+    """The vectorised clock (a window's minimum once per status) gives exactly the per-frame
+    definition, in batches cut anywhere."""
+    cuts = [0, 5, 900, 901, 4000, 8000, None]
+    got, _ = campaign_ms([slice(a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True)], rate)
+    assert np.array_equal(got, _by_definition(rate))

@@ -11,9 +11,8 @@ import can
 import numpy as np
 import pytest
 
-from gyrostand.acquisition.engine import Engine, ObservationResult
+from gyrostand.acquisition.engine import ObservationResult
 from gyrostand.acquisition.lockstep import Lockstep
-from gyrostand.devices.decoder import SourceDecoder
 from gyrostand.devices.n2k_heading import Nmea2000Heading
 from gyrostand.devices.nmea2000 import (
     RESOLUTION_DEG,
@@ -25,10 +24,14 @@ from gyrostand.devices.nmea2000 import (
     split_id,
 )
 from gyrostand.devices.sim_nmea2000 import Nmea2000Compass, Nmea2000Device, Nmea2000Faults
-from gyrostand.stand.protocol import Codec
-from tests.acquisition.harness import Recorder, quick_config, small_plan
+from tests.acquisition.harness import Recorder
+from tests.devices.source_campaign import (
+    assert_as_gyrostand,
+    assert_window_means,
+    campaign,
+    stream_key,
+)
 
-PLAN = small_plan(n_obs=3)
 PRODUCT = Product("test compass", "T-1", "1.0")  # the plan's [instrument]
 WANTED = ("test compass", "T-1")
 
@@ -38,18 +41,10 @@ def run(
     source: Callable[[], Nmea2000Heading] | None = None,
     **faults: float,
 ) -> tuple[Recorder, Lockstep]:
-    sink = Recorder()
-    config = quick_config(seed=1, **faults)
     if transmitter is None:
-        stand = Lockstep(config, 5.0)
-        engine = Engine(PLAN, sink, stand)
-    else:
-        codec = Codec()
-        make = source or (lambda: Nmea2000Heading(None, WANTED))
-        stand = Lockstep(config, 5.0, codec, (transmitter, lambda: SourceDecoder(codec, make())))  # type: ignore[arg-type]
-        engine = Engine(PLAN, sink, stand, source=Nmea2000Heading.info)
-    stand.run(engine)
-    return sink, stand
+        return campaign(**faults)
+    make = source or (lambda: Nmea2000Heading(None, WANTED))
+    return campaign(transmitter, make, Nmea2000Heading.info, **faults)
 
 
 def compass(**faults: object) -> Nmea2000Compass:
@@ -71,14 +66,7 @@ def test_observations_as_with_the_gyrostand_heading_frame(
 ) -> None:
     """The same samples, rounded to 1e-4 rad instead of 0.001 deg: each window mean within a
     resolution step's worth of rounding error (the mean of ~300 rounding errors is far smaller)."""
-    ours = n2k_run[0].observations
-    assert [(o.trial, o.j, o.k) for o in ours] == [(o.trial, o.j, o.k) for o in gyrostand_run]
-    assert len(ours) == 12
-    for a, b in zip(ours, gyrostand_run, strict=True):
-        assert (a.window_start_ms, a.window_end_ms) == (b.window_start_ms, b.window_end_ms)
-        assert abs(a.frames_used - b.frames_used) <= 1  # (the first heading: before any status)
-        assert abs(a.value_deg - b.value_deg) < RESOLUTION_DEG / 2
-        assert a.frames_lost == 0 and "stuck" not in a.flags  # a still compass is not stuck
+    assert_as_gyrostand(n2k_run[0].observations, gyrostand_run, RESOLUTION_DEG)
 
 
 def test_window_means_are_those_of_the_frames_sent(n2k_run: tuple[Recorder, Lockstep]) -> None:
@@ -91,21 +79,11 @@ def test_window_means_are_those_of_the_frames_sent(n2k_run: tuple[Recorder, Lock
     deg = np.degrees(
         decode_vessel_heading(np.array([list(m.data) for m in heading], np.uint8)).heading_rad()
     )
-    for obs in sink.observations:
-        inside = (t_ms >= obs.window_start_ms) & (t_ms < obs.window_end_ms)
-        assert obs.frames_used == inside.sum()
-        ref = deg[inside][0]  # deviations from one of them: no wrap at 360 inside a window
-        assert obs.value_deg == pytest.approx(ref + np.mean(deg[inside] - ref), abs=1e-9)
+    assert_window_means(sink, t_ms, deg)
 
 
 def test_byte_reproducible(n2k_run: tuple[Recorder, Lockstep]) -> None:
-    again = run(compass())[1].stream
-    key: Callable[[can.Message], tuple[object, ...]] = lambda m: (  # noqa: E731
-        m.timestamp,
-        m.arbitration_id,
-        bytes(m.data),
-    )
-    assert [key(m) for m in again] == [key(m) for m in n2k_run[1].stream]
+    assert stream_key(run(compass())[1]) == stream_key(n2k_run[1])
 
 
 def test_an_address_change_and_not_available_values_lose_nothing(
