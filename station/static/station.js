@@ -158,7 +158,9 @@
     $("trial").textContent = c ? c.trial + "/" + s.n_trials + (c.attempt > 1 ? " (attempt " + c.attempt + ")" : "") : "-";
     $("series").textContent = c ? series(c.j) : "-";
     $("observation").textContent = c ? c.k + "/" + s.n_obs : "-";
-    $("phase").textContent = s.prompt ? "stand stopped, " + WAITING : c ? c.phase : "done";
+    // a run that has ended shows its stand at rest, not the phase its last snapshot was in
+    $("phase").textContent = s.prompt ? "stand stopped, " + WAITING : !c ? "done"
+      : s.acquiring ? c.phase : "stand at rest (" + s.status + "), last in: " + c.phase;
     $("mean").textContent = c && c.mean_deg !== null ? num(c.mean_deg, 4) + "°" + (c.spread_deg === null ? "" : " (s = " + num(c.spread_deg, 4) + "°)") : "";
     $("settle").textContent = c && c.settle_estimate_deg !== null ? num(c.settle_estimate_deg, 4) + "°" : "";
     $("stand-time").textContent = hms(s.stand_time_s);

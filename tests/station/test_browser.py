@@ -168,6 +168,7 @@ def test_start_watch_stop_resume_report_in_a_browser(station: str, browser, tmp_
     assert "stop" in text("events") and "interrupted" in text("events")
     assert "safe stop requested at the station" in text("status-detail")  # from the events
     assert text("process-error") == ""  # not the stopped process's stderr
+    assert text("phase").startswith("stand at rest (stopped)")  # not the last snapshot's phase
     screenshot(browser, tmp_path, "4-stopped")
 
     browser.find_element(By.ID, "resume").click()
