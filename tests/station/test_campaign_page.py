@@ -155,7 +155,7 @@ def test_a_report_is_generated_without_blocking_the_page(client_for, tmp_path: P
     assert args[args.index("--format") + 1] == "html,pdf,json"
     while "analysing" not in processes.reports[1].progress()["stage"]:
         time.sleep(0.02)
-    state = initial(answer.text)
+    state = initial(client.get("/campaigns/1").text)  # the page as it is now, not at the POST
     assert state["report"]["running"] and state["report"]["stage"] == "analysing it"
     assert '<option value="html+pdf" selected>' in answer.text  # the format chosen, kept
     (reports / "go").touch()
