@@ -229,7 +229,6 @@ def run_live(
                     engine.interrupt(serial.error)
                     break
                 if msgs:
-                    last_frame = time.monotonic()
                     raw = RawFrames.from_messages(position, msgs, channels=live.own_bus)
                     batch = decoder.decode(raw)
                     for before, overflow in overflows:
@@ -254,6 +253,9 @@ def run_live(
                     if serial is not None:
                         serial.log_batch(engine.consumed)
                     position += len(msgs)
+                    # silence counts from when the acquisition listens again: a slow batch here
+                    # (a first import, an emulated machine) is not the stand's silence
+                    last_frame = time.monotonic()
                 else:
                     if grants is not None:
                         _granted(engine, grants.idle)

@@ -90,6 +90,12 @@ class DampedPrecession:
         self.x_rad -= delta_rad
 
 
+def load_noise_filter() -> None:
+    """Import the noise filter's scipy module now: a `gyrostand simulate` that says it is ready
+    must not then pause at its first sample (~1 s here, a minute on an emulated machine)."""
+    import scipy.signal  # noqa: F401
+
+
 class CorrelatedNoise:
     """Stationary Gaussian noise with correlation function sigma^2 e^(-mu |tau|)
     (seed 004 §8.3, the Markov case below eq 8.79), sampled every `step_s`.
