@@ -81,7 +81,8 @@ def config(plan: Plan) -> SimConfig:
     return simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
 
 
-def run(plan: Plan, profile) -> ProcedureResults:
+def run(plan: Plan, profile, progress: Progress | None = None) -> ProcedureResults:
+    """The plan's procedures from the start, or resumed from `progress`."""
     model = plan.settle.transient_model
     assert model is not None
     return run_procedures(
@@ -91,6 +92,7 @@ def run(plan: Plan, profile) -> ProcedureResults:
         model,
         plan.stand_limits,
         plan.site.latitude_deg,
+        progress,
     )
 
 
@@ -236,22 +238,8 @@ def run_until(plan: Plan, profile, kill_at: str, done: dict | None = None) -> di
             raise Killed
 
     with pytest.raises(Killed):
-        resume(plan, profile, Progress(done or {}, saved))
+        run(plan, profile, Progress(done or {}, saved))
     return stored
-
-
-def resume(plan: Plan, profile, progress: Progress) -> ProcedureResults:
-    model = plan.settle.transient_model
-    assert model is not None
-    return run_procedures(
-        config(plan),
-        resolve(plan, profile),
-        plan.reference,
-        model,
-        plan.stand_limits,
-        plan.site.latitude_deg,
-        progress,
-    )
 
 
 def test_killed_part_way_the_stages_done_are_kept_and_the_rest_redone(results, a821) -> None:
@@ -261,7 +249,7 @@ def test_killed_part_way_the_stages_done_are_kept_and_the_rest_redone(results, a
     stored["settling"]["u_s"] = 12.5  # kept, not measured again: the tampered value stays
     stored = run_until(plan, a821, "runup 2", stored)  # then killed during run-up 3
     assert set(stored) == {"settling", "static_end_s", "static", "rolling", "runup 2"}
-    out = resume(plan, a821, Progress(stored))
+    out = run(plan, a821, Progress(stored))
     assert out.settling.u_s == 12.5
     # the rest as in the run never interrupted: the compass brought through the kept stages
     # unheard is the same compass, to the bit
