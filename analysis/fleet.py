@@ -33,8 +33,8 @@ For each parameter:
   mean lies farthest from the others' (Student t of the contrast) is set apart; when the last
   two differ, both are (two groups that differ from each other do not tell which one is odd);
   each group's t against the rest of the fleet is reported too;
-- Smirnov's two-sample test (Kolmogorov-Smirnov, `scipy.stats.ks_2samp`) of each group against
-  the rest of the fleet, at level q / k (Bonferroni over the k groups);
+- Smirnov's two-sample test (Kolmogorov-Smirnov, its exact p-value: analysis.smirnov) of each
+  group against the rest of the fleet, at level q / k (Bonferroni over the k groups);
 - each unit against the type's prediction interval formed from the other units (leave-one-out:
   mean ± t · s · sqrt(1 + 1/(N-1)), Student with N - 2 degrees of freedom), at the fleet-wide
   level q: each unit at q / N (Bonferroni), so that a fleet without an odd unit shows none with
@@ -50,7 +50,9 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy import stats
+
+from gyrostand.analysis.quantiles import chi2_quantile, f_quantile, f_sf, t_quantile
+from gyrostand.analysis.smirnov import smirnov_test
 
 PARAMETERS = (("C_gcm2s2", "C", "g·cm²·s⁻²"), ("T_s", "T", "s"))
 
@@ -227,8 +229,8 @@ def one_way_anova(groups: Sequence[np.ndarray], ses: Sequence[np.ndarray], q: fl
     s2_between = float(q_between) / dof_between  # S1² = Q1 / (k - 1)
     s2_within = q_within / dof_within  # S2² = Q2 / (N - k)
     f = s2_between / s2_within if s2_within > 0 else math.inf  # F = S1² / S2²
-    f_critical = float(stats.f.ppf(1 - q, dof_between, dof_within))  # F*(1 - q; k-1, N-k)
-    p_value = float(stats.f.sf(f, dof_between, dof_within))
+    f_critical = f_quantile(1 - q, dof_between, dof_within)  # F*(1 - q; k-1, N-k)
+    p_value = f_sf(f, dof_between, dof_within)
     # E[Q2] = (N - k) σ²_type + Σ_j Σ_i (1 - 1/n_j) σ²_ji (Q2 about the group means)
     s2_measurement = float(sum(((1 - 1 / e.size) * e**2).sum() for e in ses) / dof_within)
     # Satterthwaite's degrees of freedom of S²_within, each group's variance s2_type + its
@@ -244,7 +246,7 @@ def one_way_anova(groups: Sequence[np.ndarray], ses: Sequence[np.ndarray], q: fl
     )
     # ν' S²/χ²(1 - q/2; ν') .. ν' S²/χ²(q/2; ν'), less the measurement share (taken as known)
     low, high = (
-        max(0.0, dof_type * s2_within / float(stats.chi2.ppf(p, dof_type)) - s2_measurement)
+        max(0.0, dof_type * s2_within / chi2_quantile(p, dof_type) - s2_measurement)
         for p in (1 - q / 2, q / 2)
     )
     return Anova(
@@ -289,7 +291,7 @@ def set_apart(
         data = [values[g] for g in remaining]
         grand = float(np.concatenate(data).mean())
         s2_between = sum(d.size * (d.mean() - grand) ** 2 for d in data) / (len(data) - 1)  # S1²
-        f_critical = float(stats.f.ppf(1 - q, len(data) - 1, dof_within))
+        f_critical = f_quantile(1 - q, len(data) - 1, dof_within)
         if s2_within > 0 and s2_between / s2_within <= f_critical:
             break
         if len(remaining) == 2:
@@ -306,7 +308,7 @@ def prediction_checks(units: Sequence[FleetUnit], parameter: str, q: float) -> l
     values = np.array([u.value(parameter)[0] for u in units])
     n = values.size
     level = q / n  # Bonferroni over the N units: fleet-wide level q
-    t_critical = float(stats.t.ppf(1 - level / 2, n - 2))
+    t_critical = t_quantile(1 - level / 2, n - 2)
     checks = []
     for i, unit in enumerate(units):
         others = np.delete(values, i)
@@ -377,16 +379,16 @@ def analyze_fleet(units: Sequence[FleetUnit], *, factor: str, q: float = 0.05) -
         smirnov = []
         for g in names:
             rest = np.concatenate([values[h] for h in names if h != g])
-            test = stats.ks_2samp(values[g], rest)  # Smirnov's two-sample statistic D
+            test = smirnov_test(values[g], rest)  # Smirnov's two-sample statistic D
             smirnov.append(
                 SmirnovTest(
                     group=g,
                     n=int(values[g].size),
                     n_rest=int(rest.size),
-                    statistic=float(test.statistic),
-                    p_value=float(test.pvalue),
+                    statistic=test.statistic,
+                    p_value=test.p_value,
                     q_each=q / len(names),
-                    differs=bool(test.pvalue < q / len(names)),
+                    differs=test.p_value < q / len(names),
                 )
             )
         results.append(

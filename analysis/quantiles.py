@@ -1,6 +1,8 @@
-"""Student's t quantile for code that needs no other distribution (the report rebuilt from a
-stored analysis): scipy.special's stdtrit, the function scipy.stats.t.ppf evaluates, without
-importing scipy.stats (about 1 s of CPU in a fresh process against 0.2 s for scipy.special)."""
+"""Quantiles and tail areas of Student's t, Fisher's F and chi-square for code that needs no
+other distribution (the report rebuilt from a stored analysis, the fleet analysis): the
+scipy.special functions scipy.stats' t, f and chi2 evaluate (the same calls, so the same
+numbers), without importing scipy.stats (about 0.85-1 s of CPU in a fresh process against 0.2 s
+for scipy.special)."""
 
 
 def t_quantile(p: float, dof: float) -> float:
@@ -8,3 +10,24 @@ def t_quantile(p: float, dof: float) -> float:
     from scipy.special import stdtrit
 
     return float(stdtrit(dof, p))
+
+
+def f_quantile(p: float, dof_num: float, dof_den: float) -> float:
+    """F(p; dof_num, dof_den), the p quantile of Fisher's F (scipy.stats.f.ppf)."""
+    from scipy.special import fdtri
+
+    return float(fdtri(dof_num, dof_den, p))
+
+
+def f_sf(x: float, dof_num: float, dof_den: float) -> float:
+    """P(F > x) of Fisher's F with (dof_num, dof_den) degrees of freedom (scipy.stats.f.sf)."""
+    from scipy.special import fdtrc
+
+    return float(fdtrc(dof_num, dof_den, x))
+
+
+def chi2_quantile(p: float, dof: float) -> float:
+    """χ²(p; dof), the p quantile of chi-square, `dof` degrees of freedom (scipy.stats.chi2.ppf)."""
+    from scipy.special import gammaincinv
+
+    return 2.0 * float(gammaincinv(dof / 2.0, p))  # χ²_p = 2 P⁻¹(ν/2, p), P the regularised Γ

@@ -25,6 +25,13 @@ machine shared by about seven sessions (load 8-14; contention inflates CPU time 
   start-up (typer, the command modules, the database models and Alembic for the campaign
   check) adds about 0.6 s; the fleet report 2.4 s (JSON), 3.2 s (HTML), 2.7 s (PDF), NOT (the
   fleet analysis imports scipy.stats, 0.85 s, for its Kolmogorov-Smirnov test).
+- the fleet report without scipy.stats (Smirnov's exact test in analysis.smirnov, the F, t and
+  chi-square quantiles from scipy.special), `fleet report` alone, .pyc allowed, load 3-6:
+  before 1.99 s (JSON), 2.07-2.15 s (HTML, charts cached), 2.6-2.9 s (HTML, charts drawn),
+  2.19-2.27 s (PDF); after 1.39-1.48 s (JSON), 1.42-1.46 s (HTML, cached), 1.85-2.25 s (HTML,
+  drawn: matplotlib's import 0.5 s and two control charts 0.45 s), 1.55-1.63 s (PDF). This
+  bench's fleet lines (a fleet simulated anew: the HTML draws) at load 6.5: JSON 1.37-1.42,
+  HTML 2.01-2.13 (NOT, by the charts), PDF 1.54-1.63 s.
 What is left, by size: the imports (the plan's pydantic models 0.4 s, SQLAlchemy 0.3 s, Alembic
 through open_db 0.15 s, numpy 0.1 s; the start-up work of issue 33's other helper removes
 Alembic and part of the models' build), Typst (0.6 s for 17 pages, of which the figures 0.05),

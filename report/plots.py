@@ -29,7 +29,7 @@ from gyrostand.analysis.gyro_model import Conditions, RollingErrorModel
 from gyrostand.analysis.noise import NoiseCharacterisation
 from gyrostand.report import figure_cache
 from gyrostand.report.build import ForecastSection, TrialRow
-from gyrostand.report.model import SeriesRecord, TrialRecord
+from gyrostand.report.model import ObservationRecord, SeriesRecord, TrialRecord
 
 if TYPE_CHECKING:  # matplotlib is imported where a figure is drawn: not for a cached one
     from matplotlib.axes import Axes
@@ -135,12 +135,17 @@ def _trial_start_ms(record: TrialRecord) -> float | None:
     return min(starts) if starts else None
 
 
-def _mark_series(ax: Axes, series: SeriesRecord, t0: float, labelled: set[int]) -> None:
+def _mark_series(
+    ax: Axes, series: SeriesRecord, t0: float, labelled: set[int], legend: bool = True
+) -> None:
+    """Series j's windows shaded with their means as bars, its settle point; the legend's entries
+    once per series (`labelled`), none when `legend` is False."""
     colour = SERIES_COLOURS[series.j]
     for o in series.observations:
         if o.window_start_ms is None or o.window_end_ms is None:
             continue
-        label = SERIES_LABELS[series.j] + " windows" if series.j not in labelled else None
+        first = legend and series.j not in labelled
+        label = SERIES_LABELS[series.j] + " windows" if first else None
         labelled.add(series.j)
         x0, x1 = _minutes(o.window_start_ms, t0), _minutes(o.window_end_ms, t0)
         ax.axvspan(x0, x1, color=colour, alpha=0.15, lw=0, label=label)
@@ -156,17 +161,71 @@ def _mark_series(ax: Axes, series: SeriesRecord, t0: float, labelled: set[int]) 
                 color=colour,
                 ms=6,
                 ls="none",
-                label=f"settled, j = {series.j}",
+                label=f"settled, j = {series.j}" if legend else None,
             )
+
+
+def _windowed(series: SeriesRecord) -> list[ObservationRecord]:
+    """Series j's observations that carry their window's times."""
+    return [
+        o
+        for o in series.observations
+        if o.window_start_ms is not None and o.window_end_ms is not None
+    ]
+
+
+def _zoom_on_windows(ax: Axes, record: TrialRecord, series: SeriesRecord, t0: float) -> None:
+    """Series j's observation windows on a time axis of their own (they are a minute each in a
+    trial of hours: slivers on the trial's axis): the heading bins inside the zoom, each window
+    shaded with its k and its mean as a bar, the settle point when it falls inside."""
+    windows = _windowed(series)
+    first, last = windows[0].window_start_ms, windows[-1].window_end_ms
+    assert first is not None and last is not None  # _windowed keeps timed windows only
+    margin = 0.08 * (last - first)
+    low, high = _minutes(first - margin, t0), _minutes(last + margin, t0)
+    trace = record.trace
+    if trace is not None and trace.t_ms.size:
+        x = _minutes(trace.t_ms, t0)
+        inside = (x >= low) & (x <= high)
+        ax.fill_between(x[inside], trace.min_deg[inside], trace.max_deg[inside], color="0.75", lw=0)
+        ax.plot(x[inside], trace.mean_deg[inside], color="0.2", lw=0.7)
+    _mark_series(ax, series, t0, set(), legend=False)
+    ax.set_xlim(low, high)
+    for o in windows:
+        middle = _minutes((o.window_start_ms + o.window_end_ms) / 2, t0)
+        ax.annotate(
+            f"k = {o.k}" if o is windows[0] else str(o.k),
+            (middle, 1.0),
+            xycoords=("data", "axes fraction"),
+            xytext=(0, -9),
+            textcoords="offset points",
+            ha="center",
+            fontsize=6.5,
+            color=SERIES_COLOURS[series.j],
+        )
+    ax.set_title(f"{SERIES_LABELS[series.j]}: the {len(windows)} windows", loc="left", fontsize=8)
+    ax.set_xlabel("stand time since the trial began, min")
+    ax.ticklabel_format(axis="y", useOffset=False)
+    ax.margins(y=0.25)
+
+
+HEADING_ZOOM_IN = 1.3  # the row of window zooms under the trial's heading, inches: two
+# figures of 4.3 in to a page
 
 
 @_styled
 def heading_plot(record: TrialRecord, title: str) -> Figure:
-    """Heading of one trial against stand time, windows and settle points marked."""
-    fig = _figure(3.0)
-    ax = fig.axes[0]
-    ax.set_title(title, loc="left")
+    """Heading of one trial against stand time, windows and settle points marked; under it, one
+    panel per series zoomed on its observation windows."""
     t0 = _trial_start_ms(record)
+    zoomed = [s for s in record.series if _windowed(s)] if t0 is not None else []
+    fig = _figure(3.0 + (HEADING_ZOOM_IN if zoomed else 0.0))
+    ax = fig.axes[0]
+    if zoomed:  # the trial on top, the zooms below: a grid in the same margins
+        ax.remove()
+        grid = fig.add_gridspec(2, len(zoomed), height_ratios=(1.5, 1.1), hspace=0.45, wspace=0.22)
+        ax = fig.add_subplot(grid[0, :])
+    ax.set_title(title, loc="left")
     if t0 is None:  # observations without window times: values against k
         for s in record.series:
             k = [o.k for o in s.observations]
@@ -187,6 +246,11 @@ def heading_plot(record: TrialRecord, title: str) -> Figure:
         ax.set_xlabel("stand time since the trial began, min")
     ax.set_ylabel("heading, deg")
     ax.ticklabel_format(axis="y", useOffset=False)
+    for column, s in enumerate(zoomed):
+        zoom = fig.add_subplot(grid[1, column])
+        _zoom_on_windows(zoom, record, s, t0)
+        if column == 0:
+            zoom.set_ylabel("heading, deg")
     _legend_below(fig, ncols=3, fontsize=6.5)
     return fig
 

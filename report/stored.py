@@ -773,7 +773,8 @@ def _records(
             f"in up to {TRACE_BINS} time bins per trial: grey band min-max, line the bin mean. "
             "Shaded: observation windows (blue still, orange rocking) with each observation's "
             "value as a bar; dashed lines and triangles: where and at what heading each series "
-            "settled."
+            "settled. Under each trial, one panel per series on a time axis of its own zooms on "
+            "its observation windows (numbered k), a minute or so each in a trial of hours."
         )
     elif has_observations:
         reason = {

@@ -1,0 +1,81 @@
+"""report.plots.heading_plot: the observation windows, a minute each in a trial of hours, get a
+panel per series zoomed on them (issue 33: "figures 1-6 whose observation windows are slivers"),
+and each window shows its k and its mean on that panel."""
+
+import matplotlib as mpl
+import numpy as np
+import pytest
+
+from gyrostand.report.model import HeadingTrace, ObservationRecord, SeriesRecord, TrialRecord
+from gyrostand.report.plots import STYLE, heading_plot
+
+MIN = 60_000  # ms
+
+
+def _series(j: int, start_min: float, means: list[float]) -> SeriesRecord:
+    observations = tuple(
+        ObservationRecord(
+            k=k,
+            value_deg=value,
+            window_start_ms=int((start_min + 1.5 * (k - 1)) * MIN),
+            window_end_ms=int((start_min + 1.5 * (k - 1) + 1.0) * MIN),
+        )
+        for k, value in enumerate(means, start=1)
+    )
+    return SeriesRecord(
+        j=j,
+        settle_started_ms=0,
+        settle_done_ms=int(start_min * MIN),
+        settle_estimate_deg=means[0],
+        observations=observations,
+    )
+
+
+def _record() -> TrialRecord:
+    t = np.linspace(0.0, 180 * MIN, 600)
+    heading = 120.0 - 0.15 * (t > 100 * MIN)
+    trace = HeadingTrace(t, heading, heading - 0.02, heading + 0.02, frames=6000)
+    still = _series(1, 57.0, [120.001, 120.008, 120.007, 119.986, 120.002])
+    rocking = _series(2, 160.0, [119.866, 119.857, 119.860, 119.854, 119.853])
+    return TrialRecord(index=1, series=(still, rocking), trace=trace)
+
+
+def _drawn(record: TrialRecord):  # the figure before it becomes SVG
+    with mpl.rc_context(STYLE):
+        return heading_plot.__wrapped__(record, "Trial 1")
+
+
+def test_each_series_has_a_panel_zoomed_on_its_windows() -> None:
+    record = _record()
+    figure = _drawn(record)
+    trial, *zooms = figure.axes
+    assert len(zooms) == 2
+    span = np.diff(trial.get_xlim())[0]
+    for zoom, series in zip(zooms, record.series, strict=True):
+        low, high = zoom.get_xlim()
+        starts = [o.window_start_ms / MIN for o in series.observations]
+        ends = [o.window_end_ms / MIN for o in series.observations]
+        assert low < min(starts) and max(ends) < high  # every window inside its panel
+        width = high - low
+        assert width == pytest.approx(7.0 * 1.16)  # 7 min of windows, 8 % margin each side
+        # a window takes an eighth of its panel, against 1/180 of the trial's axis
+        assert 1.0 / width > 0.12 and 1.0 / span < 0.01
+        labels = [text.get_text() for text in zoom.texts]
+        assert labels == ["k = 1", "2", "3", "4", "5"]
+        bars = {
+            round(float(line.get_ydata()[0]), 6)
+            for line in zoom.lines
+            if len(line.get_ydata()) == 2 and line.get_ydata()[0] == line.get_ydata()[1]
+        }
+        assert {o.value_deg for o in series.observations} <= bars  # each window's mean
+
+
+def test_the_legend_names_each_thing_once() -> None:
+    labels = [t.get_text() for t in _drawn(_record()).legends[0].get_texts()]
+    assert len(labels) == len(set(labels)) == 6
+
+
+def test_observations_without_times_keep_one_panel() -> None:
+    still = SeriesRecord(1, None, None, None, (ObservationRecord(1, 120.0, None, None),))
+    figure = _drawn(TrialRecord(index=1, series=(still,), trace=None))
+    assert len(figure.axes) == 1
