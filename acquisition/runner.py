@@ -534,7 +534,7 @@ def replay(
     if plan.stand.protocol == "cia402":  # the drive's CANopen traffic, through our master
         from gyrostand.acquisition.cia402_replay import replay_cia402
 
-        return replay_cia402(plan, sessions, checked)
+        return replay_cia402(plan, sessions, checked, procedures)
     if plan.compass.protocol == "iec61162":  # its sentences from the serial logs beside
         try:
             decoder, stream = replay_stream(plan, codec, paths)
