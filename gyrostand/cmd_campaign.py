@@ -792,5 +792,8 @@ def register(app: typer.Typer) -> None:
                 result = replay(checked, sessions, logs, readable, procedures)
             except (ReplayLogError, ValueError, OSError, can.CanError) as exc:  # changed since
                 fail(f"replay of {printable(logs[-1])} failed: {exc}", code=EXIT_FAILED)
-            stage.done(f"campaign {result.campaign_id}: {result.observations} observations")
+            rederived = ", the standard's procedures re-derived" if procedures else ""
+            stage.done(
+                f"campaign {result.campaign_id}: {result.observations} observations{rederived}"
+            )
         print_outcome(result, checked.database, resumable=False)
