@@ -272,7 +272,7 @@ def test_killed_part_way_the_stages_done_are_kept_and_the_rest_redone(results, a
     out = resume(plan, a821, Progress(stored))
     assert out.settling.u_s == 12.5
     # the rest as in the run never interrupted: the compass brought through the kept stages
-    # unheard is the same compass, to the bit
+    # again (heard for the raw log, their results kept) is the same compass, to the bit
     assert {**out.to_dict(), "settling": None} == {**whole.to_dict(), "settling": None}
 
 
