@@ -19,6 +19,7 @@ from gyrostand.acquisition.cia402_run import _to_rest
 from gyrostand.acquisition.cia402_sim import STEP_S, Cia402Lockstep, feed, merged
 from gyrostand.acquisition.cia402_stand import Cia402Stand
 from gyrostand.acquisition.engine import Engine, Phase
+from gyrostand.acquisition.procedures import ReplayedProcedures, store_procedures
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.devices.cia402 import MASTER_NODE_ID, AxisConfig, Cia402Axis, DriveError
 from gyrostand.devices.cia402_log import (
@@ -132,7 +133,10 @@ def replay_runs(plan: Plan, store: CampaignStore, paths: Sequence[Path]) -> Engi
 
 
 def replay_cia402(
-    plan: Plan, sessions: sessionmaker[Session], checked: Sequence[ReplayLog]
+    plan: Plan,
+    sessions: sessionmaker[Session],
+    checked: Sequence[ReplayLog],
+    procedures: ReplayedProcedures | None = None,
 ) -> RunResult:
     """`runner.replay` of a CiA 402 campaign: a new campaign (source "replay") from its raw
     logs; a log whose drive traffic is not what the master sends is one line (DriveLogError,
@@ -146,6 +150,8 @@ def replay_cia402(
             "drive's traffic)"
         )
     store = CampaignStore.create(sessions, plan, source="replay")
+    if procedures is not None:  # (re-derived from their log: `runner.replay`)
+        store_procedures(sessions, store.campaign_id, procedures.results, procedures.log)
     try:
         with store.deferred():
             replayed_segments(store, checked)

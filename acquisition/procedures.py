@@ -4,14 +4,17 @@ acquisition's `BatchDecoder`), in stand time (virtual: as fast as the machine al
 deterministic).
 
 Each stage is saved as it ends (`Progress`: `campaign resume` keeps the stages done); a compass
-powered by hand is switched by the operator, prompted (`before_switch_on`). Not yet here: the
+powered by hand is switched by the operator, prompted (`before_switch_on`). Every frame heard
+goes into the procedures' raw log (`RunUp(log=...)`, BLF, in campaign stand time), from which
+`LoggedRunUp` re-derives the results offline (`gyrostand replay`), to the bit. Not yet here: the
 live bus (`acquisition.engine`): a real compass needs it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
 from typing import Any
 
 import can
@@ -34,7 +37,8 @@ from gyrostand.analysis.procedures import (
 from gyrostand.analysis.transient import TransientModel
 from gyrostand.db.models import ProcedureRun
 from gyrostand.db.session import writer
-from gyrostand.frames.batch import BatchDecoder, RawFrames
+from gyrostand.frames.batch import BatchDecoder, Headings, RawFrames
+from gyrostand.frames.logfile import BatchBLFWriter, read_raw_frames
 from gyrostand.plan.model import StandLimits
 from gyrostand.plan.procedures import ProcedurePlan, ReferencePlan, ResolvedProcedure
 from gyrostand.stand.protocol import Codec
@@ -74,12 +78,17 @@ class RunUpRecord:
 
 class RunUp:
     """Run-up k of the simulated compass, switched on at stand time `at_s` and recorded from its
-    frames as stand time advances; the stand under it can be rocked (`rock`)."""
+    frames as stand time advances; the stand under it can be rocked (`rock`). `log`: where the
+    frames heard are written (the procedures' raw log), stamped in stand time from the first
+    switch-on."""
 
-    def __init__(self, config: SimConfig, k: int, at_s: float) -> None:
+    def __init__(
+        self, config: SimConfig, k: int, at_s: float, log: BatchBLFWriter | None = None
+    ) -> None:
         self.k, self.at_s = k, at_s
         self.codec = Codec()
         self.engine = switch_on(config, k, at_s)
+        self._log = log
         self._decoder = BatchDecoder(self.codec)
         self._t: list[np.ndarray] = []
         self._heading: list[np.ndarray] = []
@@ -89,29 +98,48 @@ class RunUp:
         """Stand seconds since switch-on."""
         return self.engine.stand_time_s
 
+    @property
+    def exhausted(self) -> bool:
+        """Whether nothing more can be heard (a log read to its end; never a live compass)."""
+        return False
+
     def advance(self, until_s: float) -> None:
         """Record the compass's heading frames up to `until_s` seconds after switch-on."""
         while self.now_s < until_s:
             frames = self.engine.advance_to(min(self.now_s + CHUNK_S, until_s), compass_only=True)
             if not frames:
                 continue
-            batch = self._decoder.decode(RawFrames.from_messages(0, frames)).headings
-            ok = batch.valid.astype(bool)
-            self._t.append((batch.t_ms[ok] - self.engine.clock_ms) / 1000.0)
-            self._heading.append(batch.heading_deg[ok])
+            raw = RawFrames.from_messages(0, frames)
+            self._heard(self._decoder.decode(raw).headings)
+            if self._log is not None:
+                raw.timestamp[:] += self.at_s  # (the stand time the frames' STAND_TIME counts)
+                self._log.write_frames(raw)
+
+    def _heard(self, headings: Headings) -> None:
+        ok = headings.valid.astype(bool)
+        self._t.append((headings.t_ms[ok] - round(self.at_s * 1000.0)) / 1000.0)
+        self._heading.append(headings.heading_deg[ok])
 
     def listen(self, from_s: float, until_s: float) -> None:
         """Record from `from_s` to `until_s` after switch-on, the time before it passed unheard
         (the compass's physics and noise run on: only the frames are not built and decoded)."""
+        self._not_exhausted(from_s)
         if from_s > self.now_s:
-            self.engine.pass_to(from_s - LISTEN_EPS_S)
+            self.pass_to(from_s - LISTEN_EPS_S)
         self.advance(until_s)
+
+    def _not_exhausted(self, at_s: float) -> None:
+        if self.exhausted:
+            raise ProcedureLogError(
+                f"run-up {self.k}: the log ends before {at_s:g} s from switch-on"
+            )
 
     def listen_for_reading(self, at_s: float) -> None:
         """Record from `at_s` until the compass has sent a valid heading at or after it (the
         reading indicated then; `RunUpRecord.readings` picks it)."""
         self.listen(at_s, at_s + LISTEN_S)
-        while not (self._t and self._t[-1].size and self._t[-1][-1] >= at_s - 1e-9):
+        while not any(t.size and t[-1] >= at_s - 1e-9 for t in self._t[-1:]):
+            self._not_exhausted(at_s)
             self.advance(self.now_s + LISTEN_S)
 
     def pass_to(self, until_s: float) -> None:
@@ -129,6 +157,74 @@ class RunUp:
         """Everything recorded so far."""
         heading = np.unwrap(np.concatenate(self._heading), period=360.0)
         return RunUpRecord(self.k, self.at_s, np.concatenate(self._t), heading)
+
+
+class ProcedureLogError(ValueError):
+    """A procedures' raw log that does not hold what the plan's procedures heard."""
+
+
+class LoggedHeadings:
+    """The heading frames of a procedures' raw log, decoded once, taken in stream order by the
+    run-ups replayed (`LoggedRunUp`)."""
+
+    def __init__(self, path: Path) -> None:
+        decoder = BatchDecoder(Codec())
+        parts = [decoder.decode(raw).headings for raw in read_raw_frames(path)]
+        if not parts:
+            raise ProcedureLogError(f"{path}: no heading frame in it")
+        self.headings = Headings(
+            *(np.concatenate([getattr(h, f.name) for h in parts]) for f in fields(Headings))
+        )
+        if np.any(np.diff(self.headings.t_ms) < 0):
+            raise ProcedureLogError(f"{path}: its heading frames go back in stand time")
+        self.taken = 0
+
+    def take(self, until_ms: float) -> Headings:
+        """The frames not yet taken stamped at or before `until_ms` (stand time, ms)."""
+        start = self.taken
+        # (1e-6: a reading time's float sum; the samples lie on whole ms of stand time)
+        end = int(np.searchsorted(self.headings.t_ms, until_ms + 1e-6, side="right"))
+        self.taken = max(start, end)
+        return self.headings.take(slice(start, self.taken))
+
+    @property
+    def left(self) -> int:
+        return len(self.headings) - self.taken
+
+
+class LoggedRunUp(RunUp):
+    """Run-up k re-derived from the procedures' raw log: the frames it heard live, in the same
+    calls (`advance`, `pass_to`: stand time only), so the record is the live one, to the bit.
+    The stand's commands were sent live."""
+
+    def __init__(self, log: LoggedHeadings, k: int, at_s: float) -> None:
+        self.k, self.at_s = k, at_s
+        self.codec = Codec()
+        self._logged = log
+        self._now_s = 0.0
+        self._t, self._heading = [], []
+
+    @property
+    def now_s(self) -> float:
+        return self._now_s
+
+    @property
+    def exhausted(self) -> bool:
+        return self._logged.left == 0
+
+    def advance(self, until_s: float) -> None:
+        if until_s <= self._now_s:
+            return
+        self._now_s = until_s  # (as `StandEngine.advance_to`: its stand time is the target)
+        heard = self._logged.take(round(self.at_s * 1000.0) + until_s * 1000.0)
+        if heard.t_ms.size:  # (live: a chunk without frames is not recorded)
+            self._heard(heard)
+
+    def pass_to(self, until_s: float) -> None:
+        self._now_s = max(self._now_s, until_s)
+
+    def command(self, message: can.Message) -> None:
+        pass
 
 
 def record_runup(config: SimConfig, k: int, at_s: float, duration_s: float) -> RunUpRecord:
@@ -166,7 +262,7 @@ def _rolling(
 ) -> tuple[RollingError, ...]:
     """Each point of the envelope: rock, wait for the transient, take the readings (each a mean
     over whole rocking periods), stop; a point beyond the stand is left to the forecast. A point
-    done before an interruption is kept (its rocking replayed unheard: the compass the same)."""
+    done before an interruption is kept (heard again for the raw log: the compass the same)."""
     out: list[RollingError] = []
     kept = [RollingError(**r) for r in progress.done.get("rolling", [])]
     n, interval = proc.readings, proc.interval_s
@@ -179,7 +275,7 @@ def _rolling(
                 )
             )
             continue
-        heard = len(out) >= len(kept)
+        measured = len(out) >= len(kept)
         codec = runup.codec
         runup.command(
             codec.encode_command_set(point.direction_deg, point.amplitude_cm, point.period_s)
@@ -187,11 +283,11 @@ def _rolling(
         runup.command(codec.encode_command_start())
         first = runup.now_s + proc.wait_s
         width = ROLLING_WINDOW_PERIODS * point.period_s
-        for i in range(n if heard else 0):
+        for i in range(n):
             runup.listen(first + i * interval, first + i * interval + width)
         runup.pass_to(first + (n - 1) * interval + width + 1.0)
         runup.command(codec.encode_command_stop())
-        if not heard:
+        if not measured:
             out.append(kept[len(out)])
             continue
         record = runup.record()
@@ -207,6 +303,61 @@ def _rolling(
         )
         progress.save("rolling", [asdict(r) for r in out])
     return tuple(out)
+
+
+RAW_LOG = "raw_log"  # the key of the procedures' raw log in their stored record
+
+
+@dataclass(frozen=True)
+class ProcedureLog:
+    """The procedures' raw log: the file, its frames, its SHA-256."""
+
+    path: str
+    frames: int
+    sha256: str
+
+
+@dataclass(frozen=True)
+class ReplayedProcedures:
+    """The standard's procedures re-derived from their raw log, and that log."""
+
+    results: ProcedureResults
+    log: ProcedureLog
+
+
+def procedures_log_path(can_log: Path | str) -> Path:
+    """The procedures' raw log beside the campaign's first raw CAN log (always BLF)."""
+    can_log = Path(can_log)
+    return can_log.with_name(f"{can_log.stem}.procedures.blf")
+
+
+def replay_procedures(
+    config: SimConfig,
+    procedures: tuple[ResolvedProcedure, ...],
+    reference: ReferencePlan | None,
+    model: TransientModel,
+    limits: StandLimits,
+    latitude_deg: float,
+    path: Path,
+) -> ProcedureResults:
+    """The procedures re-derived from their raw log (`run_procedures` on `LoggedRunUp`s):
+    ProcedureLogError when the log does not hold every frame they heard, or holds more."""
+    logged = LoggedHeadings(path)
+    results = run_procedures(
+        config,
+        procedures,
+        reference,
+        model,
+        limits,
+        latitude_deg,
+        runups=lambda k, at_s: LoggedRunUp(logged, k, at_s),
+    )
+    if logged.left:
+        raise ProcedureLogError(
+            f"{path}: {logged.left} heading frames after the procedures' last: the log of "
+            "other procedures than the plan's"
+        )
+    return results
 
 
 @dataclass
@@ -232,27 +383,30 @@ def run_procedures(
     latitude_deg: float,
     progress: Progress | None = None,
     before_switch_on: Callable[[int], None] = lambda k: None,
+    runups: Callable[[int, float], RunUp] | None = None,
 ) -> ProcedureResults:
     """The plan's procedures on the simulated compass, in stand time: run-up 1 from switch-on
     (settling), its settle point after the settling record, the rolling points, then the
     further run-ups of the repeatability, each after the compass was off for `off_s`.
 
     `progress`: the stages done before an interruption are kept, not measured again; the
-    simulated compass is brought through them unheard (`RunUp.pass_to`: the same draws), so the
-    stage interrupted is redone on the compass it would have met. `before_switch_on(k)`: called
-    before run-up k is switched on (a compass powered by hand: the operator's prompts)."""
+    simulated compass is brought through them heard as before (the same draws: the raw log
+    holds every stage's frames), so the stage interrupted is redone on the compass it would have
+    met. `before_switch_on(k)`: called before run-up k is switched on (a compass powered by
+    hand: the operator's prompts). `runups(k, at_s)`: run-up k switched on at stand time at_s
+    (default: the simulated compass, unlogged; `LoggedRunUp` in a replay)."""
     progress = progress or Progress()
+    runup_at = runups or (lambda k, at_s: RunUp(config, k, at_s))
     done = progress.done
     by_kind = {p.kind: p.plan for p in procedures}
     settling = by_kind["settling"]
     assert settling.max_wait_s is not None and settling.band_deg is not None  # resolved
     before_switch_on(1)
-    first = RunUp(config, 1, 0.0)
+    first = runup_at(1, 0.0)
+    first.advance(settling.max_wait_s)
     if "settling" in done:
-        first.pass_to(settling.max_wait_s)
         settled = SettlingTime.from_dict(done["settling"])
     else:
-        first.advance(settling.max_wait_s)
         record = first.record()
         settled = settling_time(
             record.t_s,
@@ -269,13 +423,13 @@ def run_procedures(
     if settled.settled:
         start_s = max(start_s, settled.value_s + settled.expanded_s)
     static = None
-    if readings is not None and "static" in done:
-        first.pass_to(done["static_end_s"])
-        static = SettlePoint.from_dict(done["static"])
-    elif readings is not None:
+    if readings is not None:
         static = _settle_point(first, readings, start_s, reference)
-        progress.save("static_end_s", first.now_s)
-        progress.save("static", asdict(static))
+        if "static" in done:
+            static = SettlePoint.from_dict(done["static"])
+        else:
+            progress.save("static_end_s", first.now_s)
+            progress.save("static", asdict(static))
     rolling: tuple[RollingError, ...] = ()
     if "rolling" in by_kind and static is not None:
         rolling = _rolling(first, by_kind["rolling"], static, limits, progress)
@@ -288,8 +442,9 @@ def run_procedures(
             stage = f"runup {k}"
             if stage not in done:  # a run-up interrupted is redone from switch-on
                 before_switch_on(k)
-                runup = RunUp(config, k, at_s)
-                point = _settle_point(runup, proc, start_s, reference)
+            runup = runup_at(k, at_s)
+            point = _settle_point(runup, proc, start_s, reference)
+            if stage not in done:
                 progress.save(stage, {"settle_point": asdict(point), "end_s": runup.now_s})
             points.append(SettlePoint.from_dict(done[stage]["settle_point"]))
             at_s += done[stage]["end_s"]
@@ -306,10 +461,17 @@ def run_procedures(
 
 
 def store_procedures(
-    sessions: sessionmaker[Session], campaign_id: int, results: ProcedureResults
+    sessions: sessionmaker[Session],
+    campaign_id: int,
+    results: ProcedureResults,
+    raw_log: ProcedureLog | None = None,
 ) -> None:
-    """Store the campaign's procedure results (once: a resumed campaign keeps them)."""
-    _store(sessions, campaign_id, results.to_dict())
+    """Store the campaign's procedure results (once: a resumed campaign keeps them), with the
+    raw log of the frames they heard."""
+    record = results.to_dict()
+    if raw_log is not None:
+        record[RAW_LOG] = asdict(raw_log)
+    _store(sessions, campaign_id, record)
 
 
 def save_progress(sessions: sessionmaker[Session], campaign_id: int, done: dict[str, Any]) -> None:

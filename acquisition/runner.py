@@ -25,6 +25,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from gyrostand.acquisition.bus import BusFault, LiveBus
 from gyrostand.acquisition.engine import Command, CommandNotSent, Engine, Phase, TrialState
 from gyrostand.acquisition.operator import OperatorLink
+from gyrostand.acquisition.procedures import ReplayedProcedures, store_procedures
 from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
 from gyrostand.acquisition.serial_input import SerialInput, replay_stream
 from gyrostand.acquisition.store import CampaignStore
@@ -519,19 +520,23 @@ def replay(
     sessions: sessionmaker[Session],
     logs: Sequence[Path],
     checked: Sequence[ReplayLog] | None = None,
+    procedures: ReplayedProcedures | None = None,
 ) -> RunResult:
     """Re-derive a campaign offline from raw logs read in order as one stream (the segments of
     a campaign, `RawLogSegment`) into a new campaign (source "replay"). Each log is read whole
     first (`check_replay_log`, unless `checked` holds their results): one that cannot be
     replayed (ReplayLogError) leaves the database untouched. A log that ends early is replayed
-    up to its end, with a warning event."""
+    up to its end, with a warning event. The plan's procedures, re-derived from their raw log
+    (`procedures`: `campaign_procedures.replay_procedures_log`), are stored first."""
+    if plan.procedure and procedures is None:
+        raise ReplayLogError("the plan has the standard's procedures: their replay is missing")
     codec = codec_for(plan)
     checked = checked or [check_replay_log(log) for log in logs]
     paths = [log.path for log in checked]
     if plan.stand.protocol == "cia402":  # the drive's CANopen traffic, through our master
         from gyrostand.acquisition.cia402_replay import replay_cia402
 
-        return replay_cia402(plan, sessions, checked)
+        return replay_cia402(plan, sessions, checked, procedures)
     if plan.compass.protocol == "iec61162":  # its sentences from the serial logs beside
         try:
             decoder, stream = replay_stream(plan, codec, paths)
@@ -543,6 +548,8 @@ def replay(
         stream = read_segments(paths)
         info = _can_source_info(plan, codec)
     store = CampaignStore.create(sessions, plan, source="replay")
+    if procedures is not None:
+        store_procedures(sessions, store.campaign_id, procedures.results, procedures.log)
     engine = Engine(plan, store, _NoCommands(), source=info)
     try:
         with store.deferred():

@@ -1,6 +1,8 @@
 """The standard's procedures of a campaign plan ([[procedure]]): resolved against the plan's
 compliance profile ([standard] profile), run on the simulated compass before the trials, and
-stored with the campaign; a resumed campaign keeps the stored results."""
+stored with the campaign; a resumed campaign keeps the stored results. The frames they hear go
+into their raw log beside the campaign's first (`procedures_log_path`), from which a replay
+re-derives them."""
 
 from __future__ import annotations
 
@@ -10,9 +12,11 @@ from gyrostand.errors import fail
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
+    from pathlib import Path
     from threading import Event
     from typing import IO
 
+    from gyrostand.acquisition.procedures import ReplayedProcedures
     from gyrostand.acquisition.store import CampaignStore
     from gyrostand.plan.model import Plan
     from gyrostand.plan.procedures import ResolvedProcedure
@@ -74,12 +78,18 @@ def run_procedures_of(
 
     from gyrostand.acquisition.operator import OperatorLink
     from gyrostand.acquisition.procedures import (
+        ProcedureLog,
         Progress,
+        RunUp,
+        procedures_log_path,
         run_procedures,
         save_progress,
         store_procedures,
         stored_progress,
     )
+    from gyrostand.acquisition.runner import raw_log_path
+    from gyrostand.db.queries import raw_log_segments
+    from gyrostand.frames.logfile import BatchBLFWriter, sha256_of
     from gyrostand.plan.switching import power_prompts
     from gyrostand.stand.simconfig import simulator_config
 
@@ -109,6 +119,12 @@ def run_procedures_of(
             if link.ask(prompt, "the standard's procedures") is not None:
                 raise Stopped
 
+    with store.sessions() as session:
+        segments = raw_log_segments(session, store.campaign_id)
+    # beside the trials' first raw log, named as the trials' run will name it (none yet);
+    # a resumed run writes it anew, the kept stages heard again (the same frames)
+    path = procedures_log_path(segments[0].path if segments else raw_log_path(store, plan, []))
+    log = BatchBLFWriter(path)
     try:
         results = run_procedures(
             config,
@@ -119,15 +135,69 @@ def run_procedures_of(
             plan.site.latitude_deg,
             Progress(done, saved),
             prompted,
+            runups=lambda k, at_s: RunUp(config, k, at_s, log),
         )
     except Stopped:
         return False
-    store_procedures(store.sessions, store.campaign_id, results)
+    finally:
+        log.stop()
+    raw_log = ProcedureLog(str(path), log.object_count, sha256_of(path))
+    store_procedures(store.sessions, store.campaign_id, results, raw_log)
     kinds = ", ".join(p.kind for p in procedures)
     store.run_event("procedures", "info", f"the standard's procedures run and stored: {kinds}")
+    store.run_event(
+        "raw log",
+        "info",
+        f"the standard's procedures' frames in {path} ({raw_log.frames} frames, "
+        f"sha256 {raw_log.sha256})",
+    )
     if not quiet:
         print(f"campaign {store.campaign_id}: the standard's procedures done ({kinds})")
     return True
+
+
+def replay_procedures_log(plan: Plan, first_log: Path) -> ReplayedProcedures | None:
+    """The plan's procedures (None: it has none) re-derived from their raw log beside the
+    campaign's first raw log (`procedures_log_path`); ReplayLogError when it is missing, cut
+    short, or not what the plan's procedures heard."""
+    if not plan.procedure:
+        return None
+    from gyrostand.acquisition.procedures import (
+        ProcedureLog,
+        ProcedureLogError,
+        ReplayedProcedures,
+        procedures_log_path,
+        replay_procedures,
+    )
+    from gyrostand.acquisition.runner import ReplayLogError, check_replay_log
+    from gyrostand.stand.simconfig import simulator_config
+
+    path = procedures_log_path(first_log)
+    if not path.is_file():
+        raise ReplayLogError(
+            f"{path}: no such file: the plan has the standard's procedures, whose frames are in "
+            f"this log beside {first_log.name}"
+        )
+    log = check_replay_log(path)
+    if log.truncated is not None:
+        raise ReplayLogError(f"{path}: {log.truncated}: the procedures cannot be re-derived")
+    bus = plan.bus
+    config = simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
+    model = plan.settle.transient_model
+    assert model is not None  # the plan's check
+    try:
+        results = replay_procedures(
+            config,
+            resolved(plan),
+            plan.reference,
+            model,
+            plan.stand_limits,
+            plan.site.latitude_deg,
+            path,
+        )
+    except ProcedureLogError as exc:
+        raise ReplayLogError(str(exc)) from exc
+    return ReplayedProcedures(results, ProcedureLog(str(path.resolve()), log.frames, log.sha256))
 
 
 class Stopped(Exception):

@@ -760,6 +760,7 @@ def register(app: typer.Typer) -> None:
         import can
 
         from gyrostand.acquisition.runner import ReplayLogError, check_replay_log, replay
+        from gyrostand.campaign_procedures import replay_procedures_log
 
         checked = checked_plan(
             _load(plan), interface=None, channel=None, db=db, speedup=None, seed=None
@@ -780,12 +781,19 @@ def register(app: typer.Typer) -> None:
                 check_serial_logs(logs, checked.bus.timing == "virtual")
             except LogFileError as exc:
                 fail(f"cannot replay {exc}")
+        try:  # the standard's procedures: from their log beside the first, before the database
+            procedures = replay_procedures_log(checked, logs[0])
+        except ReplayLogError as exc:
+            fail(f"cannot replay {exc}")
         with Stages("replay") as stage:
             sessions = open_db(checked.database, must_exist=False)
             stage(f"logs read; re-deriving the observations into {shown_url(checked.database)}")
             try:
-                result = replay(checked, sessions, logs, readable)
+                result = replay(checked, sessions, logs, readable, procedures)
             except (ReplayLogError, ValueError, OSError, can.CanError) as exc:  # changed since
                 fail(f"replay of {printable(logs[-1])} failed: {exc}", code=EXIT_FAILED)
-            stage.done(f"campaign {result.campaign_id}: {result.observations} observations")
+            rederived = ", the standard's procedures re-derived" if procedures else ""
+            stage.done(
+                f"campaign {result.campaign_id}: {result.observations} observations{rederived}"
+            )
         print_outcome(result, checked.database, resumable=False)

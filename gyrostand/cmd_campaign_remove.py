@@ -66,6 +66,7 @@ def register(campaign_app: typer.Typer) -> None:
         labels, origin, raw logs), who removed it, when and why. Asks first, on a terminal;
         elsewhere give --yes."""
         from gyrostand import SOFTWARE_VERSION
+        from gyrostand.acquisition.procedures import procedures_log_path
         from gyrostand.db.models import Campaign
         from gyrostand.db.removal import RemovalRefused, remove_campaigns
         from gyrostand.devices.serial_replay import serial_log_path
@@ -103,7 +104,8 @@ def register(campaign_app: typer.Typer) -> None:
                 reason=None if reason is None else reason.strip(),
                 delete_raw_logs=delete_raw_logs,
                 software_version=SOFTWARE_VERSION,
-                files_of=lambda log: (Path(log), serial_log_path(log)),  # a serial log beside
+                # the serial and the procedures' logs beside
+                files_of=lambda log: (Path(log), serial_log_path(log), procedures_log_path(log)),
             )
         except RemovalRefused as error:
             fail(str(error))

@@ -4,6 +4,7 @@ report's clause table (the slow stage: a campaign and a report, ~20 s on a loade
 
 from __future__ import annotations
 
+import hashlib
 import json
 import sqlite3
 from pathlib import Path
@@ -79,3 +80,40 @@ def test_campaign_run_stores_the_procedures_and_the_report_judges_them(tmp_path:
     with sqlite3.connect(db) as conn:
         tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
     assert "procedure_run" not in tables and "campaign" in tables
+
+
+def test_replay_re_derives_the_procedures_from_their_raw_log(tmp_path: Path) -> None:
+    path = tmp_path / "p.toml"
+    path.write_text(plan(tmp_path))
+    run = CliRunner().invoke(app, ["campaign", "run", str(path), "--quiet"])
+    assert run.exit_code == 0, run.output
+    db = tmp_path / "p.sqlite"
+    (trials_log,) = (tmp_path / "raw").glob("*campaign-1.blf")
+    procedures_log = trials_log.with_name(f"{trials_log.stem}.procedures.blf")
+
+    def stored(campaign: int) -> dict:
+        with sqlite3.connect(db) as conn:
+            (text,) = conn.execute(
+                "SELECT results_json FROM procedure_run WHERE campaign_id = ?", (campaign,)
+            ).fetchone()
+        return json.loads(text)
+
+    live = stored(1)
+    assert live["raw_log"]["path"] == str(procedures_log.resolve())
+    assert live["raw_log"]["sha256"] == hashlib.sha256(procedures_log.read_bytes()).hexdigest()
+    args = ["replay", str(trials_log), "--plan", str(path), "--db", str(db)]
+    replayed = CliRunner().invoke(app, args)
+    assert replayed.exit_code == 0, replayed.output
+    again = stored(2)
+    assert again.pop("raw_log") == live.pop("raw_log")
+    assert again == live  # the same results, to the bit (JSON floats round-trip exactly)
+    # without the procedures' log beside the trials': refused in one line, nothing written
+    procedures_log.rename(tmp_path / "elsewhere.blf")
+    refused = CliRunner().invoke(app, args)
+    assert refused.exit_code != 0
+    assert refused.output.strip().splitlines() == [
+        f"gyrostand: error: cannot replay {procedures_log}: no such file: the plan has the "
+        f"standard's procedures, whose frames are in this log beside {trials_log.name}"
+    ]
+    with sqlite3.connect(db) as conn:
+        assert conn.execute("SELECT count(*) FROM campaign").fetchone() == (2,)

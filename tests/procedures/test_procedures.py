@@ -11,11 +11,19 @@ import threading
 import pytest
 
 from gyrostand.acquisition.operator import messages
-from gyrostand.acquisition.procedures import Progress, run_procedures, stored_progress
+from gyrostand.acquisition.procedures import (
+    ProcedureLogError,
+    Progress,
+    RunUp,
+    replay_procedures,
+    run_procedures,
+    stored_progress,
+)
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.analysis.procedures import ProcedureResults
 from gyrostand.campaign_procedures import run_procedures_of
 from gyrostand.db.session import open_database
+from gyrostand.frames.logfile import BatchBLFWriter, read_raw_frames
 from gyrostand.plan.model import Plan, PlanError, parse_plan
 from gyrostand.plan.prompts import ANSWER, PROMPT, STOP_REQUEST
 from gyrostand.report.compliance import (
@@ -252,7 +260,7 @@ def test_killed_part_way_the_stages_done_are_kept_and_the_rest_redone(results, a
     out = run(plan, a821, Progress(stored))
     assert out.settling.u_s == 12.5
     # the rest as in the run never interrupted: the compass brought through the kept stages
-    # unheard is the same compass, to the bit
+    # again (heard for the raw log, their results kept) is the same compass, to the bit
     assert {**out.to_dict(), "settling": None} == {**whole.to_dict(), "settling": None}
 
 
@@ -326,3 +334,71 @@ def test_procedures_on_a_real_bus_are_refused() -> None:
     with pytest.raises(PlanError) as err:
         parse_plan(PAPER.replace("simulated = true", "simulated = false") + FAST.format(knob=""))
     assert any("simulated compass only" in p for p in err.value.problems), err.value.problems
+
+
+def logged_run(plan: Plan, profile, path, progress: Progress | None = None) -> ProcedureResults:
+    """The procedures run with their heard frames written to the raw log at `path`."""
+    model = plan.settle.transient_model
+    assert model is not None
+    log = BatchBLFWriter(path)
+    try:
+        return run_procedures(
+            config(plan),
+            resolve(plan, profile),
+            plan.reference,
+            model,
+            plan.stand_limits,
+            plan.site.latitude_deg,
+            progress,
+            runups=lambda k, at_s: RunUp(config(plan), k, at_s, log),
+        )
+    finally:
+        log.stop()
+
+
+def replayed(plan: Plan, profile, path) -> ProcedureResults:
+    model = plan.settle.transient_model
+    assert model is not None
+    return replay_procedures(
+        config(plan),
+        resolve(plan, profile),
+        plan.reference,
+        model,
+        plan.stand_limits,
+        plan.site.latitude_deg,
+        path,
+    )
+
+
+def test_the_raw_log_re_derives_the_procedures_to_the_bit(results, a821, tmp_path) -> None:
+    plan, whole = results
+    path = tmp_path / "p.procedures.blf"
+    live = logged_run(plan, a821, path)
+    assert live.to_dict() == whole.to_dict()  # logging changes nothing
+    assert live.rolling[-1].forecast and len(live.repeatability.settle_points_deg) >= 2
+    # the settling record whole, then only the readings and rolling windows: 7200 s at 2 Hz
+    frames = sum(len(raw) for raw in read_raw_frames(path))
+    assert 7200 * 2 < frames < 7200 * 2 * 3
+    assert replayed(plan, a821, path).to_dict() == live.to_dict()  # equal floats, not approx
+
+
+def test_a_resumed_run_logs_every_stage_and_a_cut_log_is_refused(results, a821, tmp_path) -> None:
+    plan, whole = results
+    first = tmp_path / "killed.procedures.blf"
+    stored: dict = {}
+
+    def saved(stages: dict) -> None:
+        stored.clear()
+        stored.update(json.loads(json.dumps(stages)))
+        if "rolling" in stages:
+            raise Killed
+
+    with pytest.raises(Killed):
+        logged_run(plan, a821, first, Progress({}, saved))
+    resumed = tmp_path / "resumed.procedures.blf"
+    out = logged_run(plan, a821, resumed, Progress(stored))
+    assert out.to_dict() == whole.to_dict()
+    # the resumed run's log alone holds the kept stages' frames too
+    assert replayed(plan, a821, resumed).to_dict() == whole.to_dict()
+    with pytest.raises(ProcedureLogError, match="the log ends before"):
+        replayed(plan, a821, first)  # the killed run's: its frames end in the rolling
