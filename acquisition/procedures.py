@@ -227,14 +227,6 @@ class LoggedRunUp(RunUp):
         pass
 
 
-def record_runup(config: SimConfig, k: int, at_s: float, duration_s: float) -> RunUpRecord:
-    """Run-up k of the simulated compass switched on at stand time `at_s`, recorded for
-    `duration_s` stand seconds from its frames."""
-    runup = RunUp(config, k, at_s)
-    runup.advance(duration_s)
-    return runup.record()
-
-
 ROLLING_WINDOW_PERIODS = 8  # a reading under rolling: the mean over whole rocking periods
 
 
