@@ -29,7 +29,8 @@ def test_one_spelling_and_the_old_one_still_read_with_a_note() -> None:
     old = {"C_gcm2s2": 5.0e7, "T_s": 0.9, "lP_gcm2s2": 6.0e6, "H1_gcm2s": 1.5e8}
     with pytest.warns(DeprecationWarning) as notes:
         assert StandSpec(simulator={"compass": old}).config().compass == compass
-    assert [str(n.message) for n in notes] == [
+    spelled = [str(n.message) for n in notes if " is spelled " in str(n.message)]
+    assert spelled == [  # (not another test's ResourceWarning collected meanwhile)
         f"simulated stand: compass.{o} is spelled {n} now (the old spelling is still read)"
         for o, n in zip(old, knobs, strict=True)
     ]
