@@ -89,9 +89,9 @@ def main() -> None:
         rate = frames / wall
         print(f"end to end (stand -> bus -> acquisition -> SQLite + BLF): {rate:,.0f} frames/s")
         stream = list(itertools.islice(campaign_frames(paper_plan(":memory:")), INGEST_FRAMES))
-        seconds, done, _ = ours(stream, folder, True)
-        ingest = done / seconds
-        print(f"ingest alone (bench_ingest's path, {done:,} frames): {ingest:,.0f} frames/s")
+        run = ours(stream, folder, True)
+        ingest = run.rate
+        print(f"ingest alone (bench_ingest's path, {run.done:,} frames): {ingest:,.0f} frames/s")
         print(f"end to end / ingest: {rate / ingest:.2f}")
         print(f"target acquisition <= 8 s: {'OK' if wall <= 8 else 'ABOVE TARGET'}")
         (folder / "busy").mkdir()
