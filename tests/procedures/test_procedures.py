@@ -89,19 +89,17 @@ def config(plan: Plan) -> SimConfig:
     return simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
 
 
-def run(plan: Plan, profile, progress: Progress | None = None) -> ProcedureResults:
-    """The plan's procedures from the start, or resumed from `progress`."""
+def inputs(plan: Plan, profile) -> tuple:
+    """What `run_procedures` and `replay_procedures` take from the plan, in their order."""
     model = plan.settle.transient_model
     assert model is not None
-    return run_procedures(
-        config(plan),
-        resolve(plan, profile),
-        plan.reference,
-        model,
-        plan.stand_limits,
-        plan.site.latitude_deg,
-        progress,
-    )
+    resolved = resolve(plan, profile)
+    return config(plan), resolved, plan.reference, model, plan.stand_limits, plan.site.latitude_deg
+
+
+def run(plan: Plan, profile, progress: Progress | None = None) -> ProcedureResults:
+    """The plan's procedures from the start, or resumed from `progress`."""
+    return run_procedures(*inputs(plan, profile), progress)
 
 
 @pytest.fixture(scope="module")
@@ -338,17 +336,10 @@ def test_procedures_on_a_real_bus_are_refused() -> None:
 
 def logged_run(plan: Plan, profile, path, progress: Progress | None = None) -> ProcedureResults:
     """The procedures run with their heard frames written to the raw log at `path`."""
-    model = plan.settle.transient_model
-    assert model is not None
     log = BatchBLFWriter(path)
     try:
         return run_procedures(
-            config(plan),
-            resolve(plan, profile),
-            plan.reference,
-            model,
-            plan.stand_limits,
-            plan.site.latitude_deg,
+            *inputs(plan, profile),
             progress,
             runups=lambda k, at_s: RunUp(config(plan), k, at_s, log),
         )
@@ -357,17 +348,7 @@ def logged_run(plan: Plan, profile, path, progress: Progress | None = None) -> P
 
 
 def replayed(plan: Plan, profile, path) -> ProcedureResults:
-    model = plan.settle.transient_model
-    assert model is not None
-    return replay_procedures(
-        config(plan),
-        resolve(plan, profile),
-        plan.reference,
-        model,
-        plan.stand_limits,
-        plan.site.latitude_deg,
-        path,
-    )
+    return replay_procedures(*inputs(plan, profile), path)
 
 
 def test_the_raw_log_re_derives_the_procedures_to_the_bit(results, a821, tmp_path) -> None:
