@@ -103,16 +103,30 @@ class StoredInputs:
 
     def sha256(self) -> str:
         """Hash of everything the analysis depends on: the trials as given to the fit, the
-        settings, the trials left out, and `sources` (plan, raw logs, series, events)."""
+        settings, the trials left out, `sources` (plan, raw logs, series, events) and the code
+        that computes it (`analysis_code_sha256`)."""
         document = json_safe(
             {
                 "trials": self.trials,
                 "settings": self.settings,
                 "left_out": self.left_out,
                 "sources": self.sources,
+                "code": analysis_code_sha256(),
             }
         )
         return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
+
+
+@functools.cache
+def analysis_code_sha256() -> str:
+    """The sources of the analysis and report packages: a recorded analysis is reused only by
+    the code that computed it (the version string stays the same between a checkout's commits)."""
+    digest = hashlib.sha256()
+    for package in ("analysis", "report"):
+        folder = Path(__file__).parent.parent / package  # (this module is gyrostand.report's)
+        for path in sorted(folder.glob("*.py")):
+            digest.update(path.name.encode() + path.read_bytes())
+    return digest.hexdigest()
 
 
 def analysis_sources(campaign: Campaign) -> dict[str, Any]:

@@ -103,6 +103,20 @@ def test_a_run_is_recorded_once_per_distinct_result(tmp_path: Path) -> None:
     assert changed.run_id != first.run_id and runs(stored) == 2
 
 
+def test_a_recorded_analysis_is_not_reused_by_other_analysis_code(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Before: keyed by the version string alone, an analysis recorded by earlier code (same
+    version, another commit) was rebuilt from its record: stale texts and numbers."""
+    stored = import_paper(tmp_path)
+    first = analyze_stored(stored.sessions, stored.campaign_id)
+    assert stored_module.stored_analysis(stored.sessions, stored.campaign_id).run_id == first.run_id
+    digest = first.inputs.sha256()
+    monkeypatch.setattr(stored_module, "analysis_code_sha256", lambda: "other code")
+    later = stored_module.stored_analysis(stored.sessions, stored.campaign_id)
+    assert later.run_id is None and later.inputs.sha256() != digest
+
+
 def test_a_writer_holding_the_lock_meanwhile_delays_the_run_and_fails_nothing(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
