@@ -5,8 +5,8 @@ imports matplotlib nor draws (about 1.8 s of CPU of the paper campaign's report)
 
 The key is the SHA-256 of the figure builder's name, its arguments (`canonical`: the same
 numbers give the same key whether the analysis was computed or rebuilt from its record), the
-report's plot style, matplotlib's version and the source of the plotting
-code (`SOURCES`): any change to one of them draws the figure anew. An entry is written whole
+report's plot style, matplotlib's version and the analysis and report code
+(`code_digest`): any change to one of them draws the figure anew. An entry is written whole
 (a temporary file renamed) and an unreadable one is drawn again; the folder keeps the
 `KEEP` newest entries. ``GYROSTAND_FIGURE_CACHE``: another folder, or "off" for none.
 
@@ -22,25 +22,15 @@ import tempfile
 from collections.abc import Callable
 from dataclasses import fields, is_dataclass
 from importlib.metadata import version
-from importlib.util import find_spec
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from gyrostand.report.code_digest import analysis_code_sha256
+
 ENV = "GYROSTAND_FIGURE_CACHE"
 KEEP = 400  # entries (about 100 kB each: the figures of some 30 reports)
-SOURCES = (
-    "gyrostand.report.plots",
-    "gyrostand.report.fleet_plots",
-    "gyrostand.report.build",
-    "gyrostand.report.model",
-    "gyrostand.analysis.gyro_model",
-    "gyrostand.analysis.noise",
-    "gyrostand.analysis.campaign",
-    "gyrostand.analysis.fleet",
-)
-"""The modules whose code draws the figures or computes what they show from their arguments."""
 
 
 def folder() -> Path | None:
@@ -60,13 +50,8 @@ def folder() -> Path | None:
 
 @functools.cache
 def _code_digest() -> bytes:
-    """The plotting code's identity: matplotlib's version and the sources of `SOURCES`."""
-    digest = hashlib.sha256(version("matplotlib").encode())
-    for name in SOURCES:
-        spec = find_spec(name)
-        assert spec is not None and spec.origin is not None  # modules of this package
-        digest.update(name.encode() + Path(spec.origin).read_bytes())
-    return digest.digest()
+    """The plotting code's identity: matplotlib's version and the analysis and report code."""
+    return hashlib.sha256((version("matplotlib") + analysis_code_sha256()).encode()).digest()
 
 
 def canonical(value: Any) -> Any:

@@ -55,6 +55,7 @@ from gyrostand.db.session import writer
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import PartialPlan, Plan, PlanError, ReportPlan, parse_any_plan
 from gyrostand.report.build import Report, build_report, missing_items
+from gyrostand.report.code_digest import analysis_code_sha256
 from gyrostand.report.compliance import Profile
 from gyrostand.report.model import (
     NOT_STATED,
@@ -115,18 +116,6 @@ class StoredInputs:
             }
         )
         return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
-
-
-@functools.cache
-def analysis_code_sha256() -> str:
-    """The sources of the analysis and report packages: a recorded analysis is reused only by
-    the code that computed it (the version string stays the same between a checkout's commits)."""
-    digest = hashlib.sha256()
-    for package in ("analysis", "report"):
-        folder = Path(__file__).parent.parent / package  # (this module is gyrostand.report's)
-        for path in sorted(folder.glob("*.py")):
-            digest.update(path.name.encode() + path.read_bytes())
-    return digest.hexdigest()
 
 
 def analysis_sources(campaign: Campaign) -> dict[str, Any]:
