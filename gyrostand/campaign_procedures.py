@@ -91,16 +91,12 @@ def run_procedures_of(
     from gyrostand.db.queries import raw_log_segments
     from gyrostand.frames.logfile import BatchBLFWriter, sha256_of
     from gyrostand.plan.switching import power_prompts
-    from gyrostand.stand.simconfig import simulator_config
 
     complete, done = stored_progress(store.sessions, store.campaign_id)
     if complete:
         return True
-    procedures = resolved(plan)
-    bus = plan.bus
-    config = simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
-    model = plan.settle.transient_model
-    assert model is not None  # the plan's check
+    inputs = procedure_inputs(plan)
+    config, procedures = inputs[0], inputs[1]
     if done:
         kept = ", ".join(k for k in done if not k.endswith("_s"))
         store.run_event("procedures", "info", f"the standard's procedures resumed: kept {kept}")
@@ -127,12 +123,7 @@ def run_procedures_of(
     log = BatchBLFWriter(path)
     try:
         results = run_procedures(
-            config,
-            procedures,
-            plan.reference,
-            model,
-            plan.stand_limits,
-            plan.site.latitude_deg,
+            *inputs,
             Progress(done, saved),
             prompted,
             runups=lambda k, at_s: RunUp(config, k, at_s, log),
@@ -170,7 +161,6 @@ def replay_procedures_log(plan: Plan, first_log: Path) -> ReplayedProcedures | N
         replay_procedures,
     )
     from gyrostand.acquisition.runner import ReplayLogError, check_replay_log
-    from gyrostand.stand.simconfig import simulator_config
 
     path = procedures_log_path(first_log)
     if not path.is_file():
@@ -181,23 +171,25 @@ def replay_procedures_log(plan: Plan, first_log: Path) -> ReplayedProcedures | N
     log = check_replay_log(path)
     if log.truncated is not None:
         raise ReplayLogError(f"{path}: {log.truncated}: the procedures cannot be re-derived")
+    try:
+        results = replay_procedures(*procedure_inputs(plan), path)
+    except ProcedureLogError as exc:
+        raise ReplayLogError(str(exc)) from exc
+    return ReplayedProcedures(results, ProcedureLog(str(path.resolve()), log.frames, log.sha256))
+
+
+def procedure_inputs(plan: Plan) -> tuple:
+    """What `run_procedures` and `replay_procedures` take from the plan, in their order: the
+    simulated compass, the resolved procedures, the reference, the transient model, the stand's
+    limits and the site's latitude."""
+    from gyrostand.stand.simconfig import simulator_config
+
     bus = plan.bus
     config = simulator_config(bus.simulator, speedup=bus.speedup, seed=bus.seed, timing=bus.timing)
     model = plan.settle.transient_model
     assert model is not None  # the plan's check
-    try:
-        results = replay_procedures(
-            config,
-            resolved(plan),
-            plan.reference,
-            model,
-            plan.stand_limits,
-            plan.site.latitude_deg,
-            path,
-        )
-    except ProcedureLogError as exc:
-        raise ReplayLogError(str(exc)) from exc
-    return ReplayedProcedures(results, ProcedureLog(str(path.resolve()), log.frames, log.sha256))
+    limits, latitude = plan.stand_limits, plan.site.latitude_deg
+    return config, resolved(plan), plan.reference, model, limits, latitude
 
 
 class Stopped(Exception):
