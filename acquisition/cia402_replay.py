@@ -19,7 +19,7 @@ from gyrostand.acquisition.cia402_run import _to_rest
 from gyrostand.acquisition.cia402_sim import STEP_S, Cia402Lockstep, feed, merged
 from gyrostand.acquisition.cia402_stand import Cia402Stand
 from gyrostand.acquisition.engine import Engine, Phase
-from gyrostand.acquisition.procedures import ReplayedProcedures, store_procedures
+from gyrostand.acquisition.procedures import ReplayedProcedures
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.devices.cia402 import MASTER_NODE_ID, AxisConfig, Cia402Axis, DriveError
 from gyrostand.devices.cia402_log import (
@@ -140,8 +140,8 @@ def replay_cia402(
 ) -> RunResult:
     """`runner.replay` of a CiA 402 campaign: a new campaign (source "replay") from its raw
     logs; a log whose drive traffic is not what the master sends is one line (DriveLogError,
-    a ValueError) and the new campaign is marked failed."""
-    from gyrostand.acquisition.runner import _judged, replayed_segments, result
+    a ValueError) and the database is left as it was (`runner.replay_store`)."""
+    from gyrostand.acquisition.runner import _judged, replay_store, replayed_segments, result
 
     if not starts_a_run(checked[0].path):  # (before the database is written)
         raise DriveLogError(
@@ -149,17 +149,11 @@ def replay_cia402(
             "first: another stand's, a later segment, or written before gyrostand logged the "
             "drive's traffic)"
         )
-    store = CampaignStore.create(sessions, plan, source="replay")
-    if procedures is not None:  # (re-derived from their log: `runner.replay`)
-        store_procedures(sessions, store.campaign_id, procedures.results, procedures.log)
-    try:
+    with replay_store(sessions, plan, procedures) as store:
         with store.deferred():
             replayed_segments(store, checked)
         engine = replay_runs(plan, store, [log.path for log in checked])
-    except BaseException:
-        store.set_status("failed")
-        raise
-    assert engine is not None  # (the first log starts a run)
-    outcome = engine.outcome if engine.outcome != "completed" else _judged(store, plan)
-    store.set_status(outcome)
-    return result(store, outcome, checked[-1].path, checked[-1].sha256)
+        assert engine is not None  # (the first log starts a run)
+        outcome = engine.outcome if engine.outcome != "completed" else _judged(store, plan)
+        store.set_status(outcome)
+        return result(store, outcome, checked[-1].path, checked[-1].sha256)

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import os
 import signal
+import struct
 import threading
 import time
+import zlib
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -19,6 +21,7 @@ from typing import IO
 
 import can
 import numpy as np
+from can.io.blf import BLFParseError
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -40,6 +43,7 @@ from gyrostand.db.queries import (
     raw_log_segments,
     stand_campaign,
 )
+from gyrostand.db.removal import discard_campaign, newest_instrument
 from gyrostand.db.wal import checkpoint
 from gyrostand.devices.decoder import SourceDecoder, frame_decoder, source_info
 from gyrostand.devices.serial_replay import logged_pieces, serial_log_path
@@ -452,6 +456,10 @@ class _NoCommands:
         pass
 
 
+LOG_ERRORS = (OSError, ValueError, EOFError, struct.error, zlib.error, can.CanError, BLFParseError)
+"""What reading a raw log raises when it cannot be read (python-can's readers, `frames.logfile`)."""
+
+
 class ReplayLogError(ValueError):
     """A raw log that cannot be replayed: unreadable, corrupt, or without a CAN frame. The
     message starts with the file's name and says what is wrong."""
@@ -483,25 +491,12 @@ def _blf_truncation(log: Path) -> str | None:
 def check_replay_log(log: Path) -> ReplayLog:
     """Read the whole log (ReplayLogError when it cannot be replayed); a BLF file that ends
     early but holds frames can be replayed up to its last complete container."""
-    import struct
-    import zlib
-
-    from can.io.blf import BLFParseError
-
     try:
         sha = sha256_of(log)
         frames = sum(len(raw) for raw in read_raw_frames(log))
         blf = log.suffix.lower() == ".blf"
         truncated = _blf_truncation(log) if blf else None
-    except (
-        OSError,
-        ValueError,
-        EOFError,
-        struct.error,
-        zlib.error,
-        can.CanError,
-        BLFParseError,
-    ) as exc:
+    except LOG_ERRORS as exc:
         what = str(exc) if isinstance(exc, LogFileError) else f"{log}: {exc}"
         raise ReplayLogError(what) from exc
     if frames == 0:
@@ -547,25 +542,48 @@ def replay(
         decoder = _can_decoder(plan, codec)
         stream = read_segments(paths)
         info = _can_source_info(plan, codec)
-    store = CampaignStore.create(sessions, plan, source="replay")
-    if procedures is not None:
-        store_procedures(sessions, store.campaign_id, procedures.results, procedures.log)
-    engine = Engine(plan, store, _NoCommands(), source=info)
-    try:
+    with replay_store(sessions, plan, procedures) as store:
+        engine = Engine(plan, store, _NoCommands(), source=info)
         with store.deferred():
             replayed_segments(store, checked)
-            for raw in stream:
+            for raw in _changed_since(stream, paths):
                 engine.feed(decoder.decode(raw))
                 if engine.phase is Phase.DONE:
                     break
             if engine.phase is not Phase.DONE:
                 engine.interrupt("the log ends before the campaign does")
+        outcome = engine.outcome if engine.outcome != "completed" else _judged(store, plan)
+        store.set_status(outcome)
+        return result(store, outcome, checked[-1].path, checked[-1].sha256)
+
+
+@contextmanager
+def replay_store(
+    sessions: sessionmaker[Session], plan: Plan, procedures: ReplayedProcedures | None
+) -> Iterator[CampaignStore]:
+    """A replay's new campaign (source "replay"), with the re-derived procedures (if any). A
+    replay that fails part-way (a log that does not match, Ctrl-C, a database error) takes it
+    out again with everything it wrote and its lease: the database is as it was before."""
+    instruments = newest_instrument(sessions)
+    store = CampaignStore.create(sessions, plan, source="replay")
+    try:
+        if procedures is not None:
+            store_procedures(sessions, store.campaign_id, procedures.results, procedures.log)
+        yield store
     except BaseException:
-        store.set_status("failed")
+        store.lease.release()
+        discard_campaign(sessions, store.campaign_id, instruments)
         raise
-    outcome = engine.outcome if engine.outcome != "completed" else _judged(store, plan)
-    store.set_status(outcome)
-    return result(store, outcome, checked[-1].path, checked[-1].sha256)
+
+
+def _changed_since(stream: Iterator[RawFrames], paths: Sequence[Path]) -> Iterator[RawFrames]:
+    """The logs' frames; a log that can no longer be read (changed since `check_replay_log`
+    read it whole) is a ReplayLogError naming it."""
+    try:
+        yield from stream
+    except LOG_ERRORS as exc:
+        what = str(exc) if isinstance(exc, LogFileError) else f"{', '.join(map(str, paths))}: {exc}"
+        raise ReplayLogError(f"{what} (changed since it was read)") from exc
 
 
 def replayed_segments(store: CampaignStore, checked: Sequence[ReplayLog]) -> None:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand.db.lease import held_elsewhere
@@ -117,3 +117,26 @@ def remove_campaigns(
             for path in files_of(log):
                 path.unlink(missing_ok=True)
     return removed
+
+
+def newest_instrument(sessions: sessionmaker[Session]) -> int:
+    """The highest instrument id so far (0: none), for `discard_campaign`."""
+    with sessions() as session:
+        return session.scalar(select(func.max(Instrument.id))) or 0
+
+
+def discard_campaign(sessions: sessionmaker[Session], campaign_id: int, instruments: int) -> None:
+    """Take out a campaign this process has just made and that failed before anyone saw it
+    (a replay stopped part-way): its rows go (foreign keys cascade) with no removal record,
+    and so does its instrument when it is newer than `instruments` (`newest_instrument`
+    before the campaign was made) and no campaign refers to it: the database is as it was."""
+    with writer(sessions).begin() as session:
+        campaign = session.get(Campaign, campaign_id)
+        if campaign is None:
+            return
+        instrument = campaign.instrument_id
+        session.delete(campaign)
+        session.flush()
+        used = session.scalar(select(Campaign.id).where(Campaign.instrument_id == instrument))
+        if instrument > instruments and used is None:
+            session.delete(session.get_one(Instrument, instrument))

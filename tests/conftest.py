@@ -82,6 +82,7 @@ SLOW_FILES = frozenset(
         "acquisition/test_measured_amplitude_campaign.py",
         "acquisition/test_own_bus.py",
         "acquisition/test_raw_log_names.py",
+        "acquisition/test_replay_failure.py",
         "acquisition/test_stop_resume_report.py",
         "cli/test_bad_databases.py",
         "cli/test_demo.py",

@@ -1,0 +1,115 @@
+"""A replay that fails part-way (a raw log segment that changed after it was read, Ctrl-C) leaves
+the database as it was: no campaign marked failed, no trial, event or raw log segment of it, no
+instrument it brought, no lease file; the command says what is wrong in one line. (The CiA 402
+replay's own cases: tests/acquisition/test_cia402_replay.py.)"""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from gyrostand.acquisition import runner
+from gyrostand.acquisition.engine import Engine
+from gyrostand.acquisition.runner import replay, run_live
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.cli import app
+from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.frames.logfile import BatchBLFWriter, read_raw_frames
+from gyrostand.plan.model import Plan, parse_plan
+
+from .harness import FAST_SIM, plan_text
+
+
+def dump(db: Path) -> str:
+    """The whole database content as SQL text (equal iff the contents are)."""
+    with sqlite3.connect(db) as conn:
+        return "\n".join(conn.iterdump())
+
+
+def files(folder: Path) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+def campaign(tmp_path: Path) -> tuple[Plan, Path, list[Path]]:
+    """A live campaign, its raw log cut in two segments (as a resumed campaign's), and the
+    database moved aside so that the instrument is a new one in the database replayed into."""
+    plan = parse_plan(
+        plan_text(database=str(tmp_path / "live.sqlite"), raw_dir=str(tmp_path / "raw")) + FAST_SIM
+    )
+    sessions = open_database(sqlite_url(plan.database))
+    live = run_live(plan, CampaignStore.create(sessions, plan), quiet=True)
+    assert live.outcome == "completed" and live.raw_log is not None
+    frames = list(read_raw_frames(live.raw_log, chunk=500))
+    segments = []
+    for name, part in (
+        ("a.blf", frames[: len(frames) // 2]),
+        ("b.blf", frames[len(frames) // 2 :]),
+    ):
+        writer = BatchBLFWriter(tmp_path / name)
+        for raw in part:
+            writer.write_frames(raw)
+        writer.stop()
+        segments.append(tmp_path / name)
+    db = tmp_path / "replayed.sqlite"
+    path = tmp_path / "plan.toml"
+    path.write_text(plan.text.replace(str(tmp_path / "live.sqlite"), str(db)))
+    return parse_plan(path.read_text()), path, segments
+
+
+def corrupt(log: Path) -> None:
+    """Its middle overwritten (a container that no longer inflates)."""
+    data = bytearray(log.read_bytes())
+    data[len(data) // 2 : len(data) // 2 + 64] = b"\xff" * 64
+    log.write_bytes(data)
+
+
+def test_a_segment_changed_since_it_was_read_leaves_the_database_as_it_was(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    plan, path, (a, b) = campaign(tmp_path)
+    assert replay(plan, open_database(sqlite_url(plan.database)), [a, b]).outcome == "completed"
+    before, listed = dump(plan.database), files(tmp_path)
+    read = runner.check_replay_log
+
+    def read_then_changed(log: Path) -> runner.ReplayLog:
+        checked = read(log)
+        if log == b:  # (another process writes it meanwhile)
+            corrupt(log)
+        return checked
+
+    monkeypatch.setattr(runner, "check_replay_log", read_then_changed)
+    result = CliRunner().invoke(app, ["replay", str(a), str(b), "--plan", str(path)])
+    assert dump(plan.database) == before and files(tmp_path) == listed
+    assert result.exit_code == 1
+    (error,) = [line for line in result.stderr.splitlines() if "error" in line]
+    assert error.startswith(f"gyrostand: error: replay of {b} failed: {b}: corrupt BLF container")
+    assert error.endswith("(changed since it was read)") and "Traceback" not in result.output
+
+
+def test_ctrl_c_part_way_leaves_the_database_as_it_was(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Into a database that did not hold the instrument: it goes too."""
+    plan, _, logs = campaign(tmp_path)
+    sessions = open_database(sqlite_url(plan.database))  # (its schema, no campaign)
+    before, listed = dump(plan.database), files(tmp_path)
+    feed, fed, observed = Engine.feed, [], CampaignStore.observation
+    written: list[object] = []
+    monkeypatch.setattr(
+        CampaignStore, "observation", lambda s, o: observed(s, written.append(o) or o)
+    )
+
+    def interrupted(self: Engine, batch: object) -> None:
+        fed.append(batch)
+        if len(fed) == 2:  # the second segment: the first one's observations are written
+            assert len(written) >= 3
+            raise KeyboardInterrupt
+        feed(self, batch)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(Engine, "feed", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        replay(plan, sessions, logs)
+    assert dump(plan.database) == before and files(tmp_path) == listed
