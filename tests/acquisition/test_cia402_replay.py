@@ -12,6 +12,7 @@ import threading
 from functools import partial
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -147,12 +148,10 @@ def test_replay_of_a_trial_failed_by_the_drives_emcy_equals_the_live_run(
     assert record(tmp_path / "c.sqlite", 3) == recorded
 
 
-def test_a_stopped_and_resumed_campaign_replays_as_its_two_runs(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def stopped_and_resumed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Plan, list]:
+    """Campaign 1, stopped at STOP_AT_S and resumed; its plan and its two raw logs."""
     monkeypatch.setattr(cia402_run, "SimulatedCia402", partial(SimulatedCia402, servo=SERVO))
     plan = cia402_plan(tmp_path)
-    db = tmp_path / "c.sqlite"
     stop = threading.Event()
     advance = SimulatedCia402.advance_to
 
@@ -161,7 +160,7 @@ def test_a_stopped_and_resumed_campaign_replays_as_its_two_runs(
             stop.set()
         return advance(self, t_s)
 
-    sessions = open_database(sqlite_url(db))
+    sessions = open_database(sqlite_url(plan.database))
     with monkeypatch.context() as m:
         m.setattr(SimulatedCia402, "advance_to", advance_then_stop)
         store = CampaignStore.create(sessions, plan)
@@ -169,15 +168,23 @@ def test_a_stopped_and_resumed_campaign_replays_as_its_two_runs(
     assert first.outcome == "stopped"
     resumed = CliRunner().invoke(
         app,
-        ["campaign", "resume", "1", "--db", str(db), "--quiet"]
+        ["campaign", "resume", "1", "--db", str(plan.database), "--quiet"]
         + [f"--answer={k}={v}" for k, v in ANSWERS.items()],
     )
     assert resumed.exit_code == 0, resumed.output
     segments = logs(tmp_path)
     assert len(segments) == 2
+    return plan, segments
+
+
+def test_a_stopped_and_resumed_campaign_replays_as_its_two_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    plan, segments = stopped_and_resumed(tmp_path, monkeypatch)
+    db = tmp_path / "c.sqlite"
     assert_the_logs_headings_make_the_observations(plan, segments)
 
-    outcome = replay(plan, sessions, segments)
+    outcome = replay(plan, open_database(sqlite_url(db)), segments)
     assert outcome.outcome == "completed"
     replayed, recorded = record(db, 2), record(db, 1)
     assert replayed["observation"] == recorded["observation"]
@@ -185,6 +192,43 @@ def test_a_stopped_and_resumed_campaign_replays_as_its_two_runs(
     # the second run's windows are on the campaign clock after the stop
     starts = [o[2] for o in recorded["observation"]]
     assert starts == sorted(starts) and starts[2] > STOP_AT_S * 1000
+
+
+def dump(db: Path) -> str:
+    """The whole database content as SQL text (equal iff the contents are)."""
+    with sqlite3.connect(db) as conn:
+        return "\n".join(conn.iterdump())
+
+
+def test_a_set_point_changed_in_the_second_run_leaves_the_database_as_it_was(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The replay of the first run is written (its own transaction) when the second one's log
+    turns out not to be what the master sends: one line, exit code 1, and the database as it
+    was (no campaign marked failed, no events, segments or lease file of it)."""
+    plan, (first, second) = stopped_and_resumed(tmp_path, monkeypatch)
+    frames = list(read_raw_frames(second))
+    rpdo = [
+        (i, r)
+        for i, raw in enumerate(frames)
+        for r in np.flatnonzero(raw.arbitration_id == 0x200 + NODE)
+    ]
+    i, row = rpdo[len(rpdo) // 2]  # a set-point in the middle of the second run: another target
+    frames[i].data[row, 2] ^= 0x01
+    tampered = tmp_path / "tampered.blf"
+    writer = BatchBLFWriter(tampered)
+    for raw in frames:
+        writer.write_frames(raw)
+    writer.stop()
+    path = tmp_path / "plan.toml"
+    path.write_text(plan.text)
+    before, listed = dump(plan.database), sorted(tmp_path.rglob("*"))
+    result = CliRunner().invoke(app, ["replay", str(first), str(tampered), "--plan", str(path)])
+    assert dump(plan.database) == before and sorted(tmp_path.rglob("*")) == listed
+    assert result.exit_code == 1
+    (error,) = [line for line in result.stderr.splitlines() if "error" in line]
+    assert error.startswith(f"gyrostand: error: replay of {tampered} failed: at stand time ")
+    assert "the master sends 0x202" in error and "Traceback" not in result.output
 
 
 def test_a_log_of_another_drive_is_refused_in_one_line(
