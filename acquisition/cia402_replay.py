@@ -45,11 +45,18 @@ LOG_CUT = "its raw log ends after its last batch, not with the axis brought to r
 
 
 class _Answered:
-    """The live run's operator as its engine took it: the prompts before a trial were
-    answered at the first batch after them (a trial the operator refused ends the run's log)."""
+    """The live run's operator as its engine took it, from the run's log: the prompts before a
+    trial were answered when the log goes on with another batch after the one they came in;
+    when it does not, the live run stopped there (the operator stopped the campaign rather than
+    confirm: a "confirm" prompt has no other answer; or the process was killed)."""
+
+    def __init__(self, sim: ReplayedCia402) -> None:
+        self.sim = sim
 
     def before_trial(self, trial: int) -> str | None:
-        return None
+        if self.sim.goes_on():
+            return None
+        return f"{LOG_ENDS}, at the operator's prompt before trial {trial}: not answered"
 
 
 class ReplayedCia402:
@@ -77,11 +84,19 @@ class ReplayedCia402:
         self.stand = Cia402Stand(self.axis, kinematics, s.ramp_s, self.codec, clock_ms=run.clock_ms)
         self._steps: Iterator[list[can.Message]] = run.steps
         self._step: list[can.Message] | None = None
+        self._next: list[can.Message] | None = None  # (read ahead: `goes_on`)
 
     def next_step(self) -> bool:
         """Whether the log holds another batch the live engine was fed."""
-        self._step = next(self._steps, None)
+        self._step = self._next if self._next is not None else next(self._steps, None)
+        self._next = None
         return self._step is not None
+
+    def goes_on(self) -> bool:
+        """Whether the run's log holds another batch after the one being fed."""
+        if self._next is None:
+            self._next = next(self._steps, None)
+        return self._next is not None
 
     def advance_to(self, t_s: float) -> list[can.Message]:
         """The master's frames up to `t_s` and the logged batch's others, as live."""
@@ -114,7 +129,7 @@ def replay_runs(plan: Plan, store: CampaignStore, paths: Sequence[Path]) -> Engi
             source = source_info(sim.codec, plan.compass.protocol, True, s.protocol)
             progress = store.progress()
             with store.deferred():  # (a transaction per run: the next one reads its progress)
-                engine = Engine(plan, store, stand, progress, _Answered(), source, run.clock_ms)
+                engine = Engine(plan, store, stand, progress, _Answered(sim), source, run.clock_ms)
                 decoder, position, run_start = stand.decoder(), 0, n > 0
                 while engine.phase is not Phase.DONE and sim.next_step():
                     msgs = sim.advance_to(sim.stand.t_s + STEP_S)

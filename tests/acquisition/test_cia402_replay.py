@@ -18,6 +18,7 @@ from typer.testing import CliRunner
 
 from gyrostand.acquisition import cia402_run
 from gyrostand.acquisition.cia402_sim import SimulatedCia402
+from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.runner import replay, run_live
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.cli import app
@@ -38,6 +39,7 @@ TRIALS = [(45.0, 24.0, 6.0, "fit"), (135.0, 20.0, 5.0, "fit")]
 FAULT_AT_S = 380.0  # drive time: trial 2 rocks (from about 345 s)
 STOP_AT_S = 120.0  # stand time: trial 1 rocks (from about 100 s)
 ANSWERS = {"k_trial1": "yes", "k_trial2": "yes"}
+ANSWERS_1 = {"k_trial1": "yes"}  # trial 2's K prompt left to the operator
 # what a run records of itself (prompts and answers, its raw log, how it ended) is not re-derived
 RUN_ONLY = "('prompt', 'answer', 'raw log', 'resume', 'interrupted', 'command')"
 RECORD = {
@@ -90,8 +92,10 @@ def cia402_plan(tmp_path: Path) -> Plan:
 
 
 def logs(tmp_path: Path) -> list[Path]:
+    """Campaign 1's raw logs."""
     with sqlite3.connect(tmp_path / "c.sqlite") as conn:
-        return [Path(p) for (p,) in conn.execute("SELECT path FROM raw_log_segment ORDER BY seq")]
+        rows = conn.execute("SELECT path FROM raw_log_segment WHERE campaign_id = 1 ORDER BY seq")
+        return [Path(p) for (p,) in rows]
 
 
 def test_replay_of_a_trial_failed_by_the_drives_emcy_equals_the_live_run(
@@ -275,3 +279,39 @@ def test_a_log_of_another_drive_is_refused_in_one_line(
         replay(plan, sessions, [headless])
     with sqlite3.connect(tmp_path / "c.sqlite") as conn:
         assert conn.execute("SELECT count(*) FROM campaign").fetchall() == before
+
+
+def test_a_campaign_stopped_at_a_k_prompt_replays_as_live_and_so_does_its_resume(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The operator declines to turn the compass for trial 2 (stops the campaign at its K
+    prompt: a confirm prompt has no other answer than yes); later the campaign is resumed and
+    the prompt answered. The first run's log replays to the stopped campaign, trial 2 not
+    begun; both logs to the completed one."""
+    monkeypatch.setattr(cia402_run, "SimulatedCia402", partial(SimulatedCia402, servo=SERVO))
+    plan = cia402_plan(tmp_path)
+    db = tmp_path / "c.sqlite"
+    sessions = open_database(sqlite_url(db))
+    stop = threading.Event()
+    with monkeypatch.context() as m:  # the prompt said on the terminal: the operator stops
+        m.setattr(OperatorLink, "_say", lambda self, line: self.stop.set())
+        first = run_live(
+            plan, CampaignStore.create(sessions, plan), quiet=True, stop=stop, answers=ANSWERS_1
+        )
+    assert first.outcome == "stopped"
+    stopped = record(db, 1)
+    assert [t[1] for t in stopped["trial"]] == ["completed", "pending"]
+    (log,) = logs(tmp_path)
+    assert replay(plan, sessions, [log]).outcome == "stopped"
+    assert record(db, 2) == stopped
+
+    resumed = CliRunner().invoke(
+        app,
+        ["campaign", "resume", "1", "--db", str(db), "--quiet"]
+        + [f"--answer={k}={v}" for k, v in ANSWERS.items()],
+    )
+    assert resumed.exit_code == 0, resumed.output
+    completed = record(db, 1)
+    assert [t[1] for t in completed["trial"]] == ["completed", "completed"]
+    assert replay(plan, sessions, logs(tmp_path)).outcome == "completed"
+    assert record(db, 3) == completed
