@@ -460,6 +460,40 @@ LOG_ERRORS = (OSError, ValueError, EOFError, struct.error, zlib.error, can.CanEr
 """What reading a raw log raises when it cannot be read (python-can's readers, `frames.logfile`)."""
 
 
+class _LoggedPrompts:
+    """A replay's frames and its operator (`engine.Operator`) as the live run's engine took
+    it: the prompts before a trial were answered when the log holds a frame after the point
+    where the engine asked them; when it ends there, the live run stopped there (the operator
+    stopped the campaign rather than confirm: a "confirm" prompt has no other answer; or the
+    process was killed). Exact in virtual time, where the log ends with the last frame the
+    engine took; a real-time log holds the rest of its last batch, so a stop at a prompt
+    replays there as an answer, then the log's end."""
+
+    def __init__(self, stream: Iterator[RawFrames]) -> None:
+        self._stream = stream
+        self._ahead: RawFrames | None = None
+        self._end = 0  # the stream position after the batch being fed
+        self.engine: Engine | None = None
+
+    def __iter__(self) -> Iterator[RawFrames]:
+        while self._more():
+            raw, self._ahead = self._ahead, None
+            assert raw is not None
+            self._end = raw.start + len(raw)
+            yield raw
+
+    def _more(self) -> bool:
+        if self._ahead is None:
+            self._ahead = next(self._stream, None)
+        return self._ahead is not None
+
+    def before_trial(self, trial: int) -> str | None:
+        assert self.engine is not None
+        if self.engine.consumed < self._end or self._more():
+            return None
+        return f"the log ends at the operator's prompt before trial {trial}: not answered"
+
+
 class ReplayLogError(ValueError):
     """A raw log that cannot be replayed: unreadable, corrupt, or without a CAN frame. The
     message starts with the file's name and says what is wrong."""
@@ -543,10 +577,12 @@ def replay(
         stream = read_segments(paths)
         info = _can_source_info(plan, codec)
     with replay_store(sessions, plan, procedures) as store:
-        engine = Engine(plan, store, _NoCommands(), source=info)
+        frames = _LoggedPrompts(_changed_since(stream, paths))
+        engine = Engine(plan, store, _NoCommands(), operator=frames, source=info)
+        frames.engine = engine
         with store.deferred():
             replayed_segments(store, checked)
-            for raw in _changed_since(stream, paths):
+            for raw in frames:
                 engine.feed(decoder.decode(raw))
                 if engine.phase is Phase.DONE:
                     break

@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 
 from gyrostand.acquisition import runner
 from gyrostand.acquisition.engine import Engine
+from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.runner import replay, run_live
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.cli import app
@@ -113,3 +114,46 @@ def test_ctrl_c_part_way_leaves_the_database_as_it_was(
     with pytest.raises(KeyboardInterrupt):
         replay(plan, sessions, logs)
     assert dump(plan.database) == before and files(tmp_path) == listed
+
+
+PROMPT = """
+[[prompt]]
+id = "mounted"
+text = "compass mounted and powered?"
+before = 2
+"""
+# what a run records of itself (prompts and answers, its raw log, how it ended) is not re-derived
+RUN_ONLY = "('prompt', 'answer', 'raw log', 'resume', 'interrupted')"
+RECORD = {
+    "trial": 'SELECT "index", status, failure_reason, meas_direction_deg, meas_amplitude_cm, '
+    "meas_period_s FROM trial WHERE campaign_id = {c} ORDER BY id",
+    "observation": "SELECT k, value_deg, window_start_ms, window_end_ms, frames_used FROM "
+    "observation o JOIN series s ON s.id = o.series_id JOIN trial t ON t.id = s.trial_id "
+    "WHERE campaign_id = {c} ORDER BY o.id",
+    "event": "SELECT stand_time_ms, kind, severity, message FROM event WHERE campaign_id = {c} "
+    f"AND kind NOT IN {RUN_ONLY} ORDER BY id",
+}
+
+
+def record(db: Path, campaign: int) -> dict[str, list[tuple]]:
+    with sqlite3.connect(db) as conn:
+        return {k: conn.execute(q.format(c=campaign)).fetchall() for k, q in RECORD.items()}
+
+
+def test_a_campaign_stopped_at_a_prompt_replays_as_live(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The operator stops the campaign at the prompt before trial 2 rather than confirm (a
+    "confirm" prompt has no other answer): the replay stops there too, trial 2 not begun."""
+    db = tmp_path / "c.sqlite"
+    plan = parse_plan(
+        plan_text(database=str(db), raw_dir=str(tmp_path / "raw")) + FAST_SIM + PROMPT
+    )
+    sessions = open_database(sqlite_url(db))
+    monkeypatch.setattr(OperatorLink, "_say", lambda self, line: self.stop.set())
+    live = run_live(plan, CampaignStore.create(sessions, plan), quiet=True)
+    assert live.outcome == "stopped" and live.raw_log is not None
+    stopped = record(db, 1)
+    assert [t[1] for t in stopped["trial"]] == ["completed", "pending"]
+    assert replay(plan, sessions, [live.raw_log]).outcome == "stopped"
+    assert record(db, 2) == stopped
