@@ -35,7 +35,7 @@ from gyrostand.analysis.procedures import (
     settling_time,
 )
 from gyrostand.analysis.transient import TransientModel
-from gyrostand.db.models import ProcedureRun
+from gyrostand.db.models import PROCEDURES_RAW_LOG, ProcedureRun
 from gyrostand.db.session import writer
 from gyrostand.frames.batch import BatchDecoder, Headings, RawFrames
 from gyrostand.frames.logfile import BatchBLFWriter, read_raw_frames
@@ -297,7 +297,7 @@ def _rolling(
     return tuple(out)
 
 
-RAW_LOG = "raw_log"  # the key of the procedures' raw log in their stored record
+RAW_LOG = PROCEDURES_RAW_LOG  # the key of the procedures' raw log in their stored record
 
 
 @dataclass(frozen=True)
@@ -466,10 +466,12 @@ def store_procedures(
     _store(sessions, campaign_id, record)
 
 
-def save_progress(sessions: sessionmaker[Session], campaign_id: int, done: dict[str, Any]) -> None:
-    """The stages done so far (`Progress.done`), in the campaign's procedure row until the
-    results replace them."""
-    _store(sessions, campaign_id, {PROGRESS: done})
+def save_progress(
+    sessions: sessionmaker[Session], campaign_id: int, done: dict[str, Any], raw_log: Path
+) -> None:
+    """The stages done so far (`Progress.done`) and the raw log being written, in the
+    campaign's procedure row until the results replace them."""
+    _store(sessions, campaign_id, {PROGRESS: done, RAW_LOG: {"path": str(raw_log)}})
 
 
 def _store(sessions: sessionmaker[Session], campaign_id: int, record: dict[str, Any]) -> None:

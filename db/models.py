@@ -466,6 +466,12 @@ class AnalysisRun(Base):
 SIGN_OFF_ROLES = ("tested_by", "checked_by")
 
 
+PROCEDURES_RAW_LOG = "raw_log"
+"""The key of the procedures' raw log in `ProcedureRun.results_json` ({"path": ...}, with its
+frames and SHA-256 once the procedures are done): from when the log is opened, so that a
+campaign stopped before its trials began still names it (`db.removal`)."""
+
+
 class ProcedureRun(Base):
     """The results of the standard's own procedures of a campaign (settling, settle point,
     repeatability, rolling: `analysis.procedures.ProcedureResults` as JSON), one per campaign."""

@@ -16,10 +16,12 @@ from sqlalchemy.orm import Session, sessionmaker
 from gyrostand.db.lease import held_elsewhere
 from gyrostand.db.merge import campaign_rows, content_sha256
 from gyrostand.db.models import (
+    PROCEDURES_RAW_LOG,
     Campaign,
     CampaignOrigin,
     CampaignRemoval,
     Instrument,
+    ProcedureRun,
     RawLogSegment,
 )
 from gyrostand.db.queries import as_utc
@@ -66,9 +68,22 @@ def _record(session: Session, campaign: Campaign) -> dict[str, Any]:
         "raw_logs": [
             {"path": log.path, "sha256": log.sha256, "frames": log.frames}
             for log in campaign.raw_logs
+        ]
+        + [
+            {"path": log["path"], "sha256": log.get("sha256"), "frames": log.get("frames")}
+            for log in _procedures_log(session, campaign.id)
         ],
         "analysis_runs": len(campaign.analysis_runs),
     }
+
+
+def _procedures_log(session: Session, campaign_id: int | None = None) -> list[dict[str, Any]]:
+    """The procedures' raw logs recorded with the campaign's procedures (all campaigns' with
+    None): a campaign stopped before its trials began has no raw log segment but this one."""
+    query = select(ProcedureRun.results_json)
+    if campaign_id is not None:
+        query = query.where(ProcedureRun.campaign_id == campaign_id)
+    return [r[PROCEDURES_RAW_LOG] for r in session.scalars(query) if PROCEDURES_RAW_LOG in r]
 
 
 def remove_campaigns(
@@ -98,6 +113,7 @@ def remove_campaigns(
                     "first; nothing removed"
                 )
             logs = tuple(log.path for log in campaign.raw_logs)
+            logs += tuple(log["path"] for log in _procedures_log(session, campaign_id))
             record = CampaignRemoval(
                 campaign_id=campaign_id,
                 content_sha256=content_sha256(campaign_rows(session, campaign_id)),
@@ -112,6 +128,7 @@ def remove_campaigns(
             session.flush()
             removed.append(Removed(campaign_id, record.content_sha256, record.id, logs))
         still_used = set(session.scalars(select(RawLogSegment.path)))
+        still_used.update(log["path"] for log in _procedures_log(session))
     if delete_raw_logs:
         for log in {p for r in removed for p in r.raw_logs} - still_used:
             for path in files_of(log):

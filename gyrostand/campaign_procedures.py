@@ -102,7 +102,7 @@ def run_procedures_of(
         store.run_event("procedures", "info", f"the standard's procedures resumed: kept {kept}")
 
     def saved(stages: dict[str, object]) -> None:
-        save_progress(store.sessions, store.campaign_id, stages)
+        save_progress(store.sessions, store.campaign_id, stages, path)
         if stop.is_set():
             raise Stopped
 
@@ -121,6 +121,7 @@ def run_procedures_of(
     # a resumed run writes it anew, the kept stages heard again (the same frames)
     path = procedures_log_path(segments[0].path if segments else raw_log_path(store, plan, []))
     log = BatchBLFWriter(path)
+    save_progress(store.sessions, store.campaign_id, done, path)  # (named before it holds any)
     try:
         results = run_procedures(
             *inputs,

@@ -54,7 +54,8 @@ def register(campaign_app: typer.Typer) -> None:
             bool,
             typer.Option(
                 "--delete-raw-logs",
-                help="Delete their raw CAN logs (and serial logs) that no campaign left refers "
+                help="Delete their raw CAN logs (with the serial logs beside, the standard's "
+                "procedures' logs, and a killed run's progress file) that no campaign left refers "
                 "to (default: the files are kept where they are, named in the removal record).",
             ),
         ] = False,
@@ -68,6 +69,7 @@ def register(campaign_app: typer.Typer) -> None:
         from gyrostand import SOFTWARE_VERSION
         from gyrostand.acquisition.procedures import procedures_log_path
         from gyrostand.db.models import Campaign
+        from gyrostand.db.queries import live_file_of
         from gyrostand.db.removal import RemovalRefused, remove_campaigns
         from gyrostand.devices.serial_replay import serial_log_path
 
@@ -104,8 +106,13 @@ def register(campaign_app: typer.Typer) -> None:
                 reason=None if reason is None else reason.strip(),
                 delete_raw_logs=delete_raw_logs,
                 software_version=SOFTWARE_VERSION,
-                # the serial and the procedures' logs beside
-                files_of=lambda log: (Path(log), serial_log_path(log), procedures_log_path(log)),
+                # the serial and the procedures' logs beside, the progress file a killed run left
+                files_of=lambda log: (
+                    Path(log),
+                    serial_log_path(log),
+                    procedures_log_path(log),
+                    live_file_of(log),
+                ),
             )
         except RemovalRefused as error:
             fail(str(error))

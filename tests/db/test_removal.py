@@ -2,12 +2,15 @@
 transaction and nothing else, a removal record with who, when, why and the content's SHA-256,
 raw logs kept or deleted; refusals change nothing. On both database back ends."""
 
+import threading
 from pathlib import Path
 
 import pytest
 from sqlalchemy import func, select
 from typer.testing import CliRunner
 
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.campaign_procedures import run_procedures_of
 from gyrostand.cli import app
 from gyrostand.db.merge import campaign_rows, content_sha256, copy_campaign
 from gyrostand.db.models import (
@@ -16,8 +19,10 @@ from gyrostand.db.models import (
     CampaignRemoval,
     RawLogSegment,
 )
-from gyrostand.db.session import open_database
+from gyrostand.db.session import open_database, sqlite_url
+from gyrostand.plan.model import parse_plan
 from tests.acquisition.harness import ROOT
+from tests.procedures.test_campaign_procedures import plan as procedures_plan
 
 PAPER_CSV = str(ROOT / "examples" / "paper.csv")
 
@@ -110,11 +115,14 @@ def test_remove_takes_every_row_of_the_campaigns_and_records_each_removal(
 def test_delete_raw_logs_deletes_only_files_no_campaign_left_refers_to(
     db_url: str, three: list[Path]
 ) -> None:
+    live = three[0].with_suffix(".live.json")  # a killed run's progress file
+    live.write_text("{}")
     args = ["campaign", "remove", "1", "2", "--db", db_url, "--yes", "--delete-raw-logs"]
     code, out, err = gyrostand(*args)
     assert code == 0, err
     assert out.count("raw logs deleted") == 2
     assert not three[0].exists() and not three[0].with_suffix(".nmea").exists()
+    assert not live.exists()
     assert three[1].is_file()  # campaign 3 still refers to it
     sessions = open_database(db_url)
     with sessions() as session:
@@ -150,3 +158,28 @@ def test_the_confirmation_on_a_terminal(
     code, out, err = gyrostand("campaign", "remove", "3", "--db", db_url, input="y\n")
     assert code == 0 and "removed campaign 3 (" in out, err
     assert counts(db_url)["campaign"] == 2
+
+
+def test_a_campaign_stopped_in_its_procedures_names_and_deletes_their_raw_log(
+    tmp_path: Path,
+) -> None:
+    """Stopped before its trials began (no raw log segment): the procedures' log it wrote is
+    its raw log, named in the removal record and deleted with --delete-raw-logs."""
+    plan = parse_plan(procedures_plan(tmp_path))
+    sessions = open_database(sqlite_url(plan.database))
+    store = CampaignStore.create(sessions, plan)
+    stop = threading.Event()
+    stop.set()  # the procedures stop once their first stage is saved
+    assert run_procedures_of(plan, store, True, stop) is False
+    store.set_status("stopped")
+    store.lease.release()
+    (log,) = (tmp_path / "raw").iterdir()
+    assert log.name == "p-campaign-1.procedures.blf"
+    args = ["campaign", "remove", "1", "--db", str(plan.database), "--yes"]
+    code, out, err = gyrostand(*args, "--delete-raw-logs")
+    assert code == 0, err
+    assert out.endswith("; raw logs deleted\n") and not log.exists()
+    with sessions() as session:
+        removal = session.scalars(select(CampaignRemoval)).one()
+    assert removal.raw_logs == "deleted"
+    assert removal.record["raw_logs"] == [{"path": str(log), "sha256": None, "frames": None}]
