@@ -147,6 +147,18 @@ def replay_runs(plan: Plan, store: CampaignStore, paths: Sequence[Path]) -> Engi
     return engine
 
 
+def check_first_log(path: Path) -> None:
+    """DriveLogError (one line) unless `path` begins a CiA 402 campaign's raw log: a RUN
+    record first (not so another stand's log, a later segment alone, or a log written before
+    gyrostand logged the drive's traffic: the acks and statuses its master derived instead)."""
+    if not starts_a_run(path):
+        raise DriveLogError(
+            f"{path}: not a CiA 402 stand's raw log from its start (no RUN record first: "
+            "another stand's, a later segment, or written before gyrostand logged the drive's "
+            "traffic)"
+        )
+
+
 def replay_cia402(
     plan: Plan,
     sessions: sessionmaker[Session],
@@ -158,12 +170,7 @@ def replay_cia402(
     a ValueError) and the database is left as it was (`runner.replay_store`)."""
     from gyrostand.acquisition.runner import _judged, replay_store, replayed_segments, result
 
-    if not starts_a_run(checked[0].path):  # (before the database is written)
-        raise DriveLogError(
-            f"{checked[0].path}: not a CiA 402 stand's raw log from its start (no RUN record "
-            "first: another stand's, a later segment, or written before gyrostand logged the "
-            "drive's traffic)"
-        )
+    check_first_log(checked[0].path)  # (before the database is written)
     with replay_store(sessions, plan, procedures) as store:
         with store.deferred():
             replayed_segments(store, checked)

@@ -781,6 +781,14 @@ def register(app: typer.Typer) -> None:
                 check_serial_logs(logs, checked.bus.timing == "virtual")
             except LogFileError as exc:
                 fail(f"cannot replay {exc}")
+        if checked.stand.protocol == "cia402":  # its drive's traffic, from a run's start
+            from gyrostand.acquisition.cia402_replay import check_first_log
+            from gyrostand.devices.cia402_log import DriveLogError
+
+            try:
+                check_first_log(readable[0].path)
+            except DriveLogError as exc:
+                fail(f"cannot replay {exc}")
         try:  # the standard's procedures: from their log beside the first, before the database
             procedures = replay_procedures_log(checked, logs[0])
         except ReplayLogError as exc:

@@ -22,6 +22,7 @@ from gyrostand.frames.logfile import BatchBLFWriter, read_raw_frames
 from gyrostand.plan.model import Plan, parse_plan
 
 from .harness import FAST_SIM, plan_text
+from .test_cia402_replay import cia402_plan
 
 
 def dump(db: Path) -> str:
@@ -157,3 +158,20 @@ def test_a_campaign_stopped_at_a_prompt_replays_as_live(
     assert [t[1] for t in stopped["trial"]] == ["completed", "pending"]
     assert replay(plan, sessions, [live.raw_log]).outcome == "stopped"
     assert record(db, 2) == stopped
+
+
+def test_a_cia402_log_of_before_the_drives_traffic_was_logged_is_one_line(tmp_path: Path) -> None:
+    """Before the RUN and STEP records, a CiA 402 stand's raw log held the acks and statuses
+    its master derived (stand DBC frames) and the compass's frames, as a smart stand's log
+    does: refused before the database is opened (none is made)."""
+    _, _, (log, _) = campaign(tmp_path)
+    plan = tmp_path / "cia402.toml"
+    plan.write_text(cia402_plan(tmp_path / "new").text)
+    db = tmp_path / "new" / "c.sqlite"
+    result = CliRunner().invoke(app, ["replay", str(log), "--plan", str(plan)])
+    assert result.exit_code == 2 and not db.exists()
+    assert result.stderr.splitlines() == [
+        f"gyrostand: error: cannot replay {log}: not a CiA 402 stand's raw log from its start "
+        "(no RUN record first: another stand's, a later segment, or written before gyrostand "
+        "logged the drive's traffic)"
+    ]
