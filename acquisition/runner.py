@@ -598,18 +598,38 @@ def replay_store(
     sessions: sessionmaker[Session], plan: Plan, procedures: ReplayedProcedures | None
 ) -> Iterator[CampaignStore]:
     """A replay's new campaign (source "replay"), with the re-derived procedures (if any). A
-    replay that fails part-way (a log that does not match, Ctrl-C, a database error) takes it
-    out again with everything it wrote and its lease: the database is as it was before."""
+    replay that fails part-way (a log that does not match, Ctrl-C or SIGTERM, a database error)
+    takes it out again with everything it wrote and its lease: the database is as it was
+    before. (A kill -9 leaves it, marked running: `campaign remove` takes it out.)"""
     instruments = newest_instrument(sessions)
-    store = CampaignStore.create(sessions, plan, source="replay")
+    with _terminate_interrupts():
+        store = CampaignStore.create(sessions, plan, source="replay")
+        try:
+            if procedures is not None:
+                store_procedures(sessions, store.campaign_id, procedures.results, procedures.log)
+            yield store
+        except BaseException:
+            store.lease.release()
+            discard_campaign(sessions, store.campaign_id, instruments)
+            raise
+
+
+@contextmanager
+def _terminate_interrupts() -> Iterator[None]:
+    """SIGTERM raises KeyboardInterrupt, as Ctrl-C does (instead of ending the process where
+    it is). Only possible from the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, _frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, handler)
     try:
-        if procedures is not None:
-            store_procedures(sessions, store.campaign_id, procedures.results, procedures.log)
-        yield store
-    except BaseException:
-        store.lease.release()
-        discard_campaign(sessions, store.campaign_id, instruments)
-        raise
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _changed_since(stream: Iterator[RawFrames], paths: Sequence[Path]) -> Iterator[RawFrames]:

@@ -6,6 +6,8 @@ replay's own cases: tests/acquisition/test_cia402_replay.py.)"""
 from __future__ import annotations
 
 import sqlite3
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -175,3 +177,33 @@ def test_a_cia402_log_of_before_the_drives_traffic_was_logged_is_one_line(tmp_pa
         "(no RUN record first: another stand's, a later segment, or written before gyrostand "
         "logged the drive's traffic)"
     ]
+
+
+TERMINATED = """
+import os, signal, sys
+from gyrostand.__main__ import main
+from gyrostand.acquisition.engine import Engine
+
+feed, fed = Engine.feed, []
+
+def terminated(self, batch):  # SIGTERM after the first segment's observations are written
+    fed.append(batch)
+    if len(fed) == 2:
+        os.kill(os.getpid(), signal.SIGTERM)
+    feed(self, batch)
+
+Engine.feed = terminated
+sys.argv[1:] = ["replay", *sys.argv[1:]]
+main()
+"""
+
+
+def test_sigterm_part_way_leaves_the_database_as_it_was(tmp_path: Path) -> None:
+    """`gyrostand replay` told to terminate (a service stopped, a job's time limit)."""
+    plan, path, logs = campaign(tmp_path)
+    open_database(sqlite_url(plan.database))  # (its schema, no campaign)
+    before, listed = dump(plan.database), files(tmp_path)
+    args = [sys.executable, "-c", TERMINATED, *map(str, logs), "--plan", str(path)]
+    done = subprocess.run(args, capture_output=True, text=True, timeout=120, check=False)
+    assert (done.returncode, done.stderr.splitlines()[-1]) == (130, "gyrostand: interrupted")
+    assert dump(plan.database) == before and files(tmp_path) == listed
