@@ -4,6 +4,7 @@ the engine without a bus or a clock is `gyrostand.acquisition.lockstep`)."""
 from __future__ import annotations
 
 import dataclasses
+import sqlite3
 from pathlib import Path
 from typing import Any
 
@@ -163,3 +164,16 @@ class NoCommands:
 
 def replace_faults(config: SimConfig, **faults: Any) -> SimConfig:
     return dataclasses.replace(config, faults=FaultParams(**faults))
+
+
+def dump(db: Path) -> str:
+    """The whole database content as SQL text (equal iff the contents are)."""
+    with sqlite3.connect(db) as conn:
+        return "\n".join(conn.iterdump())
+
+
+def files(folder: Path) -> list[str]:
+    """The files in `folder` but SQLite's own beside a database (its write-ahead log and index,
+    there while a connection is open: this process's, closed whenever it is collected)."""
+    found = (p for p in folder.rglob("*") if not p.name.endswith(("-wal", "-shm", "-journal")))
+    return sorted(str(p.relative_to(folder)) for p in found)

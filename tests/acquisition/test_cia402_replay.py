@@ -30,7 +30,7 @@ from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import Plan, parse_plan
 from gyrostand.report.signal_record import heading_source, headings_in
 
-from .harness import FAST_SIM, plan_text
+from .harness import FAST_SIM, dump, files, plan_text
 from .test_cia402_campaign import SERVO, STAND
 
 NODE = 2  # the plan's drive
@@ -198,12 +198,6 @@ def test_a_stopped_and_resumed_campaign_replays_as_its_two_runs(
     assert starts == sorted(starts) and starts[2] > STOP_AT_S * 1000
 
 
-def dump(db: Path) -> str:
-    """The whole database content as SQL text (equal iff the contents are)."""
-    with sqlite3.connect(db) as conn:
-        return "\n".join(conn.iterdump())
-
-
 def test_a_set_point_changed_in_the_second_run_leaves_the_database_as_it_was(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -226,9 +220,9 @@ def test_a_set_point_changed_in_the_second_run_leaves_the_database_as_it_was(
     writer.stop()
     path = tmp_path / "plan.toml"
     path.write_text(plan.text)
-    before, listed = dump(plan.database), sorted(tmp_path.rglob("*"))
+    before, listed = dump(plan.database), files(tmp_path)
     result = CliRunner().invoke(app, ["replay", str(first), str(tampered), "--plan", str(path)])
-    assert dump(plan.database) == before and sorted(tmp_path.rglob("*")) == listed
+    assert dump(plan.database) == before and files(tmp_path) == listed
     assert result.exit_code == 1
     (error,) = [line for line in result.stderr.splitlines() if "error" in line]
     assert error.startswith(f"gyrostand: error: replay of {tampered} failed: at stand time ")

@@ -26,18 +26,8 @@ from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.frames.logfile import BatchBLFWriter, read_raw_frames
 from gyrostand.plan.model import Plan, parse_plan
 
-from .harness import FAST_SIM, plan_text
+from .harness import FAST_SIM, dump, files, plan_text
 from .test_cia402_replay import cia402_plan
-
-
-def dump(db: Path) -> str:
-    """The whole database content as SQL text (equal iff the contents are)."""
-    with sqlite3.connect(db) as conn:
-        return "\n".join(conn.iterdump())
-
-
-def files(folder: Path) -> list[str]:
-    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
 
 
 def campaign(tmp_path: Path) -> tuple[Plan, Path, list[Path]]:
