@@ -6,8 +6,8 @@ deterministic).
 Each stage is saved as it ends (`Progress`: `campaign resume` keeps the stages done); a compass
 powered by hand is switched by the operator, prompted (`before_switch_on`). Every frame heard
 goes into the procedures' raw log (`RunUp(log=...)`, BLF, in campaign stand time), from which
-`LoggedRunUp` re-derives the results offline (`gyrostand replay`), to the bit. Not yet here: the
-live bus (`acquisition.engine`): a real compass needs it.
+`LoggedRunUp` re-derives the results offline (`gyrostand replay`), to the bit. On a real bus the
+same procedures run on `procedures_live.LiveRunUp`, in real time.
 """
 
 from __future__ import annotations
@@ -102,6 +102,13 @@ class RunUp:
     def exhausted(self) -> bool:
         """Whether nothing more can be heard (a log read to its end; never a live compass)."""
         return False
+
+    @property
+    def rehears(self) -> bool:
+        """Whether the stages kept from an interrupted run are gone through again (the
+        simulated compass re-simulated, its log replayed: the same frames); not a real
+        compass's (`LiveRunUp`): its run goes on."""
+        return True
 
     def advance(self, until_s: float) -> None:
         """Record the compass's heading frames up to `until_s` seconds after switch-on."""
@@ -268,6 +275,9 @@ def _rolling(
             )
             continue
         measured = len(out) >= len(kept)
+        if not measured and not runup.rehears:
+            out.append(kept[len(out)])
+            continue
         codec = runup.codec
         runup.command(
             codec.encode_command_set(point.direction_deg, point.amplitude_cm, point.period_s)

@@ -307,8 +307,7 @@ def test_a_compass_powered_by_hand_is_switched_when_the_operator_answers(tmp_pat
         "switch_on_1",
         "switch_off_2",
         "switch_on_2",
-        "switch_off_3",
-        "switch_off_3",  # asked again by the resumed run (it was never answered)
+        "switch_off_3",  # asked again by the resumed run (never answered): one event
         "switch_on_3",
     ]
     assert answered == [f"{k}: yes" for k in ("switch_on_1", "switch_off_2", "switch_on_2")] + [
@@ -328,10 +327,24 @@ def test_no_reference_heading_leaves_the_settle_point_error_not_assessed(a821) -
     assert items["heading-rms"].verdict == PASS and items["settling-time"].verdict == PASS
 
 
-def test_procedures_on_a_real_bus_are_refused() -> None:
+def test_on_a_real_bus_a_power_control_gyrostand_cannot_command_is_refused() -> None:
+    real = PAPER.replace("simulated = true", "simulated = false") + FAST.format(knob="")
     with pytest.raises(PlanError) as err:
-        parse_plan(PAPER.replace("simulated = true", "simulated = false") + FAST.format(knob=""))
-    assert any("simulated compass only" in p for p in err.value.problems), err.value.problems
+        parse_plan(real)
+    power = (
+        ': power = "stand" on a real bus: gyrostand cannot switch the compass there (its stand '
+        'protocol has no power control); power = "manual": the operator switches it, prompted'
+    )
+    assert err.value.problems == [
+        f"[[procedure]] 1 power: settling{power}",
+        f"[[procedure]] 3 power: repeatability{power}",
+        "[bus] timing: the standard's procedures on a real bus: not with timing = \"virtual\" "
+        '(they run in real time: timing = "realtime")',
+    ]
+    manual = real.replace('timing = "virtual"', 'timing = "realtime"')
+    for kind in ("settling", "repeatability"):
+        manual = manual.replace(f'kind = "{kind}"\n', f'kind = "{kind}"\npower = "manual"\n')
+    assert [p.power for p in parse_plan(manual).procedure] == ["manual", "stand"] * 2
 
 
 def logged_run(plan: Plan, profile, path, progress: Progress | None = None) -> ProcedureResults:
