@@ -101,7 +101,10 @@ def run_procedures_of(
     inputs = procedure_inputs(plan)
     config, procedures = inputs[0], inputs[1]
     if done:
-        kept = ", ".join(k for k in done if not k.endswith("_s"))
+        kept = ", ".join(
+            [k for k in done if not k.endswith("_s")]
+            + [f"the switch-on of run-up {k}" for k in done.get("switch_on_s", {})]
+        )
         store.run_event("procedures", "info", f"the standard's procedures resumed: kept {kept}")
 
     def saved(stages: dict[str, object]) -> None:

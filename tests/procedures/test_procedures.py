@@ -338,7 +338,7 @@ def test_on_a_real_bus_a_power_control_gyrostand_cannot_command_is_refused() -> 
     assert err.value.problems == [
         f"[[procedure]] 1 power: settling{power}",
         f"[[procedure]] 3 power: repeatability{power}",
-        "[bus] timing: the standard's procedures on a real bus: not with timing = \"virtual\" "
+        '[bus] timing: the standard\'s procedures on a real bus: not with timing = "virtual" '
         '(they run in real time: timing = "realtime")',
     ]
     manual = real.replace('timing = "virtual"', 'timing = "realtime"')

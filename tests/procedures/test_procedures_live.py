@@ -1,0 +1,143 @@
+"""The standard's procedures on a real bus (issue 35): the campaign's procedure stage on python-
+can's `virtual` bus, the simulated compass and stand in a thread of their own in real time (sped
+up, as `gyrostand simulate --timing realtime --speedup X` runs them), switched on as it starts
+(its run-up from rotor stop, `stand.runup`). The operator's answer starts the run-up; a stop
+request part-way keeps the switch-on and the frames heard, and the resumed run goes on with that
+run-up. The results are checked against the simulator's truth within their stated
+uncertainties; no assertion on wall time (the waits are guards against a hang only).
+
+~20 s of wall time (2300 s of stand time at 150x): in SLOW_FILES."""
+
+from __future__ import annotations
+
+import math
+import re
+import sqlite3
+import threading
+import uuid
+from pathlib import Path
+
+import can
+import numpy as np
+
+from gyrostand.acquisition.operator import messages
+from gyrostand.acquisition.procedures import stored_progress
+from gyrostand.acquisition.store import CampaignStore
+from gyrostand.campaign_procedures import run_procedures_of
+from gyrostand.db.session import open_database
+from gyrostand.frames.logfile import read_raw_frames
+from gyrostand.plan.model import parse_plan
+from gyrostand.plan.prompts import PROMPT, STOP_REQUEST
+from gyrostand.report.stored import stored_procedures
+from gyrostand.stand.runup import runup_config, true_settle_point_deg, true_settling_time_s
+from gyrostand.stand.simconfig import CompassParams, SimConfig
+from gyrostand.stand.simulator import Simulator
+from tests.acquisition.harness import plan_text
+
+SPEEDUP = 150.0
+STOP_AT_S = 500.0  # stand time of the station's stop request (during the settling record)
+GUARD_WALL_S = 300.0  # against a hang only
+PROCEDURES = """
+[standard]
+profile = "imo-a821"
+[reference]
+heading_deg = 120.0
+uncertainty_deg = 0.01
+[[procedure]]
+kind = "settling"
+max_wait_s = 1200.0
+power = "manual"
+[[procedure]]
+kind = "settle_point"
+interval_s = 20.0
+[[procedure]]
+kind = "rolling"
+wait_s = 600.0
+readings = 3
+interval_s = 60.0
+points = [{direction_deg = 45, amplitude_cm = 24, period_s = 6}]
+"""
+
+
+def live_plan(tmp_path: Path, channel: str) -> str:
+    text = plan_text(
+        [(45.0, 24.0, 6.0, "fit")],
+        database=str(tmp_path / "p.sqlite"),
+        raw_dir=str(tmp_path / "raw"),
+    )
+    bus = f'simulated = false\ninterface = "virtual"\nchannel = "{channel}"\ntiming = "realtime"'
+    text = text.replace("simulated = true", bus).replace("seed = 1\n", "")
+    transient = "max_wait_s = 3600.0\nundamped_period_s = 240.0\ndamping_ratio = 0.8"
+    return text.replace("max_wait_s = 3600.0", transient) + PROCEDURES
+
+
+def test_procedures_on_a_real_bus_recover_the_simulated_compass_truth(tmp_path: Path) -> None:
+    channel = f"gyrostand-procbus-{uuid.uuid4().hex}"
+    plan = parse_plan(live_plan(tmp_path, channel))
+    base = SimConfig(
+        compass=CompassParams(undamped_period_s=240.0, damping_ratio=0.8),
+        timing="realtime",
+        speedup=SPEEDUP,
+        seed=2,
+    )
+    compass = runup_config(base, 1)  # switched on as the simulator starts: stand time 0
+    sessions = open_database(f"sqlite:///{tmp_path / 'p.sqlite'}")
+    store = CampaignStore.create(sessions, plan)
+
+    def stop_request() -> None:  # the station's, during the settling record
+        try:
+            simulator.wait_until(STOP_AT_S, GUARD_WALL_S)
+        except TimeoutError:
+            return
+        store.run_event(STOP_REQUEST, "info", "stop requested at the station")
+
+    with (
+        can.Bus(interface="virtual", channel=channel) as bus,
+        Simulator(bus, compass) as simulator,
+    ):
+        requester = threading.Thread(target=stop_request, daemon=True)
+        requester.start()
+        given = {"switch_on_1": "yes"}
+        assert run_procedures_of(plan, store, True, threading.Event(), given) is False
+        requester.join(GUARD_WALL_S)
+        complete, done = stored_progress(sessions, store.campaign_id)
+        assert not complete and set(done) == {"switch_on_s"}  # the settling record under way
+        store.run_event("resume", "info", "resumed")  # the stop request before it is spent
+        assert run_procedures_of(plan, store, True, threading.Event(), {}) is True
+        assert not simulator.engine.rocking  # the rolling point's stop acknowledged
+    with sessions() as session:
+        out = stored_procedures(session, store.campaign_id)
+        events = messages(session, store.campaign_id, "procedures")
+        asked = messages(session, store.campaign_id, PROMPT)
+    assert out is not None
+    on = "switch_on_1: switch the compass on: run-up 1 (settling from switch-on) starts"
+    assert asked == [on]
+    (switched,) = [e for e in events if e.startswith("run-up 1 switched on")]
+    at_s = float(re.search(r"stand time ([0-9.e+-]+) s", switched)[1])
+    assert 0.0 <= at_s < STOP_AT_S and at_s == done["switch_on_s"]["1"]
+    # settling, from the operator's answer (the compass was switched on at stand time 0)
+    s = out.settling
+    truth = true_settling_time_s(compass, s.half_band_deg, 1200.0) - at_s
+    assert s.settled and abs(s.value_s - truth) <= s.expanded_s
+    assert 0 < s.expanded_s < 60
+    p = out.settle_point
+    true_error = true_settle_point_deg(base, 1) - 120.0
+    assert abs(p.error_deg - true_error) <= p.error_expanded_deg
+    noise = base.noise
+    sigma = math.hypot(noise.white_sigma_deg, noise.corr_sigma_deg)
+    assert abs(p.rms_deg - sigma) <= p.rms_expanded_deg
+    (rolled,) = out.rolling
+    shift = base.compass.settled_shift_deg(45.0, 24.0, 6.0)
+    assert not rolled.forecast and abs(rolled.error_deg - shift) <= rolled.expanded_deg
+    assert abs(shift) > 5 * rolled.expanded_deg  # the rolling error is there, and resolved
+    # the raw logs: the stopped run's and the resumed run's, stamped by reception (wall clock)
+    first = tmp_path / "raw" / "p-campaign-1.procedures.blf"
+    resumed = first.with_name("p-campaign-1.procedures-resume1.blf")
+    assert sorted((tmp_path / "raw").glob("*.procedures*.blf")) == [resumed, first]
+    stamps = np.concatenate([raw.timestamp for raw in read_raw_frames(first)])
+    # stamped by reception, in wall seconds: STOP_AT_S of stand time took ~STOP_AT_S / SPEEDUP
+    assert np.ptp(stamps) < STOP_AT_S / 5
+    with sqlite3.connect(tmp_path / "p.sqlite") as conn:
+        raw = [m for (m,) in conn.execute("SELECT message FROM event WHERE kind = 'raw log'")]
+    assert f"the standard's procedures' earlier frames in {first}" in raw
+    assert any(m.startswith(f"the standard's procedures' frames in {resumed}") for m in raw)
