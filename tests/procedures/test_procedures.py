@@ -19,9 +19,10 @@ from gyrostand.acquisition.procedures import (
     run_procedures,
     stored_progress,
 )
+from gyrostand.acquisition.runner import ReplayLogError
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.analysis.procedures import ProcedureResults
-from gyrostand.campaign_procedures import run_procedures_of
+from gyrostand.campaign_procedures import replay_procedures_log, run_procedures_of
 from gyrostand.db.session import open_database
 from gyrostand.frames.logfile import BatchBLFWriter, read_raw_frames
 from gyrostand.plan.model import Plan, PlanError, parse_plan
@@ -327,10 +328,20 @@ def test_no_reference_heading_leaves_the_settle_point_error_not_assessed(a821) -
     assert items["heading-rms"].verdict == PASS and items["settling-time"].verdict == PASS
 
 
+REAL = PAPER.replace("simulated = true", "simulated = false") + FAST.format(knob="")
+
+
+def manual_on_a_real_bus() -> Plan:
+    """FAST on a real bus, in real time, the compass switched by the operator."""
+    text = REAL.replace('timing = "virtual"', 'timing = "realtime"')
+    for kind in ("settling", "repeatability"):
+        text = text.replace(f'kind = "{kind}"\n', f'kind = "{kind}"\npower = "manual"\n')
+    return parse_plan(text)
+
+
 def test_on_a_real_bus_a_power_control_gyrostand_cannot_command_is_refused() -> None:
-    real = PAPER.replace("simulated = true", "simulated = false") + FAST.format(knob="")
     with pytest.raises(PlanError) as err:
-        parse_plan(real)
+        parse_plan(REAL)
     power = (
         ': power = "stand" on a real bus: gyrostand cannot switch the compass there (its stand '
         'protocol has no power control); power = "manual": the operator switches it, prompted'
@@ -341,10 +352,17 @@ def test_on_a_real_bus_a_power_control_gyrostand_cannot_command_is_refused() -> 
         '[bus] timing: the standard\'s procedures on a real bus: not with timing = "virtual" '
         '(they run in real time: timing = "realtime")',
     ]
-    manual = real.replace('timing = "virtual"', 'timing = "realtime"')
-    for kind in ("settling", "repeatability"):
-        manual = manual.replace(f'kind = "{kind}"\n', f'kind = "{kind}"\npower = "manual"\n')
-    assert [p.power for p in parse_plan(manual).procedure] == ["manual", "stand"] * 2
+    assert [p.power for p in manual_on_a_real_bus().procedure] == ["manual", "stand"] * 2
+
+
+def test_replay_refuses_the_procedures_of_a_real_bus_in_one_line(tmp_path) -> None:
+    log = tmp_path / "lab-campaign-1.blf"
+    with pytest.raises(ReplayLogError) as err:
+        replay_procedures_log(manual_on_a_real_bus(), log)
+    assert str(err.value) == (
+        f"{log}: the standard's procedures of a campaign on a real bus are not re-derived from "
+        "their log yet (their run-ups start at the operator's answers)"
+    )
 
 
 def logged_run(plan: Plan, profile, path, progress: Progress | None = None) -> ProcedureResults:
