@@ -62,7 +62,6 @@ class BusHeadings:
         self.now_ms = -np.inf  # the latest stand time heard (statuses and headings)
         self.position = 0  # frames drained
         self.rocking = False
-        self._errors = 0
         self._silence_s = plan.timeouts.bus_silence_s
         self._last_frame = time.monotonic()
 
@@ -91,8 +90,8 @@ class BusHeadings:
             )
         if live.recorder.log_error is not None:
             raise ProcedureBusError(f"the raw log cannot be written: {live.recorder.log_error}")
-        if len(live.recorder.errors) > self._errors:
-            raise ProcedureBusError(f"bus error: {live.recorder.errors[self._errors]}")
+        if live.recorder.errors:
+            raise ProcedureBusError(f"bus error: {live.recorder.errors[0]}")
         if not msgs:
             if time.monotonic() - self._last_frame > self._silence_s:
                 raise ProcedureBusError(

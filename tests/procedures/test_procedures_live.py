@@ -6,7 +6,12 @@ request part-way keeps the switch-on and the frames heard, and the resumed run g
 run-up. The results are checked against the simulator's truth within their stated
 uncertainties; no assertion on wall time (the waits are guards against a hang only).
 
-~20 s of wall time (2300 s of stand time at 150x): in SLOW_FILES."""
+The operator's switching of the compass for the repeatability's run-ups: its simulator stopped,
+a new one started (the run-up from rotor stop, the stand clock going on).
+
+~20 s of wall time each (2500-3400 s of stand time at 150x): in SLOW_FILES. The readings lie
+100 s apart, 5 correlation times of the simulated noise (closer, they are not independent and
+the stated uncertainty of their mean is too small)."""
 
 from __future__ import annotations
 
@@ -27,7 +32,7 @@ from gyrostand.campaign_procedures import run_procedures_of
 from gyrostand.db.session import open_database
 from gyrostand.frames.logfile import read_raw_frames
 from gyrostand.plan.model import parse_plan
-from gyrostand.plan.prompts import PROMPT, STOP_REQUEST
+from gyrostand.plan.prompts import ANSWER, PROMPT, STOP_REQUEST, keyed, message
 from gyrostand.report.stored import stored_procedures
 from gyrostand.stand.runup import runup_config, true_settle_point_deg, true_settling_time_s
 from gyrostand.stand.simconfig import CompassParams, SimConfig
@@ -49,7 +54,8 @@ max_wait_s = 1200.0
 power = "manual"
 [[procedure]]
 kind = "settle_point"
-interval_s = 20.0
+readings = 5
+interval_s = 100.0
 [[procedure]]
 kind = "rolling"
 wait_s = 600.0
@@ -67,6 +73,11 @@ def live_plan(tmp_path: Path, channel: str) -> str:
     )
     bus = f'simulated = false\ninterface = "virtual"\nchannel = "{channel}"\ntiming = "realtime"'
     text = text.replace("simulated = true", bus).replace("seed = 1\n", "")
+    # guards against a hang only, generous: the machine may be loaded (wall seconds)
+    guards = {"ack_s = 2.0": "ack_s = 30.0", "bus_silence_s = 5.0": "bus_silence_s = 30.0"}
+    for was, now in guards.items():
+        assert was in text
+        text = text.replace(was, now)
     transient = "max_wait_s = 3600.0\nundamped_period_s = 240.0\ndamping_ratio = 0.8"
     return text.replace("max_wait_s = 3600.0", transient) + PROCEDURES
 
@@ -141,3 +152,84 @@ def test_procedures_on_a_real_bus_recover_the_simulated_compass_truth(tmp_path: 
         raw = [m for (m,) in conn.execute("SELECT message FROM event WHERE kind = 'raw log'")]
     assert f"the standard's procedures' earlier frames in {first}" in raw
     assert any(m.startswith(f"the standard's procedures' frames in {resumed}") for m in raw)
+
+
+REPEATABILITY = """
+[standard]
+profile = "imo-a821"
+[[procedure]]
+kind = "settling"
+max_wait_s = 1200.0
+power = "manual"
+[[procedure]]
+kind = "repeatability"
+runups = 2
+off_s = 60.0
+readings = 5
+interval_s = 100.0
+power = "manual"
+"""
+
+
+class Operator(threading.Thread):
+    """The operator at the station: answers each switching prompt once the simulated compass is
+    switched (off: its simulator stopped; on: a new one, run-up k from rotor stop, its stand
+    clock going on)."""
+
+    def __init__(self, store: CampaignStore, bus: can.BusABC, base: SimConfig) -> None:
+        super().__init__(daemon=True)
+        self.store, self.bus, self.base = store, bus, base
+        self.simulators = [Simulator(bus, runup_config(base, 1))]
+        self.done = threading.Event()
+
+    def run(self) -> None:
+        answered: set[str] = set()
+        while not self.done.wait(0.05):
+            with self.store.sessions() as session:
+                asked = keyed(messages(session, self.store.campaign_id, PROMPT))
+            for prompt in asked.keys() - answered:
+                kind, k = prompt.rsplit("_", 1)
+                last = self.simulators[-1]
+                if kind == "switch_off":
+                    last.stop()
+                elif k != "1":  # (run-up 1's simulator runs from the start)
+                    clock_ms = last.engine.clock_ms + math.ceil(last.stand_time_s) * 1000
+                    on = Simulator(self.bus, runup_config(self.base, int(k)), clock_ms=clock_ms)
+                    on.start()
+                    self.simulators.append(on)
+                self.store.run_event(ANSWER, "info", message(prompt, "yes"))
+                answered.add(prompt)
+
+
+def test_repeatability_on_a_real_bus_the_operator_switching_the_compass(tmp_path: Path) -> None:
+    channel = f"gyrostand-procbus-{uuid.uuid4().hex}"
+    text = live_plan(tmp_path, channel)
+    plan = parse_plan(text[: text.index("[standard]")] + REPEATABILITY)
+    base = SimConfig(
+        compass=CompassParams(undamped_period_s=240.0, damping_ratio=0.8),
+        timing="realtime",
+        speedup=SPEEDUP,
+        seed=3,
+    )
+    sessions = open_database(f"sqlite:///{tmp_path / 'p.sqlite'}")
+    store = CampaignStore.create(sessions, plan)
+    with can.Bus(interface="virtual", channel=channel) as bus:
+        operator = Operator(store, bus, base)
+        operator.simulators[0].start()
+        operator.start()
+        try:
+            assert run_procedures_of(plan, store, True, threading.Event()) is True
+        finally:
+            operator.done.set()
+            operator.join(GUARD_WALL_S)
+            operator.simulators[-1].stop()
+    assert len(operator.simulators) == 2
+    with sessions() as session:
+        out = stored_procedures(session, store.campaign_id)
+        asked = [m.split(":")[0] for m in messages(session, store.campaign_id, PROMPT)]
+    assert asked == ["switch_on_1", "switch_off_2", "switch_on_2"]
+    assert out is not None and out.repeatability is not None
+    r = out.repeatability
+    truth = [true_settle_point_deg(base, k) for k in (1, 2)]
+    assert abs(r.range_deg - (max(truth) - min(truth))) <= r.expanded_deg
+    assert 0 < r.expanded_deg < 0.05  # a real uncertainty, not a blanket one
