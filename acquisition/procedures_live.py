@@ -6,9 +6,9 @@ frames into one queue, the raw log written as they are drained) and are decoded 
 decoder (`runner._can_decoder`: a compass timed by its own frames' stand time, or by reception on
 the stand clock, `devices.clock`). Campaign time is the stand clock heard: a run-up's "until"
 waits for it (real time is the point: a settling test takes hours). Each run-up starts at the
-stand time the operator's answer to its switch-on prompt was heard (the stand's protocol has no
-power control); `switch_on_s` keeps those times, so that a resumed run goes on with the run-ups
-under way, fed first the frames the stopped run logged (`earlier`)."""
+stand time of the first frame heard after the operator's answer to its switch-on prompt (the
+stand's protocol has no power control); `switch_on_s` keeps those times, so that a resumed run
+goes on with the run-ups under way, fed first the frames the stopped run logged (`earlier`)."""
 
 from __future__ import annotations
 
@@ -60,6 +60,7 @@ class BusHeadings:
         self._pending = _empty()
         self._acks: list[AckFrame] = []
         self.now_ms = -np.inf  # the latest stand time heard (statuses and headings)
+        self._next_ms: float | None = 0.0  # (None: `next_heard_s` waits for a frame)
         self.position = 0  # frames drained
         self.rocking = False
         self._silence_s = plan.timeouts.bus_silence_s
@@ -104,16 +105,21 @@ class BusHeadings:
         live.recorder.log(raw, msgs)
         self.position += len(msgs)
         self._heard(batch.headings)
-        if len(batch.statuses):
-            self.now_ms = max(self.now_ms, float(batch.statuses.t_ms.max()))
+        times = np.concatenate([batch.statuses.t_ms, batch.headings.t_ms])
+        times = times[times >= 0]  # (NO_CLOCK: a heading received before any stand status)
+        if times.size:
+            self.now_ms = max(self.now_ms, float(times.max()))
+            if self._next_ms is None:
+                self._next_ms = float(times.min())
         self._acks += [f for _, f in batch.others if isinstance(f, AckFrame)]
 
-    @property
-    def now_s(self) -> float:
-        """The latest stand time heard, s (waiting for the first frame)."""
-        while not np.isfinite(self.now_ms):
+    def next_heard_s(self) -> float:
+        """The stand time of the first frame heard from now on (a stand status or a heading),
+        s: the switch-on of a run-up, the operator having just answered."""
+        self._next_ms = None
+        while self._next_ms is None:
             self.poll()
-        return self.now_ms / 1000.0
+        return self._next_ms / 1000.0
 
     def take(self, until_ms: float) -> Headings:
         """The headings not yet taken stamped at or before `until_ms` (campaign ms), once the
@@ -181,7 +187,9 @@ class LiveRunUp(RunUp):
 
     @property
     def now_s(self) -> float:
-        return max(self._until_s, self._bus.now_s - self.at_s)
+        # (as `StandEngine`: the time it was advanced to; the bus is heard a batch later, and
+        # the readings' times follow from switch-on alone)
+        return self._until_s
 
     @property
     def rehears(self) -> bool:

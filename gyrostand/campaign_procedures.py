@@ -169,7 +169,8 @@ def _on_the_bus(
 ) -> tuple[ProcedureResults, Path, int] | None:
     """The procedures on the plan's real bus, in real time (`procedures_live`): the results,
     the raw log written and its frames; None when stopped (the stages done are kept). Each
-    run-up starts at the stand time the operator's answer to its switch-on was heard; a resumed
+    run-up starts at the stand time of the first frame heard after the operator's answer to its
+    switch-on; a resumed
     run goes on with the run-ups under way, fed the frames of the stopped runs' logs first, and
     writes a log of its own beside them (-resumeN)."""
     from gyrostand.acquisition.bus import LiveBus
@@ -191,14 +192,13 @@ def _on_the_bus(
     def runup(k: int, _at_s: float) -> LiveRunUp:
         switched = dict(progress.done.get("switch_on_s", {}))
         if str(k) not in switched:
-            heard.poll()
-            switched[str(k)] = heard.now_s
+            switched[str(k)] = heard.next_heard_s()
             progress.save("switch_on_s", switched)
             store.run_event(
                 "procedures",
                 "info",
-                f"run-up {k} switched on at stand time {heard.now_s:g} s (when the operator's "
-                "answer was heard)",
+                f"run-up {k} switched on at stand time {switched[str(k)]:g} s (the first frame "
+                "heard after the operator's answer)",
             )
         return LiveRunUp(heard, k, switched[str(k)])
 

@@ -16,7 +16,6 @@ the stated uncertainty of their mean is too small)."""
 from __future__ import annotations
 
 import math
-import re
 import sqlite3
 import threading
 import uuid
@@ -24,9 +23,11 @@ from pathlib import Path
 
 import can
 import numpy as np
+import pytest
 
 from gyrostand.acquisition.operator import messages
 from gyrostand.acquisition.procedures import stored_progress
+from gyrostand.acquisition.procedures_live import BusHeadings
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.campaign_procedures import run_procedures_of
 from gyrostand.db.session import open_database
@@ -40,7 +41,7 @@ from gyrostand.stand.simulator import Simulator
 from tests.acquisition.harness import plan_text
 
 SPEEDUP = 150.0
-STOP_AT_S = 500.0  # stand time of the station's stop request (during the settling record)
+STOP_AT_S = 900.0  # stand time of the station's stop request (during the settling record)
 GUARD_WALL_S = 300.0  # against a hang only
 PROCEDURES = """
 [standard]
@@ -82,40 +83,110 @@ def live_plan(tmp_path: Path, channel: str) -> str:
     return text.replace("max_wait_s = 3600.0", transient) + PROCEDURES
 
 
-def test_procedures_on_a_real_bus_recover_the_simulated_compass_truth(tmp_path: Path) -> None:
-    channel = f"gyrostand-procbus-{uuid.uuid4().hex}"
-    plan = parse_plan(live_plan(tmp_path, channel))
-    base = SimConfig(
+class Operator(threading.Thread):
+    """The operator at the station: answers each switching prompt, switching the simulated
+    compass (off: its simulator stopped; on: a new one, run-up k from rotor stop, its stand
+    clock going on from the last). The compass is switched on once the acquisition waits for
+    the first frame after the answer (`switching`, a spy on `BusHeadings.next_heard_s`), so that
+    the run-up's switch-on is the simulator's start, not a wall-time race: the results do not
+    depend on the machine's load."""
+
+    def __init__(self, store: CampaignStore, bus: can.BusABC, base: SimConfig) -> None:
+        super().__init__(daemon=True)
+        self.store, self.bus, self.base = store, bus, base
+        self.simulators: list[Simulator] = []
+        self.started = threading.Event()  # run-up 1's simulator is running
+        self.done = threading.Event()
+        self.switching = threading.Event()
+
+    def spy(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        next_heard_s = BusHeadings.next_heard_s
+
+        def spied(heard: BusHeadings) -> float:
+            self.switching.set()
+            return next_heard_s(heard)
+
+        monkeypatch.setattr(BusHeadings, "next_heard_s", spied)
+
+    def run(self) -> None:
+        answered: set[str] = set()
+        while not self.done.wait(0.05):
+            with self.store.sessions() as session:
+                asked = keyed(messages(session, self.store.campaign_id, PROMPT))
+            for prompt in sorted(asked.keys() - answered):
+                kind, k = prompt.rsplit("_", 1)
+                answered.add(prompt)
+                if kind == "switch_off":
+                    self.simulators[-1].stop()
+                    self.answer(prompt)
+                    continue
+                self.switching.clear()
+                self.answer(prompt)
+                if not self.switching.wait(GUARD_WALL_S):
+                    return
+                clock_ms = 0
+                if self.simulators:
+                    last = self.simulators[-1]
+                    clock_ms = last.engine.clock_ms + math.ceil(last.stand_time_s) * 1000
+                on = Simulator(self.bus, runup_config(self.base, int(k)), clock_ms=clock_ms)
+                on.start()
+                self.simulators.append(on)
+                self.started.set()
+
+    def answer(self, prompt: str) -> None:
+        self.store.run_event(ANSWER, "info", message(prompt, "yes"))
+
+    def stop_all(self) -> None:
+        self.done.set()
+        self.join(GUARD_WALL_S)
+        if self.simulators:
+            self.simulators[-1].stop()
+
+
+def compass_config(seed: int) -> SimConfig:
+    return SimConfig(
         compass=CompassParams(undamped_period_s=240.0, damping_ratio=0.8),
         timing="realtime",
         speedup=SPEEDUP,
-        seed=2,
+        seed=seed,
     )
-    compass = runup_config(base, 1)  # switched on as the simulator starts: stand time 0
+
+
+def test_procedures_on_a_real_bus_recover_the_simulated_compass_truth(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    channel = f"gyrostand-procbus-{uuid.uuid4().hex}"
+    plan = parse_plan(live_plan(tmp_path, channel))
+    base = compass_config(2)
+    compass = runup_config(base, 1)
     sessions = open_database(f"sqlite:///{tmp_path / 'p.sqlite'}")
     store = CampaignStore.create(sessions, plan)
 
     def stop_request() -> None:  # the station's, during the settling record
+        if not operator.started.wait(GUARD_WALL_S):
+            return
         try:
-            simulator.wait_until(STOP_AT_S, GUARD_WALL_S)
+            operator.simulators[0].wait_until(STOP_AT_S, GUARD_WALL_S)
         except TimeoutError:
             return
         store.run_event(STOP_REQUEST, "info", "stop requested at the station")
 
-    with (
-        can.Bus(interface="virtual", channel=channel) as bus,
-        Simulator(bus, compass) as simulator,
-    ):
+    with can.Bus(interface="virtual", channel=channel) as bus:
+        operator = Operator(store, bus, base)
+        operator.spy(monkeypatch)
+        operator.start()
         requester = threading.Thread(target=stop_request, daemon=True)
         requester.start()
-        given = {"switch_on_1": "yes"}
-        assert run_procedures_of(plan, store, True, threading.Event(), given) is False
-        requester.join(GUARD_WALL_S)
-        complete, done = stored_progress(sessions, store.campaign_id)
-        assert not complete and set(done) == {"switch_on_s"}  # the settling record under way
-        store.run_event("resume", "info", "resumed")  # the stop request before it is spent
-        assert run_procedures_of(plan, store, True, threading.Event(), {}) is True
-        assert not simulator.engine.rocking  # the rolling point's stop acknowledged
+        try:
+            assert run_procedures_of(plan, store, True, threading.Event()) is False
+            requester.join(GUARD_WALL_S)
+            complete, done = stored_progress(sessions, store.campaign_id)
+            assert not complete and set(done) == {"switch_on_s"}  # the settling under way
+            store.run_event("resume", "info", "resumed")  # the stop request before it is spent
+            assert run_procedures_of(plan, store, True, threading.Event()) is True
+            assert not operator.simulators[0].engine.rocking  # the point's stop acknowledged
+        finally:
+            operator.stop_all()
     with sessions() as session:
         out = stored_procedures(session, store.campaign_id)
         events = messages(session, store.campaign_id, "procedures")
@@ -123,12 +194,14 @@ def test_procedures_on_a_real_bus_recover_the_simulated_compass_truth(tmp_path: 
     assert out is not None
     on = "switch_on_1: switch the compass on: run-up 1 (settling from switch-on) starts"
     assert asked == [on]
-    (switched,) = [e for e in events if e.startswith("run-up 1 switched on")]
-    at_s = float(re.search(r"stand time ([0-9.e+-]+) s", switched)[1])
-    assert 0.0 <= at_s < STOP_AT_S and at_s == done["switch_on_s"]["1"]
-    # settling, from the operator's answer (the compass was switched on at stand time 0)
+    assert (
+        "run-up 1 switched on at stand time 0 s (the first frame heard after the operator's answer)"
+    ) in events
+    assert done["switch_on_s"] == {"1": 0.0}
+    assert events[-2] == "the standard's procedures resumed: kept the switch-on of run-up 1"
+    # settling (a gap in its record where the run was stopped and resumed)
     s = out.settling
-    truth = true_settling_time_s(compass, s.half_band_deg, 1200.0) - at_s
+    truth = true_settling_time_s(compass, s.half_band_deg, 1200.0)
     assert s.settled and abs(s.value_s - truth) <= s.expanded_s
     assert 0 < s.expanded_s < 60
     p = out.settle_point
@@ -141,12 +214,12 @@ def test_procedures_on_a_real_bus_recover_the_simulated_compass_truth(tmp_path: 
     shift = base.compass.settled_shift_deg(45.0, 24.0, 6.0)
     assert not rolled.forecast and abs(rolled.error_deg - shift) <= rolled.expanded_deg
     assert abs(shift) > 5 * rolled.expanded_deg  # the rolling error is there, and resolved
-    # the raw logs: the stopped run's and the resumed run's, stamped by reception (wall clock)
+    # the raw logs: the stopped run's and the resumed run's, stamped by reception
     first = tmp_path / "raw" / "p-campaign-1.procedures.blf"
     resumed = first.with_name("p-campaign-1.procedures-resume1.blf")
     assert sorted((tmp_path / "raw").glob("*.procedures*.blf")) == [resumed, first]
     stamps = np.concatenate([raw.timestamp for raw in read_raw_frames(first)])
-    # stamped by reception, in wall seconds: STOP_AT_S of stand time took ~STOP_AT_S / SPEEDUP
+    # in wall seconds: STOP_AT_S of stand time took ~STOP_AT_S / SPEEDUP
     assert np.ptp(stamps) < STOP_AT_S / 5
     with sqlite3.connect(tmp_path / "p.sqlite") as conn:
         raw = [m for (m,) in conn.execute("SELECT message FROM event WHERE kind = 'raw log'")]
@@ -171,63 +244,31 @@ power = "manual"
 """
 
 
-class Operator(threading.Thread):
-    """The operator at the station: answers each switching prompt once the simulated compass is
-    switched (off: its simulator stopped; on: a new one, run-up k from rotor stop, its stand
-    clock going on)."""
-
-    def __init__(self, store: CampaignStore, bus: can.BusABC, base: SimConfig) -> None:
-        super().__init__(daemon=True)
-        self.store, self.bus, self.base = store, bus, base
-        self.simulators = [Simulator(bus, runup_config(base, 1))]
-        self.done = threading.Event()
-
-    def run(self) -> None:
-        answered: set[str] = set()
-        while not self.done.wait(0.05):
-            with self.store.sessions() as session:
-                asked = keyed(messages(session, self.store.campaign_id, PROMPT))
-            for prompt in asked.keys() - answered:
-                kind, k = prompt.rsplit("_", 1)
-                last = self.simulators[-1]
-                if kind == "switch_off":
-                    last.stop()
-                elif k != "1":  # (run-up 1's simulator runs from the start)
-                    clock_ms = last.engine.clock_ms + math.ceil(last.stand_time_s) * 1000
-                    on = Simulator(self.bus, runup_config(self.base, int(k)), clock_ms=clock_ms)
-                    on.start()
-                    self.simulators.append(on)
-                self.store.run_event(ANSWER, "info", message(prompt, "yes"))
-                answered.add(prompt)
-
-
-def test_repeatability_on_a_real_bus_the_operator_switching_the_compass(tmp_path: Path) -> None:
+def test_repeatability_on_a_real_bus_the_operator_switching_the_compass(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     channel = f"gyrostand-procbus-{uuid.uuid4().hex}"
     text = live_plan(tmp_path, channel)
     plan = parse_plan(text[: text.index("[standard]")] + REPEATABILITY)
-    base = SimConfig(
-        compass=CompassParams(undamped_period_s=240.0, damping_ratio=0.8),
-        timing="realtime",
-        speedup=SPEEDUP,
-        seed=3,
-    )
+    base = compass_config(3)
     sessions = open_database(f"sqlite:///{tmp_path / 'p.sqlite'}")
     store = CampaignStore.create(sessions, plan)
     with can.Bus(interface="virtual", channel=channel) as bus:
         operator = Operator(store, bus, base)
-        operator.simulators[0].start()
+        operator.spy(monkeypatch)
         operator.start()
         try:
             assert run_procedures_of(plan, store, True, threading.Event()) is True
         finally:
-            operator.done.set()
-            operator.join(GUARD_WALL_S)
-            operator.simulators[-1].stop()
+            operator.stop_all()
     assert len(operator.simulators) == 2
+    second = operator.simulators[1].engine.clock_ms / 1000.0
     with sessions() as session:
         out = stored_procedures(session, store.campaign_id)
+        events = messages(session, store.campaign_id, "procedures")
         asked = [m.split(":")[0] for m in messages(session, store.campaign_id, PROMPT)]
     assert asked == ["switch_on_1", "switch_off_2", "switch_on_2"]
+    assert f"run-up 2 switched on at stand time {second:g} s" in events[1]
     assert out is not None and out.repeatability is not None
     r = out.repeatability
     truth = [true_settle_point_deg(base, k) for k in (1, 2)]
