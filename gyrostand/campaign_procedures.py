@@ -170,20 +170,22 @@ def _on_the_bus(
     """The procedures on the plan's real bus, in real time (`procedures_live`): the results,
     the raw log written and its frames; None when stopped (the stages done are kept). Each
     run-up starts at the stand time of the first frame heard after the operator's answer to its
-    switch-on; a resumed
-    run goes on with the run-ups under way, fed the frames of the stopped runs' logs first, and
-    writes a log of its own beside them (-resumeN)."""
+    switch-on; a resumed run goes on with the run-ups under way, fed the frames of the stopped
+    runs' logs first, and writes a log of its own beside them (-resumeN)."""
+    from itertools import count, takewhile
+    from pathlib import Path
+
     from gyrostand.acquisition.bus import LiveBus
     from gyrostand.acquisition.procedures import run_procedures
     from gyrostand.acquisition.procedures_live import BusHeadings, LiveRunUp
     from gyrostand.acquisition.runner import _stop_on_signals
     from gyrostand.plan.codec import codec_for
 
-    earlier = [first_log] + [
-        first_log.with_name(f"{first_log.stem}-resume{n}.blf") for n in range(1, 1000)
-    ]
-    path = next(p for p in earlier if not p.exists())
-    earlier = earlier[: earlier.index(path)]
+    def log(run: int) -> Path:  # the first run's, then -resume1, -resume2, ...
+        return first_log.with_name(f"{first_log.stem}-resume{run}.blf") if run else first_log
+
+    earlier = list(takewhile(Path.exists, map(log, count())))
+    path = log(len(earlier))
 
     def check() -> None:
         if link.stop_requested() is not None:
