@@ -57,7 +57,7 @@ class BusHeadings:
         self.plan, self.live, self.check = plan, live, check
         self.codec = codec_for(plan)
         self._decoder = _can_decoder(plan, self.codec)
-        self._pending = _empty()
+        self._pending: list[Headings] = []  # heard, not yet taken (joined when taken)
         self._acks: list[AckFrame] = []
         self.now_ms = -np.inf  # the latest stand time heard (statuses and headings)
         self._next_ms: float | None = 0.0  # (None: `next_heard_s` waits for a frame)
@@ -77,7 +77,7 @@ class BusHeadings:
     def _heard(self, headings: Headings) -> None:
         known = headings.t_ms >= 0  # (NO_CLOCK: received before the first stand status)
         if known.any():
-            self._pending = _joined([self._pending, headings.take(known)])
+            self._pending.append(headings.take(known))
             self.now_ms = max(self.now_ms, float(headings.t_ms[known].max()))
 
     def poll(self) -> None:
@@ -126,12 +126,11 @@ class BusHeadings:
         stand clock heard has reached it."""
         while self.now_ms < until_ms:
             self.poll()
-        t = self._pending.t_ms
-        later = np.flatnonzero(t > until_ms + 1e-6)  # (as `LoggedHeadings.take`)
-        end = int(later[0]) if later.size else len(t)
-        taken = self._pending.take(slice(0, end))
-        self._pending = self._pending.take(slice(end, None))
-        return taken
+        pending = _joined([_empty(), *self._pending])
+        later = np.flatnonzero(pending.t_ms > until_ms + 1e-6)  # (as `LoggedHeadings.take`)
+        end = int(later[0]) if later.size else len(pending)
+        self._pending = [pending.take(slice(end, None))]
+        return pending.take(slice(0, end))
 
     def command(self, message: can.Message) -> None:
         """A stand command (encoded by the plan's codec) through the stand controller; an error
