@@ -124,7 +124,7 @@ class BusHeadings:
     def take(self, until_ms: float) -> Headings:
         """The headings not yet taken stamped at or before `until_ms` (campaign ms), once the
         stand clock heard has reached it."""
-        while self.now_ms < until_ms:
+        while self.now_ms < until_ms - 1e-6:  # (a reading time's float sum: whole ms)
             self.poll()
         pending = _joined([_empty(), *self._pending])
         later = np.flatnonzero(pending.t_ms > until_ms + 1e-6)  # (as `LoggedHeadings.take`)
