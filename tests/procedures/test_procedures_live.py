@@ -25,20 +25,31 @@ import can
 import numpy as np
 import pytest
 
+from gyrostand.acquisition.bus import Recorder
 from gyrostand.acquisition.operator import messages
-from gyrostand.acquisition.procedures import stored_progress
-from gyrostand.acquisition.procedures_live import BusHeadings
+from gyrostand.acquisition.procedures import run_procedures, stored_progress
+from gyrostand.acquisition.procedures_live import BusHeadings, LiveRunUp
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.campaign_procedures import run_procedures_of
 from gyrostand.db.session import open_database
 from gyrostand.frames.logfile import read_raw_frames
 from gyrostand.plan.model import parse_plan
 from gyrostand.plan.prompts import ANSWER, PROMPT, STOP_REQUEST, keyed, message
+from gyrostand.report.compliance import load_profile
 from gyrostand.report.stored import stored_procedures
-from gyrostand.stand.runup import runup_config, true_settle_point_deg, true_settling_time_s
+from gyrostand.stand.engine import StandEngine
+from gyrostand.stand.protocol import Codec
+from gyrostand.stand.runup import (
+    runup_config,
+    switch_on,
+    true_settle_point_deg,
+    true_settling_time_s,
+)
 from gyrostand.stand.simconfig import CompassParams, SimConfig
 from gyrostand.stand.simulator import Simulator
 from tests.acquisition.harness import plan_text
+from tests.procedures.test_procedures import PAPER, inputs, manual_on_a_real_bus
+from tests.report.test_compliance import A821, lab_verified, profile_file
 
 SPEEDUP = 150.0
 STOP_AT_S = 900.0  # stand time of the station's stop request (during the settling record)
@@ -274,3 +285,89 @@ def test_repeatability_on_a_real_bus_the_operator_switching_the_compass(
     truth = [true_settle_point_deg(base, k) for k in (1, 2)]
     assert abs(r.range_deg - (max(truth) - min(truth))) <= r.expanded_deg
     assert 0 < r.expanded_deg < 0.05  # a real uncertainty, not a blanket one
+
+
+SHORT = """
+[bus.simulator]
+heading_rate_hz = 2.0
+[bus.simulator.compass]
+undamped_period_s = 1200.0
+[reference]
+heading_deg = 120.0
+uncertainty_deg = 0.01
+[[procedure]]
+kind = "settling"
+max_wait_s = 2400.0
+[[procedure]]
+kind = "settle_point"
+readings = 3
+interval_s = 300.0
+[[procedure]]
+kind = "repeatability"
+runups = 2
+readings = 3
+interval_s = 300.0
+[[procedure]]
+kind = "rolling"
+wait_s = 600.0
+readings = 2
+interval_s = 100.0
+points = [{direction_deg = 45, amplitude_cm = 24, period_s = 6}]
+"""
+
+
+class CompassAt1x:
+    """The simulated compass's frames as a real bus brings them: the next second of stand time
+    once the acquisition has taken what came (`arrive`, its poll's `check`), and its stand
+    answering commands (`post`, as the stand controller sends them); `procedures_live` without
+    a bus or a wall clock."""
+
+    def __init__(self, config: SimConfig) -> None:
+        self.config, self.codec = config, Codec()
+        self.recorder = Recorder(10**7, None)
+        self.own_bus, self.controller = False, self
+        self.engine: StandEngine | None = None
+        self.heard: BusHeadings
+        self.sent = 0
+
+    def switch_on(self, k: int, at_s: float) -> None:
+        self.engine = switch_on(self.config, k, at_s)
+
+    def arrive(self) -> None:
+        assert self.engine is not None
+        if self.heard.position == self.sent:  # (all taken: an ack before the next second)
+            self.send(self.engine.advance_to(self.engine.stand_time_s + 1.0))
+
+    def post(self, name: str, *motion: float) -> int:
+        assert self.engine is not None
+        self.send(self.engine.receive(self.codec.encode_command(name, *motion)))
+        return 0
+
+    def send(self, frames: list[can.Message]) -> None:
+        self.recorder.on_messages(frames)
+        self.sent += len(frames)
+
+
+def test_on_a_real_bus_the_same_procedures_give_the_virtual_results_to_the_bit(
+    tmp_path: Path,
+) -> None:
+    """The live path (`LiveRunUp` on the frames as they arrive, every one recorded, the stand
+    commanded through its controller and its acks awaited) and the virtual one (`RunUp`, nobody
+    listening between readings) are one procedure: on the same compass, the same results."""
+    profile = load_profile(profile_file(tmp_path, lab_verified(A821)))
+    fast = PAPER.replace("undamped_period_s = 5064.0", "undamped_period_s = 1200.0")
+    virtual_plan = parse_plan(fast + SHORT)
+    plan_inputs = inputs(virtual_plan, profile)
+    virtual = run_procedures(*plan_inputs)
+    compass = CompassAt1x(plan_inputs[0])
+    real = virtual_plan.model_copy(update={"bus": manual_on_a_real_bus().bus})
+    heard = compass.heard = BusHeadings(real, compass, compass.arrive)  # type: ignore[arg-type]
+
+    def runup(k: int, at_s: float) -> LiveRunUp:
+        compass.switch_on(k, at_s)  # (at the virtual path's switch-on: the same compass)
+        return LiveRunUp(heard, k, at_s)
+
+    live = run_procedures(*plan_inputs, runups=runup)
+    assert live.to_dict() == virtual.to_dict()
+    assert live.rolling[0].error_deg is not None and live.repeatability is not None
+    assert heard.position > 4 * 2400  # every frame heard (2 Hz headings, 2 Hz status)
