@@ -7,9 +7,11 @@ run-up. The results are checked against the simulator's truth within their state
 uncertainties; no assertion on wall time (the waits are guards against a hang only).
 
 The operator's switching of the compass for the repeatability's run-ups: its simulator stopped,
-a new one started (the run-up from rotor stop, the stand clock going on).
+a new one started (the run-up from rotor stop, the stand clock going on). And the live path and
+the virtual one as one procedure: the simulated compass's frames brought as a bus at 1x brings
+them (no thread, no clock) give the virtual path's results to the bit.
 
-~20 s of wall time each (2500-3400 s of stand time at 150x): in SLOW_FILES. The readings lie
+~20-25 s of wall time each (2500-3400 s of stand time at 150x): in SLOW_FILES. The readings lie
 100 s apart, 5 correlation times of the simulated noise (closer, they are not independent and
 the stated uncertainty of their mean is too small)."""
 
