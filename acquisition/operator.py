@@ -101,11 +101,15 @@ class OperatorLink:
 
     def ask(self, prompt: PromptPlan, when: str) -> str | None:
         """Ask `prompt` (said to come `when`) and wait for its answer (None), unless answered
-        in an earlier run of the campaign; or why the campaign is to stop."""
+        in an earlier run of the campaign; or why the campaign is to stop. A prompt an earlier
+        run asked and left unanswered (stopped while it waited) is the same prompt, still
+        pending: asked again without a second "prompt" event."""
         with self.store.sessions() as session:
             if prompt.id in answers(session, self.store.campaign_id):
                 return None
-        self.store.run_event(PROMPT, "info", message(prompt.id, prompt.text))
+            asked = keyed(messages(session, self.store.campaign_id, PROMPT))
+        if prompt.id not in asked:
+            self.store.run_event(PROMPT, "info", message(prompt.id, prompt.text))
         return self._wait(prompt, when)
 
     def _wait(self, prompt: PromptPlan, when: str) -> str | None:

@@ -6,14 +6,15 @@ deterministic).
 Each stage is saved as it ends (`Progress`: `campaign resume` keeps the stages done); a compass
 powered by hand is switched by the operator, prompted (`before_switch_on`). Every frame heard
 goes into the procedures' raw log (`RunUp(log=...)`, BLF, in campaign stand time), from which
-`LoggedRunUp` re-derives the results offline (`gyrostand replay`), to the bit. Not yet here: the
-live bus (`acquisition.engine`): a real compass needs it.
+`LoggedRunUp` re-derives the results offline (`gyrostand replay`), to the bit. On a real bus the
+same procedures run on `procedures_live.LiveRunUp`, in real time.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields
+from itertools import count, takewhile
 from pathlib import Path
 from typing import Any
 
@@ -102,6 +103,13 @@ class RunUp:
     def exhausted(self) -> bool:
         """Whether nothing more can be heard (a log read to its end; never a live compass)."""
         return False
+
+    @property
+    def rehears(self) -> bool:
+        """Whether the stages kept from an interrupted run are gone through again (the
+        simulated compass re-simulated, its log replayed: the same frames); not a real
+        compass's (`LiveRunUp`): its run goes on."""
+        return True
 
     def advance(self, until_s: float) -> None:
         """Record the compass's heading frames up to `until_s` seconds after switch-on."""
@@ -268,6 +276,9 @@ def _rolling(
             )
             continue
         measured = len(out) >= len(kept)
+        if not measured and not runup.rehears:
+            out.append(kept[len(out)])
+            continue
         codec = runup.codec
         runup.command(
             codec.encode_command_set(point.direction_deg, point.amplitude_cm, point.period_s)
@@ -321,6 +332,17 @@ def procedures_log_path(can_log: Path | str) -> Path:
     """The procedures' raw log beside the campaign's first raw CAN log (always BLF)."""
     can_log = Path(can_log)
     return can_log.with_name(f"{can_log.stem}.procedures.blf")
+
+
+def procedures_run_log(first: Path, run: int) -> Path:
+    """The procedures' log of a campaign's run on a real bus: the first run's (`first`, from
+    `procedures_log_path`), then -resume1, -resume2, ... for the resumed runs."""
+    return first.with_name(f"{first.stem}-resume{run}.blf") if run else first
+
+
+def procedures_run_logs(first: Path | str) -> list[Path]:
+    """The procedures' logs of a campaign's runs on disk, the first run's on."""
+    return list(takewhile(Path.exists, (procedures_run_log(Path(first), k) for k in count())))
 
 
 def replay_procedures(

@@ -1,8 +1,9 @@
 """The standard's procedures of a campaign plan ([[procedure]]): resolved against the plan's
-compliance profile ([standard] profile), run on the simulated compass before the trials, and
-stored with the campaign; a resumed campaign keeps the stored results. The frames they hear go
-into their raw log beside the campaign's first (`procedures_log_path`), from which a replay
-re-derives them."""
+compliance profile ([standard] profile), run before the trials on the simulated compass (in
+virtual time) or on the plan's real bus (in real time, the compass switched by the operator),
+and stored with the campaign; a resumed campaign keeps the stored results. The frames they hear
+go into their raw log beside the campaign's first (`procedures_log_path`), from which a replay
+re-derives them (the simulated compass's)."""
 
 from __future__ import annotations
 
@@ -11,13 +12,15 @@ from typing import TYPE_CHECKING
 from gyrostand.errors import fail
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
+    from collections.abc import Callable, Mapping
     from pathlib import Path
     from threading import Event
     from typing import IO
 
-    from gyrostand.acquisition.procedures import ReplayedProcedures
+    from gyrostand.acquisition.operator import OperatorLink
+    from gyrostand.acquisition.procedures import Progress, ReplayedProcedures
     from gyrostand.acquisition.store import CampaignStore
+    from gyrostand.analysis.procedures import ProcedureResults
     from gyrostand.plan.model import Plan
     from gyrostand.plan.procedures import ResolvedProcedure
 
@@ -98,7 +101,10 @@ def run_procedures_of(
     inputs = procedure_inputs(plan)
     config, procedures = inputs[0], inputs[1]
     if done:
-        kept = ", ".join(k for k in done if not k.endswith("_s"))
+        kept = ", ".join(
+            [k for k in done if not k.endswith("_s")]
+            + [f"the switch-on of run-up {k}" for k in done.get("switch_on_s", {})]
+        )
         store.run_event("procedures", "info", f"the standard's procedures resumed: kept {kept}")
 
     def saved(stages: dict[str, object]) -> None:
@@ -120,20 +126,25 @@ def run_procedures_of(
     # beside the trials' first raw log, named as the trials' run will name it (none yet);
     # a resumed run writes it anew, the kept stages heard again (the same frames)
     path = procedures_log_path(segments[0].path if segments else raw_log_path(store, plan, []))
-    log = BatchBLFWriter(path)
     save_progress(store.sessions, store.campaign_id, done, path)  # (named before it holds any)
-    try:
-        results = run_procedures(
-            *inputs,
-            Progress(done, saved),
-            prompted,
-            runups=lambda k, at_s: RunUp(config, k, at_s, log),
-        )
-    except Stopped:
-        return False
-    finally:
-        log.stop()
-    raw_log = ProcedureLog(str(path), log.object_count, sha256_of(path))
+    progress = Progress(done, saved)
+    if plan.bus.simulated:
+        log = BatchBLFWriter(path)
+        try:
+            results = run_procedures(
+                *inputs, progress, prompted, runups=lambda k, at_s: RunUp(config, k, at_s, log)
+            )
+        except Stopped:
+            return False
+        finally:
+            log.stop()
+        frames = log.object_count
+    else:
+        on_bus = _on_the_bus(plan, store, inputs, progress, prompted, link, path)
+        if on_bus is None:
+            return False
+        results, path, frames = on_bus
+    raw_log = ProcedureLog(str(path), frames, sha256_of(path))
     store_procedures(store.sessions, store.campaign_id, results, raw_log)
     kinds = ", ".join(p.kind for p in procedures)
     store.run_event("procedures", "info", f"the standard's procedures run and stored: {kinds}")
@@ -148,12 +159,83 @@ def run_procedures_of(
     return True
 
 
+def _on_the_bus(
+    plan: Plan,
+    store: CampaignStore,
+    inputs: tuple,
+    progress: Progress,
+    prompted: Callable[[int], None],
+    link: OperatorLink,
+    first_log: Path,
+) -> tuple[ProcedureResults, Path, int] | None:
+    """The procedures on the plan's real bus, in real time (`procedures_live`): the results,
+    the raw log written and its frames; None when stopped (the stages done are kept). Each
+    run-up starts at the stand time of the first frame heard after the operator's answer to its
+    switch-on; a resumed run goes on with the run-ups under way, fed the frames of the stopped
+    runs' logs first, and writes a log of its own beside them (-resumeN)."""
+    from gyrostand.acquisition.bus import LiveBus
+    from gyrostand.acquisition.procedures import (
+        procedures_run_log,
+        procedures_run_logs,
+        run_procedures,
+    )
+    from gyrostand.acquisition.procedures_live import BusHeadings, LiveRunUp
+    from gyrostand.acquisition.runner import _stop_on_signals
+    from gyrostand.plan.codec import codec_for
+
+    earlier = procedures_run_logs(first_log)
+    path = procedures_run_log(first_log, len(earlier))
+
+    def check() -> None:
+        if link.stop_requested() is not None:
+            raise Stopped
+
+    def runup(k: int, _at_s: float) -> LiveRunUp:
+        switched = dict(progress.done.get("switch_on_s", {}))
+        if str(k) not in switched:
+            switched[str(k)] = heard.next_heard_s()
+            progress.save("switch_on_s", switched)
+            store.run_event(
+                "procedures",
+                "info",
+                f"run-up {k} switched on at stand time {switched[str(k)]:g} s (the first frame "
+                "heard after the operator's answer)",
+            )
+        return LiveRunUp(heard, k, switched[str(k)])
+
+    live = LiveBus(plan, codec_for(plan), path)
+    heard = BusHeadings(plan, live, check)
+    link.waiting = heard.poll  # (the frames keep coming while the operator is asked)
+    try:
+        with _stop_on_signals(link.stop):
+            heard.earlier(earlier)
+            results = run_procedures(*inputs, progress, prompted, runups=runup)
+    except Stopped:
+        return None
+    finally:
+        try:
+            heard.stop_rocking()
+        finally:
+            live.close()
+    if earlier:
+        logs = ", ".join(str(p) for p in earlier)
+        store.run_event("raw log", "info", f"the standard's procedures' earlier frames in {logs}")
+    return results, path, live.recorder.logged
+
+
 def replay_procedures_log(plan: Plan, first_log: Path) -> ReplayedProcedures | None:
     """The plan's procedures (None: it has none) re-derived from their raw log beside the
     campaign's first raw log (`procedures_log_path`); ReplayLogError when it is missing, cut
     short, or not what the plan's procedures heard."""
     if not plan.procedure:
         return None
+    if not plan.bus.simulated:
+        from gyrostand.acquisition.runner import ReplayLogError
+
+        raise ReplayLogError(
+            f"{first_log}: the standard's procedures of a campaign on a real bus are not "
+            "re-derived from their log yet (their run-ups start at the operator's answers)"
+        )
     from gyrostand.acquisition.procedures import (
         ProcedureLog,
         ProcedureLogError,

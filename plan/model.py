@@ -1089,11 +1089,7 @@ class Plan(_Table):
             for row, message in duplicated(self.procedure) + needs(self.procedure)
         ]
         if self.procedure and not self.bus.simulated:
-            message = (
-                "the standard's procedures run on the simulated compass only (not yet on a "
-                "real bus: switching the compass and recording its run-up there is not built)"
-            )
-            errors.append(_error("procedure", ("procedure",), message))
+            errors += self._bad_procedures_on_a_real_bus()
         if self.procedure and self.settle.transient_model is None:
             message = (
                 "the standard's procedures need the compass's precession: [settle] "
@@ -1115,6 +1111,43 @@ class Plan(_Table):
                         '(beyond_stand = "forecast" forecasts it by model 1.1 instead)'
                     )
                     errors.append(_error("stand_limit", ("procedure", row, "points"), message))
+        return errors
+
+    def _bad_procedures_on_a_real_bus(self) -> list[InitErrorDetails]:
+        """On a real bus the procedures run in real time on a compass on CAN and a stand of
+        gyrostand's protocol, the compass switched by the operator (the stand's protocol has no
+        power control gyrostand could command)."""
+        errors = [
+            _error("procedure", ("procedure", row, "power"), message)
+            for row, proc in enumerate(self.procedure)
+            if proc.kind in ("settling", "repeatability") and proc.power == "stand"
+            for message in (
+                f'{proc.kind}: power = "stand" on a real bus: gyrostand cannot switch the '
+                'compass there (its stand protocol has no power control); power = "manual": '
+                "the operator switches it, prompted",
+            )
+        ]
+        unsupported = (
+            (
+                self.bus.timing == "virtual",
+                ("bus", "timing"),
+                'timing = "virtual" (they run in real time: timing = "realtime")',
+            ),
+            (
+                self.compass.protocol == "iec61162",
+                ("compass", "protocol"),
+                "a compass on a serial line (not yet: a compass on CAN)",
+            ),
+            (
+                self.stand.protocol == "cia402",
+                ("stand", "protocol"),
+                "a CiA 402 stand (not yet: a stand of gyrostand's protocol or a lab DBC)",
+            ),
+        )
+        for broken, loc, what in unsupported:
+            if broken:
+                message = f"the standard's procedures on a real bus: not with {what}"
+                errors.append(_error("procedure", loc, message))
         return errors
 
     @property

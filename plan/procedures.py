@@ -63,8 +63,9 @@ class ProcedurePlan(_Table):
     off_s: float = Field(600.0, gt=0)
     """repeatability: how long the compass stays off between run-ups, s."""
     power: Literal["stand", "manual"] = "stand"
-    """settling, repeatability: who switches the compass on and off: the stand's power control,
-    or the operator by hand, prompted (at the station, on the terminal or `--answer`)."""
+    """settling, repeatability: who switches the compass on and off: the stand's power control
+    (the simulated stand's; a real stand's protocol has none: refused on a real bus), or the
+    operator by hand, prompted (at the station, on the terminal or `--answer`)."""
     points: tuple[RollingPoint, ...] | None = Field(None, strict=False)
     """rolling: the envelope's points (default: the profile's envelope periods at its largest
     horizontal acceleration, K = 45 deg)."""

@@ -78,6 +78,7 @@ SLOW_FILES = frozenset(
         "acquisition/test_kill_resume.py",
         "acquisition/test_live.py",
         "procedures/test_campaign_procedures.py",
+        "procedures/test_procedures_live.py",
         "acquisition/test_liveness.py",
         "acquisition/test_measured_amplitude_campaign.py",
         "acquisition/test_own_bus.py",

@@ -19,9 +19,10 @@ from gyrostand.acquisition.procedures import (
     run_procedures,
     stored_progress,
 )
+from gyrostand.acquisition.runner import ReplayLogError
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.analysis.procedures import ProcedureResults
-from gyrostand.campaign_procedures import run_procedures_of
+from gyrostand.campaign_procedures import replay_procedures_log, run_procedures_of
 from gyrostand.db.session import open_database
 from gyrostand.frames.logfile import BatchBLFWriter, read_raw_frames
 from gyrostand.plan.model import Plan, PlanError, parse_plan
@@ -307,8 +308,7 @@ def test_a_compass_powered_by_hand_is_switched_when_the_operator_answers(tmp_pat
         "switch_on_1",
         "switch_off_2",
         "switch_on_2",
-        "switch_off_3",
-        "switch_off_3",  # asked again by the resumed run (it was never answered)
+        "switch_off_3",  # asked again by the resumed run (never answered): one event
         "switch_on_3",
     ]
     assert answered == [f"{k}: yes" for k in ("switch_on_1", "switch_off_2", "switch_on_2")] + [
@@ -328,10 +328,41 @@ def test_no_reference_heading_leaves_the_settle_point_error_not_assessed(a821) -
     assert items["heading-rms"].verdict == PASS and items["settling-time"].verdict == PASS
 
 
-def test_procedures_on_a_real_bus_are_refused() -> None:
+REAL = PAPER.replace("simulated = true", "simulated = false") + FAST.format(knob="")
+
+
+def manual_on_a_real_bus() -> Plan:
+    """FAST on a real bus, in real time, the compass switched by the operator."""
+    text = REAL.replace('timing = "virtual"', 'timing = "realtime"')
+    for kind in ("settling", "repeatability"):
+        text = text.replace(f'kind = "{kind}"\n', f'kind = "{kind}"\npower = "manual"\n')
+    return parse_plan(text)
+
+
+def test_on_a_real_bus_a_power_control_gyrostand_cannot_command_is_refused() -> None:
     with pytest.raises(PlanError) as err:
-        parse_plan(PAPER.replace("simulated = true", "simulated = false") + FAST.format(knob=""))
-    assert any("simulated compass only" in p for p in err.value.problems), err.value.problems
+        parse_plan(REAL)
+    power = (
+        ': power = "stand" on a real bus: gyrostand cannot switch the compass there (its stand '
+        'protocol has no power control); power = "manual": the operator switches it, prompted'
+    )
+    assert err.value.problems == [
+        f"[[procedure]] 1 power: settling{power}",
+        f"[[procedure]] 3 power: repeatability{power}",
+        '[bus] timing: the standard\'s procedures on a real bus: not with timing = "virtual" '
+        '(they run in real time: timing = "realtime")',
+    ]
+    assert [p.power for p in manual_on_a_real_bus().procedure] == ["manual", "stand"] * 2
+
+
+def test_replay_refuses_the_procedures_of_a_real_bus_in_one_line(tmp_path) -> None:
+    log = tmp_path / "lab-campaign-1.blf"
+    with pytest.raises(ReplayLogError) as err:
+        replay_procedures_log(manual_on_a_real_bus(), log)
+    assert str(err.value) == (
+        f"{log}: the standard's procedures of a campaign on a real bus are not re-derived from "
+        "their log yet (their run-ups start at the operator's answers)"
+    )
 
 
 def logged_run(plan: Plan, profile, path, progress: Progress | None = None) -> ProcedureResults:
