@@ -345,6 +345,14 @@ def procedures_run_logs(first: Path | str) -> list[Path]:
     return list(takewhile(Path.exists, (procedures_run_log(Path(first), k) for k in count())))
 
 
+def procedures_logs_of(raw_log: Path | str) -> list[Path]:
+    """The procedures' logs on disk that go with a campaign's raw log: those beside its CAN
+    log, or, given the procedures' first log itself, it and its resumed runs'."""
+    raw_log = Path(raw_log)
+    procedures = raw_log.name.endswith(".procedures.blf")
+    return procedures_run_logs(raw_log if procedures else procedures_log_path(raw_log))
+
+
 def replay_procedures(
     config: SimConfig,
     procedures: tuple[ResolvedProcedure, ...],

@@ -67,7 +67,7 @@ def register(campaign_app: typer.Typer) -> None:
         labels, origin, raw logs), who removed it, when and why. Asks first, on a terminal;
         elsewhere give --yes."""
         from gyrostand import SOFTWARE_VERSION
-        from gyrostand.acquisition.procedures import procedures_log_path, procedures_run_logs
+        from gyrostand.acquisition.procedures import procedures_logs_of
         from gyrostand.db.models import Campaign
         from gyrostand.db.queries import live_file_of
         from gyrostand.db.removal import RemovalRefused, remove_campaigns
@@ -110,7 +110,7 @@ def register(campaign_app: typer.Typer) -> None:
                 files_of=lambda log: (
                     Path(log),
                     serial_log_path(log),
-                    *procedures_run_logs(procedures_log_path(log)),
+                    *procedures_logs_of(log),
                     live_file_of(log),
                 ),
             )

@@ -175,10 +175,15 @@ def test_a_campaign_stopped_in_its_procedures_names_and_deletes_their_raw_log(
     store.lease.release()
     (log,) = (tmp_path / "raw").iterdir()
     assert log.name == "p-campaign-1.procedures.blf"
+    # the logs resumed runs on a real bus write beside it (campaign_procedures._on_the_bus)
+    resumed = [log.with_name(f"p-campaign-1.procedures-resume{k}.blf") for k in (1, 2)]
+    for path in resumed:
+        path.write_bytes(log.read_bytes())
     args = ["campaign", "remove", "1", "--db", str(plan.database), "--yes"]
     code, out, err = gyrostand(*args, "--delete-raw-logs")
     assert code == 0, err
     assert out.endswith("; raw logs deleted\n") and not log.exists()
+    assert list((tmp_path / "raw").iterdir()) == []
     with sessions() as session:
         removal = session.scalars(select(CampaignRemoval)).one()
     assert removal.raw_logs == "deleted"
