@@ -26,7 +26,7 @@ from pathlib import Path
 
 from acquisition_stream import campaign_frames, paper_plan
 from bench_ingest import ours
-from top_costs import print_costs, profiled_method
+from top_costs import print_costs, profiled_method, profiler
 
 from gyrostand.acquisition.runner import run_live
 from gyrostand.acquisition.store import CampaignStore
@@ -66,7 +66,7 @@ def campaign(
 
 def profiled() -> None:
     """The top five costs per frame of both threads."""
-    main_thread = cProfile.Profile()
+    main_thread = profiler()
     with profiled_method(Simulator, "_run") as stand, tempfile.TemporaryDirectory() as tmp:
         _, _, frames, _ = campaign(Path(tmp), main_thread)
     print(f"paper campaign, virtual time, {frames:,} frames, under cProfile")
