@@ -1052,12 +1052,13 @@ class Engine:
             self._oi += 1
             if self._gap_events:
                 self._tell_gaps(pos)
+            if type(frame) is ClockFrame:  # most of them (one a stand second): only the clock
+                self.now_ms = max(self.now_ms, frame.stand_time_ms)
+                continue
             if isinstance(frame, CommandFrame):
                 self._foreign_command(frame)
             if isinstance(frame, DeviceEvent | RollSample):
                 self._on_other(pos, frame)
-            if isinstance(frame, ClockFrame):
-                self.now_ms = max(self.now_ms, frame.stand_time_ms)
             if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
                 self._series_errors += 1
             if isinstance(frame, InvalidFrame) and self._window is not None:
