@@ -29,6 +29,7 @@ from gyrostand.plan.codec import codec_for, stand_config
 from gyrostand.plan.model import BusPlan, CompassPlan, Plan
 from gyrostand.stand.controller import StandController
 from gyrostand.stand.engine import HeadingTransmitter
+from gyrostand.stand.packing import Part
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simulator import Simulator
 
@@ -75,7 +76,7 @@ class SimulatorBus(VirtualBus):
     `sink` (virtual time, where the campaign's `Recorder` is the only receiver): the frames go
     straight to it, a batch at a time (`send_batch`), instead of one by one through the
     receiving bus's queue and the notifier thread (two lock round trips and a listener call a
-    frame, ~3 us: 4 s of the paper campaign); on the one bus, as arrays (`send_frames`: no
+    frame, ~3 us: 4 s of the paper campaign); on the one bus, as arrays (`send_parts`: no
     `can.Message` per frame, ~3 us more). The stand still receives commands on the bus."""
 
     def __init__(self, channel: str, sink: Recorder | None = None, mark: int | None = None) -> None:
@@ -87,15 +88,19 @@ class SimulatorBus(VirtualBus):
 
     @property
     def takes_frames(self) -> bool:
-        """Whether frames may come as arrays (`send_frames`): into a recorder that needs no
+        """Whether frames may come as arrays (`send_parts`): into a recorder that needs no
         messages, on the one bus."""
         return self.sink is not None and self.mark is None and self.sink.takes_frames
 
-    def send_frames(self, raw: RawFrames) -> None:
-        """Frames as arrays, in order (`takes_frames`)."""
+    def send_parts(self, parts: list[Part], epoch_s: float) -> int:
+        """The simulated stand's frames as parts (`takes_frames`), in stand-time order, with
+        timestamps epoch_s + stand time; how many."""
         self._check_if_open()
         assert self.sink is not None
+        raw = RawFrames.from_parts(0, parts)
+        raw.timestamp[:] += epoch_s  # (after the sort: as the stand's messages)
         self.sink.on_frames(raw)
+        return len(raw)
 
     def send_batch(self, msgs: list[can.Message]) -> None:
         """Every frame of `msgs`, in order (as `send` one by one)."""
@@ -189,7 +194,7 @@ class Recorder(can.Listener):
             self._ready.set()
 
     def on_frames(self, raw: RawFrames) -> None:
-        """Frames received together as arrays (`SimulatorBus.send_frames`; `takes_frames`):
+        """Frames received together as arrays (`SimulatorBus.send_parts`; `takes_frames`):
         one queue entry, drained by `drain_frames`."""
         if self._queued() + len(raw) > self.maxsize:  # (frame by frame, counting the dropped)
             for row in range(len(raw)):

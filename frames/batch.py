@@ -18,7 +18,7 @@ import can
 import numpy as np
 
 from gyrostand.frames.vectordecode import VectorDecoder
-from gyrostand.stand.packing import EncodedFrames
+from gyrostand.stand.packing import EncodedFrames, Part
 from gyrostand.stand.protocol import (
     ClockFrame,
     Codec,
@@ -118,6 +118,19 @@ class RawFrames:
             timestamp=np.asarray(frames.timestamp, np.float64),
             channel=np.zeros(n, np.uint8),
         )
+
+    @classmethod
+    def from_parts(cls, start: int, parts: Sequence[Part]) -> RawFrames:
+        """The simulated stand's frames (`stand.packing.Part`) in stand-time order: sorted
+        stably by timestamp, as the stand sorts its messages (ties keep the parts' order)."""
+        raw = cls.concat(
+            start,
+            [
+                cls.from_encoded(0, p) if isinstance(p, EncodedFrames) else cls.from_messages(0, p)
+                for p in parts
+            ],
+        )
+        return raw.take(np.argsort(raw.timestamp, kind="stable"))
 
     @classmethod
     def concat(cls, start: int, parts: Sequence[RawFrames]) -> RawFrames:

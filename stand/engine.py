@@ -16,9 +16,8 @@ from typing import Protocol, runtime_checkable
 import can
 import numpy as np
 
-from gyrostand.frames.batch import RawFrames
 from gyrostand.stand.inclinometer import SimInclinometerFrames
-from gyrostand.stand.packing import BatchEncoder, EncodedFrames
+from gyrostand.stand.packing import BatchEncoder, EncodedFrames, Part
 from gyrostand.stand.physics import CorrelatedNoise, DampedPrecession
 from gyrostand.stand.protocol import HEADING_KEYS, STATUS_KEYS, Codec, CommandFrame, Reason
 from gyrostand.stand.simconfig import FaultParams, SimConfig
@@ -29,8 +28,6 @@ _DROP, _JUMP, _JUMP_SIZE, _INVALID, _OOR, _OOR_VALUE, _CORRUPT, _CORRUPT_BIT, _E
 _N_FAULT_DRAWS = 9
 _EPS = 1e-9  # tolerance when turning stand times into sample indices
 COMPASS_FRAME = "compass"  # `can.Message.channel` of the transmitter's frames (`Simulator`)
-# frames as the engine builds them: a message's frames as arrays, or messages one by one
-Part = EncodedFrames | list[can.Message]
 
 
 @dataclass(frozen=True)
@@ -159,11 +156,10 @@ class StandEngine:
         frames.sort(key=lambda m: m.timestamp)  # stable: keeps the order within one instant
         return frames
 
-    def advance_frames(self, t_s: float) -> RawFrames:
-        """`advance_to`'s frames as arrays, in the same order, all on the stand's bus: no
-        `can.Message` per frame (three quarters of the in-process stand's cost a frame)."""
-        raw = RawFrames.concat(0, [_raw(p) for p in self._advance(t_s, heading=True, others=True)])
-        return raw.take(np.argsort(raw.timestamp, kind="stable"))  # as advance_to's sort
+    def advance_parts(self, t_s: float) -> list[Part]:
+        """`advance_to`'s frames mostly as arrays, not yet sorted (`Part`): no `can.Message` per
+        frame (three quarters of the in-process stand's cost a frame)."""
+        return self._advance(t_s, heading=True, others=True)
 
     def pass_to(self, t_s: float) -> None:
         """Advance to stand time t_s with nobody listening (a procedure's wait): the physics and
@@ -373,12 +369,6 @@ def _compass(frames: list[can.Message]) -> list[can.Message]:
     for msg in frames:
         msg.channel = COMPASS_FRAME
     return frames
-
-
-def _raw(part: Part) -> RawFrames:
-    if isinstance(part, EncodedFrames):
-        return RawFrames.from_encoded(0, part)
-    return RawFrames.from_messages(0, part)
 
 
 def _within(t: np.ndarray | float, start_s: float | None, length_s: float) -> np.ndarray:

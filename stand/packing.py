@@ -20,7 +20,7 @@ from gyrostand.stand.protocol import ProtocolError, SignalLayout, crc8_sae_j1850
 @dataclass(frozen=True)
 class EncodedFrames:
     """Frames of one message as arrays: payloads (n, length) uint8 and their timestamps. The
-    in-process simulated stand hands them on as they are (`StandEngine.advance_frames`); a bus
+    in-process simulated stand hands them on as they are (`StandEngine.advance_parts`); a bus
     takes them as messages (`messages`)."""
 
     arbitration_id: int
@@ -41,6 +41,12 @@ class EncodedFrames:
             )
             for row, t in zip(self.data, self.timestamp, strict=True)
         ]
+
+
+# frames as the simulated stand builds them: one message's frames as arrays, or messages one by
+# one (error frames, another protocol's); a list of parts is in stand-time order once sorted
+# stably by timestamp (`frames.batch.RawFrames.from_parts`)
+Part = EncodedFrames | list[can.Message]
 
 
 class BatchEncoder:

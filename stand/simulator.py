@@ -20,9 +20,7 @@ import time
 from types import TracebackType
 
 import can
-import numpy as np
 
-from gyrostand.frames.batch import RawFrames
 from gyrostand.stand.engine import COMPASS_FRAME, HeadingTransmitter, StandEngine
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simconfig import (
@@ -99,7 +97,7 @@ class Simulator:
         self._sent_to_s = -1.0
         self._faults: list[FaultParams] = []
         # an in-process bus taking the frames as arrays (`acquisition.bus.SimulatorBus` into a
-        # campaign's recorder): no message per frame; one bus only, nobody else recording
+        # campaign's recorder, `send_parts`): no message per frame; one bus, no other recorder
         self._takes_frames = (
             getattr(bus, "takes_frames", False) and recorder is None and compass_bus is None
         )
@@ -250,18 +248,9 @@ class Simulator:
         """Advance the stand to t_s, sending its frames and the SIM_CLOCK ticks in time order."""
         if t_s <= self.engine.stand_time_s:
             return
-        if self._takes_frames:
-            raw = RawFrames.concat(
-                0,
-                [
-                    self.engine.advance_frames(t_s),
-                    RawFrames.from_encoded(0, self._clock.frames_until(t_s)),
-                ],
-            )
-            raw = raw.take(np.argsort(raw.timestamp, kind="stable"))  # as the sort below
-            raw.timestamp[:] += self._epoch_s
-            self.bus.send_frames(raw)  # type: ignore[attr-defined]
-            self.frames_sent += len(raw)
+        if self._takes_frames:  # (the ticks last: as the sort below, at the same instant)
+            parts = [*self.engine.advance_parts(t_s), self._clock.frames_until(t_s)]
+            self.frames_sent += self.bus.send_parts(parts, self._epoch_s)  # type: ignore[attr-defined]
             return
         frames = self.engine.advance_to(t_s) + self._clock.until(t_s)
         frames.sort(key=lambda m: m.timestamp)  # stable: a tick after the stand's same-instant

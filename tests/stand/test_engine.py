@@ -208,8 +208,9 @@ def test_frames_do_not_depend_on_how_time_is_chunked(cuts: list[float]) -> None:
 
 
 def test_frames_as_arrays_are_the_messages_frame_for_frame() -> None:
-    """`advance_frames` (the in-process stand's path into a campaign) gives `advance_to`'s frames
-    in `advance_to`'s order: every fault knob, error frames, an inclinometer, rocking."""
+    """`advance_parts` (the in-process stand's path into a campaign) gives `advance_to`'s frames,
+    in `advance_to`'s order once sorted as `RawFrames.from_parts` sorts them: every fault knob,
+    error frames, an inclinometer, rocking."""
     cfg = config(seed=5, faults=FAULTY, inclinometer=InclinometerParams(node_id=6))
     as_messages, as_arrays = StandEngine(cfg), StandEngine(cfg)
     for engine in (as_messages, as_arrays):
@@ -217,7 +218,7 @@ def test_frames_as_arrays_are_the_messages_frame_for_frame() -> None:
         engine.receive(CODEC.encode_command_start())
     for t_s in (0.0, 0.35, 120.0, 121.0, 400.0):
         expected = RawFrames.from_messages(0, as_messages.advance_to(t_s))
-        got = as_arrays.advance_frames(t_s)
+        got = RawFrames.from_parts(0, as_arrays.advance_parts(t_s))
         assert len(got) == len(expected) > 0 or t_s == 0.0
         for f in fields(RawFrames)[1:]:
             assert np.array_equal(getattr(got, f.name), getattr(expected, f.name)), f.name
