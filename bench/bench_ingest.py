@@ -33,7 +33,7 @@ from pathlib import Path
 import can
 import numpy as np
 from acquisition_stream import campaign_frames, paper_plan
-from top_costs import print_costs, profiler
+from top_costs import print_costs
 
 from gyrostand.acquisition.bus import Recorder
 from gyrostand.acquisition.engine import Engine
@@ -224,7 +224,7 @@ def main() -> None:
         plan = paper_plan(":memory:", protocol=args.protocol)
         frames = list(itertools.islice(campaign_frames(plan), args.frames))
         print(f"{len(frames):,} frames ({args.protocol}), pinned to CPU {cpu}")
-        profile = profiler()
+        profile = cProfile.Profile()
         with tempfile.TemporaryDirectory() as folder:
             ours(frames, Path(folder), True, args.protocol, profile=profile)
         print_costs(

@@ -1,24 +1,16 @@
 """The top costs per frame of a benchmark run, from cProfile (issue 37 asks for them before and
 after a change): each function's own time in microseconds per frame, the five largest, per
-thread profiled. Timed by the thread's CPU clock (`profiler`): with two threads sharing the
-interpreter, a wall-clock profile charges the wait to take it back (after zlib, after a lock) to
-whatever released it. Waiting for a lock is left out."""
+thread profiled. Waiting for a lock (the other thread holding the interpreter) is left out."""
 
 from __future__ import annotations
 
 import cProfile
 import pstats
-import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
 WAITS = ("acquire' of '_thread.lock", "wait' of '_thread")
-
-
-def profiler() -> cProfile.Profile:
-    """A profile timed by the CPU clock of the thread it runs in."""
-    return cProfile.Profile(time.thread_time)
 
 
 def top_costs(profile: cProfile.Profile, frames: int, n: int = 5) -> list[tuple[str, float]]:
@@ -41,7 +33,7 @@ def print_costs(title: str, profile: cProfile.Profile, frames: int) -> None:
 @contextmanager
 def profiled_method(cls: type, name: str) -> Iterator[cProfile.Profile]:
     """Profile every call of `cls.name` (a thread's run loop) into one profile."""
-    profile = profiler()
+    profile = cProfile.Profile()
     original: Callable[..., Any] = getattr(cls, name)
 
     def wrapper(self: Any, *args: Any, **kwargs: Any) -> Any:
