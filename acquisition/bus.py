@@ -29,6 +29,7 @@ from gyrostand.plan.codec import codec_for, stand_config
 from gyrostand.plan.model import BusPlan, CompassPlan, Plan
 from gyrostand.stand.controller import StandController
 from gyrostand.stand.engine import HeadingTransmitter
+from gyrostand.stand.packing import Part
 from gyrostand.stand.protocol import Codec
 from gyrostand.stand.simulator import Simulator
 
@@ -75,7 +76,8 @@ class SimulatorBus(VirtualBus):
     `sink` (virtual time, where the campaign's `Recorder` is the only receiver): the frames go
     straight to it, a batch at a time (`send_batch`), instead of one by one through the
     receiving bus's queue and the notifier thread (two lock round trips and a listener call a
-    frame, ~3 us: 4 s of the paper campaign). The stand still receives commands on the bus."""
+    frame, ~3 us: 4 s of the paper campaign); on the one bus, as arrays (`send_parts`: no
+    `can.Message` per frame, ~3 us more). The stand still receives commands on the bus."""
 
     def __init__(self, channel: str, sink: Recorder | None = None, mark: int | None = None) -> None:
         """`mark`: with a `sink`, the `RawFrames.channel` its frames get (two buses: `OnBus`'s
@@ -83,6 +85,22 @@ class SimulatorBus(VirtualBus):
         super().__init__(channel=channel)
         self.sink = sink
         self.mark = mark
+
+    @property
+    def takes_frames(self) -> bool:
+        """Whether frames may come as arrays (`send_parts`): into a recorder that needs no
+        messages, on the one bus."""
+        return self.sink is not None and self.mark is None and self.sink.takes_frames
+
+    def send_parts(self, parts: list[Part], epoch_s: float) -> int:
+        """The simulated stand's frames as parts (`takes_frames`), in stand-time order, with
+        timestamps epoch_s + stand time; how many."""
+        self._check_if_open()
+        assert self.sink is not None
+        raw = RawFrames.from_parts(0, parts)
+        raw.timestamp[:] += epoch_s  # (after the sort: as the stand's messages)
+        self.sink.on_frames(raw)
+        return len(raw)
 
     def send_batch(self, msgs: list[can.Message]) -> None:
         """Every frame of `msgs`, in order (as `send` one by one)."""
@@ -147,9 +165,23 @@ class Recorder(can.Listener):
         self.log_error: Exception | None = None  # the raw log stopped being written
         self.logged = 0  # frames written to the raw log
         self._stopped = False
+        # frames queued as arrays (`on_frames`): batches and frames in (the producer's counts)
+        # and out (the consumer's), so that each count has one writer
+        self._batches_in = self._batch_frames_in = 0
+        self._batches_out = self._batch_frames_out = 0
+
+    @property
+    def takes_frames(self) -> bool:
+        """Whether frames may come as arrays (`on_frames`): the raw log needs no messages."""
+        return self.writer is None or isinstance(self.writer, BatchBLFWriter)
+
+    def _queued(self) -> int:
+        """Frames in the queue (overflow markers counted as frames: a bound, not a count)."""
+        batches = self._batches_in - self._batches_out
+        return len(self._frames) - batches + self._batch_frames_in - self._batch_frames_out
 
     def on_message_received(self, msg: can.Message) -> None:
-        if len(self._frames) >= self.maxsize:
+        if (len(self._frames) if not self._batches_in else self._queued()) >= self.maxsize:
             self.dropped += 1
             if self._overflow is None:  # one marker (beyond the bound) where frames go missing
                 self._overflow = Overflow()
@@ -161,9 +193,23 @@ class Recorder(can.Listener):
         if not self._ready.is_set():
             self._ready.set()
 
+    def on_frames(self, raw: RawFrames) -> None:
+        """Frames received together as arrays (`SimulatorBus.send_parts`; `takes_frames`):
+        one queue entry, drained by `drain_frames`."""
+        if self._queued() + len(raw) > self.maxsize:  # (frame by frame, counting the dropped)
+            for row in range(len(raw)):
+                self.on_message_received(raw.message(row))
+            return
+        self._overflow = None
+        self._batch_frames_in += len(raw)
+        self._batches_in += 1
+        self._frames.append(raw)  # type: ignore[arg-type]
+        if not self._ready.is_set():
+            self._ready.set()
+
     def on_messages(self, msgs: list[can.Message]) -> None:
         """Frames received together (`SimulatorBus.send_batch`): as one by one, at once."""
-        if len(self._frames) + len(msgs) > self.maxsize:
+        if self._queued() + len(msgs) > self.maxsize:
             for msg in msgs:  # (the bound reached: frame by frame, counting what is dropped)
                 self.on_message_received(msg)
             return
@@ -178,20 +224,56 @@ class Recorder(can.Listener):
     def drain(self, limit: int, timeout_s: float) -> list[can.Message]:
         """Up to `limit` frames in arrival order (waits up to `timeout_s` for the first one).
         The caller logs them (`log`) before using them. Where the full queue dropped frames
-        among them: `overflows` (how many of the frames come before each overflow)."""
+        among them: `overflows` (how many of the frames come before each overflow). Frames
+        sent as arrays (`on_frames`) are drained by `drain_frames` only."""
+        return self._unmark(self._pop(limit, timeout_s))
+
+    def drain_frames(
+        self, start: int, limit: int, timeout_s: float
+    ) -> tuple[RawFrames, list[can.Message] | None]:
+        """`drain`'s frames as one `RawFrames` from stream position `start`, and as messages;
+        None for the messages when some came as arrays (`on_frames`: the raw log takes the
+        arrays). `limit` counts a batch of arrays as one."""
+        items = self._pop(limit, timeout_s)
+        if not self._batches_in:  # (read after popping: a batch is counted before it is queued)
+            msgs = self._unmark(items)
+            return RawFrames.from_messages(start, msgs, channels=self.channels), msgs
+        self.overflows = []
+        parts: list[RawFrames] = []
+        run: list[can.Message] = []  # messages since the last batch of arrays
+        n = 0
+        for item in items:
+            if isinstance(item, RawFrames):
+                if run:
+                    parts.append(RawFrames.from_messages(0, run, channels=self.channels))
+                    run = []
+                parts.append(item)
+                n += len(item)
+                self._batch_frames_out += len(item)
+                self._batches_out += 1
+            elif isinstance(item, Overflow):
+                self.overflows.append((n, item))
+            else:
+                run.append(item)
+                n += 1
+        if run:
+            parts.append(RawFrames.from_messages(0, run, channels=self.channels))
+        return RawFrames.concat(start, parts), None
+
+    def _pop(self, limit: int, timeout_s: float) -> list[Any]:
+        """Up to `limit` queue entries (waits up to `timeout_s` for the first one)."""
         if not self._frames:
             self._ready.clear()
             if not self._frames:
                 self._ready.wait(timeout_s)
         pop = self._frames.popleft
-        drained = [pop() for _ in range(min(len(self._frames), limit))]
-        self.overflows = []
-        if not self.dropped:  # (no marker was ever queued)
-            return drained
-        return self._unmark(drained)
+        return [pop() for _ in range(min(len(self._frames), limit))]
 
     def _unmark(self, items: list[Any]) -> list[can.Message]:
         """The frames of `items`, the overflow markers among them noted in `overflows`."""
+        self.overflows = []
+        if not self.dropped:  # (no marker was ever queued)
+            return items
         frames: list[can.Message] = []
         for item in items:
             if isinstance(item, Overflow):
@@ -200,20 +282,22 @@ class Recorder(can.Listener):
                 frames.append(item)
         return frames
 
-    def log(self, raw: RawFrames, msgs: list[can.Message]) -> None:
-        """Write drained frames to the raw log (BLF: the whole batch at once)."""
+    def log(self, raw: RawFrames, msgs: list[can.Message] | None) -> None:
+        """Write drained frames to the raw log (BLF: the whole batch at once; `msgs` None: the
+        frames came as arrays, `takes_frames`)."""
         if self.writer is None or self._stopped or self.log_error is not None:
             return
         try:
             if isinstance(self.writer, BatchBLFWriter):
                 self.writer.write_frames(raw)
             else:
+                assert msgs is not None
                 for msg in msgs:
                     self.writer.on_message_received(msg)
         except Exception as exc:  # the frames still reach the campaign
             self.log_error = exc
         else:
-            self.logged += len(msgs)
+            self.logged += len(raw)
 
     def stop(self) -> None:
         """Log what is still queued (frames of the campaign too), then close the log."""

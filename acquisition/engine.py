@@ -359,6 +359,8 @@ class Engine:
         self._quiet_from = 0  # stream position from which unusable frames are counted
         self._quiet_carry: Counter[str] = Counter()  # ... those counted in earlier batches
         self._quiet_key: tuple[int, int] | None = None
+        self._watch_key: tuple[int, int] | None = None  # `_watched`, for this batch and trial
+        self._watch = np.zeros(0, dtype=np.int64)
         self._resets = 0
         self._batch_no = 0
         # gaps: the expected frame interval and the received-but-unusable frames in a gap
@@ -986,13 +988,13 @@ class Engine:
         if quiet < best[0]:
             best = (quiet, None, QUIET)
         errors = self._series_errors
-        for pos, frame in self._o[self._oi :]:
+        watched = self._watched()
+        for k in watched[int(np.searchsorted(watched, self._oi)) :].tolist():
+            pos, frame = self._o[k]
             if pos >= best[0]:
                 break
-            if isinstance(frame, ClockFrame):
-                since = self._valid_before(pos) if self._valid_ms is not None else None
-                if since is not None and frame.stand_time_ms - since > self._silence_ms:
-                    return pos, None, QUIET
+            if isinstance(frame, ClockFrame):  # (only those revealing the timeout are watched)
+                return pos, None, QUIET
             if isinstance(frame, CompassStatusFrame) and _compass_fault(frame):
                 return pos, _compass_fault(frame), "compass fault"
             if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
@@ -1003,6 +1005,31 @@ class Engine:
                     limit = self.plan.checks.max_error_frames
                     return pos, f"more than {limit} error frames in one series", "error frames"
         return best
+
+    def _watched(self) -> np.ndarray:
+        """Indices of the batch's other frames that may end a series (`_first_fatal`): SIM_CLOCK
+        ticks revealing the silence timeout, faulty compass statuses, error frames. Once per
+        batch and trial (as `_quiet_index`): `_first_fatal` runs once per window or step, and
+        the batch's ticks, one per stand second, are nearly all fine."""
+        key = (self._batch_no, self._resets)
+        if self._watch_key == key:
+            return self._watch
+        self._quiet_index()
+        clocks: list[tuple[int, int, int]] = []  # (index, position, stand ms)
+        watched: list[int] = []
+        for k, (pos, frame) in enumerate(self._o):
+            if isinstance(frame, ClockFrame):
+                clocks.append((k, pos, frame.stand_time_ms))
+            elif (isinstance(frame, CompassStatusFrame) and _compass_fault(frame)) or (
+                isinstance(frame, InvalidFrame) and frame.reason == "error frame"
+            ):
+                watched.append(k)
+        if clocks and self._valid_ms is not None:  # as `_valid_before` at each tick
+            index, pos, t_ms = np.array(clocks, dtype=np.int64).T
+            since = self._last_valid(np.searchsorted(self._vpos, pos))
+            watched += index[t_ms - since > self._silence_ms].tolist()
+        self._watch_key, self._watch = key, np.array(sorted(watched), dtype=np.int64)
+        return self._watch
 
     def _skip_to(self, pos: int) -> None:
         self._hi += int(np.searchsorted(self._h.pos[self._hi :], pos))
@@ -1025,12 +1052,13 @@ class Engine:
             self._oi += 1
             if self._gap_events:
                 self._tell_gaps(pos)
+            if type(frame) is ClockFrame:  # most of them (one a stand second): only the clock
+                self.now_ms = max(self.now_ms, frame.stand_time_ms)
+                continue
             if isinstance(frame, CommandFrame):
                 self._foreign_command(frame)
             if isinstance(frame, DeviceEvent | RollSample):
                 self._on_other(pos, frame)
-            if isinstance(frame, ClockFrame):
-                self.now_ms = max(self.now_ms, frame.stand_time_ms)
             if isinstance(frame, InvalidFrame) and frame.reason == "error frame":
                 self._series_errors += 1
             if isinstance(frame, InvalidFrame) and self._window is not None:

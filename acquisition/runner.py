@@ -204,12 +204,14 @@ def run_live(
                 if (why := operator.stop_requested()) is not None:
                     engine.interrupt(why)
                     break
-                msgs = live.recorder.drain(BATCH_FRAMES, 0.05)
                 if live.merge is not None:  # (virtual time: no overflow, the stand waits)
-                    msgs = live.merge.order(msgs)
+                    msgs = live.merge.order(live.recorder.drain(BATCH_FRAMES, 0.05))
                     if live.merge.error is not None:
                         engine.interrupt(live.merge.error)
                         break
+                    raw = RawFrames.from_messages(position, msgs, channels=live.own_bus)
+                else:  # (msgs None: the frames came as arrays)
+                    raw, msgs = live.recorder.drain_frames(position, BATCH_FRAMES, 0.05)
                 if live.recorder.dropped > dropped:
                     lost = live.recorder.dropped - dropped
                     dropped = live.recorder.dropped
@@ -233,8 +235,7 @@ def run_live(
                 if serial is not None and serial.error is not None:
                     engine.interrupt(serial.error)
                     break
-                if msgs:
-                    raw = RawFrames.from_messages(position, msgs, channels=live.own_bus)
+                if len(raw):
                     batch = decoder.decode(raw)
                     for before, overflow in overflows:
                         at = position + before  # (a serial line's pieces among the frames)
@@ -244,20 +245,20 @@ def run_live(
                     live_file.headings(batch.headings)
                     if grants is not None and serial is not None:  # (timed by the decoder)
                         keep = serial.decoder.frames_before(engine.consumed)
-                        raw, msgs = raw.head(keep), msgs[:keep]
+                        raw, msgs = raw.head(keep), msgs and msgs[:keep]
                         restamp(raw, msgs, raw.timestamp)
                         _granted(engine, grants.progress, engine.now_ms)
                     elif grants is not None:  # the log ends where the campaign did
                         keep = engine.consumed - position
                         times_s = stream_clock.times_s(batch, position)[:keep]
-                        raw, msgs = raw.head(keep), msgs[:keep]
+                        raw, msgs = raw.head(keep), msgs and msgs[:keep]
                         restamp(raw, msgs, times_s)
                         _granted(engine, grants.progress, engine.now_ms)
-                    skip = min(max(first_frame - position, 0), len(msgs))  # in earlier logs
-                    live.recorder.log(raw.tail(skip), msgs[skip:])
+                    skip = min(max(first_frame - position, 0), len(raw))  # in earlier logs
+                    live.recorder.log(raw.tail(skip), msgs and msgs[skip:])
                     if serial is not None:
                         serial.log_batch(engine.consumed)
-                    position += len(msgs)
+                    position += len(raw)
                     # silence counts from when the acquisition listens again: a slow batch here
                     # (a first import, an emulated machine) is not the stand's silence
                     last_frame = time.monotonic()
@@ -406,9 +407,11 @@ def _granted(engine: Engine, send: Callable[..., None], *args: int) -> None:
         engine.fail(f"could not send SIM_SYNC: {exc}", kind="bus error")
 
 
-def restamp(raw: RawFrames, msgs: list[can.Message], times_s: np.ndarray) -> None:
+def restamp(raw: RawFrames, msgs: list[can.Message] | None, times_s: np.ndarray) -> None:
     """Give the frames their stream times (virtual time: the raw log's timestamps)."""
     raw.timestamp[:] = times_s
+    if msgs is None:  # (the frames came as arrays)
+        return
     for msg, t in zip(msgs, times_s.tolist(), strict=True):
         msg.timestamp = t
 

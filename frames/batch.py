@@ -11,13 +11,14 @@ the authoritative `InvalidFrame` reasons.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from operator import attrgetter
 
 import can
 import numpy as np
 
 from gyrostand.frames.vectordecode import VectorDecoder
+from gyrostand.stand.packing import EncodedFrames, Part
 from gyrostand.stand.protocol import (
     ClockFrame,
     Codec,
@@ -100,19 +101,61 @@ class RawFrames:
             ),
         )
 
+    @classmethod
+    def from_encoded(cls, start: int, frames: EncodedFrames) -> RawFrames:
+        """Frames of one message from the batch encoder (`stand.packing`), on the stand's bus."""
+        n, length = frames.data.shape
+        data = np.zeros((n, 8), np.uint8)
+        data[:, :length] = frames.data
+        return cls(
+            start=start,
+            arbitration_id=np.full(n, frames.arbitration_id, np.uint32),
+            dlc=np.full(n, length, np.int64),
+            data=data,
+            is_error=np.zeros(n, bool),
+            is_remote=np.zeros(n, bool),
+            is_extended=np.full(n, frames.is_extended_id, bool),
+            timestamp=np.asarray(frames.timestamp, np.float64),
+            channel=np.zeros(n, np.uint8),
+        )
+
+    @classmethod
+    def from_parts(cls, start: int, parts: Sequence[Part]) -> RawFrames:
+        """The simulated stand's frames (`stand.packing.Part`) in stand-time order: sorted
+        stably by timestamp, as the stand sorts its messages (ties keep the parts' order)."""
+        raw = cls.concat(
+            start,
+            [
+                cls.from_encoded(0, p) if isinstance(p, EncodedFrames) else cls.from_messages(0, p)
+                for p in parts
+            ],
+        )
+        return raw.take(np.argsort(raw.timestamp, kind="stable"))
+
+    @classmethod
+    def concat(cls, start: int, parts: Sequence[RawFrames]) -> RawFrames:
+        """The frames of `parts` one after the other, from stream position `start`."""
+        if not parts:
+            return cls.from_messages(start, [])
+        if len(parts) == 1:
+            return replace(parts[0], start=start)
+        return cls(start, *(np.concatenate([getattr(p, f.name) for p in parts]) for f in _ARRAYS))
+
+    def take(self, rows: np.ndarray) -> RawFrames:
+        """The frames of `rows` (indices or a mask), in that order."""
+        return RawFrames(self.start, *(getattr(self, f.name)[rows] for f in _ARRAYS))
+
     def on_bus(self, bus: int | None) -> np.ndarray:
         """Which rows came from bus `bus` (None: any bus)."""
         return np.ones(len(self), dtype=bool) if bus is None else self.channel == bus
 
     def head(self, n: int) -> RawFrames:
         """The first n frames."""
-        return RawFrames(self.start, *(getattr(self, f.name)[:n] for f in fields(self)[1:]))
+        return RawFrames(self.start, *(getattr(self, f.name)[:n] for f in _ARRAYS))
 
     def tail(self, skip: int) -> RawFrames:
         """All but the first `skip` frames."""
-        return RawFrames(
-            self.start + skip, *(getattr(self, f.name)[skip:] for f in fields(self)[1:])
-        )
+        return RawFrames(self.start + skip, *(getattr(self, f.name)[skip:] for f in _ARRAYS))
 
     def message(self, row: int) -> can.Message:
         """Row `row` as a python-can message (for the rare frames decoded one by one)."""
@@ -126,6 +169,9 @@ class RawFrames:
             data=bytes(self.data[row, : int(self.dlc[row])]),
             channel=int(self.channel[row]),
         )
+
+
+_ARRAYS = fields(RawFrames)[1:]  # the per-frame arrays, after `start`
 
 
 @dataclass(frozen=True)

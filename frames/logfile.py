@@ -137,25 +137,11 @@ def read_blf(path: Path, chunk: int = CHUNK_FRAMES) -> Iterator[RawFrames]:
         pending.append(part)
         pending_n += len(part)
         if pending_n >= chunk:
-            yield _concat(start, pending)
+            yield RawFrames.concat(start, pending)
             start += pending_n
             pending, pending_n = [], 0
     if pending_n:
-        yield _concat(start, pending)
-
-
-def _concat(start: int, parts: list[RawFrames]) -> RawFrames:
-    return RawFrames(
-        start,
-        np.concatenate([p.arbitration_id for p in parts]),
-        np.concatenate([p.dlc for p in parts]),
-        np.concatenate([p.data for p in parts]),
-        np.concatenate([p.is_error for p in parts]),
-        np.concatenate([p.is_remote for p in parts]),
-        np.concatenate([p.is_extended for p in parts]),
-        np.concatenate([p.timestamp for p in parts]),
-        np.concatenate([p.channel for p in parts]),
-    )
+        yield RawFrames.concat(start, pending)
 
 
 def _containers(path: Path) -> Iterator[bytes]:

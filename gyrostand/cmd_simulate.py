@@ -361,7 +361,6 @@ def _live(
 ) -> None:
     import can
 
-    from gyrostand.stand.physics import load_noise_filter
     from gyrostand.stand.schedule import LOG_SUFFIXES
     from gyrostand.stand.simulator import Simulator
 
@@ -377,7 +376,6 @@ def _live(
         start_epoch_s=run["start_epoch"],
         transmitter=transmitter,
     )
-    load_noise_filter()
     pace = "in virtual time" if config.timing == "virtual" else f"at {config.speedup:g}x"
     say(f"simulating on {run['interface']}:{run['channel']} {pace} (Ctrl-C to stop)")
     deadline = None if run["duration_s"] is None else time.monotonic() + run["duration_s"]

@@ -7,12 +7,46 @@ frame."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import can
 import numpy as np
 from cantools.database.can import Message as DbcMessage
 from cantools.database.can import Signal
 
 from gyrostand.stand.protocol import ProtocolError, SignalLayout, crc8_sae_j1850_rows
+
+
+@dataclass(frozen=True)
+class EncodedFrames:
+    """Frames of one message as arrays: payloads (n, length) uint8 and their timestamps. The
+    in-process simulated stand hands them on as they are (`StandEngine.advance_parts`); a bus
+    takes them as messages (`messages`)."""
+
+    arbitration_id: int
+    is_extended_id: bool
+    data: np.ndarray
+    timestamp: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.timestamp)
+
+    def messages(self) -> list[can.Message]:
+        return [
+            can.Message(
+                arbitration_id=self.arbitration_id,
+                is_extended_id=self.is_extended_id,
+                data=row.tobytes(),
+                timestamp=float(t),
+            )
+            for row, t in zip(self.data, self.timestamp, strict=True)
+        ]
+
+
+# frames as the simulated stand builds them: one message's frames as arrays, or messages one by
+# one (error frames, another protocol's); a list of parts is in stand-time order once sorted
+# stably by timestamp (`frames.batch.RawFrames.from_parts`)
+Part = EncodedFrames | list[can.Message]
 
 
 class BatchEncoder:
@@ -52,13 +86,9 @@ class BatchEncoder:
         big = words[True].astype(">u8").view(np.uint8).reshape(n, 8)
         return (little | big)[:, : self.length].copy()
 
+    def frames(self, data: np.ndarray, timestamps: np.ndarray) -> EncodedFrames:
+        """Payloads from `pack` with their timestamps, as this message's frames."""
+        return EncodedFrames(self.arbitration_id, self.is_extended_id, data, timestamps)
+
     def messages(self, data: np.ndarray, timestamps: np.ndarray) -> list[can.Message]:
-        return [
-            can.Message(
-                arbitration_id=self.arbitration_id,
-                is_extended_id=self.is_extended_id,
-                data=row.tobytes(),
-                timestamp=float(t),
-            )
-            for row, t in zip(data, timestamps, strict=True)
-        ]
+        return self.frames(data, timestamps).messages()

@@ -96,6 +96,11 @@ class Simulator:
         self._progress = threading.Condition()
         self._sent_to_s = -1.0
         self._faults: list[FaultParams] = []
+        # an in-process bus taking the frames as arrays (`acquisition.bus.SimulatorBus` into a
+        # campaign's recorder, `send_parts`): no message per frame; one bus, no other recorder
+        self._takes_frames = (
+            getattr(bus, "takes_frames", False) and recorder is None and compass_bus is None
+        )
 
     @property
     def stand_time_s(self) -> float:
@@ -242,6 +247,10 @@ class Simulator:
     def _run_to(self, t_s: float) -> None:
         """Advance the stand to t_s, sending its frames and the SIM_CLOCK ticks in time order."""
         if t_s <= self.engine.stand_time_s:
+            return
+        if self._takes_frames:  # (the ticks last: as the sort below, at the same instant)
+            parts = [*self.engine.advance_parts(t_s), self._clock.frames_until(t_s)]
+            self.frames_sent += self.bus.send_parts(parts, self._epoch_s)  # type: ignore[attr-defined]
             return
         frames = self.engine.advance_to(t_s) + self._clock.until(t_s)
         frames.sort(key=lambda m: m.timestamp)  # stable: a tick after the stand's same-instant

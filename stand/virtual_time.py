@@ -29,7 +29,7 @@ import cantools
 import numpy as np
 from cantools.database.can import Message as DbcMessage
 
-from gyrostand.stand.packing import BatchEncoder
+from gyrostand.stand.packing import BatchEncoder, EncodedFrames
 from gyrostand.stand.protocol import ProtocolError, load_dbc
 
 CLOCK_INTERVAL_MS = 1000  # SIM_CLOCK period in stand time
@@ -105,14 +105,16 @@ class ClockEncoder:
 
     def until(self, t_s: float) -> list[can.Message]:
         """The ticks due in (last call's t, t_s], with the stand time (s) as their timestamp."""
+        return self.frames_until(t_s).messages()
+
+    def frames_until(self, t_s: float) -> EncodedFrames:
+        """`until`'s ticks as arrays."""
         end = int(t_s * 1000) // CLOCK_INTERVAL_MS + 1
         ticks = np.arange(self._next, max(self._next, end))
         self._next = max(self._next, end)
-        if not len(ticks):
-            return []
         t_ms = ticks * CLOCK_INTERVAL_MS
         clock = {"time": t_ms + self.clock_ms}
-        return self._encoder.messages(self._encoder.pack(clock, len(t_ms)), t_ms / 1000)
+        return self._encoder.frames(self._encoder.pack(clock, len(t_ms)), t_ms / 1000)
 
     def now(self, t_s: float) -> can.Message:
         """One SIM_CLOCK at stand time t_s (the answer to a new controller)."""

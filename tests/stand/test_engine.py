@@ -1,16 +1,18 @@
 """The simulated stand: commands and refusals, every fault knob, determinism, batch encoding."""
 
 import math
+from dataclasses import fields
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from gyrostand.frames.batch import RawFrames
 from gyrostand.stand.engine import StandEngine
 from gyrostand.stand.packing import BatchEncoder
 from gyrostand.stand.protocol import HEADING_KEYS, STATUS_KEYS, AckFrame, Reason
-from gyrostand.stand.simconfig import CompassParams, SimConfig
+from gyrostand.stand.simconfig import CompassParams, InclinometerParams, SimConfig
 from tests.stand.frames import CODEC, command, config, decoded_headings, headings, invalid, statuses
 
 N = 20_000  # heading samples in the fault tests (2000 s at 10 Hz)
@@ -203,6 +205,24 @@ def test_same_seed_same_frames_different_seed_different_frames() -> None:
 @given(st.lists(st.floats(0.0, 600.0), max_size=30))
 def test_frames_do_not_depend_on_how_time_is_chunked(cuts: list[float]) -> None:
     assert scripted(3, sorted(cuts)) == scripted(3, [])
+
+
+def test_frames_as_arrays_are_the_messages_frame_for_frame() -> None:
+    """`advance_parts` (the in-process stand's path into a campaign) gives `advance_to`'s frames,
+    in `advance_to`'s order once sorted as `RawFrames.from_parts` sorts them: every fault knob,
+    error frames, an inclinometer, rocking."""
+    cfg = config(seed=5, faults=FAULTY, inclinometer=InclinometerParams(node_id=6))
+    as_messages, as_arrays = StandEngine(cfg), StandEngine(cfg)
+    for engine in (as_messages, as_arrays):
+        engine.receive(CODEC.encode_command_set(31, 20, 6))
+        engine.receive(CODEC.encode_command_start())
+    for t_s in (0.0, 0.35, 120.0, 121.0, 400.0):
+        expected = RawFrames.from_messages(0, as_messages.advance_to(t_s))
+        got = RawFrames.from_parts(0, as_arrays.advance_parts(t_s))
+        assert len(got) == len(expected) > 0 or t_s == 0.0
+        for f in fields(RawFrames)[1:]:
+            assert np.array_equal(getattr(got, f.name), getattr(expected, f.name)), f.name
+    assert got.is_error.any() and (got.arbitration_id == 0x180 + 6).any()
 
 
 def test_an_unheard_wait_leaves_the_frames_heard_after_it_unchanged() -> None:

@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from scipy.signal import lfilter
 
 from gyrostand.stand.engine import StandEngine
 from gyrostand.stand.physics import CorrelatedNoise, DampedPrecession, rolling_error_rad
@@ -166,6 +167,20 @@ def test_correlated_noise_chunks_equal_one_draw() -> None:
     chunked = CorrelatedNoise(1.0, 0.5, 0.1, np.random.default_rng(4))
     parts = [chunked.sample(n) for n in (1, 0, 337, 662)]
     assert np.array_equal(whole, np.concatenate(parts))
+
+
+def test_correlated_noise_is_scipys_ar1_filter_to_the_bit() -> None:
+    """The recursion gives lfilter's numbers exactly (what it replaced: the same campaigns)."""
+    sigma, mu, step = 0.02, 0.05, 0.1
+    noise = CorrelatedNoise(sigma, mu, step, np.random.default_rng(7))
+    ours = np.concatenate([noise.sample(n) for n in (1, 500, 0, 20_000)])
+    w = np.random.default_rng(7).standard_normal(20_501)
+    r = math.exp(-mu * step)
+    drive = sigma * math.sqrt(1.0 - r**2) * w
+    drive[0] = sigma * w[0]
+    assert np.array_equal(ours, lfilter([1.0], [1.0, -r], drive))
+    k = autocorrelation(ours, 11)  # and it is the process asked for: sigma^2 e^(-mu tau)
+    assert k[10] / k[0] == pytest.approx(math.exp(-mu * 10 * step), abs=0.05)
 
 
 def test_drift_and_spurious_harmonic() -> None:
