@@ -32,6 +32,7 @@ from gyrostand.stand.physics import load_noise_filter
 from gyrostand.stand.protocol import Codec
 
 SYNC_ID = 0x080
+MOVED_DEG = 0.01  # the axis enabled and the platform this far from where it was: a roll
 
 
 class PlatformCompass(can.Listener):
@@ -56,6 +57,7 @@ class PlatformCompass(can.Listener):
         self.rolls = 0  # rolls begun
         self.felt: list[tuple[float, float, float, float]] = []  # t, K, A cm, tau (each roll)
         self._enabled_s: float | None = None
+        self._level_deg: float | None = None  # the platform's angle when enabled, until it moves
         self._samples: list[tuple[float, float]] = []
         self._rocking = False
         drive.network.subscribe(SYNC_ID, self._on_sync)  # (after the drive's subscription)
@@ -72,17 +74,20 @@ class PlatformCompass(can.Listener):
                 self._command("stop", 0.0, 0.0, 0.0)
             self._enabled_s, self._rocking = None, False
             return
-        if self._enabled_s is None:
-            self._enabled_s, self._samples = t, []
+        cpd = self.kinematics.counts_per_degree
+        angle = self.drive.platform_deg(cpd)
+        if self._enabled_s is None:  # (the master also enables the axis once at its start)
+            self._enabled_s, self._samples, self._level_deg = t, [], angle
+        elif self._level_deg is not None and abs(angle - self._level_deg) > MOVED_DEG:
+            self._level_deg = None  # it moves: a roll
             self.rolls += 1
-        if self._rocking or self.rolls > len(self.trials):
+        if self._rocking or self._level_deg is not None or self.rolls > len(self.trials):
             return
         direction, tau = self.trials[self.rolls - 1]
         since = t - self._enabled_s
         if since < self.ramp_s:
             return
-        cpd = self.kinematics.counts_per_degree
-        self._samples.append((t, self.drive.platform_deg(cpd)))
+        self._samples.append((t, angle))
         if since < self.ramp_s + tau:
             return
         times, angles = np.array(self._samples).T
@@ -163,3 +168,30 @@ def simulated_stand(
     assert network.notifier is not None
     network.notifier.add_listener(compass)
     return SimulatedStand(drive, compass, inclinometer)
+
+
+class StandThread:
+    """The plan's simulated stand on the plan's bus, served in a thread (tests, benchmarks: a
+    master in the same process on python-can's virtual bus)."""
+
+    def __init__(self, plan: Plan, faults: DriveFaults = DriveFaults()) -> None:
+        import threading
+
+        from gyrostand.devices.sim_drive import serve
+
+        self.network = canopen.Network()
+        self.network.connect(interface=plan.bus.interface, channel=plan.bus.channel)
+        try:
+            self.stand = simulated_stand(plan, self.network, faults)
+            self.stand.boot()
+        except BaseException:
+            self.network.disconnect()
+            raise
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=serve, args=(self.stand.drive, self.stop))
+        self.thread.start()
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join()
+        self.network.disconnect()

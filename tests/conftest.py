@@ -70,6 +70,7 @@ def db_url(new_db_url: NewDatabase) -> str:
 SLOW_FILES = frozenset(
     {
         "acquisition/test_cia402_campaign.py",
+        "acquisition/test_cia402_live.py",
         "acquisition/test_cia402_run.py",
         "acquisition/test_cia402_replay.py",
         "acquisition/test_cia402_resume.py",

@@ -7,6 +7,7 @@ file, none on wall-clock timing."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sqlite3
 import threading
@@ -14,14 +15,12 @@ import uuid
 from contextlib import closing
 from pathlib import Path
 
-import canopen
 import pytest
 
 from gyrostand.acquisition.runner import run_live
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.session import open_database, sqlite_url
-from gyrostand.devices.sim_cia402_stand import SimulatedStand, simulated_stand
-from gyrostand.devices.sim_drive import DriveFaults, serve
+from gyrostand.devices.sim_cia402_stand import SimulatedStand, StandThread
 from gyrostand.plan.model import Plan, parse_plan
 
 CYCLE_MS = 10
@@ -69,7 +68,7 @@ hold_s = 1.0
 max_wait_s = 120.0
 
 [tracking]
-confirm_s = 1.0
+confirm_s = 10.0
 
 [timeouts]
 ack_s = 10.0
@@ -120,22 +119,13 @@ def live_plan(folder: Path, channel: str) -> Plan:
     return parse_plan(text + "".join(TRIAL.format(*t) for t in TRIALS))
 
 
-class StandThread:
-    """The simulated stand on the bus, served in a thread (stand time follows the SYNC)."""
-
-    def __init__(self, plan: Plan, faults: DriveFaults) -> None:
-        self.network = canopen.Network()
-        self.network.connect(interface="virtual", channel=plan.bus.channel)
-        self.stand: SimulatedStand = simulated_stand(plan, self.network, faults)
-        self.stand.boot()
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=serve, args=(self.stand.drive, self.stop))
-        self.thread.start()
-
-    def close(self) -> None:
-        self.stop.set()
-        self.thread.join()
-        self.network.disconnect()
+def _fault_in_roll(stand: SimulatedStand, roll: int, stop: threading.Event) -> None:
+    """An over-current fault of the drive 1 s of its time after roll `roll` began."""
+    while not stop.wait(0.05):
+        if stand.compass.rolls >= roll:
+            drive = stand.drive
+            drive.faults = dataclasses.replace(drive.faults, overcurrent_at_s=drive.t_s + 1.0)
+            return
 
 
 def _rows(db: Path, sql: str) -> list[tuple]:
@@ -147,8 +137,9 @@ def _rows(db: Path, sql: str) -> list[tuple]:
 def live(tmp_path_factory):
     folder = tmp_path_factory.mktemp("live")
     plan = live_plan(folder, f"gyrostand-live-{uuid.uuid4().hex}")
-    fault_at_s = None  # set below, from the stand time trial 3 starts rolling at
-    sim = StandThread(plan, DriveFaults())
+    sim = StandThread(plan)
+    watcher = threading.Thread(target=_fault_in_roll, args=(sim.stand, 3, sim.stop))
+    watcher.start()
     try:
         sessions = open_database(sqlite_url(folder / "live.sqlite"))
         store = CampaignStore.create(sessions, plan)
@@ -156,16 +147,20 @@ def live(tmp_path_factory):
         result = run_live(plan, store, quiet=True, answers=answers)
     finally:
         sim.close()
-    return folder / "live.sqlite", result, sim.stand, fault_at_s
+        watcher.join()
+    return folder / "live.sqlite", result, sim.stand
 
 
-def test_the_live_campaign_completes_with_the_roll_measured(live):
-    db, result, stand, _ = live
-    assert result.outcome == "completed", result
-    assert result.trials_completed == len(TRIALS)
-    # one still and one rocking observation per trial, stored
-    (n,) = _rows(db, "SELECT count(*) FROM observation")[0]
-    assert n == 2 * 2 * len(TRIALS)
+def test_the_live_campaign_acquires_its_trials_with_the_roll_measured(live):
+    db, result, stand = live
+    assert (result.trials_completed, result.trials_failed) == (2, 1), result
+    # two still and two rocking observations per completed trial, stored
+    (n,) = _rows(
+        db,
+        "SELECT count(*) FROM observation o JOIN series s ON o.series_id = s.id "
+        'JOIN trial t ON s.trial_id = t.id WHERE t."index" <= 2',
+    )[0]
+    assert n == 2 * 2 * 2
     motions = _rows(
         db,
         'SELECT t."index", m.source, m.amplitude_cm, m.amplitude_se_cm, m.period_s FROM '
@@ -173,6 +168,7 @@ def test_the_live_campaign_completes_with_the_roll_measured(live):
         'ORDER BY t."index", m.source',
     )
     felt = {k: (a, tau) for k, (_, _, a, tau) in enumerate(stand.compass.felt, start=1)}
+    assert [k for k, *_ in motions] == [1, 1, 2, 2]
     for idx, source, amplitude, se, period in motions:
         K, A, tau = TRIALS[idx - 1]
         # the truth: the amplitude the simulated platform rolled at (fitted by the simulator
@@ -182,3 +178,16 @@ def test_the_live_campaign_completes_with_the_roll_measured(live):
         assert period == pytest.approx(tau, rel=0.01)
         assert math.isfinite(se)
     assert {s for _, s, *_ in motions} == {"inclinometer", "drive position"}
+
+
+def test_a_drive_fault_fails_its_trial_naming_the_error_and_leaves_the_axis_at_rest(live):
+    db, _, stand = live
+    errors = _rows(
+        db,
+        'SELECT t."index", e.kind, e.message FROM event e JOIN trial t ON e.trial_id = t.id '
+        "WHERE e.severity = 'error'",
+    )
+    assert errors == [(3, "drive fault", errors[0][2])] and "0x2310" in errors[0][2]
+    (reason,) = _rows(db, 'SELECT failure_reason FROM trial WHERE "index" = 3')[0]
+    assert "0x2310" in reason
+    assert stand.drive.at_rest and stand.drive.emcy_sent == [0x2310]
