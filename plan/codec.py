@@ -134,11 +134,6 @@ def _cia402_problems(plan: Plan) -> list[str]:
             '"virtual"); a real drive (simulated = false) runs in real time'
         )
     if not plan.bus.simulated:
-        if plan.bus.timing != "realtime":
-            problems.append(
-                "[bus] timing: a CiA 402 drive on a real bus runs in real time (timing = "
-                '"realtime"): its SYNC is the stand clock'
-            )
         if plan.compass.own_bus:
             problems.append(
                 "[compass] interface: a CiA 402 stand's compass on a bus of its own is not "
