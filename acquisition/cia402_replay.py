@@ -143,6 +143,11 @@ def replay_cia402(
     a ValueError) and the new campaign is marked failed."""
     from gyrostand.acquisition.runner import _judged, replayed_segments, result
 
+    if not plan.bus.simulated:  # (its SYNCs were the bus's, not one per cycle of the master)
+        raise DriveLogError(
+            "replay of a CiA 402 campaign run on a real bus is not supported yet (only the "
+            "simulated stand's, in virtual time)"
+        )
     if not starts_a_run(checked[0].path):  # (before the database is written)
         raise DriveLogError(
             f"{checked[0].path}: not a CiA 402 stand's raw log from its start (no RUN record "

@@ -236,7 +236,8 @@ class Cia402Axis:
         received; in lockstep also those the drive sent after it in that cycle (all arrived:
         the simulation's lockstep waits for them). Live (periodic SYNC), up to the last TPDO1
         received: a master that fell behind goes on from the drive's latest state, the cycles
-        it missed counted (`late_cycles`: no set-point of their own). A frame received after
+        it missed counted (`late_cycles`: no set-point of their own), the stand time
+        advanced by the SYNCs received (`cycle`). A frame received after
         the TPDO1 of a live cycle is the next cycle's, so a replay (lockstep) takes the same
         frames in the same cycle as the live run did."""
         tpdo = self._tpdo_id
@@ -284,8 +285,11 @@ class Cia402Axis:
         self.on_frames(frames)
         if self.inclinometer is not None:
             self.slope_deg = self.inclinometer.take()
-        cycles = sum(f.can_id == self._tpdo_id for f in frames)
-        self.late_cycles += cycles - 1
+        if c.sync == "lockstep":
+            cycles = 1
+        else:  # stand time is the SYNCs received (a TPDO lost or late does not stop it)
+            cycles = sum(f.can_id == 0x80 for f in frames)
+            self.late_cycles += max(0, cycles - 1)
         self.cycle += cycles
         self._supervise(frames)
         self.on_cycle()

@@ -32,6 +32,7 @@ from gyrostand.stand.physics import load_noise_filter
 from gyrostand.stand.protocol import Codec
 
 SYNC_ID = 0x080
+LATE_S = 0.2  # compass samples older than this at a SYNC are not sent (no bus time then)
 MOVED_DEG = 0.01  # the axis enabled and the platform this far from where it was: a roll
 
 
@@ -66,6 +67,8 @@ class PlatformCompass(can.Listener):
         drive = self.drive
         t = drive.t_s - drive._od(0x1006) * 1e-6  # the SYNC's stand time (sampled there)
         self._follow(t, drive.status == OPERATION_ENABLED)
+        if t - self.compass.stand_time_s > LATE_S:  # (the first SYNC after a silence: what
+            self.compass.pass_to(t - LATE_S)  # it would have sent then went unheard)
         self._send(self.compass.advance_to(t))
 
     def _follow(self, t: float, enabled: bool) -> None:
