@@ -165,7 +165,8 @@ class _Cycles(threading.Thread):
         """The stand's frames up to stand time `t_s`, once the cycles have reached it."""
         with self.lock:
             ok = self.lock.wait_for(
-                lambda: self.error is not None or self.stand.t_s >= t_s - 1e-9, STALL_S + t_s
+                lambda: self.error is not None or self.stand.t_s >= t_s - 1e-9,
+                max(0.0, t_s - self.stand.t_s) + STALL_S,
             )
             if self.error is not None or not ok:
                 raise ValueError(f"the CiA 402 stand stopped cycling: {self.error or 'stalled'}")
@@ -199,11 +200,7 @@ class SharedStand:
     def take_faults(self) -> list[DriveFault]:
         """The drive faults up to the stand time fed (later ones: with the next batch)."""
         with self._cycles.lock:
-            faults = self._stand.take_faults()
-            fed_ms = round(self.t_s * 1000.0)
-            later = [f for f in faults if f.t_ms > fed_ms]
-            self._stand._faults[:0] = later
-        return [f for f in faults if f.t_ms <= fed_ms]
+            return self._stand.take_faults(round(self.t_s * 1000.0))
 
     def to_rest(self, limit_s: float) -> bool:
         """The cycles in this thread from here: the roll under way, if any, to rest."""

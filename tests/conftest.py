@@ -71,6 +71,7 @@ SLOW_FILES = frozenset(
     {
         "acquisition/test_cia402_campaign.py",
         "acquisition/test_cia402_live.py",
+        "devices/test_cia402_processes.py",
         "acquisition/test_cia402_run.py",
         "acquisition/test_cia402_replay.py",
         "acquisition/test_cia402_resume.py",
