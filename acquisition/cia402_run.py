@@ -141,7 +141,12 @@ def _to_rest(sim: SimulatedCia402, store: CampaignStore) -> None:
     """Run the axis on (SYNC in stand time) until the stop ramp has brought it to rest and it is
     disabled; an event says when."""
     stand = sim.stand
-    if not stand.to_rest(REST_LIMIT_S):
+    try:
+        at_rest = stand.to_rest(REST_LIMIT_S)
+    except DriveError as exc:  # (a drive that stopped answering: its own reaction must stop it)
+        store.run_event("stand", "error", f"the axis not brought to rest: {exc}")
+        return
+    if not at_rest:
         store.run_event("stand", "error", f"the axis not at rest {REST_LIMIT_S:g} s after stopping")
     else:
         store.run_event(
