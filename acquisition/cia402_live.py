@@ -27,6 +27,7 @@ differs is where the cycles come from:
 from __future__ import annotations
 
 import threading
+from collections import deque
 from collections.abc import Callable
 
 import can
@@ -46,6 +47,7 @@ from gyrostand.plan.model import Plan
 
 SYNC_ID = 0x080
 NOTIFIER_CYCLE_S = 0.05
+SYNCS_KEPT = 100_000  # the last SYNCs' reception times (the benchmark's jitter)
 STALL_S = 10.0  # wall seconds without a cycle: the stand is gone (the drive or the bus)
 
 
@@ -89,7 +91,7 @@ class Received(can.Listener):
         self.cycle_ms = cycle_ms
         self.clock = ReceptionClock()
         self.syncs = 0
-        self.sync_rx_s: list[float] = []
+        self.sync_rx_s: deque[float] = deque(maxlen=SYNCS_KEPT)
         self._position = 0
         self._frames: list[can.Message] = []
         self._cond = threading.Condition()
