@@ -38,7 +38,7 @@ from gyrostand.acquisition.bus import open_bus, request_identity
 from gyrostand.acquisition.cia402_sim import LoggedFrames, merged
 from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault
 from gyrostand.acquisition.engine import Command
-from gyrostand.devices.cia402 import AxisConfig, Cia402Axis, DriveError, Frame
+from gyrostand.devices.cia402 import CSP, AxisConfig, Cia402Axis, DriveError, Frame
 from gyrostand.devices.cia402_log import _copy, _wrap_send, drive_ids
 from gyrostand.devices.clock import NO_CLOCK, ReceptionClock
 from gyrostand.devices.roll_trajectory import Kinematics
@@ -238,6 +238,11 @@ class LiveCia402(LoggedFrames):
             self.tap = LiveTap(self.network, s.node_id, lambda: self.axis.t_s)
             self.axis.on_frames = self.tap.cycle
             self.axis.start()  # (SYNC from here: the other devices' frames have a stand time)
+            if self.axis.mode != CSP:
+                raise DriveError(
+                    f"drive {s.node_id} offers no cyclic synchronous position (0x6502): profile "
+                    "position on a real bus is not supported yet"
+                )
             if plan.compass.protocol == "nmea2000":  # its claim and product, heard anew (from
                 request_identity(self._sync_bus)  # another handle: not the drive's traffic)
             kinematics = Kinematics(s.counts_per_degree, s.arm_length_cm)
