@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from gyrostand.acquisition.cia402_live import LiveCia402
+from gyrostand.acquisition.cia402_sim_stand import StandThread
 from gyrostand.devices.cia402 import Frame
-from gyrostand.devices.sim_cia402_stand import StandThread
 from gyrostand.plan.model import load_plan, parse_plan
 
 PLAN = Path(__file__).resolve().parents[1] / "examples" / "cia402-vcan.toml"

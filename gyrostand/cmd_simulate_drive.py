@@ -1,8 +1,8 @@
 """CLI: `gyrostand simulate-drive` -- a simulated CiA 402 roll-stand drive (and optionally a
 CiA 410 inclinometer on its platform) on a CAN bus, for a CANopen master in another process
-(gyrostand's, or the lab's own tools); with `--plan`, the plan's whole simulated stand: the drive,
-its inclinometer and the compass on the platform (`devices.sim_cia402_stand`), on the plan's bus.
-Stand time follows the master's SYNC; while no SYNC comes it follows the wall clock
+(gyrostand's, or the lab's own tools); with `--plan`, the plan's whole simulated stand: the
+drive, its inclinometer and the compass on the platform (`acquisition.cia402_sim_stand`), on the
+plan's bus. Stand time follows the master's SYNC; while no SYNC comes it follows the wall clock
 (docs/instruments.md, "A CiA 402 roll stand")."""
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def _simulate_plan(path: Path, faults: object) -> None:
     import can
     import canopen
 
-    from gyrostand.devices.sim_cia402_stand import simulated_stand
+    from gyrostand.acquisition.cia402_sim_stand import simulated_stand
     from gyrostand.devices.sim_drive import serve
     from gyrostand.errors import say
     from gyrostand.plan.model import PlanError, load_plan

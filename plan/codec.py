@@ -5,6 +5,7 @@ touched (`campaign run`, `plan check`)."""
 from __future__ import annotations
 
 import dataclasses
+from importlib.resources import files
 from pathlib import Path
 
 from gyrostand.plan.model import BusPlan, Plan, PlanError
@@ -118,10 +119,11 @@ def drive_eds(plan: Plan) -> Path:
     path = Path(name)
     if path.is_file():
         return path
-    from gyrostand.devices.sim_drive import SIM_DRIVE_EDS  # (canopen: only for a CiA 402 plan)
-
-    if path.name == SIM_DRIVE_EDS.name and len(path.parts) == 1:
-        return SIM_DRIVE_EDS
+    # the simulated drive's EDS, shipped as gyrostand's resource (devices.sim_drive.SIM_DRIVE_EDS;
+    # a resource, not an import: the plan layer imports no device)
+    shipped = Path(str(files("gyrostand.devices") / "data" / "sim-drive.eds"))
+    if path.name == shipped.name and len(path.parts) == 1:
+        return shipped
     raise ValueError(f"[stand] eds: no file {name} (the drive's EDS, from its maker)")
 
 

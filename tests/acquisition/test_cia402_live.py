@@ -1,5 +1,5 @@
 """`campaign run` on a CiA 402 stand on a real bus, in real time (`acquisition.cia402_live`):
-python-can's `virtual` bus in this process, the simulated stand (`devices.sim_cia402_stand`:
+python-can's `virtual` bus in this process, the simulated stand (`acquisition.cia402_sim_stand`:
 drive, CiA 410 inclinometer, NMEA 2000 compass on the platform) in a thread of its own, driven
 only by the SYNC that gyrostand produces. A short plan (two short trials, a third with a drive
 fault); the checks are numbers against the simulator's truth, read from the campaign's SQLite
@@ -17,10 +17,10 @@ from pathlib import Path
 
 import pytest
 
+from gyrostand.acquisition.cia402_sim_stand import SimulatedStand, StandThread
 from gyrostand.acquisition.runner import run_live
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.session import open_database, sqlite_url
-from gyrostand.devices.sim_cia402_stand import SimulatedStand, StandThread
 from gyrostand.plan.model import Plan, parse_plan
 
 CYCLE_MS = 50  # (a loaded host: the master in Python keeps up; the stand time is the same)
