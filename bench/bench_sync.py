@@ -29,7 +29,7 @@ from gyrostand.acquisition.cia402_sim_stand import StandThread
 from gyrostand.devices.cia402 import Frame
 from gyrostand.plan.model import load_plan, parse_plan
 
-PLAN = Path(__file__).resolve().parents[1] / "examples" / "cia402-vcan.toml"
+PLAN = Path(__file__).resolve().parents[1] / "docs" / "examples" / "cia402-vcan.toml"
 SYNC_ID = 0x080
 
 

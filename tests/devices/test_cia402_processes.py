@@ -1,4 +1,4 @@
-"""The CiA 402 campaign of examples/cia402-vcan.toml in two processes on the host, over
+"""The CiA 402 campaign of docs/examples/cia402-vcan.toml in two processes on the host, over
 python-can's `udp_multicast` (the VM's vcan0 version, tests/socketcan/test_cia402.py, is skipped
 under software emulation): `gyrostand simulate-drive --plan` and `gyrostand campaign run`, in
 real time (about three minutes; opt-in: make test-processes)."""

@@ -164,7 +164,7 @@ def wait_until(db: Path, sql: str, proc: Process, timeout_s: float, poll_s: floa
         time.sleep(poll_s)
 
 
-# The CiA 402 campaign of examples/cia402-vcan.toml in real time on a bus: the simulated stand
+# The CiA 402 campaign of docs/examples/cia402-vcan.toml in real time on a bus: the simulated stand
 # (`gyrostand simulate-drive --plan`) and `gyrostand campaign run` as separate processes. Under
 # software emulation or a loaded host Python is slow: a 50 ms cycle, so that the master keeps up.
 CAMPAIGN_CYCLE_MS = 50
@@ -173,9 +173,9 @@ SCALE = 1.03  # the example's [bus.simulator.faults] amplitude_factor
 
 
 def cia402_campaign(tmp_path: Path, interface: str, channel: str) -> None:
-    """The campaign of examples/cia402-vcan.toml on `interface` `channel`: the roll measured by
+    """The campaign of docs/examples/cia402-vcan.toml on `interface` `channel`: the roll measured by
     the drive's position and the inclinometer, checked in the campaign's SQLite file."""
-    example = Path(__file__).resolve().parents[2] / "examples" / "cia402-vcan.toml"
+    example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "cia402-vcan.toml"
     text = example.read_text().replace('channel = "vcan0"', f'channel = "{channel}"')
     text = text.replace('interface = "socketcan"', f'interface = "{interface}"')
     text = text.replace('database = "runs/cia402-vcan.sqlite"', 'database = "campaign.sqlite"')
