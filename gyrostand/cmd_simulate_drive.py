@@ -8,10 +8,14 @@ plan's bus. Stand time follows the master's SYNC; while no SYNC comes it follows
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from gyrostand.errors import fail
+
+if TYPE_CHECKING:
+    from gyrostand.devices.sim_drive import DriveFaults
 
 
 def simulate_drive(
@@ -42,8 +46,8 @@ def simulate_drive(
         None,
         help="A CiA 402 plan: its simulated stand (drive, [inclinometer], the compass on the "
         "platform speaking NMEA 2000, [bus.simulator]) on its [bus]; --interface, --channel, "
-        "--node-id, --inclinometer, --counts-per-degree, --noise-deg, --bias-deg and "
-        "--platform-scale are then the plan's.",
+        "--node-id, --inclinometer, --counts-per-degree, --noise-deg and --bias-deg are then "
+        "the plan's; --platform-scale multiplies its [bus.simulator.faults] amplitude_factor.",
     ),
 ) -> None:
     """Run a simulated CiA 402 drive until Ctrl-C."""
@@ -90,7 +94,7 @@ def simulate_drive(
         network.disconnect()
 
 
-def _simulate_plan(path: Path, faults: object) -> None:
+def _simulate_plan(path: Path, faults: DriveFaults) -> None:
     """The plan's simulated CiA 402 stand on the plan's bus until Ctrl-C."""
     import threading
 
@@ -118,7 +122,7 @@ def _simulate_plan(path: Path, faults: object) -> None:
     except (can.CanError, OSError, ValueError, ImportError) as exc:
         fail(f"cannot open CAN {bus.interface} {bus.channel}: {exc}", code=1)
     try:
-        stand = simulated_stand(plan, network, faults)  # type: ignore[arg-type]
+        stand = simulated_stand(plan, network, faults)
         stand.boot()
         say(
             f"simulated CiA 402 stand of {path.name} (drive node {plan.stand.node_id}) on "
