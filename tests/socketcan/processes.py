@@ -6,6 +6,7 @@ independent of the code under test, and cheap under software emulation."""
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import sqlite3
@@ -206,16 +207,18 @@ def cia402_campaign(tmp_path: Path, interface: str, channel: str) -> None:
     rows = query(
         db,
         'SELECT t."index", t.cmd_amplitude_cm, t.cmd_period_s, m.source, m.amplitude_cm, '
-        "m.period_s FROM measured_motion m JOIN series s ON "
+        "m.amplitude_se_cm, m.period_s FROM measured_motion m JOIN series s ON "
         'm.series_id = s.id JOIN trial t ON s.trial_id = t.id ORDER BY t."index", m.source',
     )
     assert len(rows) == 3 * 2
-    by_trial = {}
-    for index, a_cmd, tau, source, a, period in rows:
-        by_trial.setdefault(index, {})[source] = a
+    by_trial: dict[int, dict[str, tuple[float, float]]] = {}
+    for index, a_cmd, tau, source, a, se, period in rows:
+        by_trial.setdefault(index, {})[source] = (a, se)
         assert period == pytest.approx(tau, rel=0.01)
         # the drive follows the commanded roll within its servo's lag (< 2 %)
         assert a == pytest.approx(a_cmd * (SCALE if source == "inclinometer" else 1.0), rel=0.03)
     for index, measured in by_trial.items():  # the platform's 3 % the encoder cannot see
-        ratio = measured["inclinometer"] / measured["drive position"]
-        assert ratio == pytest.approx(SCALE, abs=0.005), index
+        (a_i, se_i), (a_d, se_d) = measured["inclinometer"], measured["drive position"]
+        # within 4 SE of the ratio (both measures' SEs) and the statuses' 0.01 cm steps
+        limit = SCALE * (4 * math.hypot(se_i / a_i, se_d / a_d) + 0.01 / a_d)
+        assert a_i / a_d == pytest.approx(SCALE, abs=limit), index
