@@ -44,10 +44,10 @@ def simulate_drive(
     bias_deg: float = typer.Option(0.0, help="Inclinometer bias, deg."),
     plan: Path | None = typer.Option(
         None,
-        help="A CiA 402 plan: its simulated stand (drive, [inclinometer], the compass on the "
-        "platform speaking NMEA 2000, [bus.simulator]) on its [bus]; --interface, --channel, "
+        help="A CiA 402 plan: its simulated stand (drive, \\[inclinometer], the compass on the "
+        "platform speaking NMEA 2000, \\[bus.simulator]) on its \\[bus]; --interface, --channel, "
         "--node-id, --inclinometer, --counts-per-degree, --noise-deg and --bias-deg are then "
-        "the plan's; --platform-scale multiplies its [bus.simulator.faults] amplitude_factor.",
+        "the plan's; --platform-scale multiplies its \\[bus.simulator.faults] amplitude_factor.",
     ),
 ) -> None:
     """Run a simulated CiA 402 drive until Ctrl-C."""
