@@ -198,7 +198,7 @@ class Cia402Stand:
         elif self._rocking.cycle():
             self._samples.append(
                 (
-                    self.t_s,
+                    self.axis.actual_t_s,
                     (self.axis.actual - self.zero_counts) / self.kinematics.counts_per_degree,
                 )
             )

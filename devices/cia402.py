@@ -130,6 +130,7 @@ class Cia402Axis:
         self._inbox: deque[Frame] = deque()
         self._arrived = threading.Condition()
         self.late_cycles = 0  # SYNC cycles the master was too late to send a set-point for
+        self.answers = 0  # the drive's TPDO1s taken (the answer k is to SYNC k)
         self._events: list[AxisEvent] = []
         self._since = 0  # the events of the current rocking start here
         self._heartbeat_cycle = 0
@@ -143,6 +144,13 @@ class Cia402Axis:
     @property
     def t_s(self) -> float:
         return self.cycle * self.cycle_s
+
+    @property
+    def actual_t_s(self) -> float:
+        """The stand time of `actual` (on the convention of `t_s`: the cycle after its SYNC):
+        live, a drive that answers late gives the position of an earlier SYNC than the last one
+        received (its TPDO1s answer the SYNCs in order); in lockstep `t_s`."""
+        return self.answers * self.cycle_s
 
     # -- setup ----------------------------------------------------------------------------
 
@@ -285,6 +293,7 @@ class Cia402Axis:
         self.on_frames(frames)
         if self.inclinometer is not None:
             self.slope_deg = self.inclinometer.take()
+        self.answers += sum(f.can_id == self._tpdo_id for f in frames)
         if c.sync == "lockstep":
             cycles = 1
         else:  # stand time is the SYNCs received (a TPDO lost or late does not stop it)
