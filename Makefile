@@ -38,7 +38,8 @@ bench: $(STAMP)
 # The two-process NMEA 2000 campaign over udp_multicast on the host (real time; not in CI's budget)
 .PHONY: test-processes
 test-processes: $(STAMP)
-	GYROSTAND_PROCESS_TESTS=1 $(VENV)/bin/pytest -m slow tests/devices/test_n2k_processes.py
+	GYROSTAND_PROCESS_TESTS=1 $(VENV)/bin/pytest -m slow tests/devices/test_n2k_processes.py \
+		tests/devices/test_cia402_processes.py
 
 # The `socketcan` tests on a real SocketCAN bus: in a small Linux VM with vcan0 (tools/vcan-vm,
 # docs/socketcan.md). On a machine that has vcan0 itself: .venv/bin/pytest -m socketcan

@@ -147,10 +147,16 @@ def replay_runs(plan: Plan, store: CampaignStore, paths: Sequence[Path]) -> Engi
     return engine
 
 
-def check_first_log(path: Path) -> None:
+def check_first_log(plan: Plan, path: Path) -> None:
     """DriveLogError (one line) unless `path` begins a CiA 402 campaign's raw log: a RUN
     record first (not so another stand's log, a later segment alone, or a log written before
-    gyrostand logged the drive's traffic: the acks and statuses its master derived instead)."""
+    gyrostand logged the drive's traffic: the acks and statuses its master derived instead),
+    of the simulated stand in virtual time."""
+    if not plan.bus.simulated:  # (its SYNCs were the bus's, not one per cycle of the master)
+        raise DriveLogError(
+            "replay of a CiA 402 campaign run on a real bus is not supported yet (only the "
+            "simulated stand's, in virtual time)"
+        )
     if not starts_a_run(path):
         raise DriveLogError(
             f"{path}: not a CiA 402 stand's raw log from its start (no RUN record first: "
@@ -170,7 +176,7 @@ def replay_cia402(
     a ValueError) and the database is left as it was (`runner.replay_store`)."""
     from gyrostand.acquisition.runner import _judged, replay_store, replayed_segments, result
 
-    check_first_log(checked[0].path)  # (before the database is written)
+    check_first_log(plan, checked[0].path)  # (before the database is written)
     with replay_store(sessions, plan, procedures) as store:
         with store.deferred():
             replayed_segments(store, checked)

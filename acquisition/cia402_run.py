@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Mapping
-from typing import IO
+from typing import IO, TYPE_CHECKING
 
 import can
 
@@ -46,6 +46,9 @@ from gyrostand.frames.batch import RawFrames
 from gyrostand.frames.logfile import sha256_of
 from gyrostand.plan.model import Plan
 
+if TYPE_CHECKING:
+    from gyrostand.acquisition.cia402_live import LiveCia402
+
 REST_LIMIT_S = 600.0  # stand time allowed for the last stop ramp (a guard: it takes ramp_s)
 
 
@@ -66,7 +69,7 @@ def run_cia402(
         segments = raw_log_segments(session, store.campaign_id)
     first_frame, progress, clock_ms = resume_point(store, plan, start, segments)
     try:
-        sim = SimulatedCia402(plan, clock_ms=clock_ms)
+        sim = _stand(plan, clock_ms)
     except DriveError as exc:  # one line (the campaign stays as stored: nothing acquired)
         raise ValueError(f"the CiA 402 drive could not be started: {exc}") from None
     _remove_live_files(segments)
@@ -76,7 +79,7 @@ def run_cia402(
     display = ProgressDisplay(quiet=quiet)
     operator = OperatorLink(store, plan, stop, answers or {}, terminal, display.console)
     stand = Cia402Lockstep(sim, plan)
-    source = source_info(sim.codec, plan.compass.protocol, True, plan.stand.protocol)
+    source = source_info(sim.codec, plan.compass.protocol, plan.bus.simulated, plan.stand.protocol)
     engine = Engine(plan, store, stand, progress, operator, source, start_ms=clock_ms)
     decoder = stand.decoder()
     run_start = start == "restarted"  # a boundary of the compass's record
@@ -114,6 +117,16 @@ def run_cia402(
     return result(store, outcome, raw_log, sha)
 
 
+def _stand(plan: Plan, clock_ms: int) -> SimulatedCia402 | LiveCia402:
+    """The plan's CiA 402 stand: the simulated one in virtual time, or the drive on the plan's
+    bus in real time (`cia402_live`)."""
+    if plan.bus.simulated:
+        return SimulatedCia402(plan, clock_ms=clock_ms)
+    from gyrostand.acquisition.cia402_live import LiveCia402
+
+    return LiveCia402(plan, clock_ms=clock_ms)
+
+
 def _log(recorder: Recorder, frames: list[can.Message], logged: int, first_frame: int) -> int:
     """Log the run's raw frames (`SimulatedCia402.take_logged`) from stream position `logged`
     but those in earlier logs (a killed run's, re-run: before `first_frame`); the position
@@ -128,7 +141,12 @@ def _to_rest(sim: SimulatedCia402, store: CampaignStore) -> None:
     """Run the axis on (SYNC in stand time) until the stop ramp has brought it to rest and it is
     disabled; an event says when."""
     stand = sim.stand
-    if not stand.to_rest(REST_LIMIT_S):
+    try:
+        at_rest = stand.to_rest(REST_LIMIT_S)
+    except DriveError as exc:  # (a drive that stopped answering: its own reaction must stop it)
+        store.run_event("stand", "error", f"the axis not brought to rest: {exc}")
+        return
+    if not at_rest:
         store.run_event("stand", "error", f"the axis not at rest {REST_LIMIT_S:g} s after stopping")
     else:
         store.run_event(

@@ -20,6 +20,7 @@ import bisect
 import dataclasses
 import uuid
 from collections.abc import Iterator
+from typing import TYPE_CHECKING
 
 import can
 import canopen
@@ -40,10 +41,38 @@ from gyrostand.plan.model import Plan
 from gyrostand.stand.engine import StandEngine
 from gyrostand.stand.inclinometer import SimInclinometerFrames
 
+if TYPE_CHECKING:
+    from gyrostand.acquisition.cia402_live import LiveTap, SharedStand
+
 STEP_S = 5.0  # stand time per batch fed to the engine
 
 
-class SimulatedCia402:
+class LoggedFrames:
+    """A CiA 402 stand's raw log frames (`cia402_log`): its `tap`'s drive traffic, the other
+    devices' frames (`_others`, as `merged` gave them to the engine) and the master's records."""
+
+    tap: BusTap | LiveTap
+    stand: Cia402Stand | SharedStand
+
+    def __init__(self, clock_ms: int) -> None:
+        self._others: list[can.Message] = []  # the compass's and inclinometer's, not yet logged
+        self._run_record: can.Message | None = record(RUN, clock_ms, 0.0)
+
+    def take_logged(self, step: bool = True) -> list[can.Message]:
+        """The raw log's frames since the last call (`cia402_log`): the drive's CANopen
+        traffic, the compass's and inclinometer's frames, and the master's records (RUN first,
+        STEP at the end of a batch the engine was fed; `step` False after the last one)."""
+        frames = sorted(self.tap.take() + self._others, key=lambda m: m.timestamp)
+        self._others = []
+        if self._run_record is not None:
+            frames.insert(0, self._run_record)
+            self._run_record = None
+        if step:
+            frames.append(record(STEP, round(self.stand.t_s * 1e6), self.stand.t_s))
+        return frames
+
+
+class SimulatedCia402(LoggedFrames):
     """The simulated drive and compass with gyrostand's master and the stand adapter."""
 
     def __init__(
@@ -64,8 +93,7 @@ class SimulatedCia402:
             net.connect(interface="virtual", channel=channel)
         drive_net, master_net = self._networks
         self.tap = BusTap(master_net, drive_net, self._stand_s)
-        self._others: list[can.Message] = []  # the compass's and inclinometer's, not yet logged
-        self._run_record: can.Message | None = record(RUN, clock_ms, 0.0)
+        super().__init__(clock_ms)
         try:
             scale = drive_faults.platform_scale * config.faults.amplitude_factor
             self.drive = SimDrive(
@@ -153,19 +181,6 @@ class SimulatedCia402:
         others += self._compass_only(self.compass.advance_to(t_s))
         self._compass_frames = []
         return merged(frames, others, self._others)
-
-    def take_logged(self, step: bool = True) -> list[can.Message]:
-        """The raw log's frames since the last call (`cia402_log`): the drive's CANopen
-        traffic, the compass's and inclinometer's frames, and the master's records (RUN first,
-        STEP at the end of a batch the engine was fed; `step` False after the last one)."""
-        frames = sorted(self.tap.take() + self._others, key=lambda m: m.timestamp)
-        self._others = []
-        if self._run_record is not None:
-            frames.insert(0, self._run_record)
-            self._run_record = None
-        if step:
-            frames.append(record(STEP, round(self.stand.t_s * 1e6), self.stand.t_s))
-        return frames
 
     def close(self) -> None:
         for net in self._networks:

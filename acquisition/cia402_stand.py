@@ -181,8 +181,12 @@ class Cia402Stand:
             self._cycle()
         return not self.rocking
 
-    def take_faults(self) -> list[DriveFault]:
-        faults, self._faults = self._faults, []
+    def take_faults(self, until_ms: int | None = None) -> list[DriveFault]:
+        """The drive faults so far (up to this run's stand time `until_ms`: later ones wait)."""
+        cut = len(self._faults)
+        if until_ms is not None:
+            cut = sum(f.t_ms <= until_ms for f in self._faults)  # (in time order)
+        faults, self._faults = self._faults[:cut], self._faults[cut:]
         return faults
 
     def _cycle(self) -> None:
@@ -194,7 +198,7 @@ class Cia402Stand:
         elif self._rocking.cycle():
             self._samples.append(
                 (
-                    self.t_s,
+                    self.axis.actual_t_s,
                     (self.axis.actual - self.zero_counts) / self.kinematics.counts_per_degree,
                 )
             )

@@ -310,7 +310,8 @@ def resume_point(
     if start == "restarted":
         store.redo_uncompensated()
         store.complete_acquired()
-        if plan.bus.simulated:  # its clock goes on, as a stand's does: one campaign time
+        # its clock goes on, as a stand's does: one campaign time (a CiA 402 stand's is ours)
+        if plan.bus.simulated or plan.stand.protocol == "cia402":
             with store.sessions() as session:
                 clock_ms = -(-last_stand_time_ms(session, store.campaign_id) // 1000) * 1000
     return 0, store.progress(), clock_ms

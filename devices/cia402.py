@@ -22,12 +22,12 @@ stop ramp; at rest the axis is disabled (shutdown, then disable voltage).
 from __future__ import annotations
 
 import math
-import queue
 import signal
 import threading
+from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
@@ -93,14 +93,13 @@ class RollRecord:
     stopped_by: str | None  # what started the stop ramp early, None for the planned end
 
 
-@dataclass
-class _Inbox:
-    """What the notifier thread hands to the master loop."""
+@dataclass(frozen=True)
+class Frame:
+    """A frame from the drive (TPDO1, EMCY, heartbeat) or a SYNC, as the master received it."""
 
-    tpdo: queue.Queue[tuple[int, int]] = field(default_factory=queue.Queue)
-    emcy: list[EmcyError] = field(default_factory=list)
-    heartbeats: int = 0
-    lock: threading.Lock = field(default_factory=threading.Lock)
+    can_id: int
+    data: bytes
+    rx_s: float  # its reception time (the bus's timestamp)
 
 
 class Cia402Axis:
@@ -127,17 +126,31 @@ class Cia402Axis:
         self.statusword = 0
         self.actual = 0
         self.stop_requested: str | None = None
-        self._inbox = _Inbox()
+        # the drive's frames and the SYNCs in the order of reception (the notifier thread's)
+        self._inbox: deque[Frame] = deque()
+        self._arrived = threading.Condition()
+        self.late_cycles = 0  # SYNC cycles the master was too late to send a set-point for
+        self.answers = 0  # the drive's TPDO1s taken (the answer k is to SYNC k)
         self._events: list[AxisEvent] = []
         self._since = 0  # the events of the current rocking start here
         self._heartbeat_cycle = 0
         self._drive_heard_cycle = 0
         self._target = 0
         self.on_cycle: Callable[[], None] = lambda: None  # after every cycle (a stand's status)
+        # the frames each cycle took, in order (a live run's raw log, `acquisition.cia402_live`)
+        self.on_frames: Callable[[list[Frame]], None] = lambda frames: None
+        self.sync_rx_s = math.nan  # the reception time of the last SYNC taken (periodic)
 
     @property
     def t_s(self) -> float:
         return self.cycle * self.cycle_s
+
+    @property
+    def actual_t_s(self) -> float:
+        """The stand time of `actual` (on the convention of `t_s`: the cycle after its SYNC):
+        live, a drive that answers late gives the position of an earlier SYNC than the last one
+        received (its TPDO1s answer the SYNCs in order); in lockstep `t_s`."""
+        return self.answers * self.cycle_s
 
     # -- setup ----------------------------------------------------------------------------
 
@@ -165,9 +178,10 @@ class Cia402Axis:
             raise DriveError(f"drive {c.node_id} refused its configuration: {exc}") from None
         self._check_mapping()
         rpdo, tpdo = self.node.rpdo[1], self.node.tpdo[1]
-        tpdo.add_callback(self._on_tpdo)
-        self.node.emcy.add_callback(self._on_emcy)
-        self.node.nmt.add_heartbeat_callback(self._on_heartbeat)
+        self._tpdo_id, self._emcy_id = tpdo.cob_id, 0x80 + c.node_id
+        ids = [self._tpdo_id, self._emcy_id, 0x700 + c.node_id]
+        for cob_id in ids + ([0x80] if c.sync == "periodic" else []):
+            self.network.subscribe(cob_id, self._on_frame)
         rpdo["Modes of operation"].raw = self.mode
         self.node.nmt.state = "OPERATIONAL"
         if c.sync == "periodic":
@@ -220,16 +234,45 @@ class Cia402Axis:
 
     # -- notifier thread ------------------------------------------------------------------
 
-    def _on_tpdo(self, pdo: canopen.pdo.PdoMap) -> None:
-        self._inbox.tpdo.put((int(pdo["Statusword"].raw), int(pdo["Position actual value"].raw)))
+    def _on_frame(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        with self._arrived:
+            self._inbox.append(Frame(can_id, bytes(data), timestamp))
+            self._arrived.notify()
 
-    def _on_emcy(self, error: EmcyError) -> None:
-        with self._inbox.lock:
-            self._inbox.emcy.append(error)
+    def _take(self) -> list[Frame]:
+        """The frames up to the drive's next TPDO1 (the answer to the next SYNC) in the order
+        received; in lockstep also those the drive sent after it in that cycle (all arrived:
+        the simulation's lockstep waits for them). Live (periodic SYNC), up to the last TPDO1
+        received: a master that fell behind goes on from the drive's latest state, the cycles
+        it missed counted (`late_cycles`: no set-point of their own), the stand time
+        advanced by the SYNCs received (`cycle`). A frame received after
+        the TPDO1 of a live cycle is the next cycle's, so a replay (lockstep) takes the same
+        frames in the same cycle as the live run did."""
+        tpdo = self._tpdo_id
+        with self._arrived:
+            if not self._arrived.wait_for(
+                lambda: any(f.can_id == tpdo for f in self._inbox), ANSWER_TIMEOUT_S
+            ):
+                raise DriveError(
+                    f"drive {self.config.node_id} sent no TPDO within {ANSWER_TIMEOUT_S:g} s of "
+                    "a SYNC"
+                )
+            frames = list(self._inbox)
+            if self.config.sync == "lockstep":
+                cut = len(frames)
+            else:
+                cut = max(i for i, f in enumerate(frames) if f.can_id == tpdo) + 1
+            for _ in range(cut):
+                self._inbox.popleft()
+        return frames[:cut]
 
-    def _on_heartbeat(self, state: int) -> None:
-        with self._inbox.lock:
-            self._inbox.heartbeats += 1
+    def _tpdo_values(self, data: bytes) -> tuple[int, int]:
+        """Statusword and actual position from TPDO1's data (the drive's mapping)."""
+        values = {}
+        for var in self.node.tpdo[1]:
+            start = var.offset // 8
+            values[var.index] = int(var.od.decode_raw(data[start : start + var.length // 8]))
+        return values[0x6041], values[0x6064]
 
     # -- one cycle ------------------------------------------------------------------------
 
@@ -246,25 +289,33 @@ class Cia402Axis:
             self._heartbeat_cycle = self.cycle + max(1, round(c.heartbeat_ms / c.cycle_ms))
         if c.sync == "lockstep":
             self.network.sync.transmit()
-        try:
-            self.statusword, self.actual = self._inbox.tpdo.get(timeout=ANSWER_TIMEOUT_S)
-        except queue.Empty:
-            raise DriveError(
-                f"drive {c.node_id} sent no TPDO within {ANSWER_TIMEOUT_S:g} s of a SYNC"
-            ) from None
+        frames = self._take()
+        self.on_frames(frames)
         if self.inclinometer is not None:
             self.slope_deg = self.inclinometer.take()
-        self.cycle += 1
-        self._supervise()
+        self.answers += sum(f.can_id == self._tpdo_id for f in frames)
+        if c.sync == "lockstep":
+            cycles = 1
+        else:  # stand time is the SYNCs received (a TPDO lost or late does not stop it)
+            cycles = sum(f.can_id == 0x80 for f in frames)
+            self.late_cycles += max(0, cycles - 1)
+        self.cycle += cycles
+        self._supervise(frames)
         self.on_cycle()
 
-    def _supervise(self) -> None:
-        with self._inbox.lock:
-            emcys, self._inbox.emcy = self._inbox.emcy, []
-            heard, self._inbox.heartbeats = self._inbox.heartbeats, 0
-        for e in emcys:
-            if e.code:
-                self._event("emcy", f"EMCY 0x{e.code:04X} ({e.get_desc()})")
+    def _supervise(self, frames: list[Frame]) -> None:
+        heard = False
+        for f in frames:
+            if f.can_id == self._tpdo_id:
+                self.statusword, self.actual = self._tpdo_values(f.data)
+            elif f.can_id == self._emcy_id:
+                e = EmcyError(int.from_bytes(f.data[:2], "little"), f.data[2], f.data[3:], f.rx_s)
+                if e.code:
+                    self._event("emcy", f"EMCY 0x{e.code:04X} ({e.get_desc()})")
+            elif f.can_id == 0x80:
+                self.sync_rx_s = f.rx_s
+            else:
+                heard = True
         if heard:
             self._drive_heard_cycle = self.cycle
         silent_s = (self.cycle - self._drive_heard_cycle) * self.cycle_s

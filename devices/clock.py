@@ -42,6 +42,11 @@ CIA402_STAND_CLOCK = (
     "the stand clock of a CiA 402 stand, which has none of its own: the master's SYNC count x "
     "cycle_ms (the drive's communication cycle)"
 )
+CIA402_LIVE_TIME_BASE = (
+    "reception time (CAN: SocketCAN kernel timestamps) on the stand clock of a CiA 402 stand: "
+    "the master's SYNCs as its statuses (SYNC k at k x cycle_ms), rate and offset (minimum of "
+    f"reception - stand time) over the last {WINDOW} SYNCs"
+)
 VIRTUAL_TIME_BASE = (
     "reception time on the stand clock; virtual time: the simulated compass's frames are "
     "received at their stand time"

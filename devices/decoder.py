@@ -9,7 +9,12 @@ from dataclasses import replace
 import numpy as np
 
 from gyrostand.devices.cia406 import Cia406Heading, encoder_info
-from gyrostand.devices.clock import CIA402_STAND_CLOCK, VIRTUAL_TIME_BASE, ReceptionClock
+from gyrostand.devices.clock import (
+    CIA402_LIVE_TIME_BASE,
+    CIA402_STAND_CLOCK,
+    VIRTUAL_TIME_BASE,
+    ReceptionClock,
+)
 from gyrostand.devices.inclinometer import InclinometerDecoder, Mount
 from gyrostand.devices.n2k_heading import Nmea2000Heading
 from gyrostand.devices.source import SourceInfo
@@ -104,7 +109,7 @@ def source_info(
         info = Nmea2000Heading.info
         base = VIRTUAL_TIME_BASE if virtual else info.time_base
         if stand == "cia402":
-            base = f"{base}; {CIA402_STAND_CLOCK}"
+            base = f"{base if virtual else CIA402_LIVE_TIME_BASE}; {CIA402_STAND_CLOCK}"
         return replace(info, time_base=base)
     if protocol == "cia406" and encoder is not None:
         return encoder_info(encoder, virtual)

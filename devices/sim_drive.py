@@ -148,7 +148,7 @@ class SimDrive:
         self._consumer_ms = value & 0xFFFF
         if self._consumer_id:
             self.network.subscribe(0x700 + self._consumer_id, self._on_heartbeat)
-        self._consumer_seen_s = self.t_s
+        self._consumer_seen_s = math.inf  # CiA 301: monitoring begins at the first heartbeat
 
     def _on_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
         with self._lock:

@@ -786,7 +786,7 @@ def register(app: typer.Typer) -> None:
             from gyrostand.devices.cia402_log import DriveLogError
 
             try:
-                check_first_log(readable[0].path)
+                check_first_log(checked, readable[0].path)
             except DriveLogError as exc:
                 fail(f"cannot replay {exc}")
         try:  # the standard's procedures: from their log beside the first, before the database

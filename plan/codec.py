@@ -5,6 +5,8 @@ touched (`campaign run`, `plan check`)."""
 from __future__ import annotations
 
 import dataclasses
+from importlib.resources import files
+from pathlib import Path
 
 from gyrostand.plan.model import BusPlan, Plan, PlanError
 from gyrostand.stand.protocol import Codec, ProtocolError
@@ -109,14 +111,40 @@ def _encoder_ids_taken(plan: Plan, codec: Codec) -> list[str]:
     return problems
 
 
+def drive_eds(plan: Plan) -> Path:
+    """The drive's EDS file: the plan's [stand] eds, or by its name the simulated drive's
+    (sim-drive.eds, shipped with gyrostand). ValueError (one line) when there is none."""
+    name = plan.stand.eds
+    assert name is not None  # (the plan requires it with protocol = "cia402")
+    path = Path(name)
+    if path.is_file():
+        return path
+    # the simulated drive's EDS, shipped as gyrostand's resource (devices.sim_drive.SIM_DRIVE_EDS;
+    # a resource, not an import: the plan layer imports no device)
+    shipped = Path(str(files("gyrostand.devices") / "data" / "sim-drive.eds"))
+    if path.name == shipped.name and len(path.parts) == 1:
+        return shipped
+    raise ValueError(f"[stand] eds: no file {name} (the drive's EDS, from its maker)")
+
+
 def _cia402_problems(plan: Plan) -> list[str]:
     """What a CiA 402 stand cannot run with yet, or at all."""
     problems = []
-    if not plan.bus.simulated or plan.bus.timing != "virtual":
+    if plan.bus.simulated and plan.bus.timing != "virtual":
         problems.append(
-            '[stand] protocol: "cia402" runs on the simulated stand in virtual time only so far '
-            '([bus] simulated = true, timing = "virtual"); a real drive is not runnable yet'
+            "[bus] timing: the simulated CiA 402 stand runs in virtual time only (timing = "
+            '"virtual"); a real drive (simulated = false) runs in real time'
         )
+    if not plan.bus.simulated:
+        if plan.compass.own_bus:
+            problems.append(
+                "[compass] interface: a CiA 402 stand's compass on a bus of its own is not "
+                "runnable yet (put it on the stand's bus)"
+            )
+        try:
+            drive_eds(plan)
+        except ValueError as exc:
+            problems.append(str(exc))
     if plan.compass.protocol != "nmea2000":
         problems.append(
             '[compass] protocol: a "cia402" stand has no clock to put in a heading frame: its '

@@ -70,6 +70,8 @@ def db_url(new_db_url: NewDatabase) -> str:
 SLOW_FILES = frozenset(
     {
         "acquisition/test_cia402_campaign.py",
+        "acquisition/test_cia402_live.py",
+        "devices/test_cia402_processes.py",
         "acquisition/test_cia402_run.py",
         "acquisition/test_cia402_replay.py",
         "acquisition/test_cia402_resume.py",

@@ -480,6 +480,13 @@ VALUES = [
         ("simulated = true", 'simulated = false\ninterface = "virtual"\ntiming = "virtual"'),
         append='\n[compass]\nprotocol = "iec61162"\nport = "/dev/ttyUSB0"\n',
     ),
+    plan_case(
+        "cia402 on a real bus without the drive's EDS file",
+        "[stand] eds: no file drives/none.eds (the drive's EDS, from its maker)",
+        ("simulated = true", 'simulated = false\ninterface = "virtual"'),
+        append='\n[stand]\nprotocol = "cia402"\neds = "drives/none.eds"\nnode_id = 2\n'
+        'counts_per_degree = 10000\narm_length_cm = 50\n[compass]\nprotocol = "nmea2000"\n',
+    ),
     # the stand's protocol ([stand], docs/instruments.md)
     *(
         plan_case(f"stand {what}", message, append=f"\n[stand]\n{table}\n")

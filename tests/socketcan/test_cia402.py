@@ -1,10 +1,13 @@
-"""A CiA 402 stand on a real SocketCAN channel: `gyrostand simulate-drive` in its own process,
-gyrostand's CiA 402 master in this one. The master rocks the axis, then falls silent as a killed
-gyrostand would: the drive's heartbeat consumer must bring the axis to rest (EMCY 0x8130, QUICK
-STOP ACTIVE, the position no longer changing), seen from the bus only."""
+"""A CiA 402 stand on a real SocketCAN channel: `gyrostand simulate-drive` in its own process.
+gyrostand's CiA 402 master in this one rocks the axis, then falls silent as a killed gyrostand
+would: the drive's heartbeat consumer must bring the axis to rest (EMCY 0x8130, QUICK STOP
+ACTIVE, the position no longer changing), seen from the bus only. And a whole campaign
+(`campaign run` in a process of its own, the plan's simulated stand with its inclinometer and
+compass in another): the roll measured by the drive's position and the inclinometer."""
 
 from __future__ import annotations
 
+import os
 import time
 
 import canopen
@@ -13,7 +16,12 @@ import pytest
 from gyrostand.devices.cia402 import AxisConfig, Cia402Axis, power_state
 from gyrostand.devices.roll_trajectory import RollTrajectory
 from gyrostand.devices.sim_drive import EMCY_HEARTBEAT, SIM_DRIVE_EDS
-from tests.socketcan.processes import Process, gyrostand_command, wait_for_output
+from tests.socketcan.processes import (
+    Process,
+    cia402_campaign,
+    gyrostand_command,
+    wait_for_output,
+)
 
 pytestmark = pytest.mark.socketcan
 
@@ -51,3 +59,14 @@ def test_a_silent_master_leaves_the_drive_at_rest(tmp_path, channel):
     finally:
         network.disconnect()
         drive.interrupt()
+
+
+@pytest.mark.skipif(
+    os.environ.get("VCAN_VM_ACCEL") == "tcg",
+    reason="too slow for the software-emulated VM (no usable KVM, tools/vcan-vm): a CiA 402 "
+    "stand runs in real time, a SYNC every cycle; the same two-process campaign runs on the "
+    "host over python-can's udp_multicast (tests/devices/test_cia402_processes.py, make "
+    "test-processes)",
+)
+def test_a_cia402_campaign_on_vcan0_measures_the_roll(tmp_path, channel):
+    cia402_campaign(tmp_path, "socketcan", channel)
