@@ -28,7 +28,6 @@ from gyrostand.devices.sim_drive import OPERATION_ENABLED, DriveFaults, SimDrive
 from gyrostand.devices.sim_inclinometer import SimInclinometer
 from gyrostand.plan.model import Plan
 from gyrostand.stand.engine import StandEngine
-from gyrostand.stand.physics import load_noise_filter
 from gyrostand.stand.protocol import Codec
 
 SYNC_ID = 0x080
@@ -163,7 +162,6 @@ def simulated_stand(
     off = dataclasses.replace(config.inclinometer, node_id=None)
     config = dataclasses.replace(config, faults=faults_off, inclinometer=off)
     codec = codec_for(plan)
-    load_noise_filter()  # (scipy: imported now, not in the first SYNC's answer)
     engine = StandEngine(config, codec, transmitter=transmitter(plan))
     trials = [(t.direction_deg, t.period_s) for t in plan.trials]
     kinematics = Kinematics(s.counts_per_degree, s.arm_length_cm)
