@@ -57,6 +57,9 @@ STAGES = """
 import sys, time
 from pathlib import Path
 t = [(time.process_time(), time.perf_counter())]
+from gyrostand.report import collector_paused
+paused = collector_paused()  # as `gyrostand report` makes its report
+paused.__enter__()
 from gyrostand.cmd_data import open_db
 from gyrostand.report.compliance import load_profile
 from gyrostand.report.stored import campaign_report

@@ -36,7 +36,8 @@ if TYPE_CHECKING:  # matplotlib is imported where a figure is drawn: not for a c
     from matplotlib.figure import Figure
 
 STYLE = {
-    "font.family": "DejaVu Sans",
+    "font.family": "sans-serif",
+    "font.sans-serif": ["DejaVu Sans"],  # the SVG's text: 'DejaVu Sans', sans-serif
     "font.size": 8.0,
     "axes.titlesize": 9.0,
     "axes.grid": True,
@@ -44,6 +45,7 @@ STYLE = {
     "legend.fontsize": 7.0,
     "legend.framealpha": 0.85,
     "svg.hashsalt": "gyrostand",  # the same ids in every run: deterministic files
+    "svg.fonttype": "none",
     # the title at a fixed height: matplotlib otherwise measures every tick label of the axes
     # to lift the title clear of them (a fifth of the figures' time)
     "axes.titley": 1.0,
@@ -139,17 +141,25 @@ def _mark_series(
     ax: Axes, series: SeriesRecord, t0: float, labelled: set[int], legend: bool = True
 ) -> None:
     """Series j's windows shaded with their means as bars, its settle point; the legend's entries
-    once per series (`labelled`), none when `legend` is False."""
+    once per series (`labelled`), none when `legend` is False. The windows are one collection
+    of spans and one of bars, not an artist each (a fifth of a heading figure's time)."""
     colour = SERIES_COLOURS[series.j]
-    for o in series.observations:
-        if o.window_start_ms is None or o.window_end_ms is None:
-            continue
+    windows = _windowed(series)
+    if windows:
         first = legend and series.j not in labelled
-        label = SERIES_LABELS[series.j] + " windows" if first else None
         labelled.add(series.j)
-        x0, x1 = _minutes(o.window_start_ms, t0), _minutes(o.window_end_ms, t0)
-        ax.axvspan(x0, x1, color=colour, alpha=0.15, lw=0, label=label)
-        ax.plot([x0, x1], [o.value_deg, o.value_deg], color=colour, lw=1.6)
+        x0 = _minutes(np.array([o.window_start_ms for o in windows], dtype=float), t0)
+        x1 = _minutes(np.array([o.window_end_ms for o in windows], dtype=float), t0)
+        ax.broken_barh(
+            list(zip(x0, x1 - x0, strict=True)),
+            (0.0, 1.0),
+            transform=ax.get_xaxis_transform(),  # the spans' height: the whole axes
+            color=colour,
+            alpha=0.15,
+            lw=0,
+            label=SERIES_LABELS[series.j] + " windows" if first else None,
+        )
+        ax.hlines([o.value_deg for o in windows], x0, x1, color=colour, lw=1.6)
     if series.settle_done_ms is not None:
         x = _minutes(series.settle_done_ms, t0)
         ax.axvline(x, color=colour, ls="--", lw=0.8)
@@ -191,19 +201,21 @@ def _zoom_on_windows(ax: Axes, record: TrialRecord, series: SeriesRecord, t0: fl
         ax.plot(x[inside], trace.mean_deg[inside], color="0.2", lw=0.7)
     _mark_series(ax, series, t0, set(), legend=False)
     ax.set_xlim(low, high)
-    for o in windows:
+    top = ax.get_xaxis_transform()  # x in data, y in axes fraction
+    for o in windows:  # k alone, inside its window: clear of the settle line before window 1
         middle = _minutes((o.window_start_ms + o.window_end_ms) / 2, t0)
-        ax.annotate(
-            f"k = {o.k}" if o is windows[0] else str(o.k),
-            (middle, 1.0),
-            xycoords=("data", "axes fraction"),
-            xytext=(0, -9),
-            textcoords="offset points",
+        ax.text(
+            middle,
+            0.97,
+            str(o.k),
+            transform=top,
             ha="center",
+            va="top",
             fontsize=6.5,
             color=SERIES_COLOURS[series.j],
         )
-    ax.set_title(f"{SERIES_LABELS[series.j]}: the {len(windows)} windows", loc="left", fontsize=8)
+    ks = f"k = {windows[0].k}" + (f"\u2013{windows[-1].k}" if len(windows) > 1 else "")
+    ax.set_title(f"{SERIES_LABELS[series.j]}: windows {ks}", loc="left", fontsize=8)
     ax.set_xlabel("stand time since the trial began, min")
     ax.ticklabel_format(axis="y", useOffset=False)
     ax.margins(y=0.25)

@@ -12,13 +12,13 @@ from gyrostand.report.plots import STYLE, heading_plot
 MIN = 60_000  # ms
 
 
-def _series(j: int, start_min: float, means: list[float]) -> SeriesRecord:
+def _series(j: int, start_min: float, means: list[float], window_min: float = 1.0) -> SeriesRecord:
     observations = tuple(
         ObservationRecord(
             k=k,
             value_deg=value,
             window_start_ms=int((start_min + 1.5 * (k - 1)) * MIN),
-            window_end_ms=int((start_min + 1.5 * (k - 1) + 1.0) * MIN),
+            window_end_ms=int((start_min + 1.5 * (k - 1) + window_min) * MIN),
         )
         for k, value in enumerate(means, start=1)
     )
@@ -31,12 +31,12 @@ def _series(j: int, start_min: float, means: list[float]) -> SeriesRecord:
     )
 
 
-def _record() -> TrialRecord:
+def _record(window_min: float = 1.0) -> TrialRecord:
     t = np.linspace(0.0, 180 * MIN, 600)
     heading = 120.0 - 0.15 * (t > 100 * MIN)
     trace = HeadingTrace(t, heading, heading - 0.02, heading + 0.02, frames=6000)
-    still = _series(1, 57.0, [120.001, 120.008, 120.007, 119.986, 120.002])
-    rocking = _series(2, 160.0, [119.866, 119.857, 119.860, 119.854, 119.853])
+    still = _series(1, 57.0, [120.001, 120.008, 120.007, 119.986, 120.002], window_min)
+    rocking = _series(2, 160.0, [119.866, 119.857, 119.860, 119.854, 119.853], window_min)
     return TrialRecord(index=1, series=(still, rocking), trace=trace)
 
 
@@ -61,13 +61,34 @@ def test_each_series_has_a_panel_zoomed_on_its_windows() -> None:
         # a window takes an eighth of its panel, against 1/180 of the trial's axis
         assert 1.0 / width > 0.12 and 1.0 / span < 0.01
         labels = [text.get_text() for text in zoom.texts]
-        assert labels == ["k = 1", "2", "3", "4", "5"]
-        bars = {
-            round(float(line.get_ydata()[0]), 6)
-            for line in zoom.lines
-            if len(line.get_ydata()) == 2 and line.get_ydata()[0] == line.get_ydata()[1]
+        assert labels == ["1", "2", "3", "4", "5"]
+        assert zoom.get_title(loc="left").endswith("windows k = 1\u20135")
+        bars = {  # the windows' means: one collection of horizontal bars
+            round(float(segment[0][1]), 6)
+            for c in zoom.collections
+            for segment in (c.get_segments() if hasattr(c, "get_segments") else ())
+            if len(segment) == 2 and segment[0][1] == segment[1][1]
         }
         assert {o.value_deg for o in series.observations} <= bars  # each window's mean
+
+
+def test_each_k_stands_inside_its_window_clear_of_the_settle_line() -> None:
+    """Issue 33: "k = 1" touched the settle line drawn just before window 1 (windows of half a
+    minute every 1.5 min, as the paper campaign's rocking series)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    record = _record(window_min=0.5)
+    figure = _drawn(record)
+    renderer = FigureCanvasAgg(figure).get_renderer()  # text extents
+    for zoom, series in zip(figure.axes[1:], record.series, strict=True):
+        to_px = zoom.transData.transform
+        settle_x = to_px((series.settle_done_ms / MIN, 0.0))[0]
+        for text, o in zip(zoom.texts, series.observations, strict=True):
+            box = text.get_window_extent(renderer)
+            left = to_px((o.window_start_ms / MIN, 0.0))[0]
+            right = to_px((o.window_end_ms / MIN, 0.0))[0]
+            assert left < box.x0 and box.x1 < right  # inside its window
+            assert box.x0 - settle_x > 2.0  # pixels clear of the settle line
 
 
 def test_the_legend_names_each_thing_once() -> None:
