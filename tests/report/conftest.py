@@ -112,12 +112,19 @@ def paper_files(paper_report: Report, tmp_path_factory: pytest.TempPathFactory) 
 
 def watermark_letters(pdf: Path) -> list[str]:
     """Per page, the sorted letters of the text set far larger than any heading: the watermark
-    (pdftotext -bbox gives each rotated glyph as a word of its own)."""
+    (pdftotext -bbox gives each rotated glyph as a word of its own; a figure's rotated axis
+    label, a word of several letters, is as tall)."""
     xml = subprocess.run(["pdftotext", "-bbox", str(pdf), "-"], check=True, capture_output=True)
     pages = xml.stdout.decode().split("<page ")[1:]
     word = re.compile(r'yMin="([\d.]+)" xMax="[\d.]+" yMax="([\d.]+)">([^<]*)</word>')
     return [
-        "".join(sorted("".join(t for y0, y1, t in word.findall(p) if float(y1) - float(y0) > 30)))
+        "".join(
+            sorted(
+                "".join(
+                    t for y0, y1, t in word.findall(p) if float(y1) - float(y0) > 30 and len(t) == 1
+                )
+            )
+        )
         for p in pages
     ]
 
