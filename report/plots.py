@@ -19,7 +19,9 @@ import base64
 import functools
 import io
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from typing import TYPE_CHECKING, Any, ParamSpec
 
 import numpy as np
@@ -95,10 +97,15 @@ LEGEND_ROW_IN = 0.16  # one row of a 6.5 pt legend
 
 
 def _figure(
-    height_in: float, width_in: float = WIDTH_IN, right_in: float = 0.0, below_in: float = 0.0
+    height_in: float,
+    width_in: float = WIDTH_IN,
+    right_in: float = 0.0,
+    below_in: float = 0.0,
+    axes: bool = True,
 ) -> Figure:
     """A figure with one axes inside fixed margins, `right_in` more on the right (a legend) and
-    `below_in` more below (long tick labels)."""
+    `below_in` more below (long tick labels); without `axes`, the margins only (a grid of axes
+    to add: an axes made and removed costs as much as one drawn)."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(width_in, height_in))
@@ -108,7 +115,8 @@ def _figure(
         bottom=(MARGIN_IN["bottom"] + below_in) / height_in,
         top=1 - MARGIN_IN["top"] / height_in,
     )
-    fig.add_subplot()
+    if axes:
+        fig.add_subplot()
     return fig
 
 
@@ -225,18 +233,55 @@ HEADING_ZOOM_IN = 1.3  # the row of window zooms under the trial's heading, inch
 # figures of 4.3 in to a page
 
 
+_LAYOUTS: ContextVar[dict[int, Figure] | None] = ContextVar("_LAYOUTS", default=None)
+
+
+@contextmanager
+def reused_layouts() -> Iterator[None]:
+    """Within it, the heading figures of one layout (so many zoom panels) are drawn on one
+    matplotlib figure, its content replaced trial by trial: the axes and their ticks are made
+    once, not per trial (a third of a heading figure's time). Per thread and task: a
+    context variable."""
+    token = _LAYOUTS.set({})
+    try:
+        yield
+    finally:
+        _LAYOUTS.reset(token)
+
+
+def _heading_figure(zooms: int) -> Figure:
+    """The heading figure's layout: the trial's axes on top and `zooms` panels under it (none:
+    one axes), empty; from `reused_layouts` when one was drawn before."""
+    pool = _LAYOUTS.get()
+    if pool is not None and zooms in pool:
+        fig = pool[zooms]
+        for ax in fig.axes:
+            for artist in (*ax.lines, *ax.collections, *ax.patches, *ax.texts):
+                artist.remove()
+            ax.relim()  # the data limits of what is left: nothing
+            ax.set_autoscale_on(True)
+        for legend in list(fig.legends):
+            legend.remove()
+        return fig
+    fig = _figure(3.0 + (HEADING_ZOOM_IN if zooms else 0.0), axes=not zooms)
+    if zooms:  # the trial on top, the zooms below: a grid in the same margins
+        grid = fig.add_gridspec(2, zooms, height_ratios=(1.5, 1.1), hspace=0.45, wspace=0.22)
+        fig.add_subplot(grid[0, :])
+        for column in range(zooms):
+            fig.add_subplot(grid[1, column])
+    if pool is not None:
+        pool[zooms] = fig
+    return fig
+
+
 @_styled
 def heading_plot(record: TrialRecord, title: str) -> Figure:
     """Heading of one trial against stand time, windows and settle points marked; under it, one
     panel per series zoomed on its observation windows."""
     t0 = _trial_start_ms(record)
     zoomed = [s for s in record.series if _windowed(s)] if t0 is not None else []
-    fig = _figure(3.0 + (HEADING_ZOOM_IN if zoomed else 0.0))
-    ax = fig.axes[0]
-    if zoomed:  # the trial on top, the zooms below: a grid in the same margins
-        ax.remove()
-        grid = fig.add_gridspec(2, len(zoomed), height_ratios=(1.5, 1.1), hspace=0.45, wspace=0.22)
-        ax = fig.add_subplot(grid[0, :])
+    fig = _heading_figure(len(zoomed))
+    ax, *zooms = fig.axes
     ax.set_title(title, loc="left")
     if t0 is None:  # observations without window times: values against k
         for s in record.series:
@@ -258,8 +303,8 @@ def heading_plot(record: TrialRecord, title: str) -> Figure:
         ax.set_xlabel("stand time since the trial began, min")
     ax.set_ylabel("heading, deg")
     ax.ticklabel_format(axis="y", useOffset=False)
-    for column, s in enumerate(zoomed):
-        zoom = fig.add_subplot(grid[1, column])
+    for column, (zoom, s) in enumerate(zip(zooms, zoomed, strict=True)):
+        assert t0 is not None  # zoomed: the windows carry times
         _zoom_on_windows(zoom, record, s, t0)
         if column == 0:
             zoom.set_ylabel("heading, deg")

@@ -100,3 +100,30 @@ def test_observations_without_times_keep_one_panel() -> None:
     still = SeriesRecord(1, None, None, None, (ObservationRecord(1, 120.0, None, None),))
     figure = _drawn(TrialRecord(index=1, series=(still,), trace=None))
     assert len(figure.axes) == 1
+
+
+def test_a_reused_layout_draws_the_same_figures() -> None:
+    """`reused_layouts`: the trials' figures drawn on one matplotlib figure, content replaced,
+    are byte for byte the figures each drawn on its own, in any order."""
+    from gyrostand.report.plots import reused_layouts
+
+    longer = _record(window_min=0.5)
+    shifted = TrialRecord(
+        index=2,
+        series=longer.series,
+        trace=HeadingTrace(
+            longer.trace.t_ms,
+            longer.trace.mean_deg + 3.0,
+            longer.trace.min_deg + 2.9,
+            longer.trace.max_deg + 3.1,
+            frames=6000,
+        ),
+    )
+    records = [_record(), longer, shifted]
+    alone = [heading_plot(r, f"Trial {i}") for i, r in enumerate(records)]
+    with reused_layouts():
+        reused = [heading_plot(r, f"Trial {i}") for i, r in enumerate(records)]
+    with reused_layouts():
+        backwards = [heading_plot(r, f"Trial {i}") for i, r in reversed(list(enumerate(records)))]
+    assert reused == alone and backwards[::-1] == alone
+    assert len(set(alone)) == 3
