@@ -54,9 +54,10 @@ from gyrostand.db.queries import campaign_constants, current_trials, load_campai
 from gyrostand.db.session import writer
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import PartialPlan, Plan, PlanError, ReportPlan, parse_any_plan
+from gyrostand.report import SHIPPED_PROFILES
 from gyrostand.report.build import Report, build_report, missing_items
 from gyrostand.report.code_digest import analysis_code_sha256
-from gyrostand.report.compliance import Profile
+from gyrostand.report.compliance import Profile, WorstCase, load_profile, worst_cases
 from gyrostand.report.model import (
     NOT_STATED,
     EventRecord,
@@ -328,6 +329,7 @@ class StoredAnalysis:
     run_id: int | None
     signal: SignalSection
     traces: dict[int, HeadingTrace | None]  # `campaign_traces`: the report's heading plots
+    worst_cases: tuple[WorstCase, ...] = ()  # the forecast's, for the shipped profiles
 
 
 def read_campaign(sessions: sessionmaker[Session], campaign_id: int) -> Campaign:
@@ -375,7 +377,10 @@ def compute_stored(campaign: Campaign, inputs: StoredInputs | None = None) -> St
     contradicted = [e.message for e in campaign.events if e.kind == PLAN_CONTRADICTED]
     if contradicted:  # told while the campaign ran; the settle criteria used the record's values
         analysis = replace(analysis, warnings=(*contradicted, *analysis.warnings))
-    return StoredAnalysis(analysis, inputs, None, signal, campaign_traces(campaign))
+    worst = dict.fromkeys(
+        w for name in SHIPPED_PROFILES for w in worst_cases(load_profile(name), analysis)
+    )
+    return StoredAnalysis(analysis, inputs, None, signal, campaign_traces(campaign), tuple(worst))
 
 
 def record_run(
@@ -394,6 +399,7 @@ def record_run(
             "analysis": encode(stored.analysis),
             "signal": encode(stored.signal),
             "traces": encode(stored.traces),
+            "worst_cases": encode(stored.worst_cases),
         }
     }
     digest, version = stored.inputs.sha256(), SOFTWARE_VERSION
@@ -449,9 +455,10 @@ def _rebuilt(run: AnalysisRun, inputs: StoredInputs) -> StoredAnalysis | None:
         analysis = decode(CampaignAnalysis, typed["analysis"])
         signal = decode(SignalSection, typed["signal"])
         traces = decode(dict[int, HeadingTrace | None], typed["traces"])
+        worst = decode(tuple[WorstCase, ...], typed["worst_cases"])
     except (TypeError, KeyError, ValueError):
         return None
-    return StoredAnalysis(analysis, inputs, run.id, signal, traces)
+    return StoredAnalysis(analysis, inputs, run.id, signal, traces, worst)
 
 
 def analyze_stored(sessions: sessionmaker[Session], campaign_id: int) -> StoredAnalysis:
@@ -968,4 +975,5 @@ def campaign_report(
         profile,
         generated_at=generated_at,
         signal=stored.signal,
+        worst_cases=stored.worst_cases,
     )
