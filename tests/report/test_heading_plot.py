@@ -127,3 +127,17 @@ def test_a_reused_layout_draws_the_same_figures() -> None:
         backwards = [heading_plot(r, f"Trial {i}") for i, r in reversed(list(enumerate(records)))]
     assert reused == alone and backwards[::-1] == alone
     assert len(set(alone)) == 3
+
+
+def test_the_x_labels_sit_under_the_tick_labels_as_matplotlib_puts_them() -> None:
+    """`_xlabel_fixed`: each axis label 4 pt (matplotlib's labelpad) under its tick labels,
+    clear of them: the fixed place holds for the report's style."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    figure = _drawn(_record())
+    renderer = FigureCanvasAgg(figure).get_renderer()
+    for ax in figure.axes:
+        ticks = [t.get_window_extent(renderer) for t in ax.get_xticklabels() if t.get_text()]
+        label = ax.xaxis.label.get_window_extent(renderer)
+        gap_pt = (min(t.y0 for t in ticks) - label.y1) * 72 / figure.dpi
+        assert gap_pt == pytest.approx(4.0, abs=0.05)
