@@ -24,11 +24,11 @@ from gyrostand.report.compliance import (
     PASS,
     Compliance,
     Profile,
-    WorstCase,
     assess,
 )
 from gyrostand.report.model import NOT_STATED, ReportInputs
 from gyrostand.report.signal import SignalSection, signal_section
+from gyrostand.report.worst_case import WorstCase
 
 SCHEMA = "gyrostand.report/5"
 COURSE_STEP_DEG = 5.0  # forecast grid
@@ -414,7 +414,7 @@ def build_report(
     """Assemble the report; ``analysis`` is the analysis or, when it failed, the reason.
     ``generated_at`` is the report's only wall-clock field (ISO 8601 text); ``signal`` the
     signal analysis the analysis used (default: made from the inputs' reading record);
-    ``worst_cases`` the forecast's worst cases recorded with it (`compliance.WorstCase`). The
+    ``worst_cases`` the forecast's worst cases recorded with it (`worst_case.WorstCase`). The
     report is a DRAFT when ``draft`` or when it lacks an item of `missing_items`."""
     if signal is None:
         signal = signal_section(

@@ -45,16 +45,16 @@ from importlib.resources import files
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gyrostand.analysis.forecast import EnvelopeWorst, MotionBox
 from gyrostand.analysis.quantiles import t_quantile
 from gyrostand.report import SHIPPED, SHIPPED_PROFILES
 from gyrostand.report.errors import ReportError
 
 if TYPE_CHECKING:  # annotations only (scipy is not loaded for this module)
     from gyrostand.analysis.campaign import CampaignAnalysis
-    from gyrostand.analysis.forecast import Extrapolation
+    from gyrostand.analysis.forecast import EnvelopeWorst, Extrapolation, MotionBox
     from gyrostand.analysis.procedures import ProcedureResults
     from gyrostand.report.model import PlanSummary
+    from gyrostand.report.worst_case import WorstCase
 
 PASS, FAIL, NOT_ASSESSED = "PASS", "FAIL", "NOT ASSESSED"
 UNVERIFIED = "UNVERIFIED"  # a requirement compared with a limit the laboratory has not verified
@@ -433,20 +433,6 @@ def _read(path: Path) -> str:
 
 
 @dataclass(frozen=True)
-class WorstCase:
-    """The envelope's worst case of the forecast (`envelope_worst`) and what it was sought
-    over: found when the analysis is recorded (`report.stored`, for each shipped profile) and
-    reused by its reports, which otherwise search again (a bounded Powell search: importing
-    scipy.optimize alone takes 0.15 s of a fresh process)."""
-
-    box: MotionBox
-    arm_cm: float
-    motion: str
-    secant_latitude: bool
-    worst: EnvelopeWorst
-
-
-@dataclass(frozen=True)
 class Evidence:
     """What the evaluators look at: the analysis, the plan's observation protocol (None: the
     data were imported without one), the profile."""
@@ -746,6 +732,8 @@ def _t975(dof: float) -> float:
 def _forecast_box(analysis: CampaignAnalysis, profile: Profile) -> MotionBox:
     """The motion the forecast's worst case is sought over: the profile's envelope for the
     plan's motion (roll or pitch)."""
+    from gyrostand.analysis.forecast import MotionBox
+
     ship = analysis.forecasts[0].conditions
     env = profile.envelope
     return MotionBox(
@@ -760,6 +748,7 @@ def _worst_case(req: Requirement, e: Evidence) -> WorstCase:
     """The forecast's worst case over the envelope: the one found when the analysis was
     recorded, else searched now."""
     from gyrostand.analysis.forecast import envelope_worst
+    from gyrostand.report.worst_case import WorstCase
 
     assert e.analysis is not None and e.analysis.forecasts  # (_rolling_error_forecast)
     ship = e.analysis.forecasts[0].conditions

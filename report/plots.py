@@ -484,7 +484,7 @@ def iteration_path_plot(analysis: CampaignAnalysis) -> Figure:
     contours = ax.contour(
         c_axis, t_axis, s2, levels=levels, cmap="viridis", norm=LogNorm(), linewidths=0.7
     )
-    ax.clabel(contours, fmt="%.2g", fontsize=6)
+    ax.clabel(contours, fmt=_two_digits, fontsize=6)
     if path.size:
         ax.plot(
             path[:, 0],
@@ -507,6 +507,15 @@ def iteration_path_plot(analysis: CampaignAnalysis) -> Figure:
 
 MATHTEXT = re.compile(r"^\$\\mathdefault\{(.*)\}\$$")
 SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def _two_digits(value: float) -> str:
+    """Two significant digits, a power of ten as ×10ⁿ (4×10⁻⁵, not the computer's 4e-05)."""
+    text = f"{value:.2g}"
+    if "e" not in text:
+        return text
+    mantissa, exponent = text.split("e")
+    return f"{mantissa}×10{str(int(exponent)).translate(SUPERSCRIPT)}"
 
 
 @functools.cache

@@ -57,7 +57,7 @@ from gyrostand.plan.model import PartialPlan, Plan, PlanError, ReportPlan, parse
 from gyrostand.report import SHIPPED_PROFILES
 from gyrostand.report.build import Report, build_report, missing_items
 from gyrostand.report.code_digest import analysis_code_sha256
-from gyrostand.report.compliance import Profile, WorstCase, load_profile, worst_cases
+from gyrostand.report.compliance import Profile, load_profile, worst_cases
 from gyrostand.report.model import (
     NOT_STATED,
     EventRecord,
@@ -84,6 +84,7 @@ from gyrostand.report.signal_record import (
 )
 from gyrostand.report.signal_record import heading_source as heading_source_of
 from gyrostand.report.transient import transient_check
+from gyrostand.report.worst_case import WorstCase
 
 STORED_SCHEMA = "gyrostand.stored-analysis/1"  # results_json["stored"]: `record_run`
 TRACE_BINS = 600  # per trial: enough for a page-wide plot, small enough for inline SVG

@@ -45,6 +45,7 @@ def test_the_imported_report_reads_clean(paper_files: Rendered) -> None:
     text = " ".join(paper_files.pdf_text.split())
     appendix_b = text.rindex("Appendix B: the plan as submitted")  # the plan's TOML as written
     assert ASCII_LEFT.findall(text[:appendix_b]) == []
+    assert re.findall(r"\b\d(?:\.\d+)?e[-+]\d\d\b", text[:appendix_b]) == []  # figures too
     assert "Nomenclature" in text and "Symbols: one quantity each" in text
     for symbol in ("p = 2π/τ", "R̂(u)", "σA(ta)", "Ω", "kg·m²·s−2"):
         assert symbol in text, symbol
