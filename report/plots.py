@@ -175,15 +175,17 @@ def _mark_series(
         labelled.add(series.j)
         x0 = _minutes(np.array([o.window_start_ms for o in windows], dtype=float), t0)
         x1 = _minutes(np.array([o.window_end_ms for o in windows], dtype=float), t0)
-        ax.broken_barh(
-            list(zip(x0, x1 - x0, strict=True)),
-            (0.0, 1.0),
+        from matplotlib.collections import PolyCollection
+
+        spans = PolyCollection(
+            [((a, 0.0), (a, 1.0), (b, 1.0), (b, 0.0)) for a, b in zip(x0, x1, strict=True)],
             transform=ax.get_xaxis_transform(),  # the spans' height: the whole axes
             color=colour,
             alpha=0.15,
             lw=0,
             label=SERIES_LABELS[series.j] + " windows" if first else None,
         )
+        ax.add_collection(spans, autolim=False)  # the bars below span the same times
         ax.hlines([o.value_deg for o in windows], x0, x1, color=colour, lw=1.6)
     if series.settle_done_ms is not None:
         x = _minutes(series.settle_done_ms, t0)
