@@ -83,6 +83,7 @@ from gyrostand.report.signal_record import (
     still_series_record,
 )
 from gyrostand.report.signal_record import heading_source as heading_source_of
+from gyrostand.report.stored_plan import is_simulated, whole_plan
 from gyrostand.report.transient import transient_check
 from gyrostand.report.worst_case import WorstCase
 
@@ -371,7 +372,7 @@ def compute_stored(campaign: Campaign, inputs: StoredInputs | None = None) -> St
                 *analysis.warnings,
             ),
         )
-    check = transient_check(campaign, _plan(campaign))
+    check = transient_check(campaign, whole_plan(campaign))
     if not isinstance(check, str):
         warnings = analysis.warnings + check.warnings(analysis.cochran.s_e)
         analysis = replace(analysis, transient=check, warnings=warnings)
@@ -523,14 +524,6 @@ def _sha256_of(path: str, size: int, mtime_ns: int) -> str:
     from gyrostand.frames.logfile import sha256_of  # (python-can: not for the hash alone)
 
     return sha256_of(Path(path))
-
-
-def is_simulated(campaign: Campaign, plan: Plan | PartialPlan | None = None) -> bool:
-    """The campaign ran on the simulated stand (its stored plan, parsed unless given, says so;
-    an import never did)."""
-    if plan is None:
-        plan = _plan(campaign)
-    return campaign.source != "import" and isinstance(plan, Plan) and plan.bus.simulated
 
 
 def _lab_items(campaign: Campaign, number: str | None) -> dict[str, Any]:
@@ -763,7 +756,7 @@ def campaign_traces(campaign: Campaign) -> dict[int, HeadingTrace | None]:
     """Per trial index its binned heading trace from the raw log (`heading_traces`); empty
     without a usable raw log or a whole plan."""
     _, logs = _raw_log_check(campaign)
-    plan, spans = _plan(campaign), trial_stand_spans(campaign)
+    plan, spans = whole_plan(campaign), trial_stand_spans(campaign)
     return heading_traces(logs, plan, spans) if logs and plan is not None and spans else {}
 
 
@@ -803,15 +796,6 @@ def _records(
     return records, note
 
 
-def _plan(campaign: Campaign) -> Plan | None:
-    """The stored plan when it is a whole one (an import may store the partial form)."""
-    try:
-        plan = parse_any_plan(campaign.plan_toml)
-    except PlanError:
-        return None
-    return plan if isinstance(plan, Plan) else None
-
-
 def _reading(
     plan: Plan | None, logs: Sequence[Path], check: str, records: tuple[TrialRecord, ...]
 ) -> tuple[ReadingRecord | None, str, ExcursionCriterion | None]:
@@ -838,7 +822,7 @@ def campaign_signal(session: Session, campaign_id: int) -> SignalSection:
 
 def _signal(campaign: Campaign) -> SignalSection:
     check, logs = _raw_log_check(campaign)
-    plan = _plan(campaign)
+    plan = whole_plan(campaign)
     records = tuple(
         TrialRecord(t.index, _series_records(t), None) for t in current_trials(campaign.trials)
     )
@@ -860,7 +844,7 @@ def report_inputs(
     campaign = load_campaign(session, campaign_id)
     _, left_out = trial_inputs(campaign)
     unused = {(t.index, t.attempt) for t in left_out}
-    plan = _plan(campaign)
+    plan = whole_plan(campaign)
     check, logs = _raw_log_check(campaign)
     traces = campaign_traces(campaign) if stored is None else stored.traces
     records, note = _records(campaign, traces, check)
