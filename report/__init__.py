@@ -12,7 +12,10 @@ inputs, the CLI (`gyrostand report`) composes.
 - `plots`: the figures as inline SVG; `html`: `render_html(report)`; `pdf`: `write_pdf` (the
   HTML laid out by Typst, templates/report.typ: PDF/A-3a carrying the JSON, CSV and plan);
   `json_doc`: `report_document` / `report_json` (schema gyrostand.report/1); `csv_table`;
-- `writer`: `write_report(report, out_dir, formats) -> {format: path}`.
+- `writer`: `write_report(report, out_dir, formats) -> {format: path}`;
+- `stored`: a stored campaign's recorded analysis (with `worst_case.WorstCase`, the forecast's
+  worst cases over the shipped profiles' envelopes) into the report; `stored_plan`: its plan;
+- `collector_paused`: the cycle collector off while a report is made (the commands).
 """
 
 import gc
