@@ -23,8 +23,10 @@ the first report, CPU s, median of 3 fresh processes:
   collector scanning the heap again and again (0.4 s over the whole report), and at the
   analysis stage the imports of scipy.special (0.16 s, for a few t quantiles) and
   scipy.optimize (0.15 s, for the forecast's worst case over the envelope, searched again).
-- after (load 14): imports 0.72, analysis 0.18, JSON + CSV 0.06, figures + HTML 1.69, PDF
-  0.55: 3.25 s (2.99-3.29), NOT at that load; `gyrostand report` 3.68 s; made again 1.47 s.
+- after (load 9.4 falling to 7.8): imports 0.70, analysis 0.18, JSON + CSV 0.05, figures + HTML
+  1.48, PDF 0.51: 2.93 s (2.81-2.96), OK; `gyrostand report` 3.30 s, NOT (the CLI's own
+  start-up: typer's adapters, the command modules, the plan read for its profile); made again
+  1.46 s; the fleet report 1.19 (JSON), 1.86 (HTML), 1.43 s (PDF), OK. At load 14: 3.25 s.
   What changed: the collector paused; figures' text as SVG text; the six heading figures drawn
   on one matplotlib figure per layout (`plots.reused_layouts`, byte for byte the same SVG);
   windows as collections; x labels placed without re-ticking; the forecast's worst cases
