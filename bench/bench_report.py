@@ -23,16 +23,18 @@ the first report, CPU s, median of 3 fresh processes:
   collector scanning the heap again and again (0.4 s over the whole report), and at the
   analysis stage the imports of scipy.special (0.16 s, for a few t quantiles) and
   scipy.optimize (0.15 s, for the forecast's worst case over the envelope, searched again).
-- after (load 9.4 falling to 7.8): imports 0.70, analysis 0.18, JSON + CSV 0.05, figures + HTML
-  1.48, PDF 0.51: 2.93 s (2.81-2.96), OK; `gyrostand report` 3.30 s, NOT (the CLI's own
-  start-up: typer's adapters, the command modules, the plan read for its profile); made again
-  1.46 s; the fleet report 1.19 (JSON), 1.86 (HTML), 1.43 s (PDF), OK. At load 14: 3.25 s.
-  What changed: the collector paused; figures' text as SVG text; the six heading figures drawn
-  on one matplotlib figure per layout (`plots.reused_layouts`, byte for byte the same SVG);
-  windows as collections; x labels placed without re-ticking; the forecast's worst cases
-  recorded with the analysis (`worst_case.WorstCase`) and t quantiles from a table of
-  scipy's own values (`analysis.t_table`): the report imports no scipy. See the closing
-  lines of a run for the load it ran at.
+- after (load 6.2-6.6): imports 0.71, analysis 0.17, JSON + CSV 0.05, figures + HTML 1.46,
+  PDF 0.51: 2.92 s (2.84-2.92), OK (load 9.4-7.8: 2.93 s; load 14: 3.25 s, NOT); `gyrostand
+  report` 3.12 s, NOT by a hair (the CLI's own start-up: typer's adapters, the command
+  modules, the plan read for its profile; one run, 2.95 s by /usr/bin/time at load 5); made
+  again 1.50 s; the fleet report 1.03 (JSON), 1.62 (HTML), 1.24 s (PDF), OK.
+  What changed: the collector paused (its last scan at exit skipped); figures' text as SVG
+  text; the six heading figures drawn on one matplotlib figure per layout
+  (`plots.reused_layouts`, byte for byte the same SVG); windows as collections; x labels
+  placed without re-ticking; the forecast's worst cases recorded with the analysis
+  (`worst_case.WorstCase`) and t quantiles from a table of scipy's own values
+  (`analysis.t_table`): the report imports no scipy. See the closing lines of a run for the
+  load it ran at.
 What is left, by size: the figures (matplotlib's import 0.4 s, the six heading figures 0.6 s:
 every axis ticked, measured and drawn; 0.5 s for the other seven), the imports (SQLAlchemy
 0.22 s, the plan's pydantic models 0.1 s with cantools 0.05 s through stand.protocol, numpy
