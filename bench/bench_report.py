@@ -12,31 +12,33 @@ as a user's install does: with Python's bytecode cache allowed (PYTHONDONTWRITEB
 this environment sets, removed) and warmed by one run first; the command is also run once
 without it (every gyrostand module compiled in the process).
 
-Target (issue 33): <= 3 s of CPU for all formats; the fleet report <= 2 s. Measured with the
-machine shared by about seven sessions (load 8-14; contention inflates CPU time too), CPU s:
-- before (this bench as it was: .pyc not written, the first of three runs analysing; load 10):
-  imports 2.8-3.1, analysis 0.27-0.28 (rebuilt), JSON + CSV 0.06, figures + HTML 1.7-1.9,
-  PDF 0.68-0.72: median 5.9 s; `gyrostand report` 6.2 s (all formats), 6.1 s (PDF); the fleet
-  report 2.9 s (JSON), 4.0 s (HTML), 3.9 s (PDF);
-- now (load 8.7-14): the first report imports 1.15-1.28, analysis 0.68-0.71 (scipy.special and
-  scipy.optimize now load here, no longer at import), JSON + CSV 0.06, figures + HTML 1.8-1.9,
-  PDF 0.63-0.67: median 4.5 s, NOT; made again 1.2 + 0.67 + 0.06 + 0.04 + 0.65: median 2.6 s,
-  OK; `gyrostand report` 5.2 s first, 3.2 s made again (3.0 without .pyc), NOT: the CLI's own
-  start-up (typer, the command modules, the database models and Alembic for the campaign
-  check) adds about 0.6 s; the fleet report 2.4 s (JSON), 3.2 s (HTML), 2.7 s (PDF), NOT (the
-  fleet analysis imports scipy.stats, 0.85 s, for its Kolmogorov-Smirnov test).
-- the fleet report without scipy.stats (Smirnov's exact test in analysis.smirnov, the F, t and
-  chi-square quantiles from scipy.special), `fleet report` alone, .pyc allowed, load 3-6:
-  before 1.99 s (JSON), 2.07-2.15 s (HTML, charts cached), 2.6-2.9 s (HTML, charts drawn),
-  2.19-2.27 s (PDF); after 1.39-1.48 s (JSON), 1.42-1.46 s (HTML, cached), 1.85-2.25 s (HTML,
-  drawn: matplotlib's import 0.5 s and two control charts 0.45 s), 1.55-1.63 s (PDF). This
-  bench's fleet lines (a fleet simulated anew: the HTML draws) at load 6.5: JSON 1.37-1.42,
-  HTML 2.01-2.13 (NOT, by the charts), PDF 1.54-1.63 s.
-What is left, by size: the imports (the plan's pydantic models 0.4 s, SQLAlchemy 0.3 s, Alembic
-through open_db 0.15 s, numpy 0.1 s; the start-up work of issue 33's other helper removes
-Alembic and part of the models' build), Typst (0.6 s for 17 pages, of which the figures 0.05),
-scipy.special for the t quantiles and the envelope's worst case of the compliance section with
-scipy.optimize (0.25 s), and for a first report matplotlib (0.4 s import, 0.1-0.13 s a figure).
+Target (issue 33): <= 3 s of CPU for all formats; the fleet report <= 2 s. The processes make
+their report as `gyrostand report` does: the cycle collector paused (`report.collector_paused`).
+Measured with the machine shared by about seven sessions (contention inflates CPU time too),
+the first report, CPU s, median of 3 fresh processes:
+- before this round (load 5.5): imports 0.74, analysis 0.60, JSON + CSV 0.05, figures + HTML
+  2.29, PDF 0.66: 4.35 s, NOT; `gyrostand report` 4.48 s; the fleet report 1.35 (JSON), 1.98
+  (HTML), 1.47 s (PDF). Profiled: the figures' matplotlib work (axes and their ticks made and
+  measured 25 times, every text's layout, 13 legends; the SVG text as glyph paths), the cycle
+  collector scanning the heap again and again (0.4 s over the whole report), and at the
+  analysis stage the imports of scipy.special (0.16 s, for a few t quantiles) and
+  scipy.optimize (0.15 s, for the forecast's worst case over the envelope, searched again).
+- after (load 6.2-6.6): imports 0.71, analysis 0.17, JSON + CSV 0.05, figures + HTML 1.46,
+  PDF 0.51: 2.92 s (2.84-2.92), OK (load 9.4-7.8: 2.93 s; load 14: 3.25 s, NOT); `gyrostand
+  report` 3.12 s, NOT by a hair (the CLI's own start-up: typer's adapters, the command
+  modules, the plan read for its profile; one run, 2.95 s by /usr/bin/time at load 5); made
+  again 1.50 s; the fleet report 1.03 (JSON), 1.62 (HTML), 1.24 s (PDF), OK.
+  What changed: the collector paused (its last scan at exit skipped); figures' text as SVG
+  text; the six heading figures drawn on one matplotlib figure per layout
+  (`plots.reused_layouts`, byte for byte the same SVG); windows as collections; x labels
+  placed without re-ticking; the forecast's worst cases recorded with the analysis
+  (`worst_case.WorstCase`) and t quantiles from a table of scipy's own values
+  (`analysis.t_table`): the report imports no scipy. See the closing lines of a run for the
+  load it ran at.
+What is left, by size: the figures (matplotlib's import 0.4 s, the six heading figures 0.6 s:
+every axis ticked, measured and drawn; 0.5 s for the other seven), the imports (SQLAlchemy
+0.22 s, the plan's pydantic models 0.1 s with cantools 0.05 s through stand.protocol, numpy
+0.1 s), Typst's layout of 17 pages (0.4 s of its 0.55 s; the PDF export itself is cheap).
 
 Run: .venv/bin/python bench/bench_report.py"""
 
@@ -57,6 +59,9 @@ STAGES = """
 import sys, time
 from pathlib import Path
 t = [(time.process_time(), time.perf_counter())]
+from gyrostand.report import collector_paused
+paused = collector_paused()  # as `gyrostand report` makes its report
+paused.__enter__()
 from gyrostand.cmd_data import open_db
 from gyrostand.report.compliance import load_profile
 from gyrostand.report.stored import campaign_report

@@ -85,7 +85,7 @@ def emit(
     """Print the analysis as text sections, or as one JSON document (keys: analysis.campaign);
     a stored campaign's heading source (protocol, resolution, time base) and its trials'
     commanded and applied motion (key "motion") first."""
-    from gyrostand.report.text import render_text
+    from gyrostand.report.text import render_text, terminal_notation
 
     if as_json:
         document = analysis.to_dict()
@@ -97,8 +97,8 @@ def emit(
     else:  # it may quote stored strings: control characters escaped
         text = render_text(analysis)
         if motion:
-            lines = "\n".join(m.describe() for m in motion)
-            text = f"MOTION (commanded; applied: measured A and tau, their SE)\n{lines}\n\n{text}"
+            lines = "\n".join(terminal_notation(m.describe()) for m in motion)
+            text = f"MOTION (commanded; applied: measured A and τ, their SE)\n{lines}\n\n{text}"
         if heading_source is not None:
             text = f"HEADING SOURCE\n{heading_source}\n\n{text}"
         typer.echo(printable_lines(text), nl=False)

@@ -122,6 +122,7 @@ def register(app: typer.Typer) -> None:
         the units outside the type's prediction interval, control charts of C and T."""
         from gyrostand import SOFTWARE_VERSION
         from gyrostand.cmd_report import DEFAULT_OUT, stage
+        from gyrostand.report import collector_paused
         from gyrostand.report.errors import ReportError
         from gyrostand.report.fleet import (
             FleetReport,
@@ -135,29 +136,30 @@ def register(app: typer.Typer) -> None:
             fleet_format(path)
         except ReportError as error:
             fail(f"--out {error}")
-        inputs, analysis = analysed_fleet(model, by, q, db)
-        with open_db(db, must_exist=True)() as session:
-            simulated = simulated_campaigns(session, inputs.units)
-        report = FleetReport(
-            inputs=inputs,
-            analysis=analysis,
-            generated_at=datetime.now(UTC).isoformat(sep=" ", timespec="seconds"),
-            database=shown_url(db),
-            software=SOFTWARE_VERSION,
-            simulated=simulated,
-            marked_draft=draft,
-            number=number,
-            laboratory=laboratory,
-        )
-        if report.missing:
-            stage(f"a DRAFT: it lacks {', '.join(report.missing)} (--number, --laboratory)")
-        stage(f"fleet of {model} by {by}: {analysis.n_units} units; writing {path}")
-        try:
-            typer.echo(
-                f"wrote {path.suffix.lstrip('.').lower()}: {write_fleet_report(report, path)}"
+        with collector_paused():  # the report's garbage: see `collector_paused`
+            inputs, analysis = analysed_fleet(model, by, q, db)
+            with open_db(db, must_exist=True)() as session:
+                simulated = simulated_campaigns(session, inputs.units)
+            report = FleetReport(
+                inputs=inputs,
+                analysis=analysis,
+                generated_at=datetime.now(UTC).isoformat(sep=" ", timespec="seconds"),
+                database=shown_url(db),
+                software=SOFTWARE_VERSION,
+                simulated=simulated,
+                marked_draft=draft,
+                number=number,
+                laboratory=laboratory,
             )
-        except ReportError as error:
-            fail(str(error))
+            if report.missing:
+                stage(f"a DRAFT: it lacks {', '.join(report.missing)} (--number, --laboratory)")
+            stage(f"fleet of {model} by {by}: {analysis.n_units} units; writing {path}")
+            try:
+                typer.echo(
+                    f"wrote {path.suffix.lstrip('.').lower()}: {write_fleet_report(report, path)}"
+                )
+            except ReportError as error:
+                fail(str(error))
 
     @fleet_app.command("simulate")
     def fleet_simulate(

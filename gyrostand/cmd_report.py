@@ -23,7 +23,7 @@ import typer
 from gyrostand.cmd_data import DEFAULT_DB, CampaignId, DbOption, open_db
 from gyrostand.db.url import shown_url
 from gyrostand.errors import fail, printable
-from gyrostand.report import FORMATS, SHIPPED, SHIPPED_PROFILES
+from gyrostand.report import FORMATS, SHIPPED, SHIPPED_PROFILES, collector_paused
 from gyrostand.stages import Stages
 
 DEFAULT_OUT = Path("runs/reports")
@@ -183,7 +183,10 @@ def register(app: typer.Typer) -> None:
         if draft and final:
             fail("--draft and --final: give one of them")
         progress = Stages("report")  # its stages: `stage`, plain lines
-        written = write_campaign_report(db, campaign, out, formats, profile, number, draft, final)
+        with collector_paused():
+            written = write_campaign_report(
+                db, campaign, out, formats, profile, number, draft, final
+            )
         for kind, path in written.items():
             typer.echo(f"wrote {kind}: {path}")
         progress.done(f"campaign {campaign}: {len(written)} files written in {out}")

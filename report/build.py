@@ -28,6 +28,7 @@ from gyrostand.report.compliance import (
 )
 from gyrostand.report.model import NOT_STATED, ReportInputs
 from gyrostand.report.signal import SignalSection, signal_section
+from gyrostand.report.worst_case import WorstCase
 
 SCHEMA = "gyrostand.report/5"
 COURSE_STEP_DEG = 5.0  # forecast grid
@@ -408,10 +409,12 @@ def build_report(
     generated_at: str,
     signal: SignalSection | None = None,
     draft: bool = False,
+    worst_cases: tuple[WorstCase, ...] = (),
 ) -> Report:
     """Assemble the report; ``analysis`` is the analysis or, when it failed, the reason.
     ``generated_at`` is the report's only wall-clock field (ISO 8601 text); ``signal`` the
-    signal analysis the analysis used (default: made from the inputs' reading record). The
+    signal analysis the analysis used (default: made from the inputs' reading record);
+    ``worst_cases`` the forecast's worst cases recorded with it (`worst_case.WorstCase`). The
     report is a DRAFT when ``draft`` or when it lacks an item of `missing_items`."""
     if signal is None:
         signal = signal_section(
@@ -424,6 +427,7 @@ def build_report(
         None if fitted is None else inputs.plan,
         imported=inputs.identification.source == "import",
         procedures=inputs.procedures,
+        worst_cases=worst_cases,
     )
     section = (
         forecast_section(fitted, profile.envelope.forecast_periods_s)

@@ -51,9 +51,10 @@ from gyrostand.report.errors import ReportError
 
 if TYPE_CHECKING:  # annotations only (scipy is not loaded for this module)
     from gyrostand.analysis.campaign import CampaignAnalysis
-    from gyrostand.analysis.forecast import EnvelopeWorst, Extrapolation
+    from gyrostand.analysis.forecast import EnvelopeWorst, Extrapolation, MotionBox
     from gyrostand.analysis.procedures import ProcedureResults
     from gyrostand.report.model import PlanSummary
+    from gyrostand.report.worst_case import WorstCase
 
 PASS, FAIL, NOT_ASSESSED = "PASS", "FAIL", "NOT ASSESSED"
 UNVERIFIED = "UNVERIFIED"  # a requirement compared with a limit the laboratory has not verified
@@ -441,6 +442,7 @@ class Evidence:
     profile: Profile
     imported: bool = False  # the data were imported from a file, not acquired on the stand
     procedures: ProcedureResults | None = None  # the standard's own tests, when run
+    worst_cases: tuple[WorstCase, ...] = ()  # found when the analysis was recorded
 
     @property
     def site_latitude_deg(self) -> float:
@@ -727,31 +729,70 @@ def _t975(dof: float) -> float:
     return t_quantile(0.975, dof)
 
 
-def _rolling_error_forecast(req: Requirement, e: Evidence) -> Finding:
-    from gyrostand.analysis.forecast import (
-        MotionBox,
-        ShipConditions,
-        envelope_worst,
-        forecast_ship,
-    )
+def _forecast_box(analysis: CampaignAnalysis, profile: Profile) -> MotionBox:
+    """The motion the forecast's worst case is sought over: the profile's envelope for the
+    plan's motion (roll or pitch)."""
+    from gyrostand.analysis.forecast import MotionBox
 
-    if not e.analysis.forecasts:
-        return _not_assessed("the plan states no ship conditions (arm, motion) to forecast")
-    ship = e.analysis.forecasts[0].conditions
-    env = e.profile.envelope
-    box = MotionBox(
+    ship = analysis.forecasts[0].conditions
+    env = profile.envelope
+    return MotionBox(
         max_angle_deg=env.max_roll_deg if ship.motion == "roll" else env.max_pitch_deg,
         period_s=env.period_s,
         max_acceleration_m_s2=env.max_acceleration_m_s2,
         max_latitude_deg=env.max_latitude_deg,
     )
-    w = envelope_worst(
+
+
+def _worst_case(req: Requirement, e: Evidence) -> WorstCase:
+    """The forecast's worst case over the envelope: the one found when the analysis was
+    recorded, else searched now."""
+    from gyrostand.analysis.forecast import envelope_worst
+    from gyrostand.report.worst_case import WorstCase
+
+    assert e.analysis is not None and e.analysis.forecasts  # (_rolling_error_forecast)
+    ship = e.analysis.forecasts[0].conditions
+    box = _forecast_box(e.analysis, e.profile)
+    for known in e.worst_cases:
+        if (known.box, known.arm_cm, known.motion, known.secant_latitude) == (
+            box,
+            ship.arm_cm,
+            ship.motion,
+            req.secant_latitude,
+        ):
+            return known
+    worst = envelope_worst(
         e.analysis.predictor,
         box,
         arm_cm=ship.arm_cm,
         motion=ship.motion,
         secant_latitude=req.secant_latitude,
     )
+    return WorstCase(box, ship.arm_cm, ship.motion, req.secant_latitude, worst)
+
+
+def worst_cases(profile: Profile, analysis: CampaignAnalysis) -> tuple[WorstCase, ...]:
+    """The worst cases the profile's forecast requirements ask of this analysis (none without
+    a forecast): recorded with the analysis (`report.stored`)."""
+    if not analysis.forecasts:
+        return ()
+    evidence = Evidence(analysis, None, profile)
+    return tuple(
+        _worst_case(req, evidence)
+        for req in profile.requirements
+        if req.evidence == "rolling_error_forecast"
+    )
+
+
+def _rolling_error_forecast(req: Requirement, e: Evidence) -> Finding:
+    from gyrostand.analysis.forecast import ShipConditions, forecast_ship
+
+    if not e.analysis.forecasts:
+        return _not_assessed("the plan states no ship conditions (arm, motion) to forecast")
+    ship = e.analysis.forecasts[0].conditions
+    env = e.profile.envelope
+    found = _worst_case(req, e)
+    box, w = found.box, found.worst
     tested = e.analysis.tested_range
     beyond = tested.beyond(w.amplitude_cm, w.period_s)
     at_max = forecast_ship(
@@ -890,15 +931,17 @@ def assess(
     *,
     imported: bool = False,
     procedures: ProcedureResults | None = None,
+    worst_cases: tuple[WorstCase, ...] = (),
 ) -> Compliance:
     """Every requirement of the profile judged on this campaign and its plan's observation
     protocol (all NOT ASSESSED when the campaign could not be analysed); ``imported``: the data
-    came from a file, and the reasons say so rather than describe the stand."""
+    came from a file, and the reasons say so rather than describe the stand; ``worst_cases``:
+    the forecast's worst cases found when the analysis was recorded."""
     if analysis is None and procedures is None:
         findings = [_not_assessed("the campaign could not be analysed")] * len(profile.requirements)
         latitude = None
     else:
-        evidence = Evidence(analysis, plan, profile, imported, procedures)
+        evidence = Evidence(analysis, plan, profile, imported, procedures, worst_cases)
         findings = [
             EVIDENCE[req.evidence](req, evidence)
             if analysis is not None or _measured_by(procedures, req.evidence)

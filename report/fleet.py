@@ -193,7 +193,7 @@ def fleet_inputs(session: Session, model: str, factor: str) -> FleetInputs:
 
 def simulated_campaigns(session: Session, units: Sequence[FleetUnit]) -> tuple[int, ...]:
     """The units' campaigns that ran on the simulated stand, as the stand report decides."""
-    from gyrostand.report.stored import is_simulated  # the report's imports: analyze stays light
+    from gyrostand.report.stored_plan import is_simulated  # the plan's models: analyze stays light
 
     return tuple(
         u.campaign_id for u in units if is_simulated(session.get_one(Campaign, u.campaign_id))

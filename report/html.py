@@ -286,13 +286,13 @@ def _heading_title(t: TrialAcquisition) -> str:
 def _figures(report: Report) -> dict[str, object]:
     """Every plot of the report as an <img> element (trusted: made here from numbers only)."""
     trials = {t.index: t for t in report.inputs.acquisition}
-    figures: dict[str, object] = {
-        "headings": {
+    with plots.reused_layouts():  # the trials' figures on one figure of each layout
+        headings = {
             r.index: Markup(plots.heading_plot(r, _heading_title(trials[r.index])))
             for r in report.inputs.records
             if r.trace is not None or any(s.observations for s in r.series)
-        },
-    }
+        }
+    figures: dict[str, object] = {"headings": headings}
     noise = report.signal.noise
     if noise is not None:
         figures["correlation"] = Markup(plots.correlation_plot(noise))

@@ -19,7 +19,9 @@ import base64
 import functools
 import io
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from typing import TYPE_CHECKING, Any, ParamSpec
 
 import numpy as np
@@ -36,7 +38,8 @@ if TYPE_CHECKING:  # matplotlib is imported where a figure is drawn: not for a c
     from matplotlib.figure import Figure
 
 STYLE = {
-    "font.family": "DejaVu Sans",
+    "font.family": "sans-serif",
+    "font.sans-serif": ["DejaVu Sans"],  # the SVG's text: 'DejaVu Sans', sans-serif
     "font.size": 8.0,
     "axes.titlesize": 9.0,
     "axes.grid": True,
@@ -44,6 +47,7 @@ STYLE = {
     "legend.fontsize": 7.0,
     "legend.framealpha": 0.85,
     "svg.hashsalt": "gyrostand",  # the same ids in every run: deterministic files
+    "svg.fonttype": "none",
     # the title at a fixed height: matplotlib otherwise measures every tick label of the axes
     # to lift the title clear of them (a fifth of the figures' time)
     "axes.titley": 1.0,
@@ -90,13 +94,33 @@ MARGIN_IN = {"left": 0.8, "right": 0.15, "bottom": 0.45, "top": 0.3}
 matplotlib's constrained layout, which measures every text twice and took half of the figures'
 time (1.8 of 3.7 s CPU for the paper campaign's 13)."""
 LEGEND_ROW_IN = 0.16  # one row of a 6.5 pt legend
+XLABEL_BELOW_PT = 19.0
+"""Where matplotlib puts an x-axis label under one line of 8 pt tick labels: its top 19 pt below
+the axes (tick 3.5, pad 3.5, the labels' line 8.0, labelpad 4.0)."""
+
+
+def _xlabel_fixed(ax: Axes) -> None:
+    """The x-axis label `XLABEL_BELOW_PT` under the axes, where matplotlib would put it: placed
+    by itself, matplotlib ticks and measures the axis over again for every label (about 5 % of
+    a figure's time)."""
+    from matplotlib.transforms import ScaledTranslation
+
+    fig = ax.get_figure()
+    assert fig is not None
+    below = ScaledTranslation(0.0, -XLABEL_BELOW_PT / 72.0, fig.dpi_scale_trans)
+    ax.xaxis.set_label_coords(0.5, 0.0, transform=ax.transAxes + below)
 
 
 def _figure(
-    height_in: float, width_in: float = WIDTH_IN, right_in: float = 0.0, below_in: float = 0.0
+    height_in: float,
+    width_in: float = WIDTH_IN,
+    right_in: float = 0.0,
+    below_in: float = 0.0,
+    axes: bool = True,
 ) -> Figure:
     """A figure with one axes inside fixed margins, `right_in` more on the right (a legend) and
-    `below_in` more below (long tick labels)."""
+    `below_in` more below (long tick labels); without `axes`, the margins only (a grid of axes
+    to add: an axes made and removed costs as much as one drawn)."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(width_in, height_in))
@@ -106,7 +130,10 @@ def _figure(
         bottom=(MARGIN_IN["bottom"] + below_in) / height_in,
         top=1 - MARGIN_IN["top"] / height_in,
     )
-    fig.add_subplot()
+    if axes:
+        ax = fig.add_subplot()
+        if not below_in:  # one line of tick labels under the axes
+            _xlabel_fixed(ax)
     return fig
 
 
@@ -139,17 +166,27 @@ def _mark_series(
     ax: Axes, series: SeriesRecord, t0: float, labelled: set[int], legend: bool = True
 ) -> None:
     """Series j's windows shaded with their means as bars, its settle point; the legend's entries
-    once per series (`labelled`), none when `legend` is False."""
+    once per series (`labelled`), none when `legend` is False. The windows are one collection
+    of spans and one of bars, not an artist each (a fifth of a heading figure's time)."""
     colour = SERIES_COLOURS[series.j]
-    for o in series.observations:
-        if o.window_start_ms is None or o.window_end_ms is None:
-            continue
+    windows = _windowed(series)
+    if windows:
         first = legend and series.j not in labelled
-        label = SERIES_LABELS[series.j] + " windows" if first else None
         labelled.add(series.j)
-        x0, x1 = _minutes(o.window_start_ms, t0), _minutes(o.window_end_ms, t0)
-        ax.axvspan(x0, x1, color=colour, alpha=0.15, lw=0, label=label)
-        ax.plot([x0, x1], [o.value_deg, o.value_deg], color=colour, lw=1.6)
+        x0 = _minutes(np.array([o.window_start_ms for o in windows], dtype=float), t0)
+        x1 = _minutes(np.array([o.window_end_ms for o in windows], dtype=float), t0)
+        from matplotlib.collections import PolyCollection
+
+        spans = PolyCollection(
+            [((a, 0.0), (a, 1.0), (b, 1.0), (b, 0.0)) for a, b in zip(x0, x1, strict=True)],
+            transform=ax.get_xaxis_transform(),  # the spans' height: the whole axes
+            color=colour,
+            alpha=0.15,
+            lw=0,
+            label=SERIES_LABELS[series.j] + " windows" if first else None,
+        )
+        ax.add_collection(spans, autolim=False)  # the bars below span the same times
+        ax.hlines([o.value_deg for o in windows], x0, x1, color=colour, lw=1.6)
     if series.settle_done_ms is not None:
         x = _minutes(series.settle_done_ms, t0)
         ax.axvline(x, color=colour, ls="--", lw=0.8)
@@ -191,19 +228,21 @@ def _zoom_on_windows(ax: Axes, record: TrialRecord, series: SeriesRecord, t0: fl
         ax.plot(x[inside], trace.mean_deg[inside], color="0.2", lw=0.7)
     _mark_series(ax, series, t0, set(), legend=False)
     ax.set_xlim(low, high)
-    for o in windows:
+    top = ax.get_xaxis_transform()  # x in data, y in axes fraction
+    for o in windows:  # k alone, inside its window: clear of the settle line before window 1
         middle = _minutes((o.window_start_ms + o.window_end_ms) / 2, t0)
-        ax.annotate(
-            f"k = {o.k}" if o is windows[0] else str(o.k),
-            (middle, 1.0),
-            xycoords=("data", "axes fraction"),
-            xytext=(0, -9),
-            textcoords="offset points",
+        ax.text(
+            middle,
+            0.97,
+            str(o.k),
+            transform=top,
             ha="center",
+            va="top",
             fontsize=6.5,
             color=SERIES_COLOURS[series.j],
         )
-    ax.set_title(f"{SERIES_LABELS[series.j]}: the {len(windows)} windows", loc="left", fontsize=8)
+    ks = f"k = {windows[0].k}" + (f"\u2013{windows[-1].k}" if len(windows) > 1 else "")
+    ax.set_title(f"{SERIES_LABELS[series.j]}: windows {ks}", loc="left", fontsize=8)
     ax.set_xlabel("stand time since the trial began, min")
     ax.ticklabel_format(axis="y", useOffset=False)
     ax.margins(y=0.25)
@@ -213,18 +252,57 @@ HEADING_ZOOM_IN = 1.3  # the row of window zooms under the trial's heading, inch
 # figures of 4.3 in to a page
 
 
+_LAYOUTS: ContextVar[dict[int, Figure] | None] = ContextVar("_LAYOUTS", default=None)
+
+
+@contextmanager
+def reused_layouts() -> Iterator[None]:
+    """Within it, the heading figures of one layout (so many zoom panels) are drawn on one
+    matplotlib figure, its content replaced trial by trial: the axes and their ticks are made
+    once, not per trial (a third of a heading figure's time). Per thread and task: a
+    context variable."""
+    token = _LAYOUTS.set({})
+    try:
+        yield
+    finally:
+        _LAYOUTS.reset(token)
+
+
+def _heading_figure(zooms: int) -> Figure:
+    """The heading figure's layout: the trial's axes on top and `zooms` panels under it (none:
+    one axes), empty; from `reused_layouts` when one was drawn before."""
+    pool = _LAYOUTS.get()
+    if pool is not None and zooms in pool:
+        fig = pool[zooms]
+        for ax in fig.axes:
+            for artist in (*ax.lines, *ax.collections, *ax.patches, *ax.texts):
+                artist.remove()
+            ax.relim()  # the data limits of what is left: nothing
+            ax.set_autoscale_on(True)
+        for legend in list(fig.legends):
+            legend.remove()
+        return fig
+    fig = _figure(3.0 + (HEADING_ZOOM_IN if zooms else 0.0), axes=not zooms)
+    if zooms:  # the trial on top, the zooms below: a grid in the same margins
+        grid = fig.add_gridspec(2, zooms, height_ratios=(1.5, 1.1), hspace=0.45, wspace=0.22)
+        fig.add_subplot(grid[0, :])
+        for column in range(zooms):
+            fig.add_subplot(grid[1, column])
+        for ax in fig.axes:
+            _xlabel_fixed(ax)
+    if pool is not None:
+        pool[zooms] = fig
+    return fig
+
+
 @_styled
 def heading_plot(record: TrialRecord, title: str) -> Figure:
     """Heading of one trial against stand time, windows and settle points marked; under it, one
     panel per series zoomed on its observation windows."""
     t0 = _trial_start_ms(record)
     zoomed = [s for s in record.series if _windowed(s)] if t0 is not None else []
-    fig = _figure(3.0 + (HEADING_ZOOM_IN if zoomed else 0.0))
-    ax = fig.axes[0]
-    if zoomed:  # the trial on top, the zooms below: a grid in the same margins
-        ax.remove()
-        grid = fig.add_gridspec(2, len(zoomed), height_ratios=(1.5, 1.1), hspace=0.45, wspace=0.22)
-        ax = fig.add_subplot(grid[0, :])
+    fig = _heading_figure(len(zoomed))
+    ax, *zooms = fig.axes
     ax.set_title(title, loc="left")
     if t0 is None:  # observations without window times: values against k
         for s in record.series:
@@ -246,8 +324,8 @@ def heading_plot(record: TrialRecord, title: str) -> Figure:
         ax.set_xlabel("stand time since the trial began, min")
     ax.set_ylabel("heading, deg")
     ax.ticklabel_format(axis="y", useOffset=False)
-    for column, s in enumerate(zoomed):
-        zoom = fig.add_subplot(grid[1, column])
+    for column, (zoom, s) in enumerate(zip(zooms, zoomed, strict=True)):
+        assert t0 is not None  # zoomed: the windows carry times
         _zoom_on_windows(zoom, record, s, t0)
         if column == 0:
             zoom.set_ylabel("heading, deg")
@@ -408,7 +486,7 @@ def iteration_path_plot(analysis: CampaignAnalysis) -> Figure:
     contours = ax.contour(
         c_axis, t_axis, s2, levels=levels, cmap="viridis", norm=LogNorm(), linewidths=0.7
     )
-    ax.clabel(contours, fmt="%.2g", fontsize=6)
+    ax.clabel(contours, fmt=_two_digits, fontsize=6)
     if path.size:
         ax.plot(
             path[:, 0],
@@ -431,6 +509,15 @@ def iteration_path_plot(analysis: CampaignAnalysis) -> Figure:
 
 MATHTEXT = re.compile(r"^\$\\mathdefault\{(.*)\}\$$")
 SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def _two_digits(value: float) -> str:
+    """Two significant digits, a power of ten as ×10ⁿ (4×10⁻⁵, not the computer's 4e-05)."""
+    text = f"{value:.2g}"
+    if "e" not in text:
+        return text
+    mantissa, exponent = text.split("e")
+    return f"{mantissa}×10{str(int(exponent)).translate(SUPERSCRIPT)}"
 
 
 @functools.cache

@@ -54,9 +54,10 @@ from gyrostand.db.queries import campaign_constants, current_trials, load_campai
 from gyrostand.db.session import writer
 from gyrostand.plan.codec import codec_for
 from gyrostand.plan.model import PartialPlan, Plan, PlanError, ReportPlan, parse_any_plan
+from gyrostand.report import SHIPPED_PROFILES
 from gyrostand.report.build import Report, build_report, missing_items
 from gyrostand.report.code_digest import analysis_code_sha256
-from gyrostand.report.compliance import Profile
+from gyrostand.report.compliance import Profile, load_profile, worst_cases
 from gyrostand.report.model import (
     NOT_STATED,
     EventRecord,
@@ -82,7 +83,9 @@ from gyrostand.report.signal_record import (
     still_series_record,
 )
 from gyrostand.report.signal_record import heading_source as heading_source_of
+from gyrostand.report.stored_plan import is_simulated, whole_plan
 from gyrostand.report.transient import transient_check
+from gyrostand.report.worst_case import WorstCase
 
 STORED_SCHEMA = "gyrostand.stored-analysis/1"  # results_json["stored"]: `record_run`
 TRACE_BINS = 600  # per trial: enough for a page-wide plot, small enough for inline SVG
@@ -328,6 +331,7 @@ class StoredAnalysis:
     run_id: int | None
     signal: SignalSection
     traces: dict[int, HeadingTrace | None]  # `campaign_traces`: the report's heading plots
+    worst_cases: tuple[WorstCase, ...] = ()  # the forecast's, for the shipped profiles
 
 
 def read_campaign(sessions: sessionmaker[Session], campaign_id: int) -> Campaign:
@@ -368,14 +372,17 @@ def compute_stored(campaign: Campaign, inputs: StoredInputs | None = None) -> St
                 *analysis.warnings,
             ),
         )
-    check = transient_check(campaign, _plan(campaign))
+    check = transient_check(campaign, whole_plan(campaign))
     if not isinstance(check, str):
         warnings = analysis.warnings + check.warnings(analysis.cochran.s_e)
         analysis = replace(analysis, transient=check, warnings=warnings)
     contradicted = [e.message for e in campaign.events if e.kind == PLAN_CONTRADICTED]
     if contradicted:  # told while the campaign ran; the settle criteria used the record's values
         analysis = replace(analysis, warnings=(*contradicted, *analysis.warnings))
-    return StoredAnalysis(analysis, inputs, None, signal, campaign_traces(campaign))
+    worst = dict.fromkeys(
+        w for name in SHIPPED_PROFILES for w in worst_cases(load_profile(name), analysis)
+    )
+    return StoredAnalysis(analysis, inputs, None, signal, campaign_traces(campaign), tuple(worst))
 
 
 def record_run(
@@ -394,6 +401,7 @@ def record_run(
             "analysis": encode(stored.analysis),
             "signal": encode(stored.signal),
             "traces": encode(stored.traces),
+            "worst_cases": encode(stored.worst_cases),
         }
     }
     digest, version = stored.inputs.sha256(), SOFTWARE_VERSION
@@ -449,9 +457,10 @@ def _rebuilt(run: AnalysisRun, inputs: StoredInputs) -> StoredAnalysis | None:
         analysis = decode(CampaignAnalysis, typed["analysis"])
         signal = decode(SignalSection, typed["signal"])
         traces = decode(dict[int, HeadingTrace | None], typed["traces"])
+        worst = decode(tuple[WorstCase, ...], typed["worst_cases"])
     except (TypeError, KeyError, ValueError):
         return None
-    return StoredAnalysis(analysis, inputs, run.id, signal, traces)
+    return StoredAnalysis(analysis, inputs, run.id, signal, traces, worst)
 
 
 def analyze_stored(sessions: sessionmaker[Session], campaign_id: int) -> StoredAnalysis:
@@ -515,14 +524,6 @@ def _sha256_of(path: str, size: int, mtime_ns: int) -> str:
     from gyrostand.frames.logfile import sha256_of  # (python-can: not for the hash alone)
 
     return sha256_of(Path(path))
-
-
-def is_simulated(campaign: Campaign, plan: Plan | PartialPlan | None = None) -> bool:
-    """The campaign ran on the simulated stand (its stored plan, parsed unless given, says so;
-    an import never did)."""
-    if plan is None:
-        plan = _plan(campaign)
-    return campaign.source != "import" and isinstance(plan, Plan) and plan.bus.simulated
 
 
 def _lab_items(campaign: Campaign, number: str | None) -> dict[str, Any]:
@@ -755,7 +756,7 @@ def campaign_traces(campaign: Campaign) -> dict[int, HeadingTrace | None]:
     """Per trial index its binned heading trace from the raw log (`heading_traces`); empty
     without a usable raw log or a whole plan."""
     _, logs = _raw_log_check(campaign)
-    plan, spans = _plan(campaign), trial_stand_spans(campaign)
+    plan, spans = whole_plan(campaign), trial_stand_spans(campaign)
     return heading_traces(logs, plan, spans) if logs and plan is not None and spans else {}
 
 
@@ -795,15 +796,6 @@ def _records(
     return records, note
 
 
-def _plan(campaign: Campaign) -> Plan | None:
-    """The stored plan when it is a whole one (an import may store the partial form)."""
-    try:
-        plan = parse_any_plan(campaign.plan_toml)
-    except PlanError:
-        return None
-    return plan if isinstance(plan, Plan) else None
-
-
 def _reading(
     plan: Plan | None, logs: Sequence[Path], check: str, records: tuple[TrialRecord, ...]
 ) -> tuple[ReadingRecord | None, str, ExcursionCriterion | None]:
@@ -830,7 +822,7 @@ def campaign_signal(session: Session, campaign_id: int) -> SignalSection:
 
 def _signal(campaign: Campaign) -> SignalSection:
     check, logs = _raw_log_check(campaign)
-    plan = _plan(campaign)
+    plan = whole_plan(campaign)
     records = tuple(
         TrialRecord(t.index, _series_records(t), None) for t in current_trials(campaign.trials)
     )
@@ -852,7 +844,7 @@ def report_inputs(
     campaign = load_campaign(session, campaign_id)
     _, left_out = trial_inputs(campaign)
     unused = {(t.index, t.attempt) for t in left_out}
-    plan = _plan(campaign)
+    plan = whole_plan(campaign)
     check, logs = _raw_log_check(campaign)
     traces = campaign_traces(campaign) if stored is None else stored.traces
     records, note = _records(campaign, traces, check)
@@ -968,4 +960,5 @@ def campaign_report(
         profile,
         generated_at=generated_at,
         signal=stored.signal,
+        worst_cases=stored.worst_cases,
     )

@@ -43,7 +43,7 @@ def test_text_output_without_plan_uses_the_paper() -> None:
     assert "example constants, start values and ship forecast of Potemkin (1982)" in result.stderr
     for heading in ("TRIALS", "COCHRAN", "FIT", "ADEQUACY", "CONTROL", "FORECAST"):
         assert heading in result.stdout
-    assert "-2.328 +/- 0.534" in result.stdout
+    assert "-2.328 ± 0.534" in result.stdout
 
 
 def test_json_output_is_one_document() -> None:

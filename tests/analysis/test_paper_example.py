@@ -146,5 +146,5 @@ def test_text_report_has_every_section(analysis: CampaignAnalysis) -> None:
     text = render_text(analysis)
     for heading in ("TRIALS", "COCHRAN", "FIT", "ADEQUACY", "CONTROL", "ASSUMPTIONS", "FORECAST"):
         assert heading in text
-    assert "G_ex = 0.4936, G* = 0.5175" in text
-    assert "-2.328 +/- 0.534" in text
+    assert "Gₑₓ = 0.4936, G* = 0.5175" in text
+    assert "-2.328 ± 0.534" in text

@@ -13,6 +13,20 @@ def test_t_quantile_is_scipy_stats_t_ppf(p: float, dof: float) -> None:
     assert t_quantile(p, dof) == float(stats.t.ppf(p, dof))
 
 
+def test_the_t_table_is_scipy_special_stdtrit() -> None:
+    """analysis.t_table, which spares a report scipy's import: every entry is stdtrit's."""
+    from scipy.special import stdtrit
+
+    from gyrostand.analysis.t_table import T_DOF_MAX, T_QUANTILES
+
+    assert set(T_QUANTILES) == {0.005, 0.025, 0.05, 0.95, 0.975, 0.995}
+    for p, row in T_QUANTILES.items():
+        assert len(row) == T_DOF_MAX
+        for dof in range(1, T_DOF_MAX + 1):
+            assert row[dof - 1] == float(stdtrit(dof, p)) == t_quantile(p, dof), (p, dof)
+    assert 1 - 0.05 / 2 in T_QUANTILES and 0.5 + 0.95 / 2 in T_QUANTILES  # as the code asks
+
+
 def test_the_textbook_value() -> None:
     assert t_quantile(0.975, 8) == pytest.approx(2.306004, abs=1e-6)  # t(0.975; 8), tables
 

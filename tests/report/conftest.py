@@ -112,12 +112,24 @@ def paper_files(paper_report: Report, tmp_path_factory: pytest.TempPathFactory) 
 
 def watermark_letters(pdf: Path) -> list[str]:
     """Per page, the sorted letters of the text set far larger than any heading: the watermark
-    (pdftotext -bbox gives each rotated glyph as a word of its own)."""
+    (pdftotext -bbox gives its rotated glyphs as words of a letter or two, each box over 30 pt
+    high and over 10 pt wide, an "I" 14 pt; a figure's axis label turned upright is as high,
+    but 8 pt wide: one line of 8 pt text)."""
     xml = subprocess.run(["pdftotext", "-bbox", str(pdf), "-"], check=True, capture_output=True)
     pages = xml.stdout.decode().split("<page ")[1:]
-    word = re.compile(r'yMin="([\d.]+)" xMax="[\d.]+" yMax="([\d.]+)">([^<]*)</word>')
+    word = re.compile(
+        r'xMin="([\d.]+)" yMin="([\d.]+)" xMax="([\d.]+)" yMax="([\d.]+)">([^<]*)</word>'
+    )
     return [
-        "".join(sorted("".join(t for y0, y1, t in word.findall(p) if float(y1) - float(y0) > 30)))
+        "".join(
+            sorted(
+                "".join(
+                    t
+                    for x0, y0, x1, y1, t in word.findall(p)
+                    if float(y1) - float(y0) > 30 and float(x1) - float(x0) > 10
+                )
+            )
+        )
         for p in pages
     ]
 

@@ -45,6 +45,7 @@ def test_the_imported_report_reads_clean(paper_files: Rendered) -> None:
     text = " ".join(paper_files.pdf_text.split())
     appendix_b = text.rindex("Appendix B: the plan as submitted")  # the plan's TOML as written
     assert ASCII_LEFT.findall(text[:appendix_b]) == []
+    assert re.findall(r"\b\d(?:\.\d+)?e[-+]\d\d\b", text[:appendix_b]) == []  # figures too
     assert "Nomenclature" in text and "Symbols: one quantity each" in text
     for symbol in ("p = 2π/τ", "R̂(u)", "σA(ta)", "Ω", "kg·m²·s−2"):
         assert symbol in text, symbol
@@ -68,3 +69,31 @@ def test_no_jargon_in_the_templates(word: str) -> None:
     from gyrostand.report.html import TEMPLATES
 
     assert word not in (TEMPLATES / "report.html.j2").read_text(encoding="utf-8")
+
+
+TERMINAL_ASCII = re.compile(
+    r"\b(?:tau|nu|nu_[er]|rho|sigma2?|delta|alpha_p)\b|<delta|\+/-|<=|\^-?\d|\bS_e\b|\bG_ex\b|"
+    r"\bF_p\b|\btheta0|\bC_gcm2s2\b|\bT_s\b"
+)
+"""The analysis's plain-text notation as `gyrostand analyze` printed it (nu = 5, tau s, S^2_e,
+G_ex, +/- ...) where the report has its symbols."""
+
+
+def test_the_analysis_text_speaks_the_reports_symbols(
+    paper_report: Report, simulated_report: Report
+) -> None:
+    """`gyrostand analyze` in the nomenclature's symbols, one per quantity (issue 33): ν, τ,
+    ⟨δᵢ⟩, Sₑ², ±; the paper's imported summaries and a simulated campaign's correlated series
+    (its N_eff columns and the transient section)."""
+    from gyrostand.report.text import render_text
+
+    for report in (paper_report, simulated_report):
+        assert report.analysis is not None
+        text = render_text(report.analysis)
+        assert TERMINAL_ASCII.findall(text) == []
+        c = report.analysis.cochran
+        assert f"Gₑₓ = {c.g_ex:.4f}, G* = {c.g_critical:.4f} (q = {c.q}, ν = {c.nu}, " in text
+        assert f"Sₑ = {c.s_e:.4f} deg" in text
+        assert "τ s" in text.split("\n")[1]  # the trial table's header
+    f = paper_report.analysis.forecasts[0]
+    assert f"{f.alpha_deg:+.3f} ± {f.half_width_deg:.3f} deg" in render_text(paper_report.analysis)

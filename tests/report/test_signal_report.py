@@ -19,6 +19,7 @@ from gyrostand.report.compliance import load_profile
 from gyrostand.report.html import render_html
 from gyrostand.report.json_doc import report_document
 from gyrostand.report.model import ExcursionCriterion
+from gyrostand.report.text import terminal_notation
 from gyrostand.stand.protocol import Codec, HeadingFrame
 
 from .conftest import GENERATED, Rendered, Simulated, Stored
@@ -194,7 +195,7 @@ def test_one_independence_verdict_everywhere(
     expected = f"assumption of independence violated: {check.detail}"
     assert warned == ([expected] if correlated else [])
     text = runner.invoke(app, ["analyze", str(simulated.campaign_id), "--db", simulated.url])
-    assert f"independence: {check.verdict} ({check.method}" in text.stdout
+    assert terminal_notation(f"independence: {check.verdict} ({check.method}") in text.stdout
     html = render_html(simulated_report)
     badge = '<span class="badge fail">NO</span>' if correlated else "badge pass"
     assert f"observations independent: {badge}" in html

@@ -151,3 +151,33 @@ def test_a_changed_raw_log_makes_the_run_stale(
         assert stale.signal.record is None  # the reading is not taken from a mismatching log
     finally:
         sim.log.write_bytes(data)
+
+
+def test_the_forecasts_worst_cases_are_recorded_and_reused(
+    sim: Simulated, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The envelope's worst case of the forecast, found for each shipped profile when the
+    analysis is recorded, comes back with the run, and the report takes it from there: the
+    same compliance as a search made at report time, without searching."""
+    from gyrostand.analysis import forecast
+    from gyrostand.report import SHIPPED_PROFILES
+    from gyrostand.report.compliance import assess, load_profile, worst_cases
+
+    first = analyze_stored(sim.sessions, sim.campaign_id)
+    again = stored_analysis(sim.sessions, sim.campaign_id)
+    assert again.run_id == first.run_id and first.analysis.forecasts
+    same(first.worst_cases, again.worst_cases, "worst cases")
+    searched = {p: worst_cases(load_profile(p), again.analysis) for p in SHIPPED_PROFILES}
+    assert set(again.worst_cases) == {w for found in searched.values() for w in found}
+    fresh = {p: assess(load_profile(p), again.analysis) for p in SHIPPED_PROFILES}
+
+    def no_search(*args: object, **kwargs: object) -> object:
+        raise AssertionError("the worst case was searched again")
+
+    monkeypatch.setattr(forecast, "envelope_worst", no_search)
+    for p in SHIPPED_PROFILES:
+        reused = assess(load_profile(p), again.analysis, worst_cases=again.worst_cases)
+        assert reused == fresh[p]
+    report = sim.report()  # the report of the recorded run searches nothing
+    assert report.compliance.predictions == fresh["imo-a424"].predictions
+    assert report.compliance.predictions[0].evidence == "rolling_error_forecast"
