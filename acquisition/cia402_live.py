@@ -217,7 +217,13 @@ class LiveCia402(LoggedFrames):
     def __init__(self, plan: Plan, clock_ms: int = 0) -> None:
         s = plan.stand
         assert s.node_id is not None and s.counts_per_degree and s.arm_length_cm
-        config = AxisConfig(s.node_id, drive_eds(plan), s.cycle_ms, sync="periodic")
+        config = AxisConfig(
+            s.node_id,
+            drive_eds(plan),
+            s.cycle_ms,
+            sync="periodic",
+            drive_timeout_ms=s.drive_timeout_ms,
+        )
         self.codec = codec_for(plan)
         self.network = canopen.Network(open_bus(plan.bus))
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S

@@ -70,7 +70,9 @@ class ReplayedCia402:
         self._network = canopen.Network()
         self._network.NOTIFIER_CYCLE = 0.05
         self._network.connect(interface="virtual", channel=channel)
-        config = AxisConfig(s.node_id, SIM_DRIVE_EDS, s.cycle_ms)
+        config = AxisConfig(
+            s.node_id, SIM_DRIVE_EDS, s.cycle_ms, drive_timeout_ms=s.drive_timeout_ms
+        )
         self.drive = LoggedDrive(self._network, channel, run.drive)
         try:
             self.drive.start(s.node_id, config.master_node_id)

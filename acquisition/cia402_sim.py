@@ -108,7 +108,12 @@ class SimulatedCia402(LoggedFrames):
                 ),
             )
             self.drive.boot()
-            self.axis = Cia402Axis(master_net, AxisConfig(s.node_id, SIM_DRIVE_EDS, s.cycle_ms))
+            self.axis = Cia402Axis(
+                master_net,
+                AxisConfig(
+                    s.node_id, SIM_DRIVE_EDS, s.cycle_ms, drive_timeout_ms=s.drive_timeout_ms
+                ),
+            )
             self.axis.start()
         except BaseException:
             self.close()

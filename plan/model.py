@@ -732,7 +732,7 @@ class InclinometerPlan(_Table):
 
 StandProtocol = Literal["gyrostand", "cia402"]
 K_PROMPT = "k_trial"  # the id of the prompt to set K by hand before trial N: k_trialN
-_CIA402_KEYS = ("eds", "node_id", "counts_per_degree", "cycle_ms", "ramp_s")
+_CIA402_KEYS = ("eds", "node_id", "counts_per_degree", "cycle_ms", "ramp_s", "drive_timeout_ms")
 
 
 class StandPlan(_Table):
@@ -764,6 +764,10 @@ class StandPlan(_Table):
     """cia402: the SYNC cycle (cyclic synchronous position: one target per cycle), ms."""
     ramp_s: float = Field(10.0, gt=0)
     """cia402: the smooth start and stop ramps of the roll's amplitude, s."""
+    drive_timeout_ms: int = Field(300, ge=200, le=65535)
+    """cia402: the drive's consumer time of gyrostand's heartbeat (0x1016, written at start;
+    gyrostand beats every 100 ms): a gyrostand silent this long is taken for dead and the drive
+    quick-stops, ms."""
 
     @model_validator(mode="after")
     def _consistent(self) -> StandPlan:
