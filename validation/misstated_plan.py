@@ -25,9 +25,10 @@ Per case it prints, each figure beside its target:
 Run: .venv/bin/python validation/misstated_plan.py [--campaigns 50] [--seed 1] [--jobs 2]
          [--cases "estimate,compensated period -10%"] [--out rows.json] [--resume]
      .venv/bin/python validation/misstated_plan.py --table-from rows.json [--cases ...]
-A campaign takes ~6 s of one core compensated, ~13 s "estimate" (an idle machine; two to three
-times that on a shared one): the shipped plans x 200 and the eight mis-stated cases x 50 are a
-few hours of two cores, so run it with --out (rows kept as they come) and --resume.
+A campaign takes ~7 s of CPU compensated, ~14 s "estimate" (measured at load 5, the first
+campaign's imports included; at nice 19 under load 12-14, about one campaign a minute with two
+jobs): the shipped plans x 200 and the eight mis-stated cases x 50 are hours of two cores, so run
+it with --out (rows kept as they come) and --resume.
 """
 
 from __future__ import annotations
