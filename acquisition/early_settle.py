@@ -32,7 +32,11 @@ plan's, the record's are used from there on and a "plan contradicted" event says
 compensated criterion compensates only once the record has determined them (confirming the
 plan's or replacing them): until then a series waits for the bound, as "estimate" does, since
 a compensation with a wrong period is biased and a short compensated record cannot tell. The
-analysis re-estimates them from the whole record too (`report.transient`).
+compensation itself, at the series' end, takes the period and damping the whole record gives
+then (not the plan's, even when the record does not contradict them at 3 SE: a damping 0.05
+off goes unnoticed for hours and biased the compensated means by 1-4 SE), and their uncertainty
+enters its SE (`fit_transient_free`'s joint covariance). The analysis re-estimates them from the
+whole record too (`report.transient`).
 """
 
 from __future__ import annotations

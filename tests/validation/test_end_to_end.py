@@ -13,8 +13,11 @@ import sys
 import tomllib
 from pathlib import Path
 
+import numpy as np
+import pytest
 from typer.testing import CliRunner
 
+from gyrostand.analysis.gyro_model import Conditions, KnownConstants, RollingErrorModel
 from gyrostand.cli import app
 from gyrostand.plan.overrides import with_keys
 
@@ -75,6 +78,27 @@ def test_a_campaign_row_agrees_with_the_database(tmp_path: Path) -> None:
     assert [(c["index"], c["within_interval"]) for c in row["controls"]] == [
         (c["index"], c["within_interval"]) for c in analysis["controls"]
     ] and len(row["controls"]) == 2
+
+    # each trial mean against model 1.1 at the drawn C and T (the rolling error the simulator
+    # settles at), with the SE and dof `analyze` reports
+    constants = KnownConstants(lP_gcm2s2=6.57e6, H1_gcm2s=1.55e8, latitude_deg=46.5,
+                               earth_rate_rad_s=7.3e-5, gravity_cm_s2=981.0)  # fmt: skip
+    trials = analysis["trials"]
+    alpha = RollingErrorModel(constants)(
+        Conditions(
+            *(
+                np.array([t[k] for t in trials])
+                for k in ("direction_deg", "amplitude_cm", "period_s")
+            )
+        ),
+        C_gcm2s2=draw.C_gcm2s2,
+        T_s=draw.T_s,
+    )
+    assert [t["index"] for t in row["trials"]] == [t["index"] for t in trials]
+    for mine, theirs, a in zip(row["trials"], trials, alpha, strict=True):
+        assert mine["error_deg"] == pytest.approx(theirs["delta_deg"] - a, abs=1e-12)
+        assert mine["se_deg"] == pytest.approx(theirs["var_mean_deg2"] ** 0.5, rel=1e-12)
+        assert mine["dof"] == theirs["dof"]
 
     # a trial's stand time spans at least its settles and windows as stored
     assert sorted(row["stand_s"]) == [str(i) for i in range(1, 7)]
