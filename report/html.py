@@ -24,6 +24,7 @@ from gyrostand.report.compliance import (
 )
 from gyrostand.report.model import TrialAcquisition
 from gyrostand.report.signal import TIME_SAVED_NOTE
+from gyrostand.report.text import GREEK
 
 TEMPLATES = files("gyrostand.report") / "templates"
 
@@ -86,14 +87,6 @@ def verdict(value: bool | str | None, yes: str = "yes", no: str = "NO") -> Marku
     return Markup(f'<span class="badge {kind}">{escape(text)}</span>')
 
 
-GREEK = {
-    "alpha": "\u03b1",
-    "delta": "\u03b4",
-    "sigma": "\u03c3",
-    "tau": "\u03c4",
-    "nu": "\u03bd",
-    "rho": "\u03c1",
-}
 NOTATION = (
     (re.compile(r"&lt;=|<="), "\u2264"),
     (re.compile(r"\btheta0\b"), "\u03b8<sub>0</sub>"),  # A = theta0 h: the roll amplitude
