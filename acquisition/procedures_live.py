@@ -65,6 +65,7 @@ class BusHeadings:
         self.rocking = False
         self._silence_s = plan.timeouts.bus_silence_s
         self._last_frame = time.monotonic()
+        self._heading_ms = -np.inf  # the latest heading heard (stand time)
 
     def earlier(self, logs: Sequence[Path]) -> None:
         """The headings a stopped run of the procedures heard (its raw logs, in order), before
@@ -78,7 +79,8 @@ class BusHeadings:
         known = headings.t_ms >= 0  # (NO_CLOCK: received before the first stand status)
         if known.any():
             self._pending.append(headings.take(known))
-            self.now_ms = max(self.now_ms, float(headings.t_ms[known].max()))
+            self._heading_ms = max(self._heading_ms, float(headings.t_ms[known].max()))
+            self.now_ms = max(self.now_ms, self._heading_ms)
 
     def poll(self) -> None:
         """Drain the frames arrived (waiting up to DRAIN_WALL_S for one), log and decode them."""
@@ -124,8 +126,16 @@ class BusHeadings:
     def take(self, until_ms: float) -> Headings:
         """The headings not yet taken stamped at or before `until_ms` (campaign ms), once the
         stand clock heard has reached it."""
+        since_ms = self.now_ms  # (a run-up's record: its compass on, sending)
         while self.now_ms < until_ms - 1e-6:  # (a reading time's float sum: whole ms)
             self.poll()
+            since_ms = since_ms if np.isfinite(since_ms) else self.now_ms
+            quiet_s = (self.now_ms - max(self._heading_ms, since_ms)) / 1000.0
+            if quiet_s > self._silence_s:  # (as the trials: `timeouts.bus_silence_s`)
+                raise ProcedureBusError(
+                    f"the compass is silent: no heading for {quiet_s:g} s of stand time while "
+                    "the stand's clock went on"
+                )
         pending = _joined([_empty(), *self._pending])
         later = np.flatnonzero(pending.t_ms > until_ms + 1e-6)  # (as `LoggedHeadings.take`)
         end = int(later[0]) if later.size else len(pending)

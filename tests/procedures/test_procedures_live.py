@@ -30,7 +30,7 @@ import pytest
 from gyrostand.acquisition.bus import Recorder
 from gyrostand.acquisition.operator import messages
 from gyrostand.acquisition.procedures import run_procedures, stored_progress
-from gyrostand.acquisition.procedures_live import BusHeadings, LiveRunUp
+from gyrostand.acquisition.procedures_live import BusHeadings, LiveRunUp, ProcedureBusError
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.campaign_procedures import run_procedures_of
 from gyrostand.db.session import open_database
@@ -373,3 +373,46 @@ def test_on_a_real_bus_the_same_procedures_give_the_virtual_results_to_the_bit(
     assert live.to_dict() == virtual.to_dict()
     assert live.rolling[0].error_deg is not None and live.repeatability is not None
     assert heard.position > 4 * 2400  # every frame heard (2 Hz headings, 2 Hz status)
+
+
+class SilentCompass(CompassAt1x):
+    """The compass falls silent (its heading frames no longer sent) from `silent_s` of stand
+    time on, the stand's statuses going on."""
+
+    def __init__(self, config: SimConfig, silent_s: float) -> None:
+        super().__init__(config)
+        self.silent_s = silent_s
+        self.heading_id = self.codec.heading_arbitration_id
+
+    def send(self, frames: list[can.Message]) -> None:
+        assert self.engine is not None
+        if self.engine.stand_time_s >= self.silent_s:
+            frames = [f for f in frames if f.arbitration_id != self.heading_id]
+        super().send(frames)
+
+
+def test_on_a_real_bus_a_compass_that_falls_silent_stops_the_procedures_in_one_line(
+    tmp_path: Path,
+) -> None:
+    """No heading for the plan's silence timeout of stand time, while the stand's statuses go
+    on: the procedures stop with one line naming the silent compass (the campaign's "bus error"
+    event, `cmd_campaign`), not a wait without end."""
+    profile = load_profile(profile_file(tmp_path, lab_verified(A821)))
+    fast = PAPER.replace("undamped_period_s = 5064.0", "undamped_period_s = 1200.0")
+    plan = parse_plan(fast + SHORT)
+    plan_inputs = inputs(plan, profile)
+    compass = SilentCompass(plan_inputs[0], silent_s=300.0)
+    real = plan.model_copy(update={"bus": manual_on_a_real_bus().bus})
+    heard = compass.heard = BusHeadings(real, compass, compass.arrive)  # type: ignore[arg-type]
+
+    def runup(k: int, at_s: float) -> LiveRunUp:
+        compass.switch_on(k, at_s)
+        return LiveRunUp(heard, k, at_s)
+
+    with pytest.raises(ProcedureBusError) as raised:
+        run_procedures(*plan_inputs, runups=runup)
+    silence_s = real.timeouts.bus_silence_s
+    assert str(raised.value).startswith("the compass is silent: no heading for ")
+    quiet_s = float(str(raised.value).split("no heading for ")[1].split(" s")[0])
+    assert silence_s < quiet_s <= silence_s + 1.0  # (the stand's next second)
+    assert heard.now_ms / 1000.0 == pytest.approx(300.0 + quiet_s, abs=1.0)
