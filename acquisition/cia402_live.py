@@ -39,7 +39,7 @@ from gyrostand.acquisition.cia402_sim import LoggedFrames, merged
 from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault
 from gyrostand.acquisition.engine import Command
 from gyrostand.devices.cia402 import CSP, AxisConfig, Cia402Axis, DriveError, Frame
-from gyrostand.devices.cia402_log import _copy, _wrap_send, drive_ids
+from gyrostand.devices.cia402_log import drive_ids, stamped_copy, wrap_send
 from gyrostand.devices.clock import NO_CLOCK, ReceptionClock
 from gyrostand.devices.roll_trajectory import Kinematics
 from gyrostand.plan.codec import codec_for, drive_eds
@@ -61,12 +61,12 @@ class LiveTap:
         self.clock = clock
         self.frames: list[can.Message] = []
         self._lock = threading.Lock()
-        _wrap_send(network, lambda msg: None, self._add)
+        wrap_send(network, lambda msg: None, self._add)
         network.subscribe(0x580 + node_id, self._on_sdo)
 
     def _add(self, msg: can.Message) -> None:
         with self._lock:
-            self.frames.append(_copy(msg, self.clock()))
+            self.frames.append(stamped_copy(msg, self.clock()))
 
     def _on_sdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
         self._add(can.Message(arbitration_id=can_id, data=bytes(data), is_extended_id=False))

@@ -3,7 +3,7 @@
 
 The frames come as the live trials take them (`bus.LiveBus`: the compass's and the stand's
 frames into one queue, the raw log written as they are drained) and are decoded by the trials'
-decoder (`runner._can_decoder`: a compass timed by its own frames' stand time, or by reception on
+decoder (`runner.can_decoder`: a compass timed by its own frames' stand time, or by reception on
 the stand clock, `devices.clock`). Campaign time is the stand clock heard: a run-up's "until"
 waits for it (real time is the point: a settling test takes hours). Each run-up starts at the
 stand time of the first frame heard after the operator's answer to its switch-on prompt (the
@@ -23,7 +23,7 @@ import numpy as np
 
 from gyrostand.acquisition.bus import LiveBus
 from gyrostand.acquisition.procedures import RunUp
-from gyrostand.acquisition.runner import BATCH_FRAMES, _can_decoder
+from gyrostand.acquisition.runner import BATCH_FRAMES, can_decoder
 from gyrostand.frames.batch import Headings, RawFrames
 from gyrostand.frames.logfile import read_raw_frames
 from gyrostand.plan.codec import codec_for
@@ -56,7 +56,7 @@ class BusHeadings:
     def __init__(self, plan: Plan, live: LiveBus, check: Callable[[], None]) -> None:
         self.plan, self.live, self.check = plan, live, check
         self.codec = codec_for(plan)
-        self._decoder = _can_decoder(plan, self.codec)
+        self._decoder = can_decoder(plan, self.codec)
         self._pending: list[Headings] = []  # heard, not yet taken (joined when taken)
         self._acks: list[AckFrame] = []
         self.now_ms = -np.inf  # the latest stand time heard (statuses and headings)
@@ -71,7 +71,7 @@ class BusHeadings:
         """The headings a stopped run of the procedures heard (its raw logs, in order), before
         the ones heard now: a run-up under way goes on from its switch-on."""
         for path in logs:
-            decoder = _can_decoder(self.plan, self.codec)  # (each run's reception times anew)
+            decoder = can_decoder(self.plan, self.codec)  # (each run's reception times anew)
             for raw in read_raw_frames(path):
                 self._heard(decoder.decode(raw).headings)
 

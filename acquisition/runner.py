@@ -183,7 +183,7 @@ def run_live(
     commander = LiveCommander(live.controller, grants)
     source = serial.info if serial else _can_source_info(plan, codec)
     engine = Engine(plan, store, commander, progress, operator, source, start_ms=clock_ms)
-    decoder = serial.decoder if serial else _can_decoder(plan, codec)
+    decoder = serial.decoder if serial else can_decoder(plan, codec)
     if grants is None:
         silence_wall_s = max(plan.timeouts.bus_silence_s / plan.bus.speedup, 2.0)
         silence = f"bus silence: no frame at all for {silence_wall_s:g} s (wall clock)"
@@ -327,7 +327,7 @@ def mark_run_start(store: CampaignStore, headings: Headings) -> bool:
     return True
 
 
-def _can_decoder(plan: Plan, codec: Codec) -> BatchDecoder | SourceDecoder:
+def can_decoder(plan: Plan, codec: Codec) -> BatchDecoder | SourceDecoder:
     """The decoder of a compass on CAN (live and replay)."""
     own_bus = plan.compass.own_bus
     return frame_decoder(codec, *plan.heading_source, plan.inclinometer_mount, own_bus=own_bus)
@@ -577,7 +577,7 @@ def replay(
             raise ReplayLogError(str(exc)) from exc
         info = decoder.source.info
     else:
-        decoder = _can_decoder(plan, codec)
+        decoder = can_decoder(plan, codec)
         stream = read_segments(paths)
         info = _can_source_info(plan, codec)
     with replay_store(sessions, plan, procedures) as store:

@@ -71,7 +71,8 @@ def master_sent(arbitration_id: int, node_id: int, master_id: int) -> bool:
     )
 
 
-def _copy(msg: can.Message, t_s: float) -> can.Message:
+def stamped_copy(msg: can.Message, t_s: float) -> can.Message:
+    """A copy of a frame sent or received, stamped with the run's stand time `t_s`."""
     return can.Message(
         timestamp=round(t_s, 6),
         arbitration_id=msg.arbitration_id,
@@ -95,7 +96,7 @@ class _Counter(can.Listener):
             self.cond.notify_all()
 
 
-def _wrap_send(
+def wrap_send(
     network: canopen.Network,
     after: Callable[[can.Message], None],
     before: Callable[[can.Message], None] = lambda msg: None,
@@ -124,13 +125,15 @@ class BusTap:
         self._cond = threading.Condition()
         self._drive_sent = 0
         self._master_sent = 0
-        self._taken = _Counter(self._cond, lambda m: self.frames.append(_copy(m, self.clock())))
+        self._taken = _Counter(
+            self._cond, lambda m: self.frames.append(stamped_copy(m, self.clock()))
+        )
         self._acted = _Counter(self._cond, lambda m: None)
         assert master.notifier is not None and drive.notifier is not None  # (connected)
         master.notifier.add_listener(self._taken)
         drive.notifier.add_listener(self._acted)
-        _wrap_send(drive, self._on_drive_sent)
-        _wrap_send(master, self._on_master_sent, self._master_sends)
+        wrap_send(drive, self._on_drive_sent)
+        wrap_send(master, self._on_master_sent, self._master_sends)
 
     def _on_drive_sent(self, msg: can.Message) -> None:
         with self._cond:
@@ -141,7 +144,7 @@ class BusTap:
         drive sent before (its boot-up)."""
         with self._cond:
             self._wait(lambda: self._taken.count >= self._drive_sent)
-            self.frames.append(_copy(msg, self.clock()))
+            self.frames.append(stamped_copy(msg, self.clock()))
             self._master_sent += 1
 
     def _on_master_sent(self, msg: can.Message) -> None:
@@ -178,7 +181,7 @@ class LoggedDrive:
         self._taken = _Counter(self._cond, lambda m: None)
         assert master.notifier is not None  # (connected)
         master.notifier.add_listener(self._taken)
-        _wrap_send(master, self._on_master_sent)
+        wrap_send(master, self._on_master_sent)
 
     def start(self, node_id: int, master_id: int) -> None:
         """The drive's frames before the master's first one (its boot-up)."""
