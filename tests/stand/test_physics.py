@@ -213,3 +213,23 @@ def test_rocking_adds_components_at_p_and_2p() -> None:
     amplitudes = harmonic_amplitudes(t, reading, [p, 2 * p])
     assert amplitudes == pytest.approx([1.0 * accel_g, 0.5 * accel_g], abs=0.001)
     assert reading.mean() == pytest.approx(120 + cfg.compass.settled_shift_deg(45, 40, 4), abs=0.01)
+
+
+def test_a_campaign_starts_with_the_compass_at_its_settle_point() -> None:
+    """Issue 34, trial 1's suspects: the compass a campaign starts with is settled (no start-up
+    transient: its first series reads the true heading, noise aside), and the correlated noise
+    is stationary from its first sample (drawn from N(0, sigma^2), not started at 0, which
+    would leave sigma^2 (1 - r^2) = 1 % of it)."""
+    engine = StandEngine(config(noise=QUIET.__dict__, heading_rate_hz=1.0))
+    t, reading, _ = headings(engine.advance_to(7200.0))
+    assert t[-1] == 7200.0 and np.all(reading == 120.0)
+    sigma, mu, step = 0.01, 0.05, 0.1
+    first = np.array(
+        [
+            CorrelatedNoise(sigma, mu, step, np.random.default_rng(s)).sample(601)
+            for s in range(3000)
+        ]
+    )
+    for k in (0, 600):  # the first sample and one a minute later (correlation e^-3)
+        assert np.var(first[:, k]) == pytest.approx(sigma**2, rel=0.08)  # SE 2.6 %
+        assert abs(np.mean(first[:, k])) < 4 * sigma / math.sqrt(3000)
