@@ -87,6 +87,7 @@ SLOW_FILES = frozenset(
         "acquisition/test_raw_log_names.py",
         "acquisition/test_replay_failure.py",
         "acquisition/test_stop_resume_report.py",
+        "validation/test_trial_one.py",
         "cli/test_bad_databases.py",
         "cli/test_demo.py",
         "cli/test_fleet_commands.py",
