@@ -21,6 +21,10 @@ the series observes from the end of the first block at which
    the end of the series, `compensation`), and R_j's standard error is the compensation's.
    Only a series whose state is carried over is compensated: the first one of a run (state
    unknown, a 3-parameter fit of a short record: its SE comes out low) waits for 3.
+   What 3 leaves is not noise: with damping 0.7 the rule is met in the overshoot, so the
+   transient left has the overshoot's sign in every series (the paper campaign, 200 draws:
+   0.3 % of the step, -0.0004 deg in trial 1's rocking series, 0.1 SE of a trial mean;
+   `validation/trial_one.py`).
 
 The band criterion is only evaluated to record the time saved: measured when it held before,
 else predicted from the fitted transient. A transient the model does not describe (wrong period
