@@ -122,10 +122,9 @@ def split(draw: Draw) -> list[SeriesSplit]:
     return out
 
 
-def _line(label: str, values: np.ndarray) -> str:
+def _line(label: str, values: np.ndarray, names: tuple[str, ...]) -> str:
     n = values.shape[0]
     se = values.std(axis=0, ddof=1) / math.sqrt(n) if n > 1 else np.full(values.shape[1], np.nan)
-    names = ("error", "noise", "rest")
     cells = [
         f"{name} {m:+.5f} +- {s:.5f}" for name, m, s in zip(names, values.mean(0), se, strict=True)
     ]
@@ -133,9 +132,16 @@ def _line(label: str, values: np.ndarray) -> str:
 
 
 def table(splits: list[list[SeriesSplit]], first: int) -> str:
-    """Per series the mean error, noise and rest (deg, +- SE over draws), for all draws and
-    for those before and from draw `first`."""
+    """Per series the mean error, noise and rest, and the trial mean's error (deg, +- SE over
+    draws), for all draws and for those before and from draw `first`."""
+    n = len(splits)
+    ranges = [(0, n)] + ([(0, first), (first, n)] if 1 < first < n - 1 else [])
     out = []
+
+    def lines(name: str, values: np.ndarray, names: tuple[str, ...]) -> None:
+        out.append(f"{name}:")
+        out.extend(_line(f"draws {a}-{b - 1}", values[a:b], names) for a, b in ranges)
+
     for j, name in ((STILL, "series 1 (still)"), (ROCKING, "series 2 (rocking)")):
         values = np.array(
             [
@@ -145,14 +151,9 @@ def table(splits: list[list[SeriesSplit]], first: int) -> str:
                 if s.j == j
             ]
         )
-        out.append(f"{name}:")
-        out.append(_line(f"draws 0-{len(values) - 1}", values))
-        if 1 < first < len(values) - 1:
-            out.append(_line(f"draws 0-{first - 1}", values[:first]))
-            out.append(_line(f"draws {first}-{len(values) - 1}", values[first:]))
+        lines(name, values, ("error", "noise", "rest"))
     delta = np.array([[d[1].error_deg - d[0].error_deg] for d in splits])
-    se = delta.std(ddof=1) / math.sqrt(len(delta))
-    out.append(f"trial mean <delta_1> error: {delta.mean():+.5f} +- {se:.5f} deg")
+    lines("trial mean <delta_1> = series 2 - series 1", delta, ("error",))
     return "\n".join(out)
 
 
