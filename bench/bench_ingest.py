@@ -2,8 +2,10 @@
 own `can.Logger` writing .db (SqliteWriter) and .blf for the same frames, frames lost for each.
 
 The frames are a real campaign stream of the simulated stand (examples/paper.toml). For each
-consumer they are first queued on a python-can `virtual` bus (untimed), then the consumer's
-`can.Notifier` drains that backlog and the clock runs until the consumer has the last frame. The
+consumer they are first queued on a python-can `virtual` bus (untimed), then the consumer drains
+that backlog (gyrostand: its own reception thread, `acquisition.bus.Reception`, as a campaign
+does; `can.Logger`: a `can.Notifier`, as python-can users log) and the clock runs until the
+consumer has the last frame. The
 process is pinned to one CPU. Targets: >= 180 000 frames/s (issue 37; twenty times a saturated 1
 Mbit/s bus), zero loss, at least twice `can.Logger` -> .blf (each the best of `--repeats` runs), and
 with the station's live view attached (the live file, a page watching) at most 10 % less.
@@ -35,7 +37,7 @@ import numpy as np
 from acquisition_stream import campaign_frames, paper_plan
 from top_costs import print_costs
 
-from gyrostand.acquisition.bus import Recorder
+from gyrostand.acquisition.bus import Reception, Recorder
 from gyrostand.acquisition.engine import Engine
 from gyrostand.acquisition.progress import LiveFile
 from gyrostand.acquisition.runner import _NoCommands
@@ -97,7 +99,7 @@ def ours(
     live: bool = False,
     profile: cProfile.Profile | None = None,
 ) -> Run:
-    """gyrostand's live path: Notifier -> Recorder (bounded queue + raw log) -> batch decode ->
+    """gyrostand's live path: Reception -> Recorder (bounded queue + raw log) -> batch decode ->
     engine -> SQLite (`live`: and the live file, a station page watching it, as `run_live`
     keeps it)."""
     db = tmp / f"ours-{uuid.uuid4().hex}.sqlite"  # (a new database for every run)
@@ -112,7 +114,7 @@ def ours(
     if live_file is not None:
         live_file.watch.touch()  # as the station does while a page shows the run
     t0, cpu0 = time.perf_counter(), time.process_time()
-    notifier = can.Notifier(rx, [recorder], timeout=0.05)
+    reception = Reception(rx, recorder)
     position = 0
     if profile is not None:
         profile.enable()
@@ -130,7 +132,7 @@ def ours(
         position += len(msgs)
     if profile is not None:
         profile.disable()
-    notifier.stop()  # and the raw log (its last container written)
+    reception.stop()  # and the raw log (its last container written)
     if live_file is not None:
         live_file.close()
     seconds, cpu_s = time.perf_counter() - t0, time.process_time() - cpu0
