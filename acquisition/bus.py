@@ -156,7 +156,8 @@ class Recorder(can.Listener):
         self.log_rest = log_rest  # on stop, log frames never drained (not in virtual time)
         self.channels = channels  # two buses: each frame's `channel` says which (`OnBus`)
         self._frames: deque[can.Message | Overflow] = deque()
-        self._ready = threading.Event()
+        self._ready = threading.Event()  # set by a producer while the consumer waits for it
+        self._waiting = False  # (a plain flag: checked for every frame, 40 ns less than is_set())
         self.writer = raw_log_writer(log_path) if log_path is not None else None
         self.dropped = 0
         self._overflow: Overflow | None = None  # the overflow going on (its marker is queued)
@@ -190,7 +191,7 @@ class Recorder(can.Listener):
             return
         self._overflow = None
         self._frames.append(msg)  # atomic; the only producer-side operation
-        if not self._ready.is_set():
+        if self._waiting:
             self._ready.set()
 
     def on_frames(self, raw: RawFrames) -> None:
@@ -204,7 +205,7 @@ class Recorder(can.Listener):
         self._batch_frames_in += len(raw)
         self._batches_in += 1
         self._frames.append(raw)  # type: ignore[arg-type]
-        if not self._ready.is_set():
+        if self._waiting:
             self._ready.set()
 
     def on_messages(self, msgs: list[can.Message]) -> None:
@@ -215,7 +216,7 @@ class Recorder(can.Listener):
             return
         self._overflow = None
         self._frames.extend(msgs)  # atomic
-        if not self._ready.is_set():
+        if self._waiting:
             self._ready.set()
 
     def on_error(self, exc: Exception) -> None:
@@ -263,9 +264,11 @@ class Recorder(can.Listener):
     def _pop(self, limit: int, timeout_s: float) -> list[Any]:
         """Up to `limit` queue entries (waits up to `timeout_s` for the first one)."""
         if not self._frames:
+            self._waiting = True  # (then the check: a frame queued after it sets `_ready`)
             self._ready.clear()
             if not self._frames:
                 self._ready.wait(timeout_s)
+            self._waiting = False
         pop = self._frames.popleft
         return [pop() for _ in range(min(len(self._frames), limit))]
 
