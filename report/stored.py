@@ -397,6 +397,9 @@ def compute_stored(campaign: Campaign, inputs: StoredInputs | None = None) -> St
                 *analysis.warnings,
             ),
         )
+    unshared = _compensated_unshared(campaign, analysis)
+    if unshared:
+        analysis = replace(analysis, warnings=(*analysis.warnings, unshared))
     check = transient_check(campaign, whole_plan(campaign))
     if not isinstance(check, str):
         warnings = analysis.warnings + check.warnings(analysis.cochran.s_e)
@@ -408,6 +411,28 @@ def compute_stored(campaign: Campaign, inputs: StoredInputs | None = None) -> St
         w for name in SHIPPED_PROFILES for w in worst_cases(load_profile(name), analysis)
     )
     return StoredAnalysis(analysis, inputs, None, signal, campaign_traces(campaign), tuple(worst))
+
+
+def _compensated_unshared(campaign: Campaign, analysis: CampaignAnalysis) -> str | None:
+    """The warning for fit trials with a compensated series whose share in the period and
+    damping error is not stored (acquired before schema 0023, or imported): their means are
+    then fitted as independent, which they are not."""
+    fitted = set(analysis.fit_indices)
+    missing = sorted(
+        (t.index, s.j)
+        for t in current_trials(campaign.trials)
+        if t.index in fitted
+        for s in t.series
+        if s.compensation_se_deg is not None and s.compensation_shared is None
+    )
+    if not missing:
+        return None
+    where = ", ".join(f"trial {i} series {j}" for i, j in missing)
+    return (
+        f"{where}: compensated without its share in the period and damping error stored "
+        "(acquired before schema 0023, or imported): C and T are fitted as if the trial means "
+        "were independent, and their SE and intervals may be too narrow"
+    )
 
 
 def record_run(
