@@ -395,6 +395,7 @@ def analyze_campaign(
         dof_e,
         q=q,
         homogeneous=cochran.homogeneous,
+        generalised=covariance is not None,
     )
     predictor = Predictor(
         constants=constants,
@@ -472,9 +473,14 @@ def _warnings(
         found.append(
             f"trial variances are not homogeneous (Cochran G_ex = {cochran.g_ex:.4f} >= "
             f"G* = {cochran.g_critical:.4f}; trial {cochran.largest}): S_e and the adequacy "
-            "test are not valid"
+            + (
+                "test are not valid"
+                if adequacy.decision is None
+                else "test on the paper's basis are not valid (the generalised fit's test, on "
+                "the trial means, weighs each by its own variance)"
+            )
         )
-    elif adequacy.decision is False:
+    if adequacy.decision is False:
         found.append(
             f"the model is NOT adequate on the trial means (F_p = {adequacy.f_p_mean:.3g} >= "
             f"F_T = {adequacy.f_critical:.3g})"
@@ -484,7 +490,7 @@ def _warnings(
                 else ""
             )
         )
-    if cochran.homogeneous and agreement.too_small:
+    if adequacy.decision is not None and agreement.too_small:  # tested: homogeneous, or GLS
         found.append(
             f"the residual variance is implausibly small: S^2_r = {adequacy.s2_r:.3g} is "
             f"{agreement.f_p:.3g} times the error of the trial means S^2_e/N = "
