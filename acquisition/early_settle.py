@@ -147,13 +147,17 @@ class TransientRecord:
 
     def sensitivity(
         self, model: TransientModel, t_s: np.ndarray, width_s: np.ndarray
-    ) -> tuple[float, float]:
+    ) -> tuple[float, float, float]:
         """d/d(period s, damping ratio) of the current series' transient averaged over its
         observation windows, the whole record refitted at each (central differences, steps of
         1e-4 as `analysis.transient`'s): what a compensation's mean owes its period and damping
-        (`analysis.gls`)."""
+        (`analysis.gls`); and the covariance of its settle point with the previous series' at
+        ``model``'s period and damping (the state carried over the step couples them; 0 when
+        the series starts free)."""
         seg, data = self._data(self._segments)
         j = len(seg.step_s) - 1
+        chained = j > 0 and not seg.free[j]
+        previous = float(fit_transient(model, seg, data).covariance[j, j - 1]) if chained else 0.0
         out = []
         for dp, dr in ((1e-4 * model.undamped_period_s, 0.0), (0.0, 1e-4)):
             up = TransientModel(model.undamped_period_s + dp, model.damping_ratio + dr)
@@ -161,7 +165,7 @@ class TransientRecord:
             high = fit_transient(up, seg, data).mean_transient(j, t_s, width_s)[0]
             low = fit_transient(down, seg, data).mean_transient(j, t_s, width_s)[0]
             out.append((high - low) / (2 * (dp + dr)))
-        return out[0], out[1]
+        return out[0], out[1], previous
 
     @property
     def start_s(self) -> float:

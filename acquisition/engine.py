@@ -1496,13 +1496,14 @@ class Engine:
         t_s, width_s = ms.mean(axis=1) / 1000, (ms[:, 1] - ms[:, 0]) / 1000
         values, _ = fit.transient(j, t_s, width_s)
         first_k = self.plan.n_obs - len(self._windows) + 1
-        d_period, d_ratio = self._record.sensitivity(fit.model, t_s, width_s)
+        d_period, d_ratio, previous = self._record.sensitivity(fit.model, t_s, width_s)
         assert fit.pd_covariance is not None
         shared = SharedError(
             (-d_period, -d_ratio),  # the compensated mean is the observations' less the transient
             tuple(tuple(float(v) for v in row) for row in fit.pd_covariance),  # type: ignore[arg-type]
             round(self._record.start_s * 1000),
             self.now_ms,
+            previous,
         )
         values_deg = tuple(float(v) for v in values)
         return SeriesCompensation(first_k, values_deg, fit.settle_point(j)[1], shared)

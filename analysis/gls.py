@@ -11,9 +11,13 @@ records of different runs are independent.
 
 The covariance of the fit trials' means is then V = diag(var_mean_i) + G C G^T less each
 series' own g_s Sigma_s g_s^T, already in var_mean_i (a compensated mean carries its settle
-point's SE, whose joint covariance includes the period and damping's). Model 1.1 is fitted by
-Gauss-Newton on the whitened problem: V / v = L L^T (v the mean of diag V, so the residual
-variance stays in deg^2 as the paper's S^2), L^-1 y against L^-1 f, L^-1 X (Aitken 1935).
+point's SE, whose joint covariance includes the period and damping's), plus the covariance of
+adjacent series' settle points at fixed period and damping (the state carried over a step
+couples them: correlation about -0.5, so neighbouring trial means covary by about +0.35),
+stored as the later one's ``previous_deg2`` (the later fit's, by the same nesting argument).
+Model 1.1 is fitted by Gauss-Newton on the whitened problem: V / v = L L^T (v the mean of
+diag V, so the residual variance stays in deg^2 as the paper's S^2), L^-1 y against L^-1 f,
+L^-1 X (Aitken 1935).
 S^2 and (X^T X)^-1 of eqs 1.9-1.10 become those of the whitened problem: S^2 = r^T (V/v)^-1 r /
 (n - m), cov = (X^T (V/v)^-1 X)^-1 S^2, t(n - m) as before. Without a shared error (the paper's
 independent means, every criterion but "compensated") nothing here runs.
@@ -44,6 +48,7 @@ class SharedError:
     covariance: tuple[tuple[float, float], tuple[float, float]]
     record_ms: int
     at_ms: int
+    previous_deg2: float = 0.0  # Cov(its settle point, the previous series') at fixed (P, ratio)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -51,6 +56,7 @@ class SharedError:
             "covariance": [list(row) for row in self.covariance],
             "record_ms": self.record_ms,
             "at_ms": self.at_ms,
+            "previous_deg2": self.previous_deg2,
         }
 
     @classmethod
@@ -59,7 +65,8 @@ class SharedError:
         cov = tuple(tuple(float(v) for v in row) for row in data["covariance"])
         if len(g) != 2 or len(cov) != 2 or any(len(row) != 2 for row in cov):
             raise AnalysisError(f"a shared error needs 2 sensitivities, a 2x2 covariance: {data}")
-        return cls(g, cov, int(data["record_ms"]), int(data["at_ms"]))  # type: ignore[arg-type]
+        previous = float(data.get("previous_deg2", 0.0))
+        return cls(g, cov, int(data["record_ms"]), int(data["at_ms"]), previous)  # type: ignore[arg-type]
 
 
 def shared_covariance(
@@ -81,7 +88,14 @@ def shared_covariance(
     # each series' own part is in var_mean already, through its settle point's SE
     own = [float(np.array(e.sensitivity) @ e.covariance @ e.sensitivity) for e in errors]
     shared_g = signs @ g
-    return shared_g @ pd_covariance(errors) @ shared_g.T - np.diag(signs**2 @ own)
+    carried = np.zeros((len(keys), len(keys)))  # adjacent settle points through the state
+    for b, (i, j) in enumerate(keys):
+        before = (i, 1) if j == 2 else (i - 1, 2)
+        if before in keys and shared[before].record_ms == errors[b].record_ms:
+            a = keys.index(before)
+            carried[a, b] = carried[b, a] = errors[b].previous_deg2
+    covariance = shared_g @ pd_covariance(errors) @ shared_g.T + signs @ carried @ signs.T
+    return covariance - np.diag(signs**2 @ own)
 
 
 def pd_covariance(errors: Sequence[SharedError]) -> np.ndarray:

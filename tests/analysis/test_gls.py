@@ -27,18 +27,27 @@ ROOT = Path(__file__).resolve().parents[2]
 CSV = ROOT / "examples" / "paper.csv"
 
 
-def shared(g: tuple[float, float], var: tuple[float, float], at_ms: int, record_ms: int = 0):
-    return SharedError(g, ((var[0], 0.0), (0.0, var[1])), record_ms, at_ms)
+def shared(
+    g: tuple[float, float],
+    var: tuple[float, float],
+    at_ms: int,
+    record_ms: int = 0,
+    previous: float = 0.0,
+) -> SharedError:
+    return SharedError(g, ((var[0], 0.0), (0.0, var[1])), record_ms, at_ms, previous)
 
 
 def test_shared_covariance_by_hand() -> None:
     """Series (1, 2), (2, 1), (2, 2) compensated in this order in one run, (3, 2) in another:
     <delta_1> = m12 - m11 gets +g12 e12, <delta_2> gets g22 e22 - g21 e21; Cov(e_s, e_t) is the
-    later one's Sigma, and each series' own g Sigma g^T (in var_mean already) is taken out."""
+    later one's Sigma, and each series' own g Sigma g^T (in var_mean already) is taken out;
+    adjacent settle points covary by the later one's previous_deg2 (c21: m12 with m21, c22:
+    m21 with m22), (3, 2)'s previous (3, 1) is not compensated: none."""
+    c21, c22 = -1e-5, -2e-5
     s12 = shared((1e-4, 0.2), (400.0, 4e-4), 1)
-    s21 = shared((-2e-4, 0.1), (300.0, 3e-4), 2)
-    s22 = shared((3e-4, -0.3), (200.0, 2e-4), 3)
-    s32 = shared((5e-4, 0.5), (100.0, 1e-4), 4, record_ms=99)
+    s21 = shared((-2e-4, 0.1), (300.0, 3e-4), 2, previous=c21)
+    s22 = shared((3e-4, -0.3), (200.0, 2e-4), 3, previous=c22)
+    s32 = shared((5e-4, 0.5), (100.0, 1e-4), 4, record_ms=99, previous=-3e-5)
     errors = {(1, 2): s12, (2, 1): s21, (2, 2): s22, (3, 2): s32}
 
     def q(a: SharedError, b: SharedError, later: SharedError) -> float:
@@ -47,8 +56,8 @@ def test_shared_covariance_by_hand() -> None:
     cov = shared_covariance(errors, [1, 2, 3])
     assert cov is not None
     expected = np.zeros((3, 3))
-    expected[0, 1] = expected[1, 0] = q(s12, s22, s22) - q(s12, s21, s21)
-    expected[1, 1] = -2 * q(s22, s21, s22)  # var(g22 e22 - g21 e21) less both own parts
+    expected[0, 1] = expected[1, 0] = q(s12, s22, s22) - q(s12, s21, s21) - c21
+    expected[1, 1] = -2 * q(s22, s21, s22) - 2 * c22  # var(m22 - m21) less both own parts
     np.testing.assert_allclose(cov, expected, rtol=1e-12, atol=1e-17)
     assert shared_covariance({}, [1, 2]) is None
 
