@@ -86,9 +86,16 @@ class Received(can.Listener):
     on the stand clock: SYNC k (stand time k x cycle) received at r is a reception-clock status
     (`ReceptionClock`); each SYNC's reception time is kept (`sync_rx_s`, the benchmark's)."""
 
-    def __init__(self, node_id: int, master_id: int, cycle_ms: int) -> None:
+    def __init__(
+        self, node_id: int, master_id: int, cycle_ms: int, sync_tpdo: int | None = None
+    ) -> None:
         self.ignored = drive_ids(node_id, master_id)
         self.cycle_ms = cycle_ms
+        # a synchronous TPDO (a CiA 410 inclinometer's, transmission type 1) samples at its SYNC:
+        # its m-th frame answers SYNC m (the first SYNC comes after the device was started), at
+        # that SYNC's stand time, not at a reception time a slow host delays
+        self.sync_tpdo = sync_tpdo
+        self._sync_answers = 0
         self.clock = ReceptionClock()
         self.syncs = 0
         self.sync_rx_s: deque[float] = deque(maxlen=SYNCS_KEPT)
@@ -107,6 +114,9 @@ class Received(can.Listener):
                 self.sync_rx_s.append(msg.timestamp)
                 self.syncs += 1
                 self._cond.notify_all()
+            elif not msg.is_extended_id and msg.arbitration_id == self.sync_tpdo:
+                self._frames.append(_received(msg, self._sync_answers * self.cycle_ms / 1000.0))
+                self._sync_answers += 1
             elif msg.is_extended_id or msg.arbitration_id not in self.ignored:
                 (t_ms,) = self.clock.to_campaign_ms(pos, rx)
                 if t_ms != NO_CLOCK:  # (before the first SYNC: no stand time yet)
@@ -229,7 +239,11 @@ class LiveCia402(LoggedFrames):
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
         self._sync_bus: can.BusABC | None = None
         self.cycles: _Cycles | None = None
-        self.received = Received(s.node_id, config.master_node_id, s.cycle_ms)
+        inclinometer = plan.inclinometer
+        sync_tpdo = None
+        if inclinometer is not None and inclinometer.protocol == "cia410" and inclinometer.node_id:
+            sync_tpdo = 0x180 + inclinometer.node_id  # its TPDO1, on SYNC
+        self.received = Received(s.node_id, config.master_node_id, s.cycle_ms, sync_tpdo)
         super().__init__(clock_ms)
         try:
             self.network.connect()
@@ -237,7 +251,6 @@ class LiveCia402(LoggedFrames):
             self.network.notifier.add_listener(self.received)
             self._sync_bus = open_bus(plan.bus)
             self.network.sync = canopen.sync.SyncProducer(canopen.Network(self._sync_bus))
-            inclinometer = plan.inclinometer
             if inclinometer is not None and inclinometer.node_id is not None:
                 self.network.send_message(0x000, bytes([0x01, inclinometer.node_id]))  # start
             self.axis = Cia402Axis(self.network, config)

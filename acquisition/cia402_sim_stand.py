@@ -68,7 +68,7 @@ class PlatformCompass(can.Listener):
         self._follow(t, drive.status == OPERATION_ENABLED)
         if t - self.compass.stand_time_s > LATE_S:  # (the first SYNC after a silence: what
             self.compass.pass_to(t - LATE_S)  # it would have sent then went unheard)
-        self._send(self.compass.advance_to(t))
+        self._send(self.compass.advance_to(t, compass_only=True))  # (its frames alone: sent)
 
     def _follow(self, t: float, enabled: bool) -> None:
         if not enabled:

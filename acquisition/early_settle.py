@@ -136,14 +136,45 @@ class TransientRecord:
         """The fit of the kept segments and the current segment's index in it; None while it
         cannot be fitted (too short, degenerate). ``free``: the period and damping ratio are
         estimated too, from ``model``'s (`fit_transient_free`)."""
-        kept = self._segments if free else self._segments[-KEEP_SEGMENTS:]
-        rows = [(k, *row) for k, s in enumerate(kept) for row in s.rows]
-        seg = Segments(tuple(s.step_s for s in kept), (True, *(s.free for s in kept[1:])))
+        seg, data = self._data(self._segments if free else self._segments[-KEEP_SEGMENTS:])
         try:
             fitter = fit_transient_free if free else fit_transient
-            return fitter(model, seg, Windows.of(rows)), len(kept) - 1
+            return fitter(model, seg, data), len(seg.step_s) - 1
         except AnalysisError:
             return None
+
+    @staticmethod
+    def _data(kept: list[_Segment]) -> tuple[Segments, Windows]:
+        rows = [(k, *row) for k, s in enumerate(kept) for row in s.rows]
+        seg = Segments(tuple(s.step_s for s in kept), (True, *(s.free for s in kept[1:])))
+        return seg, Windows.of(rows)
+
+    def sensitivity(
+        self, model: TransientModel, t_s: np.ndarray, width_s: np.ndarray
+    ) -> tuple[float, float, float]:
+        """d/d(period s, damping ratio) of the current series' transient averaged over its
+        observation windows, the whole record refitted at each (central differences, steps of
+        1e-4 as `analysis.transient`'s): what a compensation's mean owes its period and damping
+        (`analysis.gls`); and the covariance of its settle point with the previous series' at
+        ``model``'s period and damping (the state carried over the step couples them; 0 when
+        the series starts free)."""
+        seg, data = self._data(self._segments)
+        j = len(seg.step_s) - 1
+        chained = j > 0 and not seg.free[j]
+        previous = float(fit_transient(model, seg, data).covariance[j, j - 1]) if chained else 0.0
+        out = []
+        for dp, dr in ((1e-4 * model.undamped_period_s, 0.0), (0.0, 1e-4)):
+            up = TransientModel(model.undamped_period_s + dp, model.damping_ratio + dr)
+            down = TransientModel(model.undamped_period_s - dp, model.damping_ratio - dr)
+            high = fit_transient(up, seg, data).mean_transient(j, t_s, width_s)[0]
+            low = fit_transient(down, seg, data).mean_transient(j, t_s, width_s)[0]
+            out.append((high - low) / (2 * (dp + dr)))
+        return out[0], out[1], previous
+
+    @property
+    def start_s(self) -> float:
+        """Stand second of the record's first window's middle (which record: one run)."""
+        return self._segments[0].rows[0][0] if self._segments else math.nan
 
     @property
     def span_s(self) -> float:

@@ -53,6 +53,7 @@ from gyrostand.acquisition.early_settle import (
 )
 from gyrostand.acquisition.motion import MotionRecorder
 from gyrostand.analysis.angles import wrap180
+from gyrostand.analysis.gls import SharedError
 from gyrostand.analysis.measured_motion import STAND_REPORT, MeasuredMotion, preferred
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.transient import PLAN_CONTRADICTED
@@ -135,6 +136,7 @@ class SeriesCompensation:
     first_k: int
     transient_deg: tuple[float, ...]
     standard_error_deg: float
+    shared: SharedError | None = None  # its share in the period and damping error (issue 34)
 
 
 @dataclass(frozen=True)
@@ -1491,9 +1493,20 @@ class Engine:
             return None
         fit, j = fitted
         ms = np.array(self._windows, dtype=float)
-        values, _ = fit.transient(j, ms.mean(axis=1) / 1000, (ms[:, 1] - ms[:, 0]) / 1000)
+        t_s, width_s = ms.mean(axis=1) / 1000, (ms[:, 1] - ms[:, 0]) / 1000
+        values, _ = fit.transient(j, t_s, width_s)
         first_k = self.plan.n_obs - len(self._windows) + 1
-        return SeriesCompensation(first_k, tuple(float(v) for v in values), fit.settle_point(j)[1])
+        d_period, d_ratio, previous = self._record.sensitivity(fit.model, t_s, width_s)
+        assert fit.pd_covariance is not None
+        shared = SharedError(
+            (-d_period, -d_ratio),  # the compensated mean is the observations' less the transient
+            tuple(tuple(float(v) for v in row) for row in fit.pd_covariance),  # type: ignore[arg-type]
+            round(self._record.start_s * 1000),
+            self.now_ms,
+            previous,
+        )
+        values_deg = tuple(float(v) for v in values)
+        return SeriesCompensation(first_k, values_deg, fit.settle_point(j)[1], shared)
 
     def _trial_completed(self) -> None:
         assert self._trial is not None

@@ -393,6 +393,8 @@ class CampaignStore:
         if compensation is None:
             return
         series.compensation_se_deg = compensation.standard_error_deg
+        shared = compensation.shared
+        series.compensation_shared = None if shared is None else shared.to_dict()
         ks = range(compensation.first_k, compensation.first_k + len(compensation.transient_deg))
         by_k = dict(zip(ks, compensation.transient_deg, strict=True))
         for obs in session.scalars(select(Observation).where(Observation.series_id == series.id)):

@@ -61,8 +61,12 @@ def adequacy_test(
     *,
     q: float,
     homogeneous: bool,
+    generalised: bool = False,
 ) -> Adequacy:
-    """F_p = S^2_r / S^2_e (2.8) against F_T(1 - q; n - m, nu_e), and the trial-mean variant."""
+    """F_p = S^2_r / S^2_e (2.8) against F_T(1 - q; n - m, nu_e), and the trial-mean variant.
+    Not homogeneous (Cochran): S^2_e is not valid and neither decision is made, unless the fit
+    is ``generalised`` (`analysis.gls`): its S^2_r and s2_e_mean (the mean variance of V) weigh
+    each trial by its own variance, so the trial-mean decision does not rest on S^2_e."""
     from scipy import stats
 
     f_p = s2_r / s2_e  # eq 2.8
@@ -80,7 +84,7 @@ def adequacy_test(
         s2_e_mean=s2_e_mean,
         f_p_mean=f_p_mean,
         p_value_mean=float(stats.f.sf(f_p_mean, dof_r, dof_e)),
-        adequate_mean_basis=bool(f_p_mean < f_crit) if homogeneous else None,
+        adequate_mean_basis=bool(f_p_mean < f_crit) if homogeneous or generalised else None,
         q=q,
     )
 

@@ -27,7 +27,10 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
 - ``fit``: parameters, start, estimates, std_errors, covariance, correlation, xtx_inv,
   trial_indices, fitted_deg, residuals_deg (observed - fitted), rss, s2, n, dof, iterations,
   converged, reason, path, fallback_reason, condition_number, log (per Gauss-Newton iteration:
-  iteration, theta, step, rss, s2, f_p = s2 / S^2_e);
+  iteration, theta, step, rss, s2, f_p = s2 / S^2_e), trial_covariance_deg2 (null: the paper's
+  independent trial means, eq 1.6; else the fit trials' covariance V with the compensations'
+  shared period and damping error, and the fit, rss, s2 and covariance are generalised least
+  squares on it: `analysis.gls`);
 - ``adequacy``: s2_r, dof_r, s2_e, dof_e, f_p, f_critical, p_value, adequate, s2_e_mean, f_p_mean,
   p_value_mean, adequate_mean_basis, q (see `analysis.adequacy`);
 - ``error_agreement``: f_p (S^2_r over S^2_e/N), dof_r, dof_e, p_low (its lower tail), q,
@@ -92,6 +95,13 @@ from gyrostand.analysis.forecast import (
     forecast_ship,
     tested_range,
 )
+from gyrostand.analysis.gls import (
+    Series,
+    SharedError,
+    fit_generalised,
+    shared_covariance,
+    trial_covariance,
+)
 from gyrostand.analysis.gyro_model import PARAMETERS, Conditions, KnownConstants, RollingErrorModel
 from gyrostand.analysis.nlsq import COND_LIMIT, FitResult, fit_nonlinear
 from gyrostand.analysis.quantiles import t_quantile
@@ -151,6 +161,9 @@ class CampaignAnalysis:
     warnings: tuple[str, ...]
     left_out: tuple[LeftOutTrial, ...] = ()  # named by the caller that chose the trials
     transient: TransientCheck | None = None  # by the caller that has the settle records
+    # covariance of the fit trials' means when they share the compensations' period and
+    # damping error (`analysis.gls`): the fit is then generalised least squares; None: eq 1.6
+    trial_covariance: np.ndarray | None = None
 
     @property
     def tested_range(self) -> TestedRange:
@@ -211,6 +224,7 @@ class CampaignAnalysis:
                 "fallback_reason": fit.fallback_reason,
                 "condition_number": fit.condition_number,
                 "log": log,
+                "trial_covariance_deg2": self.trial_covariance,
             },
             "adequacy": {
                 **asdict(self.adequacy),
@@ -318,6 +332,7 @@ def analyze_campaign(
     n_repeat: int | None = None,
     independence: AssumptionCheck | None = None,
     inflation: Mapping[int, tuple[float, float]] | None = None,
+    shared: Mapping[Series, SharedError] | None = None,
 ) -> CampaignAnalysis:
     """Run the seed-000 method on a campaign.
 
@@ -327,6 +342,9 @@ def analyze_campaign(
     inflation: per trial index, the variance inflation f of its series before and under rocking
     (`analysis.effective`, from the reading's correlation function): each mean's variance, S_e,
     Cochran's and Fisher's tests then take N_eff = N/f observations per series.
+    shared: per compensated series (trial index, j), its share in the period and damping error
+    its compensation used (`analysis.gls`): the fit is then generalised least squares on the
+    trial means' covariance, and S^2_r, the SEs, the intervals and Fisher's test are its.
     q: significance level of every test; start: (C0 in g cm^2 s^-2, T0 in s); eps: absolute
     thresholds of eq 1.8 per parameter (default: eps_se x the standard error at the iterate, i.e.
     steps below 0.1 % of a standard error); n_repeat: N of the mean-of-N prediction variant
@@ -348,17 +366,21 @@ def analyze_campaign(
     model = RollingErrorModel(constants)
     x = _conditions(fit_stats)
     _check_design(model, x, theta0)
-    fit = fit_nonlinear(
-        model,
-        x,
-        [s.delta_deg for s in fit_stats],
-        theta0,
-        jacobian=model.jacobian,
-        bounds=PHYSICAL_BOUNDS,
-        x_scale={k: max(abs(v), 1e-12) for k, v in theta0.items()},
-        eps=eps,
-        eps_se=eps_se,
-    )
+    y = [s.delta_deg for s in fit_stats]
+    var_mean = [float(s.var_mean_deg2) for s in fit_stats]  # type: ignore[arg-type]
+    shared_part = shared_covariance(shared or {}, labels)
+    covariance = None if shared_part is None else trial_covariance(var_mean, shared_part)
+    options: dict[str, Any] = {
+        "jacobian": model.jacobian,
+        "bounds": PHYSICAL_BOUNDS,
+        "x_scale": {k: max(abs(v), 1e-12) for k, v in theta0.items()},
+        "eps": eps,
+        "eps_se": eps_se,
+    }
+    if covariance is None:  # the paper's independent trial means: eq 1.6
+        fit = fit_nonlinear(model, x, y, theta0, **options)
+    else:  # eqs 1.6, 1.9-1.10 generalised: X^T X -> X^T (V/v)^-1 X, r^T r -> r^T (V/v)^-1 r
+        fit = fit_generalised(model, x, y, theta0, covariance, **options)
     if not fit.converged:
         error = SingularDesignError if "degenerate" in fit.reason else ConvergenceError
         raise error(f"the fit of C and T failed: {fit.reason}")
@@ -369,10 +391,11 @@ def analyze_campaign(
         fit.s2,  # eq 2.7 = eq 1.9 at the solution
         fit.dof,
         s2_e,
-        float(np.mean([s.var_mean_deg2 for s in fit_stats])),
+        float(np.mean(var_mean if covariance is None else np.diag(covariance))),
         dof_e,
         q=q,
         homogeneous=cochran.homogeneous,
+        generalised=covariance is not None,
     )
     predictor = Predictor(
         constants=constants,
@@ -420,6 +443,7 @@ def analyze_campaign(
         forecasts=tuple(forecast_ship(predictor, ship) for ship in ships),
         admissible=admissible,
         warnings=_warnings(fit, cochran, adequacy, agreement, assumptions, admissible),
+        trial_covariance=covariance,
     )
 
 
@@ -449,9 +473,14 @@ def _warnings(
         found.append(
             f"trial variances are not homogeneous (Cochran G_ex = {cochran.g_ex:.4f} >= "
             f"G* = {cochran.g_critical:.4f}; trial {cochran.largest}): S_e and the adequacy "
-            "test are not valid"
+            + (
+                "test are not valid"
+                if adequacy.decision is None
+                else "test on the paper's basis are not valid (the generalised fit's test, on "
+                "the trial means, weighs each by its own variance)"
+            )
         )
-    elif adequacy.decision is False:
+    if adequacy.decision is False:
         found.append(
             f"the model is NOT adequate on the trial means (F_p = {adequacy.f_p_mean:.3g} >= "
             f"F_T = {adequacy.f_critical:.3g})"
@@ -461,7 +490,7 @@ def _warnings(
                 else ""
             )
         )
-    if cochran.homogeneous and agreement.too_small:
+    if adequacy.decision is not None and agreement.too_small:  # tested: homogeneous, or GLS
         found.append(
             f"the residual variance is implausibly small: S^2_r = {adequacy.s2_r:.3g} is "
             f"{agreement.f_p:.3g} times the error of the trial means S^2_e/N = "

@@ -105,28 +105,6 @@ class FitResult:
     condition_number: float
     log: tuple[IterationRecord, ...]
 
-    def summary(self) -> str:
-        """A plain-text table of estimates, standard errors and the fit diagnostics."""
-        width = max(9, *(len(n) for n in self.names))
-        lines = [
-            f"{'parameter':<{width}}  {'estimate':>15}  {'std error':>12}  {'rel. SE':>8}",
-        ]
-        for name in self.names:
-            est, se = self.estimates[name], self.std_errors[name]
-            rel = f"{abs(se / est):8.2%}" if est != 0 else f"{'-':>8}"
-            lines.append(f"{name:<{width}}  {est:>15.8g}  {se:>12.4g}  {rel}")
-        lines.append(
-            f"S^2 = {self.s2:.6g} (dof {self.dof}), RSS = {self.rss:.6g}, n = {self.n}, "
-            f"cond = {self.condition_number:.3g}"
-        )
-        lines.append(
-            f"path: {self.path}, iterations: {self.iterations}, "
-            f"{'converged' if self.converged else 'NOT converged'} ({self.reason})"
-        )
-        if self.fallback_reason:
-            lines.append(f"Gauss-Newton abandoned: {self.fallback_reason}")
-        return "\n".join(lines)
-
 
 class _Problem:
     """The model, data and parameter bookkeeping shared by both solution paths."""

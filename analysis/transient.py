@@ -164,6 +164,7 @@ class TransientFit:
     n: int
     period_se_s: float | None = None
     damping_ratio_se: float | None = None
+    pd_covariance: np.ndarray | None = field(default=None, repr=False)  # of (period, ratio)
 
     def settle_point(self, j: int) -> tuple[float, float]:
         """R_j and its standard error (deg)."""
@@ -255,6 +256,7 @@ def fit_transient_free(start: TransientModel, seg: Segments, data: Windows) -> T
         residual_sd_deg=math.sqrt(s2),
         period_se_s=float(math.sqrt(cov[p, p])),
         damping_ratio_se=float(math.sqrt(cov[p + 1, p + 1])),
+        pd_covariance=cov[p:, p:],
     )
 
 

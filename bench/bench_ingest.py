@@ -2,19 +2,22 @@
 own `can.Logger` writing .db (SqliteWriter) and .blf for the same frames, frames lost for each.
 
 The frames are a real campaign stream of the simulated stand (examples/paper.toml). For each
-consumer they are first queued on a python-can `virtual` bus (untimed), then the consumer's
-`can.Notifier` drains that backlog and the clock runs until the consumer has the last frame. The
-process is pinned to one CPU. Targets: >= 180 000 frames/s (issue 37; twenty times a saturated 1
-Mbit/s bus), zero loss, at least twice `can.Logger` -> .blf (each the best of `--repeats` runs), and
-with the station's live view attached (the live file, a page watching) at most 10 % less.
-`--profile`: the top five costs per frame of the path with the raw BLF, from cProfile, instead
-(`--protocol`: of that heading source's stream). Then the raw BLF writers alone (ours, python-can's)
-on the same frames, without a bus. Last, the same campaign with its compass speaking NMEA 2000 (PGN
-127250/127251/127257 decoded by the heading source, `devices`), then read by a CiA 406 encoder
-(TPDO1, heartbeat): frames/s and headings/s of each, taken in turn with gyrostand's own heading
-frame `--repeats` times (the best run of each: the machine is shared), and each one's ratio to
-gyrostand's in wall time and in the process's CPU time (target, issue 31: at or above 1.00, none
-lost; judged on CPU time, which other jobs on the shared core do not inflate).
+consumer they are first queued on a python-can `virtual` bus (untimed), then the consumer drains
+that backlog (gyrostand: its own reception thread, `acquisition.bus.Reception`, as a campaign
+does; `can.Logger`: a `can.Notifier`, as python-can users log) and the clock runs until the
+consumer has the last frame. The process is pinned to one CPU. Targets: >= 180 000 frames/s
+(issue 37; twenty times a saturated 1 Mbit/s bus), zero loss, at least twice `can.Logger` -> .blf
+(each the best of `--repeats` runs), and with the station's live view attached (the live file, a
+page watching) at most 10 % less. `--profile`: the top five costs per frame of the path with the
+raw BLF, from cProfile, instead, of the campaign thread and of the reception thread
+(`--protocol`: of that heading source's stream). Then the raw BLF writers alone (ours,
+python-can's) on the same frames, without a bus. Last, the same campaign with its compass
+speaking NMEA 2000 (PGN 127250/127251/127257 decoded by the heading source, `devices`), then read
+by a CiA 406 encoder (TPDO1, heartbeat): frames/s and headings/s of each, taken in turn with
+gyrostand's own heading frame `--repeats` times (the best run of each: the machine is shared),
+and each one's ratio to gyrostand's in wall time and in the process's CPU time (target, issue 31:
+at or above 1.00, none lost; judged on CPU time, which other jobs on the shared core do not
+inflate).
 """
 
 from __future__ import annotations
@@ -33,9 +36,9 @@ from pathlib import Path
 import can
 import numpy as np
 from acquisition_stream import campaign_frames, paper_plan
-from top_costs import print_costs
+from top_costs import print_costs, profiled_method
 
-from gyrostand.acquisition.bus import Recorder
+from gyrostand.acquisition.bus import Reception, Recorder
 from gyrostand.acquisition.engine import Engine
 from gyrostand.acquisition.progress import LiveFile
 from gyrostand.acquisition.runner import _NoCommands
@@ -97,9 +100,12 @@ def ours(
     live: bool = False,
     profile: cProfile.Profile | None = None,
 ) -> Run:
-    """gyrostand's live path: Notifier -> Recorder (bounded queue + raw log) -> batch decode ->
+    """gyrostand's live path: Reception -> Recorder (bounded queue + raw log) -> batch decode ->
     engine -> SQLite (`live`: and the live file, a station page watching it, as `run_live`
-    keeps it)."""
+    keeps it). `profile`: of the campaign thread, which starts once the reception thread has
+    taken the whole backlog (the queue's bound raised to hold it): so neither thread's profile
+    counts waits for the interpreter lock inside a call (numpy, zlib and SQLite release it),
+    which made a wall-clock profile of the two threads interleaved on one core misleading."""
     db = tmp / f"ours-{uuid.uuid4().hex}.sqlite"  # (a new database for every run)
     plan = paper_plan(str(db), protocol=protocol)
     store = CampaignStore.create(open_database(sqlite_url(db)), plan)
@@ -107,14 +113,17 @@ def ours(
     engine = Engine(plan, store, _NoCommands(), source=source)  # commands: in the stream
     decoder = frame_decoder(Codec(), *plan.heading_source)
     rx, tx = loaded_bus(frames)
-    recorder = Recorder(plan.bus.queue_size, tmp / "ours.blf" if raw_log else None)
+    bound = plan.bus.queue_size if profile is None else max(plan.bus.queue_size, len(frames))
+    recorder = Recorder(bound, tmp / "ours.blf" if raw_log else None)
     live_file = LiveFile(tmp / "ours.live.json") if live else None
     if live_file is not None:
         live_file.watch.touch()  # as the station does while a page shows the run
     t0, cpu0 = time.perf_counter(), time.process_time()
-    notifier = can.Notifier(rx, [recorder], timeout=0.05)
+    reception = Reception(rx, recorder)
     position = 0
     if profile is not None:
+        while rx.queue.qsize():  # (python-can's virtual bus's receive queue)
+            time.sleep(0.01)
         profile.enable()
     while position < len(frames):
         msgs = recorder.drain(DRAIN, 0.5)
@@ -130,7 +139,7 @@ def ours(
         position += len(msgs)
     if profile is not None:
         profile.disable()
-    notifier.stop()  # and the raw log (its last container written)
+    reception.stop()  # and the raw log (its last container written)
     if live_file is not None:
         live_file.close()
     seconds, cpu_s = time.perf_counter() - t0, time.process_time() - cpu0
@@ -225,12 +234,18 @@ def main() -> None:
         frames = list(itertools.islice(campaign_frames(plan), args.frames))
         print(f"{len(frames):,} frames ({args.protocol}), pinned to CPU {cpu}")
         profile = cProfile.Profile()
-        with tempfile.TemporaryDirectory() as folder:
+        with (
+            tempfile.TemporaryDirectory() as folder,
+            profiled_method(Reception, "_run") as reception,
+        ):
             ours(frames, Path(folder), True, args.protocol, profile=profile)
         print_costs(
             f"campaign thread ({args.protocol}: decode, check, aggregate, SQLite + raw BLF)",
             profile,
             len(frames),
+        )
+        print_costs(
+            "reception thread (python-can's bus.recv, the recorder's queue)", reception, len(frames)
         )
         return
     n = args.frames

@@ -5,8 +5,10 @@ Three file forms, detected from the columns (extra per-observation columns are o
 
 - observations: trial, role, direction_deg, amplitude_cm, period_s, j, k, value_deg
   [, window_start_ms, window_end_ms, frames_used, frames_lost, flags, compensation_deg,
-  compensation_se_deg]  (a compensated series: the transient subtracted from each raw value_deg,
-  and the SE of the compensation, the same on all the series' rows)
+  compensation_se_deg, compensation_shared]  (a compensated series: the transient subtracted
+  from each raw value_deg, the SE of the compensation and, as JSON, its share in the period and
+  damping error that all the campaign's compensations share (`analysis.gls.SharedError`), each
+  the same on all the series' rows)
 - series:       trial, role, direction_deg, amplitude_cm, period_s, j, mean_deg, variance_deg2,
   n_obs
 - trials (the paper's table, seed 000 example): trial, role, direction_deg, amplitude_cm,
@@ -32,6 +34,8 @@ from typing import Any
 import pandas as pd
 from sqlalchemy.orm import Session, sessionmaker
 
+from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.gls import SharedError
 from gyrostand.db.models import TRIAL_ROLES, Campaign, Event, Observation, Series, Trial
 from gyrostand.db.queries import CampaignHeader, new_campaign
 from gyrostand.db.session import writer
@@ -52,7 +56,8 @@ OBS_FIELDS = (
     "flags",
     "compensation_deg",  # the fitted transient subtracted from value_deg (compensated series)
 )
-SERIES_FIELDS = ("compensation_se_deg",)  # per series, repeated on each of its observation rows
+# per series, repeated on each of its observation rows
+SERIES_FIELDS = ("compensation_se_deg", "compensation_shared")
 OBSERVATION_EXTRAS = OBS_FIELDS[2:] + SERIES_FIELDS  # optional columns of the observations form
 MAX_REPORTED = 10
 
@@ -178,6 +183,23 @@ def _to_str(value: Any) -> str:
     return str(value).strip()
 
 
+def _to_shared(value: Any) -> str:
+    """A compensated series' share in the shared period and damping error, as its canonical
+    JSON text (the export's): parsed and checked by `SharedError`."""
+    try:
+        shared = SharedError.from_dict(json.loads(str(value)))
+    except (KeyError, TypeError, AnalysisError, json.JSONDecodeError) as e:
+        raise ValueError from e
+    return json.dumps(shared.to_dict(), sort_keys=True)
+
+
+def _shared_ok(text: str) -> bool:
+    shared = SharedError.from_dict(json.loads(text))
+    numbers = [*shared.sensitivity, *shared.covariance[0], *shared.covariance[1]]
+    variances = (shared.covariance[0][0], shared.covariance[1][1])
+    return all(map(math.isfinite, numbers)) and min(variances) >= 0 and shared.record_ms >= 0
+
+
 @dataclass(frozen=True)
 class Field:
     """One column: how to convert a cell, the admissible values, whether it may be empty."""
@@ -215,6 +237,13 @@ FIELDS: dict[str, Field] = {
         _to_float, NUMBER, lambda v: abs(v) <= 360, "within +-360", optional=True
     ),
     "compensation_se_deg": Field(_to_float, NUMBER, lambda v: v >= 0, ">= 0", optional=True),
+    "compensation_shared": Field(
+        _to_shared,
+        "a shared error (JSON: sensitivity, covariance, record_ms, at_ms)",
+        _shared_ok,
+        "finite, its variances >= 0",
+        optional=True,
+    ),
 }
 
 
@@ -263,6 +292,7 @@ class ImportedSeries:
     variance_deg2: float | None = None  # seed 000 eq 2.2
     n_obs: int | None = None
     compensation_se_deg: float | None = None  # SE of the compensation (compensated series)
+    compensation_shared: str | None = None  # its SharedError as JSON (issue 34's GLS)
 
 
 @dataclass(frozen=True)
@@ -430,29 +460,31 @@ def _series(
         for _, values in sorted(rows, key=lambda row: row[1]["k"])
     )
     return ImportedSeries(
-        j, observations=observations, compensation_se_deg=_compensation_se(index, j, rows, problems)
+        j,
+        observations=observations,
+        compensation_se_deg=_series_field("compensation_se_deg", index, j, rows, problems),
+        compensation_shared=_series_field("compensation_shared", index, j, rows, problems),
     )
 
 
-def _compensation_se(
-    index: int, j: int, rows: list[tuple[str, dict[str, Any]]], problems: list[str]
-) -> float | None:
-    """The series' compensation SE: one value on all its rows, given when (and only when) an
-    observation carries a compensation."""
+def _series_field(
+    name: str, index: int, j: int, rows: list[tuple[str, dict[str, Any]]], problems: list[str]
+) -> Any:
+    """A series' compensation figure (`SERIES_FIELDS`): one value on all its rows, given only
+    with a compensation; its SE also always with one (the shared error may be absent: a series
+    compensated before it was stored)."""
     first_where = rows[0][0]
-    ses = {v.get("compensation_se_deg") for _, v in rows}
+    values = {v.get(name) for _, v in rows}
     compensated = any(v.get("compensation_deg") is not None for _, v in rows)
-    if len(ses) > 1:
-        problems.append(f"{first_where}: trial {index} j = {j} compensation_se_deg differs by row")
+    if len(values) > 1:
+        problems.append(f"{first_where}: trial {index} j = {j} {name} differs by row")
         return None
-    (se,) = ses
-    if compensated != (se is not None):
-        problems.append(
-            f"{first_where}: trial {index} j = {j} "
-            + ("has compensation_deg without" if compensated else "has no compensation_deg for")
-            + " compensation_se_deg"
-        )
-    return se
+    (value,) = values
+    if value is not None and not compensated:
+        problems.append(f"{first_where}: trial {index} j = {j} has no compensation_deg for {name}")
+    elif value is None and compensated and name == "compensation_se_deg":
+        problems.append(f"{first_where}: trial {index} j = {j} has compensation_deg without {name}")
+    return value
 
 
 # ---------------------------------------------------------------- storing
@@ -558,6 +590,9 @@ def store_import(
                         summary_variance_deg2=s.variance_deg2,
                         summary_n=s.n_obs,
                         compensation_se_deg=s.compensation_se_deg,
+                        compensation_shared=None
+                        if s.compensation_shared is None
+                        else json.loads(s.compensation_shared),
                         observations=[Observation(**vars(o)) for o in s.observations],
                     )
                     for s in trial.series

@@ -292,6 +292,9 @@ class Series(Base):
     compensation_se_deg: Mapped[float | None] = mapped_column(Float)
     """Compensated series: the SE of its settle point from the transient fit, which the mean of
     its compensated observations carries on top of their scatter."""
+    compensation_shared: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    """Compensated series: its share in the period and damping error the compensation used
+    (`analysis.gls.SharedError.to_dict`); NULL: not compensated, or stored before schema 0023."""
 
     trial: Mapped[Trial] = relationship(back_populates="series")
     observations: Mapped[list[Observation]] = relationship(

@@ -30,7 +30,7 @@ MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
 # The latest migration's revision, the schema this code reads and writes: a constant so that
 # opening a current database needs no Alembic (tests/db/test_session.py checks that it is the
 # head of MIGRATIONS_DIR; a new migration changes it).
-SCHEMA_HEAD = "0021"
+SCHEMA_HEAD = "0023"
 VERSION_TABLE = "alembic_version"  # Alembic's own, one row per head
 BUSY_TIMEOUT_MS = 10_000
 IMMEDIATE = "gyrostand_begin_immediate"  # execution option: SQLite write transactions

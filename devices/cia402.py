@@ -21,9 +21,11 @@ stop ramp; at rest the axis is disabled (shutdown, then disable voltage).
 
 from __future__ import annotations
 
+import logging
 import math
 import signal
 import threading
+import time
 from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -46,6 +48,7 @@ SDO_ERRORS = (canopen.SdoAbortedError, canopen.SdoCommunicationError)
 _SUPPORTS = {CSP: 1 << 7, PP: 1 << 0}  # 0x6502 bits
 SW_FOLLOWING_ERROR = 1 << 13
 ANSWER_TIMEOUT_S = 2.0  # wall-clock bound on a drive's answer (a dead drive, not a timing)
+BOOT_S = 60.0  # wall seconds a drive that does not answer yet may take to boot (CiA 302)
 HEARTBEAT_MISSES = 3  # a heartbeat is lost after this many producer periods
 MASTER_NODE_ID = 127  # the node id of gyrostand's heartbeat (the drive consumes it)
 
@@ -157,9 +160,8 @@ class Cia402Axis:
     def start(self) -> None:
         """Configure the drive, NMT start, OPERATION ENABLED. DriveError names what failed."""
         c, sdo = self.config, self.node.sdo
-        self.node.nmt.state = "PRE-OPERATIONAL"
         try:
-            supported = int(sdo[0x6502].raw)
+            supported = self._await_boot()
             modes = [m for m in (CSP, PP) if supported & _SUPPORTS[m]]
             if not modes:
                 raise DriveError(
@@ -187,6 +189,26 @@ class Cia402Axis:
         if c.sync == "periodic":
             self.network.sync.start(self.cycle_s)
         self._enable()
+
+    def _await_boot(self) -> int:
+        """The drive's supported modes 0x6502, read once it answers (PRE-OPERATIONAL): a drive
+        still booting (a simulated stand's process still starting) is waited for BOOT_S."""
+        deadline = time.monotonic() + BOOT_S
+        log = logging.getLogger("canopen.sdo.client")  # (its line for each unanswered try)
+        log.disabled = True
+        try:
+            while True:
+                self.node.nmt.state = "PRE-OPERATIONAL"
+                try:
+                    return int(self.node.sdo[0x6502].raw)
+                except canopen.SdoCommunicationError:
+                    if time.monotonic() > deadline:
+                        raise DriveError(
+                            f"drive {self.config.node_id} did not answer within {BOOT_S:g} s "
+                            f"(is it powered, on this bus, with node id {self.config.node_id}?)"
+                        ) from None
+        finally:
+            log.disabled = False
 
     def _check_mapping(self) -> None:
         need = {"RPDO1": (self.node.rpdo[1], (0x6040, 0x607A, 0x6060))}

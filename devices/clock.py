@@ -67,6 +67,7 @@ class ReceptionClock:
         self._rx = np.zeros(0)  # ... reception ms
         self._stand = np.zeros(0)  # ... and stand ms
         self._first: tuple[float, float] | None = None  # (reception ms, stand ms) of the first
+        self._fit: tuple[np.ndarray, np.ndarray] | None = None  # rate, offset per status
 
     def observe(self, pos: np.ndarray, stand_ms: np.ndarray, rx_s: np.ndarray) -> None:
         """Take the stand statuses of a batch (stream order)."""
@@ -76,6 +77,7 @@ class ReceptionClock:
         self._pos = np.concatenate((self._pos[keep:], pos))
         self._rx = np.concatenate((self._rx[keep:], rx_s * 1000.0))
         self._stand = np.concatenate((self._stand[keep:], stand_ms.astype(np.float64)))
+        self._fit = None
 
     def to_campaign_ms(self, pos: np.ndarray, rx_s: np.ndarray) -> np.ndarray:
         """Campaign ms of frames at stream positions `pos` received at `rx_s`; NO_CLOCK before
@@ -84,6 +86,16 @@ class ReceptionClock:
         last = np.searchsorted(self._pos, pos) - 1  # the last status before each frame
         if n == 0:
             return np.full(len(pos), NO_CLOCK, dtype=np.int64)
+        rate, offset = self._statuses_fit()
+        at = np.maximum(last, 0)
+        t_ms = np.round(rate[at] * rx_s * 1000.0 - offset[at]).astype(np.int64)
+        return np.where(last >= 0, t_ms, NO_CLOCK)
+
+    def _statuses_fit(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rate and offset at each status kept, computed once per `observe` (a live listener
+        asks for one frame at a time: ~40 numpy operations a frame otherwise)."""
+        if self._fit is not None:
+            return self._fit
         assert self._first is not None
         span = self._stand - self._first[1]
         elapsed = self._rx - self._first[0]
@@ -94,11 +106,11 @@ class ReceptionClock:
         # offset of status i = min over its window (statuses i-window+1..i, from 0) of
         # (rate_i x rx - stand): once per status, then looked up per frame (a frame's own
         # window costed window x frames, 0.3 us a heading; this window x statuses)
+        n = len(self._pos)
         i = np.arange(n)
         offset = np.full(n, np.inf)
         for k in range(min(self.window, n)):
             j = np.maximum(i - k, 0)
             offset = np.minimum(offset, rate * self._rx[j] - self._stand[j])
-        at = np.maximum(last, 0)
-        t_ms = np.round(rate[at] * rx_s * 1000.0 - offset[at]).astype(np.int64)
-        return np.where(last >= 0, t_ms, NO_CLOCK)
+        self._fit = (rate, offset)
+        return self._fit

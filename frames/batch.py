@@ -85,14 +85,22 @@ class RawFrames:
         def column(name: str, dtype: type | str) -> np.ndarray:
             return np.fromiter(map(attrgetter(name), messages), dtype, n)
 
+        def flags(name: str) -> np.ndarray:
+            # mostly none set: any() (33 ns a frame, stopping at the first set) before fromiter
+            # (49 ns a frame), 50 ns a frame less for the three on a gyrostand stream
+            get = attrgetter(name)
+            if any(map(get, messages)):
+                return np.fromiter(map(get, messages), bool, n)
+            return np.zeros(n, bool)
+
         return cls(
             start=start,
             arbitration_id=column("arbitration_id", np.uint32),
             dlc=dlc,
             data=data,
-            is_error=column("is_error_frame", bool),
-            is_remote=column("is_remote_frame", bool),
-            is_extended=column("is_extended_id", bool),
+            is_error=flags("is_error_frame"),
+            is_remote=flags("is_remote_frame"),
+            is_extended=flags("is_extended_id"),
             timestamp=column("timestamp", np.float64),
             channel=(
                 np.fromiter(map(_bus_of, messages), np.uint8, n)

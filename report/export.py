@@ -5,6 +5,7 @@ the export and the analysis cannot disagree."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -48,12 +49,17 @@ def campaign_frames(session: Session, campaign_id: int) -> CampaignFrames:
     for trial in current_trials(campaign.trials):
         common = {"trial": trial.index} | applied_conditions(trial)
         for s in trial.series:
+            series_fields = {name: getattr(s, name) for name in SERIES_FIELDS}
+            if s.compensation_shared is not None:  # JSON text in a cell (db/io.py reads it)
+                series_fields["compensation_shared"] = json.dumps(
+                    s.compensation_shared, sort_keys=True
+                )
             observations += [
                 {
                     **common,
                     "j": s.j,
                     **{name: getattr(o, name) for name in OBS_FIELDS},
-                    **{name: getattr(s, name) for name in SERIES_FIELDS},
+                    **series_fields,
                 }
                 for o in s.observations
             ]

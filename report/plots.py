@@ -479,7 +479,13 @@ def iteration_path_plot(analysis: CampaignAnalysis) -> Figure:
 
     model = RollingErrorModel(analysis.constants)
     alpha = model(x, c_axis[None, None, :], t_axis[None, :, None])
-    s2 = ((y - alpha) ** 2).sum(axis=0) / fit.dof  # eq 1.9 on the grid
+    r = y - alpha
+    if analysis.trial_covariance is None:
+        s2 = (r**2).sum(axis=0) / fit.dof  # eq 1.9 on the grid
+    else:  # eq 1.9 generalised as the fit was (`analysis.gls`): r^T (V/v)^-1 r / (n - m)
+        v = analysis.trial_covariance
+        weight = np.linalg.inv(v / np.mean(np.diag(v)))
+        s2 = np.einsum("i...,ij,j...->...", r, weight, r) / fit.dof
     fig = _figure(3.4, 5.2)
     ax = fig.axes[0]
     levels = np.geomspace(fit.s2 * 1.05, s2.max(), 12)

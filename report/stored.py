@@ -42,6 +42,8 @@ from gyrostand.analysis.campaign import (
     json_safe,
 )
 from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.gls import Series as SeriesKey
+from gyrostand.analysis.gls import SharedError
 from gyrostand.analysis.gyro_model import KnownConstants
 from gyrostand.analysis.measured_motion import PREFERENCE
 from gyrostand.analysis.procedures import PROGRESS, ProcedureResults
@@ -104,6 +106,7 @@ class StoredInputs:
     left_out: tuple[LeftOutTrial, ...]
     notes: tuple[str, ...]
     sources: dict[str, Any] = field(default_factory=dict)  # `analysis_sources`
+    shared: dict[SeriesKey, SharedError] = field(default_factory=dict)  # `shared_errors`
 
     def sha256(self) -> str:
         """Hash of everything the analysis depends on: the trials as given to the fit, the
@@ -132,7 +135,15 @@ def analysis_sources(campaign: Campaign) -> dict[str, Any]:
         "raw_logs": [(s.sha256, s.frames, s.start, s.ending) for s in campaign.raw_logs],
         "raw_log_check": check,
         "series": [
-            (t.index, t.attempt, s.j, s.compensation_se_deg, s.settle_outcome, record)
+            (
+                t.index,
+                t.attempt,
+                s.j,
+                s.compensation_se_deg,
+                s.compensation_shared,
+                s.settle_outcome,
+                record,
+            )
             for t in current_trials(campaign.trials)
             for s, record in zip(t.series, _series_records(t), strict=True)
         ],
@@ -313,11 +324,24 @@ def commanded_motion(campaign: Campaign, trials: Sequence[TrialInput]) -> tuple[
     )
 
 
+def shared_errors(campaign: Campaign) -> dict[SeriesKey, SharedError]:
+    """Per compensated series (trial index, j) of the completed trials' latest attempts, its
+    share in the period and damping error its compensation used (`analysis.gls`)."""
+    return {
+        (t.index, s.j): SharedError.from_dict(s.compensation_shared)
+        for t in current_trials(campaign.trials)
+        if t.status == "completed"
+        for s in t.series
+        if s.compensation_shared is not None and s.compensation_se_deg is not None
+    }
+
+
 def stored_inputs(campaign: Campaign) -> StoredInputs:
     """The analysis inputs of a loaded campaign (see `db.queries.load_campaign`)."""
     trials, left_out = trial_inputs(campaign)
     settings, notes = stored_settings(campaign)
-    return StoredInputs(trials, settings, left_out, notes, analysis_sources(campaign))
+    sources = analysis_sources(campaign)
+    return StoredInputs(trials, settings, left_out, notes, sources, shared_errors(campaign))
 
 
 @dataclass(frozen=True)
@@ -359,6 +383,7 @@ def compute_stored(campaign: Campaign, inputs: StoredInputs | None = None) -> St
         forecast=s.forecast,
         independence=signal.independence(),
         inflation=signal.inflation(),
+        shared=inputs.shared,
     )
     analysis = replace(analysis, left_out=inputs.left_out)
     missing = [t for t in inputs.left_out if t.superseded_by is None]
@@ -372,6 +397,9 @@ def compute_stored(campaign: Campaign, inputs: StoredInputs | None = None) -> St
                 *analysis.warnings,
             ),
         )
+    unshared = _compensated_unshared(campaign, analysis)
+    if unshared:
+        analysis = replace(analysis, warnings=(*analysis.warnings, unshared))
     check = transient_check(campaign, whole_plan(campaign))
     if not isinstance(check, str):
         warnings = analysis.warnings + check.warnings(analysis.cochran.s_e)
@@ -383,6 +411,28 @@ def compute_stored(campaign: Campaign, inputs: StoredInputs | None = None) -> St
         w for name in SHIPPED_PROFILES for w in worst_cases(load_profile(name), analysis)
     )
     return StoredAnalysis(analysis, inputs, None, signal, campaign_traces(campaign), tuple(worst))
+
+
+def _compensated_unshared(campaign: Campaign, analysis: CampaignAnalysis) -> str | None:
+    """The warning for fit trials with a compensated series whose share in the period and
+    damping error is not stored (acquired before schema 0023, or imported): their means are
+    then fitted as independent, which they are not."""
+    fitted = set(analysis.fit_indices)
+    missing = sorted(
+        (t.index, s.j)
+        for t in current_trials(campaign.trials)
+        if t.index in fitted
+        for s in t.series
+        if s.compensation_se_deg is not None and s.compensation_shared is None
+    )
+    if not missing:
+        return None
+    where = ", ".join(f"trial {i} series {j}" for i, j in missing)
+    return (
+        f"{where}: compensated without its share in the period and damping error stored "
+        "(acquired before schema 0023, or imported): C and T are fitted as if the trial means "
+        "were independent, and their SE and intervals may be too narrow"
+    )
 
 
 def record_run(

@@ -192,6 +192,7 @@ def fit_section(a: CampaignAnalysis) -> list[str]:
         f"n = {fit.n}, condition number {fit.condition_number:.3g}",
         f"path: {fit.path}, iterations: {fit.iterations}, {state} ({fit.reason})",
         *([f"Gauss-Newton abandoned: {fit.fallback_reason}"] if fit.fallback_reason else []),
+        *([] if a.trial_covariance is None else [GENERALISED]),
         *(
             f"{1 - a.q:.0%} confidence interval of {_symbol(n)} (eq 1.10, t as eq 2.11): "
             f"[{lo:.6g}, {hi:.6g}]"
@@ -199,6 +200,14 @@ def fit_section(a: CampaignAnalysis) -> list[str]:
         ),
         f"correlation(C, T) = {fit.correlation[0, 1]:+.3f}",
     ]
+
+
+GENERALISED = (
+    "generalised least squares: the compensated trial means share the error of the period and "
+    "damping their compensations used (Bezvesilna & Gura), so eqs 1.6 and 1.9-1.10 take "
+    "Xᵀ(V/v)⁻¹X for XᵀX and rᵀ(V/v)⁻¹r for rᵀr, V the trial means' covariance, v its mean "
+    "variance (S² stays in deg²; intervals and Fₚ from this S², ν = n − m as before)"
+)
 
 
 def adequacy_section(a: CampaignAnalysis) -> list[str]:

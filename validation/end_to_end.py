@@ -255,9 +255,14 @@ def _analysis(analysis: Any, draw: Draw) -> dict[str, Any]:
             "error_deg": t.delta_deg - float(a),
             "se_deg": math.sqrt(t.var_mean_deg2) if t.var_mean_deg2 is not None else None,
             "dof": t.dof,
+            "delta_deg": t.delta_deg,  # and the conditions: the fit can be redone from the row
+            "conditions": [t.direction_deg, t.amplitude_cm, t.period_s],
         }
         for t, a in zip(analysis.trials, alpha, strict=True)
     ]
+    cov = analysis.trial_covariance  # generalised least squares (compensated): V of the fit
+    out["trial_covariance"] = None if cov is None else cov.tolist()
+    out["fit_indices"] = list(analysis.fit_indices)
     out["controls"] = [
         {
             "index": c.index,

@@ -308,6 +308,24 @@ def test_compensated_series_start_early_and_compensate_the_transient(band, compe
         assert abs(comp_err[key]) < 3 * comp.standard_error_deg + 0.004  # its SE + the noise
 
 
+def test_a_compensation_states_its_share_in_the_period_and_damping_error(compensated) -> None:
+    """Issue 34 (`analysis.gls`): each compensation carries d(mean) / d(period, ratio) and the
+    covariance of the two its record gave: one run's record, later and later; the covariance
+    positive definite, and its own part g Sigma g^T within the settle point's SE^2, where the
+    analysis takes it out again (it is in var_mean through that SE). Shifting the period by
+    its SE moves the compensated mean by g_P SE_P: the same order as the settle point's SE."""
+    done = [a[2] for a in compensated[0].of("series_completed") if a[2] is not None]
+    assert len(done) == 2
+    shared = [c.shared for c in done]
+    assert len({e.record_ms for e in shared}) == 1
+    assert [e.at_ms for e in shared] == sorted(e.at_ms for e in shared)
+    for comp, e in zip(done, shared, strict=True):
+        cov, g = np.array(e.covariance), np.array(e.sensitivity)
+        assert np.all(np.linalg.eigvalsh(cov) > 0)
+        own = float(g @ cov @ g)
+        assert 0.05 * comp.standard_error_deg**2 < own < comp.standard_error_deg**2
+
+
 def test_the_outcome_records_estimate_and_time_saved(band, compensated) -> None:
     sink = compensated[0]
     events = {(a[3], a[4]): a for a in sink.of("event") if a[0] == "early settle"}
@@ -376,6 +394,7 @@ def test_stored_and_reported(tmp_path: Path, compensated) -> None:
                 continue
             assert s.compensation_se_deg == comp.standard_error_deg
             assert tuple(o.compensation_deg for o in rows) == comp.transient_deg
+            assert s.compensation_shared == comp.shared.to_dict()  # issue 34's GLS
     assert len(stored) == 4
     report = campaign_report(
         sessions,

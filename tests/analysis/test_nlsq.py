@@ -126,7 +126,6 @@ def test_analytic_jacobian_path_matches_certified() -> None:
     assert first.theta == {"b1": 500.0, "b2": 1e-4}
     assert second.theta["b1"] == pytest.approx(first.theta["b1"] + first.step["b1"])
     assert fit.iterations == len(fit.log)
-    assert "b1" in fit.summary() and "converged" in fit.summary()
 
 
 def test_boxbod_local_minimum_is_reported_not_claimed() -> None:

@@ -1,6 +1,7 @@
 """Import (three forms, row-by-row validation, one transaction) and export round trips."""
 
 import hashlib
+import json
 import sqlite3
 import tomllib
 from pathlib import Path
@@ -425,7 +426,19 @@ def compensated_rows() -> pd.DataFrame:
     rows = (frame.trial == 2) & (frame.j == 1)
     frame.loc[rows, "compensation_deg"] = [0.04, 0.02, 0.01, 0.005]
     frame.loc[rows, "compensation_se_deg"] = 0.003
+    frame["compensation_shared"] = None
+    frame.loc[rows, "compensation_shared"] = json.dumps(SHARED)
     return frame
+
+
+# a compensated series' share in the period and damping error (analysis.gls.SharedError)
+SHARED = {
+    "sensitivity": [1.5e-6, -0.02],
+    "covariance": [[900.0, 0.01], [0.01, 4e-4]],
+    "record_ms": 7_200_000,
+    "at_ms": 3_600_000,
+    "previous_deg2": -2e-6,
+}
 
 
 def test_compensation_survives_export_and_import(
@@ -440,6 +453,14 @@ def test_compensation_survives_export_and_import(
     with sessions() as session:
         again = campaign_frames(session, second)
     pd.testing.assert_frame_equal(again.observations, exported.observations, check_exact=True)
+    with sessions() as session:  # the shared error too, as the acquisition stores it
+        shared = [
+            (t.index, s.j, s.compensation_shared)
+            for t in load_campaign(session, second).trials
+            for s in t.series
+            if s.compensation_shared is not None
+        ]
+    assert shared == [(2, 1, SHARED)]
     # the analysis's series: value - compensation, variance + N SE^2 (report.stored.series_summary)
     rows = frame[(frame.trial == 2) & (frame.j == 1)]
     corrected = (rows.value_deg - rows.compensation_deg).to_numpy()
@@ -459,7 +480,7 @@ def test_compensation_survives_export_and_import(
             "has compensation_deg without compensation_se_deg",
         ),
         (
-            lambda f: f.assign(compensation_deg=np.nan),
+            lambda f: f.assign(compensation_deg=np.nan, compensation_shared=None),
             "has no compensation_deg for compensation_se_deg",
         ),
         (
@@ -468,6 +489,18 @@ def test_compensation_survives_export_and_import(
             ),
             "compensation_se_deg differs by row",
         ),
+        (
+            lambda f: f.assign(
+                compensation_shared=f.compensation_shared.where(
+                    f.compensation_deg != 0.02, json.dumps({**SHARED, "at_ms": 1})
+                )
+            ),
+            "compensation_shared differs by row",
+        ),
+        (
+            lambda f: f.assign(compensation_deg=np.nan, compensation_se_deg=np.nan),
+            "has no compensation_deg for compensation_shared",
+        ),
     ],
 )
 def test_inconsistent_compensation_is_refused(tmp_path: Path, edit, problem: str) -> None:
@@ -475,3 +508,22 @@ def test_inconsistent_compensation_is_refused(tmp_path: Path, edit, problem: str
     with pytest.raises(ImportFileError) as caught:
         read_import_file(tmp_path / "obs.csv")
     assert caught.value.problems == [f"line 10: trial 2 j = 1 {problem}"]  # its first row
+
+
+@pytest.mark.parametrize(
+    ("shared", "problem"),
+    [
+        ("{", "is not a shared error"),
+        (json.dumps({**SHARED, "sensitivity": [1.0]}), "is not a shared error"),
+        (json.dumps({**SHARED, "covariance": [[-1.0, 0.0], [0.0, 1.0]]}), "its variances >= 0"),
+    ],
+)
+def test_a_malformed_shared_error_is_refused(tmp_path: Path, shared: str, problem: str) -> None:
+    frame = compensated_rows()
+    frame.loc[frame.compensation_shared.notna(), "compensation_shared"] = shared
+    frame.to_csv(tmp_path / "obs.csv", index=False)
+    with pytest.raises(ImportFileError) as caught:
+        read_import_file(tmp_path / "obs.csv")
+    assert len(caught.value.problems) == 4  # each of the series' rows
+    assert caught.value.problems[0].startswith("line 10: compensation_shared")
+    assert problem in caught.value.problems[0]

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from gyrostand.analysis.measured_roll import measure_roll
-from gyrostand.devices import sim_drive
+from gyrostand.devices import cia402, sim_drive
 from gyrostand.devices.cia402 import (
     AxisConfig,
     Cia402Axis,
@@ -240,6 +240,43 @@ def test_a_drive_refusing_its_configuration_is_one_line(stand):
     drive.node.add_write_callback(refuse)
     with pytest.raises(DriveError, match=r"^drive 3 refused its configuration: .*0x06010002"):
         axis.start()
+
+
+def test_the_master_waits_for_a_drive_still_booting():
+    """A drive that comes on the bus after the master began (a simulated stand's process still
+    starting): the master's first SDO goes unanswered, it asks again until the drive answers."""
+    channel = f"cia402-{next(_channels)}"
+    drive_net, master_net = _networks(channel)
+    drives: list[SimDrive] = []
+
+    def power_up() -> None:
+        drives.append(SimDrive(drive_net, 3))
+        drives[0].boot()
+
+    boot = threading.Timer(0.5, power_up)
+    try:
+        axis = Cia402Axis(master_net, AxisConfig(3, SIM_DRIVE_EDS, cycle_ms=CYCLE_MS))
+        boot.start()
+        axis.start()
+        assert drives and power_state(axis.statusword) == "OPERATION ENABLED"
+        assert drives[0].mode == 8 and drives[0]._od(0x1006) == CYCLE_MS * 1000
+    finally:
+        boot.cancel()
+        master_net.disconnect()
+        drive_net.disconnect()
+
+
+def test_a_drive_that_never_answers_is_one_line(monkeypatch):
+    monkeypatch.setattr(cia402, "BOOT_S", 0.1)
+    master_net = canopen.Network()
+    master_net.NOTIFIER_CYCLE = 0.05
+    master_net.connect(interface="virtual", channel=f"cia402-{next(_channels)}")
+    try:
+        axis = Cia402Axis(master_net, AxisConfig(3, SIM_DRIVE_EDS, cycle_ms=CYCLE_MS))
+        with pytest.raises(DriveError, match=r"^drive 3 did not answer within 0.1 s \(is it "):
+            axis.start()
+    finally:
+        master_net.disconnect()
 
 
 def test_a_drive_without_csp_or_pp_is_one_line(stand):
