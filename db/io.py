@@ -34,8 +34,6 @@ from typing import Any
 import pandas as pd
 from sqlalchemy.orm import Session, sessionmaker
 
-from gyrostand.analysis.errors import AnalysisError
-from gyrostand.analysis.gls import SharedError
 from gyrostand.db.models import TRIAL_ROLES, Campaign, Event, Observation, Series, Trial
 from gyrostand.db.queries import CampaignHeader, new_campaign
 from gyrostand.db.session import writer
@@ -58,6 +56,7 @@ OBS_FIELDS = (
 )
 # per series, repeated on each of its observation rows
 SERIES_FIELDS = ("compensation_se_deg", "compensation_shared")
+SHARED_KEYS = {"sensitivity", "covariance", "record_ms", "at_ms", "previous_deg2"}
 OBSERVATION_EXTRAS = OBS_FIELDS[2:] + SERIES_FIELDS  # optional columns of the observations form
 MAX_REPORTED = 10
 
@@ -183,21 +182,32 @@ def _to_str(value: Any) -> str:
     return str(value).strip()
 
 
-def _to_shared(value: Any) -> str:
-    """A compensated series' share in the shared period and damping error, as its canonical
-    JSON text (the export's): parsed and checked by `SharedError`."""
-    try:
-        shared = SharedError.from_dict(json.loads(str(value)))
-    except (KeyError, TypeError, AnalysisError, json.JSONDecodeError) as e:
-        raise ValueError from e
-    return json.dumps(shared.to_dict(), sort_keys=True)
+def shared_error_json(value: Any) -> str:
+    """A compensated series' share in the shared period and damping error, as canonical JSON
+    text: the layout of `analysis.gls.SharedError.to_dict` (db imports no analysis; a test
+    checks the two agree): two sensitivities, a 2x2 covariance, record_ms, at_ms and
+    previous_deg2, every number finite."""
+    data = json.loads(str(value))
+    if not isinstance(data, dict) or set(data) != SHARED_KEYS:
+        raise ValueError
+    g, cov = data["sensitivity"], data["covariance"]
+    if len(g) != 2 or len(cov) != 2 or any(len(row) != 2 for row in cov):
+        raise ValueError
+    shared = {
+        "sensitivity": [_to_float(v) for v in g],
+        "covariance": [[_to_float(v) for v in row] for row in cov],
+        "record_ms": _to_int(data["record_ms"]),
+        "at_ms": _to_int(data["at_ms"]),
+        "previous_deg2": _to_float(data["previous_deg2"]),
+    }
+    return json.dumps(shared, sort_keys=True)
 
 
 def _shared_ok(text: str) -> bool:
-    shared = SharedError.from_dict(json.loads(text))
-    numbers = [*shared.sensitivity, *shared.covariance[0], *shared.covariance[1]]
-    variances = (shared.covariance[0][0], shared.covariance[1][1])
-    return all(map(math.isfinite, numbers)) and min(variances) >= 0 and shared.record_ms >= 0
+    """Variances >= 0 and stand times >= 0."""
+    shared = json.loads(text)
+    (var_p, _), (_, var_r) = shared["covariance"]
+    return min(var_p, var_r, shared["record_ms"], shared["at_ms"]) >= 0
 
 
 @dataclass(frozen=True)
@@ -238,10 +248,10 @@ FIELDS: dict[str, Field] = {
     ),
     "compensation_se_deg": Field(_to_float, NUMBER, lambda v: v >= 0, ">= 0", optional=True),
     "compensation_shared": Field(
-        _to_shared,
-        "a shared error (JSON: sensitivity, covariance, record_ms, at_ms)",
+        shared_error_json,
+        "a shared error (JSON: sensitivity, covariance, record_ms, at_ms, previous_deg2)",
         _shared_ok,
-        "finite, its variances >= 0",
+        "its variances and times >= 0",
         optional=True,
     ),
 }

@@ -13,6 +13,7 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from gyrostand.analysis.gls import SharedError
 from gyrostand.analysis.trials import trial_statistics
 from gyrostand.db.io import (
     SEED_000_METADATA,
@@ -22,6 +23,7 @@ from gyrostand.db.io import (
     MetadataError,
     import_file,
     read_import_file,
+    shared_error_json,
 )
 from gyrostand.db.models import Campaign, Event, Instrument
 from gyrostand.db.queries import load_campaign
@@ -510,12 +512,27 @@ def test_inconsistent_compensation_is_refused(tmp_path: Path, edit, problem: str
     assert caught.value.problems == [f"line 10: trial 2 j = 1 {problem}"]  # its first row
 
 
+def test_the_import_reads_the_shared_error_the_analysis_writes() -> None:
+    """db/io.py checks the layout of analysis.gls.SharedError itself (db imports no analysis)."""
+    shared = SharedError.from_dict(SHARED)
+    text = shared_error_json(json.dumps(shared.to_dict()))
+    assert json.loads(text) == shared.to_dict() == SHARED
+    assert SharedError.from_dict(json.loads(text)) == shared
+    for key in SHARED:  # each key is needed
+        with pytest.raises(ValueError):
+            shared_error_json(json.dumps({k: v for k, v in SHARED.items() if k != key}))
+
+
 @pytest.mark.parametrize(
     ("shared", "problem"),
     [
         ("{", "is not a shared error"),
         (json.dumps({**SHARED, "sensitivity": [1.0]}), "is not a shared error"),
-        (json.dumps({**SHARED, "covariance": [[-1.0, 0.0], [0.0, 1.0]]}), "its variances >= 0"),
+        (
+            json.dumps({**SHARED, "covariance": [[-1.0, 0.0], [0.0, 1.0]]}),
+            "variances and times >= 0",
+        ),
+        (json.dumps({**SHARED, "at_ms": "soon"}), "is not a shared error"),
     ],
 )
 def test_a_malformed_shared_error_is_refused(tmp_path: Path, shared: str, problem: str) -> None:
