@@ -181,7 +181,7 @@ class _Cycles(threading.Thread):
                 max(0.0, t_s - self.stand.t_s) + STALL_S,
             )
             if self.error is not None or not ok:
-                raise ValueError(f"the CiA 402 stand stopped cycling: {self.error or 'stalled'}")
+                raise DriveError(f"the stand stopped cycling: {self.error or 'stalled'}")
             cut = next((i for i, m in enumerate(self.frames) if m.timestamp > t_s + 1e-9), None)
             cut = len(self.frames) if cut is None else cut
             frames, self.frames = self.frames[:cut], self.frames[cut:]

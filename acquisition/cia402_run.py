@@ -22,7 +22,7 @@ from typing import IO, TYPE_CHECKING
 import can
 
 from gyrostand.acquisition.bus import Recorder
-from gyrostand.acquisition.cia402_sim import Cia402Lockstep, SimulatedCia402, feed
+from gyrostand.acquisition.cia402_sim import Cia402Lockstep, SimulatedCia402, feed, next_step
 from gyrostand.acquisition.engine import Engine, Phase
 from gyrostand.acquisition.operator import OperatorLink
 from gyrostand.acquisition.progress import LiveFile, ProgressDisplay
@@ -93,7 +93,9 @@ def run_cia402(
                 if (why := operator.stop_requested()) is not None:
                     engine.interrupt(why)  # the stand is told to stop: its stop ramp begins
                     break
-                msgs = sim.advance_to(sim.stand.t_s + stand.step_s)
+                msgs = next_step(sim, engine, stand.step_s)
+                if msgs is None:
+                    break
                 for batch in feed(engine, decoder, position, msgs, sim.stand.take_faults()):
                     live_file.headings(batch.headings)
                     run_start = run_start and not mark_run_start(store, batch.headings)

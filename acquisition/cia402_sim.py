@@ -30,7 +30,7 @@ from gyrostand.acquisition.bus import transmitter
 from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault, Motion
 from gyrostand.acquisition.engine import Command, Engine, Phase
 from gyrostand.analysis.measured_motion import DRIVE_POSITION
-from gyrostand.devices.cia402 import AxisConfig, Cia402Axis
+from gyrostand.devices.cia402 import AxisConfig, Cia402Axis, DriveError
 from gyrostand.devices.cia402_log import RUN, STEP, BusTap, record
 from gyrostand.devices.decoder import SourceDecoder, frame_decoder
 from gyrostand.devices.roll_trajectory import Kinematics
@@ -42,7 +42,7 @@ from gyrostand.stand.engine import StandEngine
 from gyrostand.stand.inclinometer import SimInclinometerFrames
 
 if TYPE_CHECKING:
-    from gyrostand.acquisition.cia402_live import LiveTap, SharedStand
+    from gyrostand.acquisition.cia402_live import LiveCia402, LiveTap, SharedStand
 
 STEP_S = 5.0  # stand time per batch fed to the engine
 
@@ -100,12 +100,7 @@ class SimulatedCia402(LoggedFrames):
                 drive_net,
                 s.node_id,
                 servo=servo,
-                faults=DriveFaults(
-                    drive_faults.overcurrent_at_s,
-                    drive_faults.jam_at_s,
-                    drive_faults.heartbeat_silent_at_s,
-                    scale,
-                ),
+                faults=dataclasses.replace(drive_faults, platform_scale=scale),
             )
             self.drive.boot()
             self.axis = Cia402Axis(
@@ -227,6 +222,19 @@ def feed(
     return batches
 
 
+def next_step(
+    sim: SimulatedCia402 | LiveCia402, engine: Engine, step_s: float
+) -> list[can.Message] | None:
+    """The stand's frames of its next `step_s` of stand time; None where the drive stopped
+    answering: one "bus error" event naming it, the trial under way failed and the campaign
+    paused (no frame to go on from; `campaign resume` once the drive answers again)."""
+    try:
+        return sim.advance_to(sim.stand.t_s + step_s)
+    except DriveError as exc:
+        engine.fail(f"the CiA 402 drive stopped answering: {exc}", "bus error", last=True)
+        return None
+
+
 class Cia402Lockstep:
     """The engine's commander and its stream of frames from a simulated CiA 402 stand; a drive
     fault fails the trial it ends (one event naming the drive's error). The statuses' motion is
@@ -253,7 +261,9 @@ class Cia402Lockstep:
         decoder = self.decoder()
         position = 0
         while engine.phase is not Phase.DONE and self.sim.stand.t_s < max_stand_s:
-            frames = self.sim.advance_to(self.sim.stand.t_s + self.step_s)
+            frames = next_step(self.sim, engine, self.step_s)
+            if frames is None:
+                return
             feed(engine, decoder, position, frames, self.sim.stand.take_faults())
             position += len(frames)
             yield frames

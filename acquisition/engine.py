@@ -578,22 +578,32 @@ class Engine:
             nxt.append(self._o[self._oi][0])
         return min(nxt)
 
-    def fail(self, reason: str, kind: str = "fault") -> None:
-        """A fatal problem for the current trial (also called by the live driver)."""
-        if self.phase is Phase.DONE or self._trial is None:
+    def fail(self, reason: str, kind: str = "fault", *, last: bool = False) -> None:
+        """A fatal problem for the current trial (also called by the live driver). `last`:
+        nothing can go on (a stand that stopped answering): the campaign pauses, a trial under
+        way or not, whatever the plan's `on_trial_failure`."""
+        if self.phase is Phase.DONE:
+            return
+        if self._trial is None:
+            if last:
+                self.sink.event(kind, "error", reason, self._tidx, None, self.now_ms)
+                self._pause()
             return
         j = self._j if self.phase in (Phase.SETTLE, Phase.OBSERVE) else None
         self.sink.event(kind, "error", reason, self._tidx, j, self.now_ms)
         self.sink.trial_failed(self._trial.index, j, reason)
         self._stopped = False
         self._trial = None
-        if self.plan.on_trial_failure == "pause":
-            self.outcome = "paused"
-            self.todo = []
-            self._stop_stand()
-            self.phase = Phase.DONE
+        if last or self.plan.on_trial_failure == "pause":
+            self._pause()
         else:
             self._next_trial()
+
+    def _pause(self) -> None:
+        self.outcome = "paused"
+        self.todo = []
+        self._stop_stand()
+        self.phase = Phase.DONE
 
     def _stop_stand(self) -> None:
         """Best effort on the way out: nothing waits for this ack."""

@@ -69,6 +69,7 @@ class DriveFaults:
     overcurrent_at_s: float | None = None  # an internal fault: EMCY 0x2310, fault reaction
     jam_at_s: float | None = None  # the axis seizes: the following error grows until it trips
     heartbeat_silent_at_s: float | None = None  # the drive's heartbeat producer stops
+    silent_at_s: float | None = None  # the drive stops answering (power lost): no PDO, heartbeat
     platform_scale: float = 1.0  # platform roll / roll the encoder counts (kinematics error)
 
 
@@ -154,6 +155,9 @@ class SimDrive:
         with self._lock:
             self._consumer_seen_s = self.t_s
 
+    def _silent(self) -> bool:
+        return self.faults.silent_at_s is not None and self.t_s >= self.faults.silent_at_s
+
     def _operational(self) -> bool:
         return self.node.nmt.state == "OPERATIONAL"
 
@@ -161,7 +165,7 @@ class SimDrive:
         """A SYNC: apply RPDO1, send TPDO1, run one communication cycle."""
         with self._lock:
             self.syncs += 1
-            if self._operational():
+            if self._operational() and not self._silent():
                 rpdo = self.node.rpdo[1]
                 if rpdo.is_received:  # a synchronous RPDO: applied on this SYNC
                     rpdo.is_received = False
@@ -286,7 +290,9 @@ class SimDrive:
         if self.status == FAULT_REACTION_ACTIVE and self.at_rest:
             self._power_off(FAULT)
         hb_ms = self._p[0x1017]
-        silent = f.heartbeat_silent_at_s is not None and self.t_s >= f.heartbeat_silent_at_s
+        silent = self._silent() or (
+            f.heartbeat_silent_at_s is not None and self.t_s >= f.heartbeat_silent_at_s
+        )
         if hb_ms and self.t_s >= self._producer_due_s - 1e-9:
             self._producer_due_s = self.t_s + hb_ms / 1000.0
             if not silent:

@@ -10,7 +10,7 @@ import can
 import numpy as np
 import pytest
 
-from gyrostand.acquisition.cia402_sim import Cia402Lockstep, SimulatedCia402
+from gyrostand.acquisition.cia402_sim import STEP_S, Cia402Lockstep, SimulatedCia402
 from gyrostand.acquisition.engine import Engine
 from gyrostand.devices import sim_drive
 from gyrostand.devices.decoder import source_info
@@ -168,5 +168,28 @@ def test_a_drive_fault_is_one_event_a_failed_trial_and_a_stand_at_rest():
         assert sim.stand.to_rest(60.0)
         assert sim.drive.at_rest and abs(sim.drive.v) < 1.0
         assert sim.drive.status in (sim_drive.FAULT, sim_drive.SWITCH_ON_DISABLED)
+    finally:
+        sim.close()
+
+
+def test_a_drive_that_stops_answering_is_one_event_a_failed_trial_and_a_paused_campaign():
+    """A drive that falls silent mid-roll (its power lost): one "bus error" event naming it, the
+    trial failed with that reason and the campaign paused although the plan goes on after a
+    failed trial (nothing to go on from); before, the error left the run with no event."""
+    plan = cia402_plan()
+    assert plan.on_trial_failure != "pause"
+    sim = SimulatedCia402(plan, DriveFaults(silent_at_s=150.0), SERVO)
+    try:
+        sink = Recorder()
+        stand = Cia402Lockstep(sim, plan)
+        engine = Engine(plan, sink, stand, source=source_info(sim.codec, "nmea2000", virtual=True))
+        stand.run(engine, max_stand_s=600.0)
+        assert engine.outcome == "paused"
+        errors = [e for e in sink.of("event") if e[1] == "error"]
+        assert len(errors) == 1 and errors[0][0] == "bus error"
+        assert "stopped answering" in errors[0][2] and "sent no TPDO" in errors[0][2]
+        ((trial, j, reason),) = sink.of("trial_failed")
+        assert trial == 1 and j == 2 and reason == errors[0][2]  # (rocking at stand time 150 s)
+        assert 150.0 <= sim.stand.t_s <= 155.0 + STEP_S  # it stopped there, not at 600 s
     finally:
         sim.close()
