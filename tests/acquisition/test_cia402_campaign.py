@@ -4,7 +4,9 @@ the drive's actual position, the compass speaking NMEA 2000 timed by reception."
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Iterator
 
 import can
 import numpy as np
@@ -150,10 +152,10 @@ def test_two_runs_are_the_same_frames(campaign):
     )
 
 
-def test_a_drive_fault_is_one_event_a_failed_trial_and_a_stand_at_rest():
-    """(Each fault's `DriveFault`: test_cia402_stand.py.)"""
-    faults, kind, cause = DriveFaults(overcurrent_at_s=150.0), "drive fault", "0x2310"
-    plan = cia402_plan(on_failure="pause")
+@contextlib.contextmanager
+def _failing(plan: Plan, faults: DriveFaults) -> Iterator[tuple[SimulatedCia402, list, list]]:
+    """The plan run with the drive's fault until the campaign ends (600 s of stand time at
+    most): the stand, its error events and its failed trials (then the stand closed)."""
     sim = SimulatedCia402(plan, faults, SERVO)
     try:
         sink = Recorder()
@@ -161,15 +163,21 @@ def test_a_drive_fault_is_one_event_a_failed_trial_and_a_stand_at_rest():
         engine = Engine(plan, sink, stand, source=source_info(sim.codec, "nmea2000", virtual=True))
         stand.run(engine, max_stand_s=600.0)
         assert engine.outcome == "paused"
-        errors = [e for e in sink.of("event") if e[1] == "error"]
+        yield sim, [e for e in sink.of("event") if e[1] == "error"], sink.of("trial_failed")
+    finally:
+        sim.close()
+
+
+def test_a_drive_fault_is_one_event_a_failed_trial_and_a_stand_at_rest():
+    """(Each fault's `DriveFault`: test_cia402_stand.py.)"""
+    faults, kind, cause = DriveFaults(overcurrent_at_s=150.0), "drive fault", "0x2310"
+    with _failing(cia402_plan(on_failure="pause"), faults) as (sim, errors, failed):
         assert len(errors) == 1 and errors[0][0] == kind and cause in errors[0][2]
-        ((trial, j, reason),) = sink.of("trial_failed")
+        ((trial, j, reason),) = failed
         assert trial == 1 and j == 2 and reason == errors[0][2]  # (rocking at stand time 150 s)
         assert sim.stand.to_rest(60.0)
         assert sim.drive.at_rest and abs(sim.drive.v) < 1.0
         assert sim.drive.status in (sim_drive.FAULT, sim_drive.SWITCH_ON_DISABLED)
-    finally:
-        sim.close()
 
 
 def test_a_drive_that_stops_answering_is_one_event_a_failed_trial_and_a_paused_campaign():
@@ -178,18 +186,9 @@ def test_a_drive_that_stops_answering_is_one_event_a_failed_trial_and_a_paused_c
     failed trial (nothing to go on from); before, the error left the run with no event."""
     plan = cia402_plan()
     assert plan.on_trial_failure != "pause"
-    sim = SimulatedCia402(plan, DriveFaults(silent_at_s=150.0), SERVO)
-    try:
-        sink = Recorder()
-        stand = Cia402Lockstep(sim, plan)
-        engine = Engine(plan, sink, stand, source=source_info(sim.codec, "nmea2000", virtual=True))
-        stand.run(engine, max_stand_s=600.0)
-        assert engine.outcome == "paused"
-        errors = [e for e in sink.of("event") if e[1] == "error"]
+    with _failing(plan, DriveFaults(silent_at_s=150.0)) as (sim, errors, failed):
         assert len(errors) == 1 and errors[0][0] == "bus error"
         assert "stopped answering" in errors[0][2] and "sent no TPDO" in errors[0][2]
-        ((trial, j, reason),) = sink.of("trial_failed")
+        ((trial, j, reason),) = failed
         assert trial == 1 and j == 2 and reason == errors[0][2]  # (rocking at stand time 150 s)
         assert 150.0 <= sim.stand.t_s <= 155.0 + STEP_S  # it stopped there, not at 600 s
-    finally:
-        sim.close()
