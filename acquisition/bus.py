@@ -322,13 +322,14 @@ RECV_TIMEOUT_S = 0.05  # a reception thread's longest wait for a frame before it
 
 class Reception:
     """One bus into one listener on a thread of ours: the public `bus.recv` in a loop, each frame
-    to the listener's `on_message_received` in the order received, each error of the bus or the
-    listener to its `on_error` (and reception goes on); `stop()` joins the thread, then stops
-    the listener. That is what `can.Notifier` does for one bus and one listener, without its
-    lock taken for every frame and its dispatch through two more Python calls per frame
-    (`Notifier._on_message_received`, `Listener.__call__`): 2.8 -> 2.1 us of CPU a frame from a
-    python-can virtual bus into the `Recorder` on one core, 0.7 of the 4.9 us a frame of the
-    whole ingest path (bench_ingest, issue 37)."""
+    to the listener's `on_message_received` in the order received, each error of the bus (once
+    per outage) or the listener to its `on_error` and reception going on; `stop()` joins the
+    thread, then stops the listener. That is what `can.Notifier` does for one bus and one
+    listener (whose thread ends at a bus's first error), without its lock taken for every frame
+    and its dispatch through two more Python calls per frame (`Notifier._on_message_received`,
+    `Listener.__call__`): 2.8 -> 2.1 us of CPU a frame from a python-can virtual bus into the
+    `Recorder` on one core, 0.7 of the 4.9 us a frame of the whole ingest path (bench_ingest,
+    issue 37)."""
 
     def __init__(
         self, bus: can.BusABC, listener: can.Listener, timeout_s: float = RECV_TIMEOUT_S
@@ -345,12 +346,22 @@ class Reception:
 
     def _run(self, bus: can.BusABC, timeout_s: float) -> None:
         recv, received = bus.recv, self.listener.on_message_received
+        failing = False  # a bus error reported and no frame since: the same outage
         while not self._stopped:
             try:
                 msg = recv(timeout_s)
-                if msg is not None:
-                    received(msg)
-            except Exception as exc:  # the bus's or the listener's: the campaign reports it
+            except Exception as exc:  # the bus's: reported once per outage (a link down fails
+                if not failing:  # every call at once), tried again after the usual wait
+                    self.listener.on_error(exc)
+                failing = True
+                time.sleep(timeout_s)
+                continue
+            if msg is None:
+                continue
+            failing = False
+            try:
+                received(msg)
+            except Exception as exc:  # the listener's: the campaign reports it
                 self.listener.on_error(exc)
 
     def stop(self, timeout_s: float = 5.0) -> None:

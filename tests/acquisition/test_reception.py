@@ -42,31 +42,34 @@ def places(msgs: list[can.Message]) -> list[int]:
     return [int.from_bytes(m.data, "little") for m in msgs]
 
 
-class DownOnce(VirtualBus):
-    """A virtual bus whose link goes down once, after `after` frames received, as python-can's
-    SocketCAN bus reports it (CanOperationError, ENETDOWN); its frames then keep coming."""
+class Down(VirtualBus):
+    """A virtual bus whose link goes down after `after` frames received, as python-can's
+    SocketCAN bus reports it (CanOperationError, ENETDOWN, at once on every call), for `calls`
+    calls of `recv`; its frames then keep coming."""
 
-    def __init__(self, channel: str, after: int) -> None:
+    def __init__(self, channel: str, after: int, calls: int) -> None:
         super().__init__(channel=channel, preserve_timestamps=True)
-        self.after, self.received = after, 0
+        self.after, self.received, self.calls = after, 0, calls
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        if self.received == self.after:
-            self.received += 1
+        if self.received == self.after and self.calls:
+            self.calls -= 1
             raise can.CanOperationError(DOWN, errno.ENETDOWN)
         msg, filtered = super()._recv_internal(timeout)
         self.received += msg is not None
         return msg, filtered
 
 
-def loaded(frames: list[can.Message], after: int | None = None) -> tuple[can.BusABC, can.BusABC]:
+def loaded(
+    frames: list[can.Message], after: int | None = None, calls: int = 1
+) -> tuple[can.BusABC, can.BusABC]:
     """A receiving bus with `frames` queued on it (and their sender); `after`: its link goes
-    down once after that many frames."""
+    down after that many frames, for `calls` calls."""
     channel = f"test-{uuid.uuid4().hex}-x"
     if after is None:
         rx: can.BusABC = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
     else:
-        rx = DownOnce(channel, after)
+        rx = Down(channel, after, calls)
     tx = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
     for msg in frames:
         tx.send(msg)
@@ -114,10 +117,12 @@ def test_every_frame_in_order_and_stop_completes_the_raw_log(tmp_path: Path, bus
     assert recorder.errors == [] and recorder.dropped == 0
 
 
-def test_a_bus_error_is_handed_on_and_reception_goes_on(buses) -> None:
-    """The link down once after 700 frames: one error in `Recorder.errors` (a bus error event
-    of the campaign), and the frames after it still arrive, in order."""
-    buses.extend(loaded(numbered(N), after=700))
+@pytest.mark.parametrize("calls", [1, 10])
+def test_a_bus_error_is_handed_on_and_reception_goes_on(buses, calls: int) -> None:
+    """The link down after 700 frames, for one call of `recv` or ten in a row: one error in
+    `Recorder.errors` (one bus error event of the campaign per outage, not one per failed call),
+    and the frames after it still arrive, in order."""
+    buses.extend(loaded(numbered(N), after=700, calls=calls))
     recorder = Recorder(10 * N, None)
     reception = Reception(buses[0], recorder)
     try:
