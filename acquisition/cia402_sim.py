@@ -95,12 +95,11 @@ class SimulatedCia402(LoggedFrames):
         self.tap = BusTap(master_net, drive_net, self._stand_s)
         super().__init__(clock_ms)
         try:
-            scale = drive_faults.platform_scale * config.faults.amplitude_factor
             self.drive = SimDrive(
                 drive_net,
                 s.node_id,
                 servo=servo,
-                faults=dataclasses.replace(drive_faults, platform_scale=scale),
+                faults=drive_faults.scaled(config.faults.amplitude_factor),
             )
             self.drive.boot()
             self.axis = Cia402Axis(

@@ -143,8 +143,7 @@ def simulated_stand(
     s = plan.stand
     assert s.node_id is not None and s.counts_per_degree and s.arm_length_cm
     config = stand_config(plan)
-    scale = faults.platform_scale * config.faults.amplitude_factor
-    drive = SimDrive(network, s.node_id, faults=dataclasses.replace(faults, platform_scale=scale))
+    drive = SimDrive(network, s.node_id, faults=faults.scaled(config.faults.amplitude_factor))
     inclinometer = None
     i = config.inclinometer
     if i.node_id is not None and plan.inclinometer and plan.inclinometer.protocol == "cia410":

@@ -20,6 +20,7 @@ limited to 0x60C5 and velocity to 0x607F, integrated in fixed sub-steps of at mo
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -71,6 +72,11 @@ class DriveFaults:
     heartbeat_silent_at_s: float | None = None  # the drive's heartbeat producer stops
     silent_at_s: float | None = None  # the drive stops answering (power lost): no PDO, heartbeat
     platform_scale: float = 1.0  # platform roll / roll the encoder counts (kinematics error)
+
+    def scaled(self, factor: float) -> DriveFaults:
+        """These faults with the platform rolling `factor` times more again (the simulator's
+        `amplitude_factor`)."""
+        return dataclasses.replace(self, platform_scale=self.platform_scale * factor)
 
 
 class SimDrive:
