@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import sqlite3
 import threading
 import uuid
@@ -22,6 +23,14 @@ from gyrostand.acquisition.runner import run_live
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.plan.model import Plan, parse_plan
+
+# real time, gyrostand's CiA 402 master and the simulated drive in one process: beside the
+# SocketCAN VM in .ci/run its drive thread starved past the master's heartbeat supervision (3 x
+# 100 ms) in 2 of 4 runs; opt-in with the other real-time tests until the plan can set it
+pytestmark = pytest.mark.skipif(
+    os.environ.get("GYROSTAND_PROCESS_TESTS") != "1",
+    reason="opt-in: make test-processes (real time, load-sensitive: the drive's heartbeat)",
+)
 
 CYCLE_MS = 50  # (a loaded host: the master in Python keeps up; the stand time is the same)
 # a master in Python beside the simulated stand in one process, on a loaded host, can stall
