@@ -530,7 +530,7 @@ def main() -> int:
     parser.add_argument(
         "--criteria",
         default=",".join(CRITERIA),
-        help=f"comma-separated labels of CRITERIA: {', '.join(CRITERIA)}",
+        help=f"comma-separated labels of CRITERIA: {', '.join(CRITERIA)}".replace("%", "%%"),
     )
     args = parser.parse_args()
     chosen = [c.strip() for c in args.criteria.split(",") if c.strip()]

@@ -12,7 +12,7 @@ motion (as `gyrostand analyze` does) and with the commanded one. Run:
 
 from __future__ import annotations
 
-import sys
+import argparse
 import tempfile
 from pathlib import Path
 
@@ -80,4 +80,6 @@ def main(seeds: list[int]) -> None:
 
 
 if __name__ == "__main__":
-    main([int(a) for a in sys.argv[1:]] or [1])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("seeds", type=int, nargs="*", default=[1], help="simulator seeds (1)")
+    main(parser.parse_args().seeds)

@@ -217,7 +217,9 @@ def _index(row: dict[str, Any]) -> int:
 
 def main() -> int:
     parser = arguments(__doc__.splitlines()[0], campaigns=50)
-    parser.add_argument("--cases", default=",".join(CASES), help=", ".join(CASES))
+    parser.add_argument(
+        "--cases", default=",".join(CASES), help=", ".join(CASES).replace("%", "%%")
+    )
     args = parser.parse_args()
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
     if any(c not in CASES for c in cases):
