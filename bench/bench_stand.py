@@ -80,7 +80,7 @@ def live_campaign(speedup: float = 1000.0) -> None:
         while latest["ms"] < target:
             time.sleep(0.005)
 
-    simulator = Simulator(sim_bus, SimConfig(speedup=speedup))
+    simulator = Simulator(sim_bus, SimConfig(timing="realtime", speedup=speedup))
     notifier = can.Notifier(bus, [controller, Receiver()], timeout=0.05)
     worst_lag_s = 0.0
     start = time.perf_counter()
