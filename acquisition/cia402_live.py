@@ -214,10 +214,14 @@ class SharedStand:
         with self._cycles.lock:
             return self._stand.take_faults(round(self.t_s * 1000.0))
 
-    def to_rest(self, limit_s: float) -> bool:
+    @property
+    def rest_limit_s(self) -> float:
+        return self._stand.rest_limit_s
+
+    def to_rest(self) -> bool:
         """The cycles in this thread from here: the roll under way, if any, to rest."""
         self._cycles.halt()
-        return self._stand.to_rest(limit_s)
+        return self._stand.to_rest()
 
 
 class LiveCia402(LoggedFrames):

@@ -40,7 +40,7 @@ import numpy as np
 
 from gyrostand.acquisition.engine import Command
 from gyrostand.analysis.measured_roll import RollFitError, measure_roll
-from gyrostand.devices.cia402 import Cia402Axis, DriveError, Rocking
+from gyrostand.devices.cia402 import SETTLE_CYCLES, Cia402Axis, DriveError, Rocking
 from gyrostand.devices.roll_trajectory import Kinematics, RollTrajectory
 from gyrostand.stand.protocol import Codec, Reason
 
@@ -173,10 +173,22 @@ class Cia402Stand:
         out, self._out = self._out, []
         return out
 
-    def to_rest(self, limit_s: float) -> bool:
-        """Run on (SYNC in stand time) until the roll under way, if any, has ended at rest and
-        the axis is disabled: whether it did within `limit_s` of stand time."""
-        end = self.t_s + limit_s
+    @property
+    def rest_limit_s(self) -> float:
+        """The stand time a roll takes to rest from a stop: its stop ramp, the master holding
+        the last target until the servo has settled (at most SETTLE_CYCLES), disabling the axis
+        (2 cycles), and one cycle more."""
+        return self.ramp_s + (SETTLE_CYCLES + 3) * self.axis.cycle_s
+
+    def to_rest(self) -> bool:
+        """Bring the roll under way, if any, to rest by its stop ramp (begun now where no stop
+        was commanded: a campaign that ended on a trial failed mid-roll, whose engine sends no
+        stop of its own) and disable the axis, running on (SYNC in stand time): whether it did
+        within `rest_limit_s` of stand time (a drive that keeps moving is not cycled longer)."""
+        self._start_pending = False
+        if self._rocking is not None:
+            self._begin_stop()
+        end = self.t_s + self.rest_limit_s
         while self.rocking and self.t_s < end:
             self._cycle()
         return not self.rocking
