@@ -34,19 +34,40 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 import can
 import numpy as np
 
 from gyrostand.acquisition.engine import Command
 from gyrostand.analysis.measured_roll import RollFitError, measure_roll
-from gyrostand.devices.cia402 import SETTLE_CYCLES, Cia402Axis, DriveError, Rocking
+from gyrostand.devices.cia402 import SETTLE_CYCLES, AxisConfig, Cia402Axis, DriveError, Rocking
 from gyrostand.devices.roll_trajectory import Kinematics, RollTrajectory
 from gyrostand.stand.protocol import Codec, Reason
+
+if TYPE_CHECKING:
+    from gyrostand.plan.model import Plan
 
 STATUS_MS = 500  # a status every 500 ms of stand time, as a gyrostand stand controller sends
 MEASURE_PERIODS = 2  # the motion is fitted over the last two commanded periods
 IDLE_CONTROLWORD = 0x00  # disable voltage: the axis off between rolls (SYNC goes on)
+
+
+def axis_config(
+    plan: Plan, eds: Path, sync: Literal["lockstep", "periodic"] = "lockstep"
+) -> AxisConfig:
+    """The master's configuration of the plan's [stand] drive (described by `eds`)."""
+    s = plan.stand
+    assert s.node_id is not None
+    return AxisConfig(
+        s.node_id,
+        eds,
+        s.cycle_ms,
+        heartbeat_ms=s.drive_heartbeat_ms,
+        drive_timeout_ms=s.drive_timeout_ms,
+        sync=sync,
+    )
 
 
 @dataclass(frozen=True)

@@ -5,12 +5,14 @@ is at rest and disabled."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from gyrostand.acquisition.cia402_sim import SimulatedCia402
 from gyrostand.acquisition.engine import Command
 from gyrostand.devices import sim_drive
 from gyrostand.devices.sim_drive import DriveFaults
+from gyrostand.plan.model import Plan, PlanError, parse_plan
 from gyrostand.stand.protocol import AckFrame, Codec, StandStatusFrame
 from tests.acquisition.test_cia402_campaign import SERVO, cia402_plan
 
@@ -86,3 +88,36 @@ def test_a_drive_that_cannot_be_enabled_again_is_a_fault_not_an_ack():
         assert "start" not in acks and not sim.stand.rocking
     finally:
         sim.close()
+
+
+def _with_heartbeat(heartbeat_ms: int, timeout_ms: int) -> Plan:
+    keys = f"drive_heartbeat_ms = {heartbeat_ms}\ndrive_timeout_ms = {timeout_ms}\n"
+    return parse_plan(cia402_plan().text.replace("ramp_s = 5\n", "ramp_s = 5\n" + keys))
+
+
+def test_the_plans_heartbeat_period_is_the_drives_and_gyrostands():
+    """[stand] drive_heartbeat_ms: the drive's producer 0x1017, gyrostand's own heartbeat
+    period, and the drive's heartbeat lost after 3 of its periods."""
+    plan = _with_heartbeat(500, 2000)
+    sim = SimulatedCia402(plan, DriveFaults(heartbeat_silent_at_s=3.0), SERVO)
+    master_beats: list[float] = []
+    sim.drive.network.subscribe(0x77F, lambda *_: master_beats.append(sim.drive.t_s))
+    try:
+        sim.stand.issue(Command("set", 45.0, 48.0, 4.0))
+        sim.stand.issue(Command("start"))
+        sim.stand.advance_to(8.0)
+        assert sim.drive._od(0x1017) == 500
+        assert sim.drive._od(0x1016, 1) == (127 << 16) | 2000
+        assert np.diff(master_beats) == pytest.approx(0.5, abs=1e-9)  # every 5 cycles of 0.1 s
+        (fault,) = sim.stand.take_faults()
+        # silent for more than 3 x 500 ms: noticed at the first cycle (0.1 s) beyond
+        assert fault.kind == "heartbeat lost" and 3000 < fault.t_ms < 5100, fault
+        assert fault.reason.endswith("no heartbeat from drive for 1.60 s")
+    finally:
+        sim.close()
+
+
+def test_a_heartbeat_consumer_time_not_above_the_period_is_one_line():
+    message = r"^invalid plan: \[stand\] drive_timeout_ms: must be > drive_heartbeat_ms$"
+    with pytest.raises(PlanError, match=message):
+        _with_heartbeat(500, 500)
