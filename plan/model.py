@@ -768,8 +768,9 @@ class StandPlan(_Table):
     arm_length_cm: float | None = Field(None, gt=0)
     """The arm at which the amplitude A is measured (A = arm x roll angle, rad), cm: for a
     cia402 stand, and for any stand with an [inclinometer] (which measures the roll angle)."""
-    cycle_ms: int = Field(10, ge=1, le=100)
-    """cia402: the SYNC cycle (cyclic synchronous position: one target per cycle), ms."""
+    cycle_ms: int = Field(10, ge=1, le=250)
+    """cia402: the SYNC cycle (cyclic synchronous position: one target per cycle), ms; at most
+    250 (the interpolation period 0x60C2 is a byte of ms: drives take up to 255)."""
     ramp_s: float = Field(10.0, gt=0)
     """cia402: the smooth start and stop ramps of the roll's amplitude, s."""
     drive_timeout_ms: int = Field(300, ge=200, le=65535)

@@ -5,8 +5,12 @@ is at rest and disabled."""
 
 from __future__ import annotations
 
+import cmath
+import math
+
 import numpy as np
 import pytest
+import scipy.linalg
 
 from gyrostand.acquisition.cia402_sim import SimulatedCia402
 from gyrostand.acquisition.engine import Command
@@ -121,3 +125,41 @@ def test_a_heartbeat_consumer_time_not_above_the_period_is_one_line():
     message = r"^invalid plan: \[stand\] drive_timeout_ms: must be > drive_heartbeat_ms$"
     with pytest.raises(PlanError, match=message):
         _with_heartbeat(500, 500)
+
+
+def _sampled_gain(period_s: float, cycle_s: float) -> float:
+    """Closed form: the drive's position at each SYNC over the commanded roll's, for a target
+    held over each cycle (zero-order hold) through the simulated servo's second-order lag
+    wn^2 / (s^2 + 2 zeta wn s + wn^2), sampled at SYNC: the discretised system
+    x[k+1] = Ad x[k] + Bd u[k], Ad = expm(Ac T), Bd = Ac^-1 (Ad - I) Bc, at z = exp(j w T)."""
+    wn, zeta = 2 * math.pi * SERVO.natural_hz, SERVO.damping
+    ac = np.array([[0.0, 1.0], [-(wn**2), -2 * zeta * wn]])
+    bc = np.array([0.0, wn**2])
+    ad = scipy.linalg.expm(ac * cycle_s)
+    bd = np.linalg.solve(ac, (ad - np.eye(2)) @ bc)
+    z = cmath.exp(2j * math.pi / period_s * cycle_s)
+    return abs(np.linalg.solve(z * np.eye(2) - ad, bd)[0])
+
+
+@pytest.mark.parametrize("cycle_ms", [100, 250])
+def test_the_drive_follows_the_roll_up_to_the_longest_cycle(cycle_ms):
+    """Up to the plan's longest cycle (250 ms: the interpolation period 0x60C2 is a byte of ms)
+    the statuses' amplitude, measured from the drive's position at each SYNC, is the commanded
+    one through the held targets and the servo's lag (closed form), and its period the
+    commanded one."""
+    plan = parse_plan(cia402_plan().text.replace("cycle_ms = 100", f"cycle_ms = {cycle_ms}"))
+    sim = SimulatedCia402(plan, DriveFaults(), SERVO)
+    try:
+        sim.stand.issue(Command("set", 45.0, 48.0, 4.0))
+        sim.stand.issue(Command("start"))
+        statuses = [
+            f for f in _decoded(sim.stand.advance_to(30.0)) if isinstance(f, StandStatusFrame)
+        ]
+        expected = 48.0 * _sampled_gain(4.0, cycle_ms / 1000)
+        assert expected < 48.0 * (0.99 if cycle_ms == 250 else 0.999)  # (the lag shows)
+        for s in statuses[-4:]:  # (from 20 s: the 5 s start ramp and 2 periods behind)
+            # within 0.1 %: the simulated servo's 5 ms integration steps, the 0.01 cm statuses
+            assert s.rocking and s.amplitude_cm == pytest.approx(expected, abs=0.05), (s, expected)
+            assert s.period_s == pytest.approx(4.0, abs=0.002)
+    finally:
+        sim.close()
