@@ -39,7 +39,7 @@ bench: $(STAMP)
 .PHONY: test-processes
 test-processes: $(STAMP)
 	GYROSTAND_PROCESS_TESTS=1 $(VENV)/bin/pytest -m slow tests/devices/test_n2k_processes.py \
-		tests/devices/test_cia402_processes.py
+		tests/devices/test_cia402_processes.py tests/acquisition/test_cia402_live.py
 
 # The `socketcan` tests on a real SocketCAN bus: in a small Linux VM with vcan0 (tools/vcan-vm,
 # docs/socketcan.md). On a machine that has vcan0 itself: .venv/bin/pytest -m socketcan

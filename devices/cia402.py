@@ -150,6 +150,12 @@ class Cia402Axis:
         return self.cycle * self.cycle_s
 
     @property
+    def answer_timeout_s(self) -> float:
+        """Wall seconds without the drive's TPDO1 after which it is taken for silent: as long as
+        its heartbeat may be missing (HEARTBEAT_MISSES periods), at least ANSWER_TIMEOUT_S."""
+        return max(ANSWER_TIMEOUT_S, HEARTBEAT_MISSES * self.config.heartbeat_ms / 1000.0)
+
+    @property
     def actual_t_s(self) -> float:
         """The stand time of `actual` (on the convention of `t_s`: the cycle after its SYNC):
         live, a drive that answers late gives the position of an earlier SYNC than the last one
@@ -295,10 +301,10 @@ class Cia402Axis:
         else:
             ready = lambda: self._answered(sent_s)  # noqa: E731
         with self._arrived:
-            if not self._arrived.wait_for(ready, ANSWER_TIMEOUT_S):
+            if not self._arrived.wait_for(ready, self.answer_timeout_s):
                 raise DriveError(
-                    f"drive {self.config.node_id} sent no TPDO within {ANSWER_TIMEOUT_S:g} s of "
-                    "a SYNC"
+                    f"drive {self.config.node_id} sent no TPDO within "
+                    f"{self.answer_timeout_s:g} s of a SYNC"
                 )
             frames = list(self._inbox)
             if self.config.sync == "lockstep":
