@@ -36,9 +36,9 @@ import numpy as np
 
 from gyrostand.acquisition.bus import open_bus, request_identity
 from gyrostand.acquisition.cia402_sim import LoggedFrames, merged
-from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault
+from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault, axis_config
 from gyrostand.acquisition.engine import Command
-from gyrostand.devices.cia402 import CSP, AxisConfig, Cia402Axis, DriveError, Frame
+from gyrostand.devices.cia402 import CSP, Cia402Axis, DriveError, Frame
 from gyrostand.devices.cia402_log import drive_ids, stamped_copy, wrap_send
 from gyrostand.devices.clock import NO_CLOCK, ReceptionClock
 from gyrostand.devices.roll_trajectory import Kinematics
@@ -214,10 +214,14 @@ class SharedStand:
         with self._cycles.lock:
             return self._stand.take_faults(round(self.t_s * 1000.0))
 
-    def to_rest(self, limit_s: float) -> bool:
+    @property
+    def rest_limit_s(self) -> float:
+        return self._stand.rest_limit_s
+
+    def to_rest(self) -> bool:
         """The cycles in this thread from here: the roll under way, if any, to rest."""
         self._cycles.halt()
-        return self._stand.to_rest(limit_s)
+        return self._stand.to_rest()
 
 
 class LiveCia402(LoggedFrames):
@@ -227,13 +231,7 @@ class LiveCia402(LoggedFrames):
     def __init__(self, plan: Plan, clock_ms: int = 0) -> None:
         s = plan.stand
         assert s.node_id is not None and s.counts_per_degree and s.arm_length_cm
-        config = AxisConfig(
-            s.node_id,
-            drive_eds(plan),
-            s.cycle_ms,
-            sync="periodic",
-            drive_timeout_ms=s.drive_timeout_ms,
-        )
+        config = axis_config(plan, drive_eds(plan), sync="periodic")
         self.codec = codec_for(plan)
         self.network = canopen.Network(open_bus(plan.bus))
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S

@@ -17,11 +17,11 @@ import canopen
 
 from gyrostand.acquisition.cia402_run import _to_rest
 from gyrostand.acquisition.cia402_sim import STEP_S, Cia402Lockstep, feed, merged
-from gyrostand.acquisition.cia402_stand import Cia402Stand
+from gyrostand.acquisition.cia402_stand import Cia402Stand, axis_config
 from gyrostand.acquisition.engine import Engine, Phase
 from gyrostand.acquisition.procedures import ReplayedProcedures
 from gyrostand.acquisition.store import CampaignStore
-from gyrostand.devices.cia402 import MASTER_NODE_ID, AxisConfig, Cia402Axis, DriveError
+from gyrostand.devices.cia402 import MASTER_NODE_ID, Cia402Axis, DriveError
 from gyrostand.devices.cia402_log import (
     DriveLogError,
     LoggedDrive,
@@ -70,9 +70,7 @@ class ReplayedCia402:
         self._network = canopen.Network()
         self._network.NOTIFIER_CYCLE = 0.05
         self._network.connect(interface="virtual", channel=channel)
-        config = AxisConfig(
-            s.node_id, SIM_DRIVE_EDS, s.cycle_ms, drive_timeout_ms=s.drive_timeout_ms
-        )
+        config = axis_config(plan, SIM_DRIVE_EDS)
         self.drive = LoggedDrive(self._network, channel, run.drive)
         try:
             self.drive.start(s.node_id, config.master_node_id)

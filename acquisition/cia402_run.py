@@ -49,8 +49,6 @@ from gyrostand.plan.model import Plan
 if TYPE_CHECKING:
     from gyrostand.acquisition.cia402_live import LiveCia402
 
-REST_LIMIT_S = 600.0  # stand time allowed for the last stop ramp (a guard: it takes ramp_s)
-
 
 def run_cia402(
     plan: Plan,
@@ -140,16 +138,22 @@ def _log(recorder: Recorder, frames: list[can.Message], logged: int, first_frame
 
 
 def _to_rest(sim: SimulatedCia402, store: CampaignStore) -> None:
-    """Run the axis on (SYNC in stand time) until the stop ramp has brought it to rest and it is
-    disabled; an event says when."""
+    """Run the axis on (SYNC in stand time) until the stop ramp (begun here if the engine ended
+    mid-roll) has brought it to rest and it is disabled, within the stand's `rest_limit_s`; an
+    event says when, or that it did not."""
     stand = sim.stand
     try:
-        at_rest = stand.to_rest(REST_LIMIT_S)
+        at_rest = stand.to_rest()
     except DriveError as exc:  # (a drive that stopped answering: its own reaction must stop it)
         store.run_event("stand", "error", f"the axis not brought to rest: {exc}")
         return
     if not at_rest:
-        store.run_event("stand", "error", f"the axis not at rest {REST_LIMIT_S:g} s after stopping")
+        store.run_event(
+            "stand",
+            "error",
+            f"the axis not at rest {stand.rest_limit_s:g} s after stopping (its stop ramp and "
+            "the servo's settling): the drive's own reaction must stop it",
+        )
     else:
         store.run_event(
             "stand", "info", f"the axis at rest and disabled at stand time {stand.t_ms / 1000:g} s"

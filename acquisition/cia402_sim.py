@@ -27,10 +27,10 @@ import canopen
 import numpy as np
 
 from gyrostand.acquisition.bus import transmitter
-from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault, Motion
+from gyrostand.acquisition.cia402_stand import Cia402Stand, DriveFault, Motion, axis_config
 from gyrostand.acquisition.engine import Command, Engine, Phase
 from gyrostand.analysis.measured_motion import DRIVE_POSITION
-from gyrostand.devices.cia402 import AxisConfig, Cia402Axis, DriveError
+from gyrostand.devices.cia402 import Cia402Axis, DriveError
 from gyrostand.devices.cia402_log import RUN, STEP, BusTap, record
 from gyrostand.devices.decoder import SourceDecoder, frame_decoder
 from gyrostand.devices.roll_trajectory import Kinematics
@@ -102,12 +102,7 @@ class SimulatedCia402(LoggedFrames):
                 faults=drive_faults.scaled(config.faults.amplitude_factor),
             )
             self.drive.boot()
-            self.axis = Cia402Axis(
-                master_net,
-                AxisConfig(
-                    s.node_id, SIM_DRIVE_EDS, s.cycle_ms, drive_timeout_ms=s.drive_timeout_ms
-                ),
-            )
+            self.axis = Cia402Axis(master_net, axis_config(plan, SIM_DRIVE_EDS))
             self.axis.start()
         except BaseException:
             self.close()

@@ -34,19 +34,40 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 import can
 import numpy as np
 
 from gyrostand.acquisition.engine import Command
 from gyrostand.analysis.measured_roll import RollFitError, measure_roll
-from gyrostand.devices.cia402 import Cia402Axis, DriveError, Rocking
+from gyrostand.devices.cia402 import SETTLE_CYCLES, AxisConfig, Cia402Axis, DriveError, Rocking
 from gyrostand.devices.roll_trajectory import Kinematics, RollTrajectory
 from gyrostand.stand.protocol import Codec, Reason
+
+if TYPE_CHECKING:
+    from gyrostand.plan.model import Plan
 
 STATUS_MS = 500  # a status every 500 ms of stand time, as a gyrostand stand controller sends
 MEASURE_PERIODS = 2  # the motion is fitted over the last two commanded periods
 IDLE_CONTROLWORD = 0x00  # disable voltage: the axis off between rolls (SYNC goes on)
+
+
+def axis_config(
+    plan: Plan, eds: Path, sync: Literal["lockstep", "periodic"] = "lockstep"
+) -> AxisConfig:
+    """The master's configuration of the plan's [stand] drive (described by `eds`)."""
+    s = plan.stand
+    assert s.node_id is not None
+    return AxisConfig(
+        s.node_id,
+        eds,
+        s.cycle_ms,
+        heartbeat_ms=s.drive_heartbeat_ms,
+        drive_timeout_ms=s.drive_timeout_ms,
+        sync=sync,
+    )
 
 
 @dataclass(frozen=True)
@@ -173,10 +194,22 @@ class Cia402Stand:
         out, self._out = self._out, []
         return out
 
-    def to_rest(self, limit_s: float) -> bool:
-        """Run on (SYNC in stand time) until the roll under way, if any, has ended at rest and
-        the axis is disabled: whether it did within `limit_s` of stand time."""
-        end = self.t_s + limit_s
+    @property
+    def rest_limit_s(self) -> float:
+        """The stand time a roll takes to rest from a stop: its stop ramp, the master holding
+        the last target until the servo has settled (at most SETTLE_CYCLES), disabling the axis
+        (2 cycles), and one cycle more."""
+        return self.ramp_s + (SETTLE_CYCLES + 3) * self.axis.cycle_s
+
+    def to_rest(self) -> bool:
+        """Bring the roll under way, if any, to rest by its stop ramp (begun now where no stop
+        was commanded: a campaign that ended on a trial failed mid-roll, whose engine sends no
+        stop of its own) and disable the axis, running on (SYNC in stand time): whether it did
+        within `rest_limit_s` of stand time (a drive that keeps moving is not cycled longer)."""
+        self._start_pending = False
+        if self._rocking is not None:
+            self._begin_stop()
+        end = self.t_s + self.rest_limit_s
         while self.rocking and self.t_s < end:
             self._cycle()
         return not self.rocking

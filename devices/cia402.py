@@ -51,6 +51,7 @@ ANSWER_TIMEOUT_S = 2.0  # wall-clock bound on a drive's answer (a dead drive, no
 BOOT_S = 60.0  # wall seconds a drive that does not answer yet may take to boot (CiA 302)
 HEARTBEAT_MISSES = 3  # a heartbeat is lost after this many producer periods
 MASTER_NODE_ID = 127  # the node id of gyrostand's heartbeat (the drive consumes it)
+SETTLE_CYCLES = 200  # cycles the master holds the last target at most for the servo to settle
 
 
 class DriveError(RuntimeError):
@@ -147,6 +148,12 @@ class Cia402Axis:
     @property
     def t_s(self) -> float:
         return self.cycle * self.cycle_s
+
+    @property
+    def answer_timeout_s(self) -> float:
+        """Wall seconds without the drive's TPDO1 after which it is taken for silent: as long as
+        its heartbeat may be missing (HEARTBEAT_MISSES periods), at least ANSWER_TIMEOUT_S."""
+        return max(ANSWER_TIMEOUT_S, HEARTBEAT_MISSES * self.config.heartbeat_ms / 1000.0)
 
     @property
     def actual_t_s(self) -> float:
@@ -261,23 +268,43 @@ class Cia402Axis:
             self._inbox.append(Frame(can_id, bytes(data), timestamp))
             self._arrived.notify()
 
-    def _take(self) -> list[Frame]:
+    def _answered(self, sent_s: float) -> bool:
+        """Live (periodic SYNC): whether the drive's TPDO1 answering the first SYNC received
+        after `sent_s` (the wall time the last RPDO was on the bus: the drive applies it at
+        that SYNC at the earliest) is in. A lagging drive's answer to an older SYNC is not
+        enough: the next RPDO would then reach the drive before the SYNC this one waits for,
+        and overwrite it (a set-point lost: a fault reset's edge, a step of the power state
+        machine). The drive's TPDO1s answer the SYNCs in order (its m-th, SYNC m)."""
+        syncs, answers, due = self.cycle, self.answers, None
+        for f in self._inbox:
+            if f.can_id == 0x80:
+                syncs += 1
+                if due is None and f.rx_s > sent_s:
+                    due = syncs
+            elif f.can_id == self._tpdo_id:
+                answers += 1
+        return due is not None and answers >= due
+
+    def _take(self, sent_s: float) -> list[Frame]:
         """The frames up to the drive's next TPDO1 (the answer to the next SYNC) in the order
         received; in lockstep also those the drive sent after it in that cycle (all arrived:
-        the simulation's lockstep waits for them). Live (periodic SYNC), up to the last TPDO1
-        received: a master that fell behind goes on from the drive's latest state, the cycles
-        it missed counted (`late_cycles`: no set-point of their own), the stand time
+        the simulation's lockstep waits for them). Live (periodic SYNC), once the drive has
+        answered the SYNC the RPDO sent at `sent_s` applies to (`_answered`), up to the last
+        TPDO1 received: a master that fell behind goes on from the drive's latest state, the
+        cycles it missed counted (`late_cycles`: no set-point of their own), the stand time
         advanced by the SYNCs received (`cycle`). A frame received after
         the TPDO1 of a live cycle is the next cycle's, so a replay (lockstep) takes the same
         frames in the same cycle as the live run did."""
         tpdo = self._tpdo_id
+        if self.config.sync == "lockstep":
+            ready: Callable[[], bool] = lambda: any(f.can_id == tpdo for f in self._inbox)  # noqa: E731
+        else:
+            ready = lambda: self._answered(sent_s)  # noqa: E731
         with self._arrived:
-            if not self._arrived.wait_for(
-                lambda: any(f.can_id == tpdo for f in self._inbox), ANSWER_TIMEOUT_S
-            ):
+            if not self._arrived.wait_for(ready, self.answer_timeout_s):
                 raise DriveError(
-                    f"drive {self.config.node_id} sent no TPDO within {ANSWER_TIMEOUT_S:g} s of "
-                    "a SYNC"
+                    f"drive {self.config.node_id} sent no TPDO within "
+                    f"{self.answer_timeout_s:g} s of a SYNC"
                 )
             frames = list(self._inbox)
             if self.config.sync == "lockstep":
@@ -305,13 +332,14 @@ class Cia402Axis:
         rpdo["Target position"].raw = target_counts
         self._target = target_counts
         rpdo.transmit()
+        sent_s = time.time()  # (after it is on the bus: a SYNC received later follows it)
         c = self.config
         if self.cycle >= self._heartbeat_cycle:
             self.network.send_message(0x700 + c.master_node_id, bytes([5]))  # OPERATIONAL
             self._heartbeat_cycle = self.cycle + max(1, round(c.heartbeat_ms / c.cycle_ms))
         if c.sync == "lockstep":
             self.network.sync.transmit()
-        frames = self._take()
+        frames = self._take(sent_s)
         self.on_frames(frames)
         if self.inclinometer is not None:
             self.slope_deg = self.inclinometer.take()
@@ -400,7 +428,7 @@ class Cia402Axis:
                 return
             self.step(State402.CW_OPERATION_ENABLED, self.actual)
 
-    def _settle(self, controlword: int, max_cycles: int = 200) -> None:
+    def _settle(self, controlword: int, max_cycles: int = SETTLE_CYCLES) -> None:
         """Hold the last target until the axis has stopped moving (the servo's lag settled)."""
         if power_state(self.statusword) != "OPERATION ENABLED":
             return

@@ -732,7 +732,15 @@ class InclinometerPlan(_Table):
 
 StandProtocol = Literal["gyrostand", "cia402"]
 K_PROMPT = "k_trial"  # the id of the prompt to set K by hand before trial N: k_trialN
-_CIA402_KEYS = ("eds", "node_id", "counts_per_degree", "cycle_ms", "ramp_s", "drive_timeout_ms")
+_CIA402_KEYS = (
+    "eds",
+    "node_id",
+    "counts_per_degree",
+    "cycle_ms",
+    "ramp_s",
+    "drive_timeout_ms",
+    "drive_heartbeat_ms",
+)
 
 
 class StandPlan(_Table):
@@ -760,14 +768,19 @@ class StandPlan(_Table):
     arm_length_cm: float | None = Field(None, gt=0)
     """The arm at which the amplitude A is measured (A = arm x roll angle, rad), cm: for a
     cia402 stand, and for any stand with an [inclinometer] (which measures the roll angle)."""
-    cycle_ms: int = Field(10, ge=1, le=100)
-    """cia402: the SYNC cycle (cyclic synchronous position: one target per cycle), ms."""
+    cycle_ms: int = Field(10, ge=1, le=250)
+    """cia402: the SYNC cycle (cyclic synchronous position: one target per cycle), ms; at most
+    250 (the interpolation period 0x60C2 is a byte of ms: drives take up to 255)."""
     ramp_s: float = Field(10.0, gt=0)
     """cia402: the smooth start and stop ramps of the roll's amplitude, s."""
     drive_timeout_ms: int = Field(300, ge=200, le=65535)
     """cia402: the drive's consumer time of gyrostand's heartbeat (0x1016, written at start;
-    gyrostand beats every 100 ms): a gyrostand silent this long is taken for dead and the drive
-    quick-stops, ms."""
+    gyrostand beats every `drive_heartbeat_ms`): a gyrostand silent this long is taken for dead
+    and the drive quick-stops, ms."""
+    drive_heartbeat_ms: int = Field(100, ge=10, le=65535)
+    """cia402: the heartbeat producer period of gyrostand and of the drive (its 0x1017, written
+    at start), ms; the drive's heartbeat missing for 3 periods is an event and fails the
+    rocking."""
 
     @model_validator(mode="after")
     def _consistent(self) -> StandPlan:
@@ -779,6 +792,8 @@ class StandPlan(_Table):
         if self.protocol == "cia402":
             needed = ("eds", "node_id", "counts_per_degree", "arm_length_cm")
             problems += [(k, 'missing (protocol = "cia402")') for k in needed if k not in given]
+            if self.drive_timeout_ms <= self.drive_heartbeat_ms:  # (CiA 301: consumer > producer)
+                problems.append(("drive_timeout_ms", "must be > drive_heartbeat_ms"))
         else:
             problems += [
                 (k, f'not with protocol = "{self.protocol}" (a CiA 402 drive\'s)')

@@ -37,9 +37,9 @@ TRIALS = [(45.0, 24.0, 6.0, "fit"), (135.0, 20.0, 5.0, "fit"), (45.0, 16.0, 8.0,
 SERVO = ServoModel(natural_hz=2.0, max_substep_ms=5.0)
 
 
-def cia402_plan(**kwargs: object) -> Plan:
+def cia402_plan(trials: list[tuple] = TRIALS, **kwargs: object) -> Plan:
     fast = FAST_SIM.replace("240.0", "120.0")  # a compass that settles in about a minute
-    text = plan_text(TRIALS, n_obs=2, hold_s=30.0, **kwargs) + fast  # type: ignore[arg-type]
+    text = plan_text(trials, n_obs=2, hold_s=30.0, **kwargs) + fast  # type: ignore[arg-type]
     return parse_plan(text + STAND + '\n[compass]\nprotocol = "nmea2000"\n')
 
 
@@ -175,7 +175,7 @@ def test_a_drive_fault_is_one_event_a_failed_trial_and_a_stand_at_rest():
         assert len(errors) == 1 and errors[0][0] == kind and cause in errors[0][2]
         ((trial, j, reason),) = failed
         assert trial == 1 and j == 2 and reason == errors[0][2]  # (rocking at stand time 150 s)
-        assert sim.stand.to_rest(60.0)
+        assert sim.stand.to_rest()
         assert sim.drive.at_rest and abs(sim.drive.v) < 1.0
         assert sim.drive.status in (sim_drive.FAULT, sim_drive.SWITCH_ON_DISABLED)
 

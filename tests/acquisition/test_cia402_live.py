@@ -24,18 +24,24 @@ from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.plan.model import Plan, parse_plan
 
-# real time, gyrostand's CiA 402 master and the simulated drive in one process: beside the
-# SocketCAN VM in .ci/run its drive thread starved past the master's heartbeat supervision (3 x
-# 100 ms) in 2 of 4 runs; opt-in with the other real-time tests until the plan can set it
+# real time, gyrostand's CiA 402 master, the engine and the simulated drive in one process: not
+# load-proof (with the drive's and gyrostand's heartbeat every second, on a 2-core host at
+# load 11-12 (the test at nice 10, `yes` x2 and the SocketCAN VM beside) 4 runs of 4 failed: the
+# drive's first answer later than 2 and 3 s (the master takes it for silent), a trial mis-tracked
+# by the cycles the master was late for (14.95 cm measured for 16), all three trials failed
+# once); unloaded it passes (111 s at load 5-7). Opt-in with the other real-time tests.
 pytestmark = pytest.mark.skipif(
     os.environ.get("GYROSTAND_PROCESS_TESTS") != "1",
-    reason="opt-in: make test-processes (real time, load-sensitive: the drive's heartbeat)",
+    reason="opt-in: make test-processes (real time in one process: not load-proof)",
 )
 
 CYCLE_MS = 50  # (a loaded host: the master in Python keeps up; the stand time is the same)
 # a master in Python beside the simulated stand in one process, on a loaded host, can stall
 # for longer than a lab's 300 ms (the heartbeat consumer is tested in virtual time and the VM)
 TIMEOUT_MS = 5000
+# the drive's heartbeat, and gyrostand's, every second (lost after 3 s): beside the SocketCAN VM
+# in CI the drive's thread starved past 3 x 100 ms in 2 of 4 runs
+HEARTBEAT_MS = 1000
 SCALE = 1.03  # the platform rolls 3 % more than the encoder counts (the kinematics error)
 TRIALS = [(45.0, 20.0, 2.0), (135.0, 16.0, 2.5), (45.0, 12.0, 2.0)]
 
@@ -113,6 +119,7 @@ arm_length_cm = 750
 cycle_ms = {cycle_ms}
 ramp_s = 1
 drive_timeout_ms = {timeout_ms}
+drive_heartbeat_ms = {heartbeat_ms}
 
 [compass]
 protocol = "nmea2000"
@@ -129,7 +136,12 @@ role = "fit"
 
 def live_plan(folder: Path, channel: str) -> Plan:
     text = PLAN.format(
-        folder=folder, channel=channel, scale=SCALE, cycle_ms=CYCLE_MS, timeout_ms=TIMEOUT_MS
+        folder=folder,
+        channel=channel,
+        scale=SCALE,
+        cycle_ms=CYCLE_MS,
+        timeout_ms=TIMEOUT_MS,
+        heartbeat_ms=HEARTBEAT_MS,
     )
     return parse_plan(text + "".join(TRIAL.format(*t) for t in TRIALS))
 

@@ -14,7 +14,8 @@ from gyrostand.acquisition.store import CampaignStore
 from gyrostand.db.models import Event
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.devices import sim_drive
-from tests.acquisition.test_cia402_campaign import cia402_plan
+from gyrostand.plan.model import parse_plan
+from tests.acquisition.test_cia402_campaign import INCLINOMETER, TRIALS, cia402_plan
 
 STOP_AT_S = 120.0  # stand time: trial 1 rocks (from about 100 s)
 
@@ -51,3 +52,30 @@ def test_a_stop_mid_roll_ramps_the_axis_to_rest_after_the_k_prompt(tmp_path, mon
     assert STOP_AT_S + 5.0 < at_s <= STOP_AT_S + 5.0 + 5.0 + 200 * 0.1
     drive = drives[-1]
     assert drive.at_rest and drive.status == sim_drive.SWITCH_ON_DISABLED
+
+
+def test_a_campaign_whose_last_roll_fails_brings_the_axis_to_rest(tmp_path):
+    """The engine ends on its last trial failed mid-roll (the inclinometer sees 20 % more roll
+    than commanded: mis-tracking) without a stop of its own: the run begins the stop ramp and
+    the axis is at rest within the ramp and the servo's settling, not left rocking until a
+    guard's limit."""
+    extra = INCLINOMETER.replace("amplitude_factor = 1.03", "amplitude_factor = 1.2")
+    plan = cia402_plan(
+        [TRIALS[0]], database=str(tmp_path / "c.sqlite"), raw_dir=str(tmp_path / "raw")
+    )
+    plan = parse_plan(plan.text.replace("[stand]", extra + "[stand]", 1))
+    sessions = open_database(sqlite_url(tmp_path / "c.sqlite"))
+    store = CampaignStore.create(sessions, plan)
+    result = run_live(plan, store, quiet=True, answers={"k_trial1": "yes"})
+    assert result.trials_completed == 0
+    with sessions() as session:
+        events = session.execute(
+            select(Event.kind, Event.message, Event.stand_time_ms).order_by(Event.id)
+        ).all()
+    (failed_ms,) = [t for k, m, t in events if k == "mis-tracking"]
+    (rest,) = [m for k, m, _ in events if k == "stand"]
+    assert rest.startswith("the axis at rest and disabled at stand time"), rest
+    # the stop ramp (5 s) from the end of the batch the failure was in (5 s steps), then the
+    # servo settled (at most 200 cycles of 0.1 s)
+    at_s = float(rest.split()[-2])
+    assert failed_ms / 1000 + 5.0 < at_s <= failed_ms / 1000 + 5.0 + 5.0 + 200 * 0.1

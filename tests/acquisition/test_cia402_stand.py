@@ -5,12 +5,18 @@ is at rest and disabled."""
 
 from __future__ import annotations
 
+import cmath
+import math
+
+import numpy as np
 import pytest
+import scipy.linalg
 
 from gyrostand.acquisition.cia402_sim import SimulatedCia402
 from gyrostand.acquisition.engine import Command
 from gyrostand.devices import sim_drive
 from gyrostand.devices.sim_drive import DriveFaults
+from gyrostand.plan.model import Plan, PlanError, parse_plan
 from gyrostand.stand.protocol import AckFrame, Codec, StandStatusFrame
 from tests.acquisition.test_cia402_campaign import SERVO, cia402_plan
 
@@ -84,5 +90,76 @@ def test_a_drive_that_cannot_be_enabled_again_is_a_fault_not_an_ack():
         assert "did not reach OPERATION ENABLED (state FAULT, error code 0x2310)" in fault.reason
         acks = [f.command for f in _decoded(frames) if isinstance(f, AckFrame)]
         assert "start" not in acks and not sim.stand.rocking
+    finally:
+        sim.close()
+
+
+def _with_heartbeat(heartbeat_ms: int, timeout_ms: int) -> Plan:
+    keys = f"drive_heartbeat_ms = {heartbeat_ms}\ndrive_timeout_ms = {timeout_ms}\n"
+    return parse_plan(cia402_plan().text.replace("ramp_s = 5\n", "ramp_s = 5\n" + keys))
+
+
+def test_the_plans_heartbeat_period_is_the_drives_and_gyrostands():
+    """[stand] drive_heartbeat_ms: the drive's producer 0x1017, gyrostand's own heartbeat
+    period, and the drive's heartbeat lost after 3 of its periods."""
+    plan = _with_heartbeat(500, 2000)
+    sim = SimulatedCia402(plan, DriveFaults(heartbeat_silent_at_s=3.0), SERVO)
+    master_beats: list[float] = []
+    sim.drive.network.subscribe(0x77F, lambda *_: master_beats.append(sim.drive.t_s))
+    try:
+        sim.stand.issue(Command("set", 45.0, 48.0, 4.0))
+        sim.stand.issue(Command("start"))
+        sim.stand.advance_to(8.0)
+        assert sim.drive._od(0x1017) == 500
+        assert sim.drive._od(0x1016, 1) == (127 << 16) | 2000
+        assert np.diff(master_beats) == pytest.approx(0.5, abs=1e-9)  # every 5 cycles of 0.1 s
+        (fault,) = sim.stand.take_faults()
+        # silent for more than 3 x 500 ms: noticed at the first cycle (0.1 s) beyond
+        assert fault.kind == "heartbeat lost" and 3000 < fault.t_ms < 5100, fault
+        assert fault.reason.endswith("no heartbeat from drive for 1.60 s")
+    finally:
+        sim.close()
+
+
+def test_a_heartbeat_consumer_time_not_above_the_period_is_one_line():
+    message = r"^invalid plan: \[stand\] drive_timeout_ms: must be > drive_heartbeat_ms$"
+    with pytest.raises(PlanError, match=message):
+        _with_heartbeat(500, 500)
+
+
+def _sampled_gain(period_s: float, cycle_s: float) -> float:
+    """Closed form: the drive's position at each SYNC over the commanded roll's, for a target
+    held over each cycle (zero-order hold) through the simulated servo's second-order lag
+    wn^2 / (s^2 + 2 zeta wn s + wn^2), sampled at SYNC: the discretised system
+    x[k+1] = Ad x[k] + Bd u[k], Ad = expm(Ac T), Bd = Ac^-1 (Ad - I) Bc, at z = exp(j w T)."""
+    wn, zeta = 2 * math.pi * SERVO.natural_hz, SERVO.damping
+    ac = np.array([[0.0, 1.0], [-(wn**2), -2 * zeta * wn]])
+    bc = np.array([0.0, wn**2])
+    ad = scipy.linalg.expm(ac * cycle_s)
+    bd = np.linalg.solve(ac, (ad - np.eye(2)) @ bc)
+    z = cmath.exp(2j * math.pi / period_s * cycle_s)
+    return abs(np.linalg.solve(z * np.eye(2) - ad, bd)[0])
+
+
+@pytest.mark.parametrize("cycle_ms", [100, 250])
+def test_the_drive_follows_the_roll_up_to_the_longest_cycle(cycle_ms):
+    """Up to the plan's longest cycle (250 ms: the interpolation period 0x60C2 is a byte of ms)
+    the statuses' amplitude, measured from the drive's position at each SYNC, is the commanded
+    one through the held targets and the servo's lag (closed form), and its period the
+    commanded one."""
+    plan = parse_plan(cia402_plan().text.replace("cycle_ms = 100", f"cycle_ms = {cycle_ms}"))
+    sim = SimulatedCia402(plan, DriveFaults(), SERVO)
+    try:
+        sim.stand.issue(Command("set", 45.0, 48.0, 4.0))
+        sim.stand.issue(Command("start"))
+        statuses = [
+            f for f in _decoded(sim.stand.advance_to(30.0)) if isinstance(f, StandStatusFrame)
+        ]
+        expected = 48.0 * _sampled_gain(4.0, cycle_ms / 1000)
+        assert expected < 48.0 * (0.99 if cycle_ms == 250 else 0.999)  # (the lag shows)
+        for s in statuses[-4:]:  # (from 20 s: the 5 s start ramp and 2 periods behind)
+            # within 0.1 %: the simulated servo's 5 ms integration steps, the 0.01 cm statuses
+            assert s.rocking and s.amplitude_cm == pytest.approx(expected, abs=0.05), (s, expected)
+            assert s.period_s == pytest.approx(4.0, abs=0.002)
     finally:
         sim.close()

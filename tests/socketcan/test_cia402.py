@@ -7,7 +7,6 @@ compass in another): the roll measured by the drive's position and the inclinome
 
 from __future__ import annotations
 
-import os
 import time
 
 import canopen
@@ -61,14 +60,5 @@ def test_a_silent_master_leaves_the_drive_at_rest(tmp_path, channel):
         drive.interrupt()
 
 
-@pytest.mark.skipif(
-    os.environ.get("VCAN_VM_ACCEL") == "tcg",
-    reason="not yet reliable in the software-emulated VM (no usable KVM, tools/vcan-vm): a "
-    "CiA 402 stand runs in real time and the emulated guest stalls for 0.3-1.3 s at times (its "
-    "SYNC period's p99 270-510 ms at 100 ms) and its two-process runs did not end after their "
-    "last trial (docs/socketcan.md); the same two-process campaign runs on "
-    "the host over python-can's udp_multicast (tests/devices/test_cia402_processes.py, make "
-    "test-processes)",
-)
 def test_a_cia402_campaign_on_vcan0_measures_the_roll(tmp_path, channel):
     cia402_campaign(tmp_path, "socketcan", channel)
