@@ -59,6 +59,7 @@ from gyrostand.analysis.transient import (
     TransientFit,
     TransientModel,
     Windows,
+    compensated_mean_se,
     contradicts,
     fit_transient,
     fit_transient_free,
@@ -148,6 +149,12 @@ class TransientRecord:
         rows = [(k, *row) for k, s in enumerate(kept) for row in s.rows]
         seg = Segments(tuple(s.step_s for s in kept), (True, *(s.free for s in kept[1:])))
         return seg, Windows.of(rows)
+
+    def compensation_se(self, fit: TransientFit, t_s: np.ndarray, width_s: np.ndarray) -> float:
+        """SE of the current series' compensated mean, ``fit`` the free fit of the whole record
+        (`fit(free=True)`) and its observation windows at ``t_s`` (`compensated_mean_se`)."""
+        seg, data = self._data(self._segments)
+        return compensated_mean_se(fit, data, len(seg.step_s) - 1, t_s, width_s)
 
     def sensitivity(
         self, model: TransientModel, t_s: np.ndarray, width_s: np.ndarray

@@ -1,0 +1,89 @@
+"""The variance of a compensated series' mean (issue 34): `analysis.transient.
+compensated_mean_se`, and the analysis taking it as the mean's variance (`SeriesSummary.
+var_mean_deg2`) instead of S^2/N + s_c^2.
+
+A compensated value is the window mean less the fitted transient, y_k - (row_k - e_j) theta =
+R_j + r_k, so the series' mean is the settle point fitted to those same windows plus the mean
+residual. Its variance is SE(R_j)^2 + Var(r_bar); S^2/N on top of SE(R_j)^2 counted the
+observations' scatter twice. Checked by Monte Carlo on records of the simulated compass's
+transient (seed 003 eq 2, 5064 s, 0.7) across one step, as window means with fixed-seed white
+noise, the second series compensated after a 20-minute settle: over 1000 records the SD of the
+compensated mean's error over the RMS reported SE is 0.99 (this seed) with the new SE, 0.87
+with the old sum. On the shipped campaign's structure with the simulator's correlated noise
+(`validation/compensation_noise.py`) the old sum overstated it 0.87-0.97, and the trial means
+0.91 over 200 whole campaigns.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from gyrostand.analysis.transient import (
+    Segments,
+    TransientModel,
+    Windows,
+    compensated_mean_se,
+    design,
+    fit_transient,
+    fit_transient_free,
+)
+from gyrostand.analysis.trials import SeriesSummary, TrialInput, trial_statistics
+
+MODEL = TransientModel(5064.0, 0.7)
+WIDTH_S, STEP_S, NOISE_DEG, N = 60.0, 6000.0, 0.01, 5
+SEGMENTS = Segments((0.0, STEP_S), (True, False))
+OBS = STEP_S + 1200.0 + WIDTH_S / 2 + 90.0 * np.arange(N)  # 20 min of settle blocks, then N
+MIDS = np.r_[np.arange(WIDTH_S / 2, STEP_S + 1200.0, WIDTH_S), OBS]
+SEGMENT = (MIDS > STEP_S).astype(int)
+THETA = np.array([0.0, 0.3, 0.5, -0.2])  # R_0, R_1 (deg), x_0, v_0 of the first series
+CLEAN = design(MODEL, SEGMENTS, SEGMENT, MIDS, WIDTH_S) @ THETA
+
+
+def _record(rng: np.random.Generator) -> Windows:
+    noisy = CLEAN + NOISE_DEG * rng.standard_normal(MIDS.size)
+    return Windows(SEGMENT, MIDS, np.full(MIDS.size, WIDTH_S), noisy)
+
+
+def _ratio(errors: list[float], ses: list[float]) -> float:
+    return float(np.std(errors, ddof=1) / math.sqrt(np.mean(np.square(ses))))
+
+
+def test_the_compensated_mean_se_states_its_spread() -> None:
+    rng = np.random.default_rng(34)
+    errors, new, old = [], [], []
+    for _ in range(1000):
+        data = _record(rng)
+        fit = fit_transient(MODEL, SEGMENTS, data)
+        compensated = data.value_deg[-N:] - fit.transient(1, OBS, WIDTH_S)[0]
+        errors.append(float(compensated.mean()) - THETA[1])
+        new.append(compensated_mean_se(fit, data, 1, OBS, WIDTH_S))
+        old.append(math.sqrt(compensated.var(ddof=1) / N + fit.settle_point(1)[1] ** 2))
+    assert 0.94 <= _ratio(errors, new) <= 1.06  # 0.99; the ratio's SD is ~0.023
+    assert _ratio(errors, old) < 0.92  # S^2/N + SE(R)^2 counted the scatter twice (0.87)
+
+
+def test_the_free_fit_includes_the_residual_part_and_needs_the_windows() -> None:
+    data = _record(np.random.default_rng(3))
+    fit = fit_transient_free(TransientModel(0.95 * MODEL.undamped_period_s, 0.7), SEGMENTS, data)
+    se = compensated_mean_se(fit, data, 1, OBS, WIDTH_S)
+    assert fit.settle_point(1)[1] < se < 1.2 * fit.settle_point(1)[1]
+    with pytest.raises(ValueError, match="not all in the record"):
+        compensated_mean_se(fit, data, 1, OBS + 1.0, WIDTH_S)
+
+
+def test_a_series_with_its_own_variance_of_the_mean_keeps_it() -> None:
+    """A compensated series' var_mean is its own (not S^2/N, nor S^2/N_eff); the other series
+    of the trial keeps eq 2.3 / N_eff; eq 2.3 itself (Cochran's, S_e's basis) is unchanged."""
+    before = SeriesSummary(0.0, 4e-4, 5, var_mean_deg2=3e-5)
+    under = SeriesSummary(0.2, 2e-4, 5)
+    common = {"index": 1, "role": "fit", "direction_deg": 0.0, "amplitude_cm": 20.0}
+    trial = TrialInput(**common, period_s=6.0, before=before, under=under)
+    plain = trial_statistics(trial)
+    assert plain.var_mean_deg2 == pytest.approx(3e-5 + 2e-4 / 5, rel=1e-15)
+    assert plain.var_deg2 == pytest.approx(6e-4, rel=1e-15)
+    f = 1.5
+    correlated = trial_statistics(trial, inflation=(f, f))
+    sigma2 = 2e-4 * 4 / (5 - f)  # analysis.effective: E[S^2] = sigma^2 (N - f) / (N - 1)
+    assert correlated.var_mean_deg2 == pytest.approx(3e-5 + sigma2 * f / 5, rel=1e-14)
+    assert correlated.paper_var_mean_deg2 == pytest.approx(4e-4 / 5 + 2e-4 / 5, rel=1e-15)
