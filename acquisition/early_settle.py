@@ -150,11 +150,19 @@ class TransientRecord:
         seg = Segments(tuple(s.step_s for s in kept), (True, *(s.free for s in kept[1:])))
         return seg, Windows.of(rows)
 
-    def compensation_se(self, fit: TransientFit, t_s: np.ndarray, width_s: np.ndarray) -> float:
+    def compensation_se(
+        self,
+        fit: TransientFit,
+        t_s: np.ndarray,
+        width_s: np.ndarray,
+        correlation_time_s: float | None = None,
+    ) -> float:
         """SE of the current series' compensated mean, ``fit`` the free fit of the whole record
-        (`fit(free=True)`) and its observation windows at ``t_s`` (`compensated_mean_se`)."""
+        (`fit(free=True)`), its observation windows at ``t_s`` and the reading's correlation
+        time (`compensated_mean_se`)."""
         seg, data = self._data(self._segments)
-        return compensated_mean_se(fit, data, len(seg.step_s) - 1, t_s, width_s)
+        j = len(seg.step_s) - 1
+        return compensated_mean_se(fit, data, j, t_s, width_s, correlation_time_s)
 
     def sensitivity(
         self, model: TransientModel, t_s: np.ndarray, width_s: np.ndarray

@@ -1517,7 +1517,8 @@ class Engine:
             previous,
         )
         values_deg = tuple(float(v) for v in values)
-        se = self._record.compensation_se(fit, t_s, width_s)  # of the compensated mean
+        tau_k = self.plan.observation.correlation_time_s  # the reading's (None: not stated)
+        se = self._record.compensation_se(fit, t_s, width_s, tau_k)  # of the compensated mean
         return SeriesCompensation(first_k, values_deg, se, shared)
 
     def _trial_completed(self) -> None:
