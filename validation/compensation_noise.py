@@ -14,8 +14,11 @@ period and damping, the compensation's SE). The trial means are then analysed as
 generalised fit), with the compensated mean's variance
 
 - "before": S^2/N + s_c^2 (s_c the settle point's SE) times the N_eff correction, as until
-  issue 34's fix, and
-- "after": the compensation's SE^2 (`analysis.transient.compensated_mean_se`).
+  issue 34's fix;
+- "scalar": the compensation's SE^2 from the fit's own covariance and one inflation factor for
+  the whole record (`analysis.transient.compensated_mean_se` without a correlation time);
+- "after": the compensation's SE^2 with the reading's correlation time (the shipped plan's
+  20 s), as the acquisition now stores it.
 
 Printed, as SD of the errors over the RMS of the reported SEs (1 when the SE is honest) with a
 bootstrap 95 % interval: the period and damping ratio of each compensation's free fit, its
@@ -23,14 +26,17 @@ settle point, its compensated mean; and the regression of the compensated mean's
 period and damping errors beside the stored sensitivity G (finite differences of the refit).
 Then the fit trials' means against V, and C and T of the generalised fit (coverage too).
 
-Run: .venv/bin/python validation/compensation_noise.py CAMPAIGN.sqlite [...] [--draws 200]
-     [--seed 1]      (a compensated campaign's database, e.g. `validation/end_to_end.py --keep`)
+Run: .venv/bin/python validation/compensation_noise.py [--structures 3] [--draws 120] [--seed 2]
+     (runs the first `--structures` compensated campaigns of `validation/end_to_end.py`'s draws
+     of seed 1 for the structure, ~20 s each), or on stored campaigns: ... CAMPAIGN.sqlite [...]
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -335,14 +341,28 @@ def report(structures: list[Structure], draws: list[list[dict]], rows: dict[str,
             print(f"    {short}: SD/SE {ratio(e, s, rng)}, coverage {cover:.1f} % (93-97 %)")
 
 
+def _campaign(i: int, folder: Path) -> Path:
+    """Draw i of seed 1's compensated campaigns (`validation/end_to_end.py`), its database."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from end_to_end import campaign_row, draws
+
+    row = campaign_row("compensated", draws(i + 1, 1)[i], folder=folder / str(i))
+    if row["error"] is not None:
+        raise SystemExit(f"campaign {i}: {row['error']}")
+    return folder / str(i) / "campaign.sqlite"
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("campaigns", type=Path, nargs="+")
-    parser.add_argument("--draws", type=int, default=200, help="per campaign")
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("campaigns", type=Path, nargs="*", help="compensated campaigns' databases")
+    parser.add_argument("--structures", type=int, default=3, help="campaigns to run, without them")
+    parser.add_argument("--draws", type=int, default=120, help="per campaign")
+    parser.add_argument("--seed", type=int, default=2)
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
-    structures = [load(p) for p in args.campaigns]
+    with tempfile.TemporaryDirectory(prefix="gyrostand-noise-") as tmp:
+        paths = args.campaigns or [_campaign(i, Path(tmp)) for i in range(args.structures)]
+        structures = [load(p) for p in paths]
     draws, rows = [], {m: [] for m in METHODS}
     for st in structures:
         f = {(s.trial, s.j): inflation(st, s) for s in st.series}
