@@ -14,7 +14,7 @@ RMS reported SE (1 when honest):
   exact window-mean covariance, 600 records: 0.99 with the correlation time, 0.88 with one
   inflation factor for the whole record, 0.83 with the old sum.
 On the shipped campaign's structure with the simulator's noise (`validation/compensation_noise.py`)
-the old sum overstated it 0.76-0.99, and the trial means 0.91 over 200 whole campaigns.
+the old sum gave SD/SE 0.72-1.02 (overstated), the trial means 0.91 over 200 whole campaigns.
 """
 
 import math
