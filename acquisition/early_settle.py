@@ -59,6 +59,7 @@ from gyrostand.analysis.transient import (
     TransientFit,
     TransientModel,
     Windows,
+    compensated_mean_se,
     contradicts,
     fit_transient,
     fit_transient_free,
@@ -148,6 +149,20 @@ class TransientRecord:
         rows = [(k, *row) for k, s in enumerate(kept) for row in s.rows]
         seg = Segments(tuple(s.step_s for s in kept), (True, *(s.free for s in kept[1:])))
         return seg, Windows.of(rows)
+
+    def compensation_se(
+        self,
+        fit: TransientFit,
+        t_s: np.ndarray,
+        width_s: np.ndarray,
+        correlation_time_s: float | None = None,
+    ) -> float:
+        """SE of the current series' compensated mean, ``fit`` the free fit of the whole record
+        (`fit(free=True)`), its observation windows at ``t_s`` and the reading's correlation
+        time (`compensated_mean_se`)."""
+        seg, data = self._data(self._segments)
+        j = len(seg.step_s) - 1
+        return compensated_mean_se(fit, data, j, t_s, width_s, correlation_time_s)
 
     def sensitivity(
         self, model: TransientModel, t_s: np.ndarray, width_s: np.ndarray

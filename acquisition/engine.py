@@ -131,7 +131,8 @@ class ObservationResult:
 class SeriesCompensation:
     """The transient subtracted from observations ``first_k``, ``first_k + 1``, ... of a
     compensated series (deg each, the fitted transient over the observation's window) and the
-    standard error of the series' settle point, which the compensated mean carries."""
+    standard error of the series' compensated mean (`analysis.transient.compensated_mean_se`:
+    its settle point's, with the observations' residual scatter about the fit)."""
 
     first_k: int
     transient_deg: tuple[float, ...]
@@ -1516,7 +1517,9 @@ class Engine:
             previous,
         )
         values_deg = tuple(float(v) for v in values)
-        return SeriesCompensation(first_k, values_deg, fit.settle_point(j)[1], shared)
+        tau_k = self.plan.observation.correlation_time_s  # the reading's (None: not stated)
+        se = self._record.compensation_se(fit, t_s, width_s, tau_k)  # of the compensated mean
+        return SeriesCompensation(first_k, values_deg, se, shared)
 
     def _trial_completed(self) -> None:
         assert self._trial is not None

@@ -110,3 +110,32 @@ def independent_spacing_s(
     out: it only lowers the correlation."""
     ratio = touching_correlation(window_s, correlation_time_s) / max_correlation
     return max(0.0, correlation_time_s * math.log(ratio))
+
+
+def window_means_covariance(
+    start_s: np.ndarray, end_s: np.ndarray, correlation_time_s: float
+) -> np.ndarray:
+    """Covariance of the means over disjoint windows [start, end) of a reading with the
+    exponential correlation e^(-|tau| / tau_k) (unit variance; Sveshnikov eq 8.89's model): the
+    double integral behind eq 8.93 in closed form, mu = 1 / tau_k. A window with itself:
+    2 (mu W - 1 + e^(-mu W)) / (mu W)^2; windows i before k (end_i <= start_k):
+    (e^(-mu (a_k - b_i)) - e^(-mu (a_k - a_i)) - e^(-mu (b_k - b_i)) + e^(-mu (b_k - a_i)))
+    / (mu^2 W_i W_k)."""
+    import numpy as np
+
+    mu = 1.0 / correlation_time_s
+    a, b = np.asarray(start_s, dtype=float), np.asarray(end_s, dtype=float)
+    width = b - a
+    first = a[:, None] <= a[None, :]  # i before k: the formula with (i, k), else (k, i)
+    ai, bi = np.where(first, a[:, None], a[None, :]), np.where(first, b[:, None], b[None, :])
+    ak, bk = np.where(first, a[None, :], a[:, None]), np.where(first, b[None, :], b[:, None])
+    gap = np.maximum(ak - bi, 0.0)
+    between = (
+        np.exp(-mu * gap)
+        - np.exp(-mu * (ak - ai))
+        - np.exp(-mu * (bk - bi))
+        + np.exp(-mu * (bk - ai))
+    ) / (mu**2 * np.outer(width, width))
+    x = mu * width
+    np.fill_diagonal(between, 2.0 * (x + np.expm1(-x)) / x**2)
+    return between

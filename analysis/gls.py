@@ -10,8 +10,9 @@ estimate is efficient on a superset of the data, Cov(e_s - e_t, e_t) = 0 (Hausma
 records of different runs are independent.
 
 The covariance of the fit trials' means is then V = diag(var_mean_i) + G C G^T less each
-series' own g_s Sigma_s g_s^T, already in var_mean_i (a compensated mean carries its settle
-point's SE, whose joint covariance includes the period and damping's), plus the covariance of
+series' own g_s Sigma_s g_s^T, already in var_mean_i (a compensated mean's variance is its
+compensation's SE^2, `analysis.transient.compensated_mean_se`, from the joint covariance that
+includes the period and damping's), plus the covariance of
 adjacent series' settle points at fixed period and damping (the state carried over a step
 couples them: correlation about -0.5, so neighbouring trial means covary by about +0.35),
 stored as the later one's ``previous_deg2`` (the later fit's, by the same nesting argument).
@@ -85,7 +86,7 @@ def shared_covariance(
     signs = np.zeros((len(trials), len(keys)))
     for c, (i, j) in enumerate(keys):
         signs[list(trials).index(i), c] = 1.0 if j == 2 else -1.0
-    # each series' own part is in var_mean already, through its settle point's SE
+    # each series' own part is in var_mean already, through its compensation's SE
     own = [float(np.array(e.sensitivity) @ e.covariance @ e.sensitivity) for e in errors]
     shared_g = signs @ g
     carried = np.zeros((len(keys), len(keys)))  # adjacent settle points through the state

@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
+from gyrostand.analysis.effective import window_means_covariance
 from gyrostand.analysis.errors import SingularDesignError
 from gyrostand.analysis.settle import variance_inflation
 
@@ -258,6 +259,56 @@ def fit_transient_free(start: TransientModel, seg: Segments, data: Windows) -> T
         damping_ratio_se=float(math.sqrt(cov[p + 1, p + 1])),
         pd_covariance=cov[p:, p:],
     )
+
+
+def compensated_mean_se(
+    fit: TransientFit,
+    data: Windows,
+    j: int,
+    t_s: np.ndarray,
+    width_s: np.ndarray,
+    correlation_time_s: float | None = None,
+) -> float:
+    """Standard error (deg) of the mean of segment j's windows at ``t_s`` (middles) each less
+    the transient ``fit`` gives over it: a compensated series' mean, when ``data`` (the record
+    ``fit`` was fitted to) includes those windows. Each compensated value is y_k - (row_k -
+    e_j) theta = R_j + r_k, r_k the fit's residual, so the mean is R_j + r_bar: linear in the
+    record, c^T y with c = J (J^T J)^-1 e_j + (I - H) a (weighted rows; J with the period and
+    damping columns when they were estimated, H = J (J^T J)^-1 J^T, a the mean over the
+    windows). Not SE(R_j)^2 + S^2/N: R_j is fitted to those same windows, so their scatter is in
+    its SE already (adding it overstated a compensated mean's variance ~1.2x, issue 34).
+
+    With the reading's ``correlation_time_s`` (exponential, Sveshnikov eq 8.89) the window
+    means' covariance is sigma^2 K (`window_means_covariance`) and Var = sigma^2 c^T K c, sigma^2
+    = r^T r / tr((I - H) K) (E[r^T r] under K): the record mixes settle blocks laid end to end
+    (neighbours correlated ~0.2-0.4) with observations 30 s apart (~0.05), which one inflation
+    factor for the whole record cannot describe. Without it: the fit's own covariance and
+    inflation, Var = SE(R_j)^2 + s^2 f a^T (I - H) a (residuals _|_ estimates)."""
+    mid = np.atleast_1d(np.asarray(t_s, dtype=float))
+    width = np.broadcast_to(np.asarray(width_s, dtype=float), mid.shape)
+    match = (data.segment[None, :] == j) & (np.abs(data.mid_s[None, :] - mid[:, None]) < 1e-6)
+    match &= np.abs(data.width_s[None, :] - width[:, None]) < 1e-6
+    if not np.all(match.sum(axis=1) == 1):
+        raise ValueError(f"the compensated windows are not all in the record of segment {j}")
+    rows, y = _weighted_rows(fit.model, fit.segments, data)
+    jac = rows
+    if fit.pd_covariance is not None:  # the period and damping were estimated too
+        jac = np.column_stack([rows, *_model_columns(fit.model, fit.segments, data, fit.theta)])
+    sw = np.sqrt(data.width_s / np.mean(data.width_s))
+    a = match.sum(axis=0) / (mid.size * sw)  # mean of the unweighted residuals r_w / sw
+    pinv = np.linalg.pinv(jac)
+    resid = y - rows @ fit.theta
+    if correlation_time_s is None:
+        f = variance_inflation(resid)
+        var_rbar = fit.residual_sd_deg**2 * f * float(a @ (a - jac @ (pinv @ a)))  # s^2 f a'(I-H)a
+        return math.sqrt(fit.covariance[j, j] + max(var_rbar, 0.0))  # Var(R_j) + Var(r_bar)
+    half = data.width_s / 2
+    k = window_means_covariance(data.mid_s - half, data.mid_s + half, correlation_time_s)
+    k *= np.outer(sw, sw)  # of the weighted window means
+    hk = jac @ (pinv @ k)
+    sigma2 = float(resid @ resid) / float(np.trace(k) - np.trace(hk))  # E[r'r] = s^2 tr((I-H)K)
+    c = pinv[j] + a - jac @ (pinv @ a)  # m - E[m] = c^T (y_w - E[y_w])
+    return math.sqrt(sigma2 * float(c @ k @ c))  # Var(m) = s^2 c^T K c
 
 
 def _model_columns(

@@ -37,11 +37,15 @@ ROLES = ("fit", "control")
 
 @dataclass(frozen=True)
 class SeriesSummary:
-    """A pre-averaged series: mean (2.1) in deg, sample variance (2.2, N-1) in deg^2, and N."""
+    """A pre-averaged series: mean (2.1) in deg, sample variance (2.2, N-1) in deg^2, and N;
+    ``var_mean_deg2`` the variance of the mean when it is known otherwise than as S^2/N (a
+    compensated series: its mean is the settle point fitted to the same observations,
+    `analysis.transient.compensated_mean_se`; None: S^2/N, or S^2/N_eff when correlated)."""
 
     mean_deg: float
     var_deg2: float
     n: int
+    var_mean_deg2: float | None = None
 
 
 @dataclass(frozen=True)
@@ -206,6 +210,9 @@ def _from_summaries(
     delta, var, var_mean, dof = combine_series(
         s1.mean_deg, s1.var_deg2, s1.n, s2.mean_deg, s2.var_deg2, s2.n
     )
+    paper_var_mean = var_mean
+    if s1.var_mean_deg2 is not None or s2.var_mean_deg2 is not None:
+        var_mean = _var_mean(s1, s1.var_deg2 / s1.n) + _var_mean(s2, s2.var_deg2 / s2.n)
     stats = TrialStats(
         **common,
         delta_deg=delta,
@@ -228,12 +235,18 @@ def _from_summaries(
     return replace(
         stats,
         var_deg2=c1.var_deg2 + c2.var_deg2,  # eq 2.3 with sigma^2 for S^2
-        var_mean_deg2=c1.var_mean_deg2 + c2.var_mean_deg2,  # eq 2.3 / N with N_eff for N
+        # eq 2.3 / N with N_eff for N (a compensated series: its own, `SeriesSummary`)
+        var_mean_deg2=_var_mean(s1, c1.var_mean_deg2) + _var_mean(s2, c2.var_mean_deg2),
         dof=max(int(np.floor(c1.n_eff + c2.n_eff - 2)), 1),  # eq 2.4 with N_eff for N
         n_eff_before=c1.n_eff,
         n_eff_under=c2.n_eff,
-        paper_var_mean_deg2=var_mean,
+        paper_var_mean_deg2=paper_var_mean,
     )
+
+
+def _var_mean(series: SeriesSummary, otherwise: float) -> float:
+    """The variance of a series' mean: its own when given (`SeriesSummary`), else ``otherwise``."""
+    return otherwise if series.var_mean_deg2 is None else series.var_mean_deg2
 
 
 def trial_statistics(trial: TrialInput, inflation: tuple[float, float] | None = None) -> TrialStats:

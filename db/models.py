@@ -290,8 +290,9 @@ class Series(Base):
     summary_variance_deg2: Mapped[float | None] = mapped_column(Float)
     summary_n: Mapped[int | None] = mapped_column(Integer)
     compensation_se_deg: Mapped[float | None] = mapped_column(Float)
-    """Compensated series: the SE of its settle point from the transient fit, which the mean of
-    its compensated observations carries on top of their scatter."""
+    """Compensated series: the SE of the mean of its compensated observations (the settle point
+    fitted to them plus their mean residual, `analysis.transient.compensated_mean_se`; stored
+    before issue 34's fix: the settle point's SE)."""
     compensation_shared: Mapped[dict[str, Any] | None] = mapped_column(JSON)
     """Compensated series: its share in the period and damping error the compensation used
     (`analysis.gls.SharedError.to_dict`); NULL: not compensated, or stored before schema 0023."""

@@ -254,13 +254,18 @@ def trial_input(trial: Trial) -> TrialInput | str:
 def series_summary(series: Series) -> SeriesSummary | None:
     """Mean (eq 2.1), variance (eq 2.2) and N of a stored series: of its observations, else as
     imported pre-averaged (None: neither). A compensated series' observations are corrected by
-    their compensation, and the settle point's SE s_c, common to all N of them, is added to
-    the variance as N s_c^2, so that S^2/N, the variance of the mean, includes it."""
+    their compensation; the variance of their mean is the compensation's SE^2, s_c^2 (the
+    settle point fitted to these same observations, `analysis.transient.compensated_mean_se`;
+    stored before issue 34's fix: the settle point's SE alone, which errs ~3 % low), and s_c,
+    common to all N of them, is added to the variance as N s_c^2 (eq 2.2's basis for Cochran's
+    test and S_e, as before)."""
     if len(series.observations) >= 2:
         values = np.array([o.corrected_deg for o in series.observations])
         mean, var = (float(x) for x in series_moments(values))
-        n = values.size
-        return SeriesSummary(mean, var + n * (series.compensation_se_deg or 0.0) ** 2, n)
+        n, s_c = values.size, series.compensation_se_deg
+        if s_c is None:
+            return SeriesSummary(mean, var, n)
+        return SeriesSummary(mean, var + n * s_c**2, n, var_mean_deg2=s_c**2)
     if series.summary_mean_deg is not None:
         return SeriesSummary(
             series.summary_mean_deg, series.summary_variance_deg2, series.summary_n

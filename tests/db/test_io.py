@@ -28,7 +28,7 @@ from gyrostand.db.io import (
 from gyrostand.db.models import Campaign, Event, Instrument
 from gyrostand.db.queries import load_campaign
 from gyrostand.report.export import campaign_frames, export_campaign, export_paths
-from gyrostand.report.stored import stored_inputs
+from gyrostand.report.stored import series_summary, stored_inputs
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -456,13 +456,18 @@ def test_compensation_survives_export_and_import(
         again = campaign_frames(session, second)
     pd.testing.assert_frame_equal(again.observations, exported.observations, check_exact=True)
     with sessions() as session:  # the shared error too, as the acquisition stores it
+        trials = load_campaign(session, second).trials
         shared = [
             (t.index, s.j, s.compensation_shared)
-            for t in load_campaign(session, second).trials
+            for t in trials
             for s in t.series
             if s.compensation_shared is not None
         ]
+        summaries = {(t.index, s.j): series_summary(s) for t in trials for s in t.series}
     assert shared == [(2, 1, SHARED)]
+    # the variance of a compensated mean is the compensation's SE^2 (issue 34), not S^2/N + SE^2
+    assert summaries[2, 1].var_mean_deg2 == 0.003**2
+    assert summaries[2, 2].var_mean_deg2 is None
     # the analysis's series: value - compensation, variance + N SE^2 (report.stored.series_summary)
     rows = frame[(frame.trial == 2) & (frame.j == 1)]
     corrected = (rows.value_deg - rows.compensation_deg).to_numpy()
