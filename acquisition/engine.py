@@ -192,6 +192,10 @@ class Sink(Protocol):
         j: int | None = None,
         t_ms: int | None = None,
     ) -> None: ...
+    def flush(self) -> None:
+        """Make the writes so far durable (an observation is at once): the engine calls it at
+        the end of each of its calls and before it waits on the stand or the operator."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -405,6 +409,7 @@ class Engine:
         self._last_status_text = ""
         self._settle_durations: list[int] = []
         self._next_trial()
+        self.sink.flush()
 
     # --------------------------------------------------------------------------- trial sequence
     def _next_trial(self) -> None:
@@ -423,6 +428,7 @@ class Engine:
         """The prompts before the next trial: the engine (and, in virtual time, the stand clock:
         nothing is granted meanwhile) waits for the answers at this point of the stream."""
         assert self.operator is not None and self._trial is not None
+        self.sink.flush()
         stopped = self.operator.before_trial(self._trial.index)
         if stopped is None:
             self._start_trial()
@@ -469,6 +475,7 @@ class Engine:
         self._sent = False
         self._phase_start_ms = self.now_ms  # (until it shows up in the stream)
         self.sink.event("command", "info", command.describe(), self._tidx, None, self.now_ms)
+        self.sink.flush()  # (a command's event is stored before the stand gets it)
         try:
             self.commander.issue(command, self.now_ms)
         except CommandNotSent as exc:
@@ -504,15 +511,18 @@ class Engine:
             return
         self._batch_no += 1
         self._batch_started()
-        while self.phase is not Phase.DONE:
-            if self.phase is Phase.PROMPT:
-                self._ask()
-            elif not self._left():
-                break
-            elif self.phase in (Phase.SETTLE, Phase.OBSERVE):
-                self._bulk()
-            else:
-                self._step()
+        try:
+            while self.phase is not Phase.DONE:
+                if self.phase is Phase.PROMPT:
+                    self._ask()
+                elif not self._left():
+                    break
+                elif self.phase in (Phase.SETTLE, Phase.OBSERVE):
+                    self._bulk()
+                else:
+                    self._step()
+        finally:
+            self.sink.flush()
         self._batch_ended()
 
     def _left(self) -> bool:
@@ -588,16 +598,17 @@ class Engine:
             if last:
                 self.sink.event(kind, "error", reason, self._tidx, None, self.now_ms)
                 self._pause()
-            return
-        j = self._j if self.phase in (Phase.SETTLE, Phase.OBSERVE) else None
-        self.sink.event(kind, "error", reason, self._tidx, j, self.now_ms)
-        self.sink.trial_failed(self._trial.index, j, reason)
-        self._stopped = False
-        self._trial = None
-        if last or self.plan.on_trial_failure == "pause":
-            self._pause()
         else:
-            self._next_trial()
+            j = self._j if self.phase in (Phase.SETTLE, Phase.OBSERVE) else None
+            self.sink.event(kind, "error", reason, self._tidx, j, self.now_ms)
+            self.sink.trial_failed(self._trial.index, j, reason)
+            self._stopped = False
+            self._trial = None
+            if last or self.plan.on_trial_failure == "pause":
+                self._pause()
+            else:
+                self._next_trial()
+        self.sink.flush()
 
     def _pause(self) -> None:
         self.outcome = "paused"
@@ -608,6 +619,7 @@ class Engine:
     def _stop_stand(self) -> None:
         """Best effort on the way out: nothing waits for this ack."""
         self.sink.event("command", "info", "stop", self._tidx, None, self.now_ms)
+        self.sink.flush()
         try:
             self.commander.issue(Command("stop"), self.now_ms)
         except CommandNotSent as exc:
@@ -620,6 +632,7 @@ class Engine:
             self._stop_stand()
             self.outcome = "stopped"
             self.phase = Phase.DONE
+            self.sink.flush()
 
     # ------------------------------------------------------------ one frame at a time (waiting)
     def _step(self) -> None:
