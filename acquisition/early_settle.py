@@ -361,7 +361,8 @@ class EarlySettle:
         self.n_obs = n_obs
         self._estimates: list[float] = []
         self._blocks = 0
-        self.last: SettleCheck | None = None
+        self._last: SettleCheck | None = None
+        self._unbounded: np.ndarray | None = None  # `_last`'s windows, its bound not yet taken
         self.stable: SettleCheck | None = None  # first check meeting conditions 1-2
         self.fit: tuple[TransientFit, int] | None = None
         self.band_s: float | None = None  # first block end where the band criterion held
@@ -373,8 +374,9 @@ class EarlySettle:
         if band and self.band_s is None:
             self.band_s = since
         self._blocks += 1
-        r, se, spread, transient = None, math.inf, math.inf, math.inf
+        r, se, spread = None, math.inf, math.inf
         self.fit = self.record.fit(self.plan.model) if self._blocks >= MIN_BLOCKS else None
+        self._unbounded = None
         if self.fit is not None:
             fit, j = self.fit
             r, se = fit.settle_point(j)
@@ -382,12 +384,27 @@ class EarlySettle:
             recent = self._estimates[-self.plan.stable_estimates :]
             if len(recent) == self.plan.stable_estimates:
                 spread = max(recent) - min(recent)
-            mids = end_s + self.window_s / 2 + self.step_s * np.arange(self.n_obs)
-            transient = fit.bound(j, mids, self.window_s)
-        self.last = SettleCheck(since, r, se, spread, transient, self.plan, self.record.chained)
-        if self.last.stable and self.stable is None:
-            self.stable = self.last
-        return self.last
+            self._unbounded = end_s + self.window_s / 2 + self.step_s * np.arange(self.n_obs)
+        check = SettleCheck(since, r, se, spread, math.inf, self.plan, self.record.chained)
+        # the transient's bound (a third of a check) only where it can decide (conditions 1-2
+        # met), or when asked for (`last`)
+        self._last = check
+        if check.stable:
+            check = self.last
+            assert check is not None
+            if self.stable is None:
+                self.stable = check
+        return check
+
+    @property
+    def last(self) -> SettleCheck | None:
+        """The last check, its transient bound taken if it was not."""
+        if self._unbounded is not None and self._last is not None and self.fit is not None:
+            fit, j = self.fit
+            bound = fit.bound(j, self._unbounded, self.window_s)
+            self._last = replace(self._last, transient_deg=bound)
+            self._unbounded = None
+        return self._last
 
     def outcome(
         self, reference_deg: float, means_deg: Sequence[float], settle: SettlePlan

@@ -1276,16 +1276,21 @@ class Engine:
             where = f"settle block {w.start_ms / 1000:g}-{w.end_ms / 1000:g} s"
             self._tell_stuck(w, where, limit, "; the series does not settle on it")
         # a hold with a stuck block is no sign of settling: the series waits for one without
-        trusted = not any(start in self._stuck_blocks for start, _, _ in self._blocks[-need:])
-        recent = [m / NANO for _, _, m in self._blocks[-need:]]
-        band = len(recent) == need and not any(math.isnan(m) for m in recent) and trusted
-        band = band and band_settled(recent, settle)
+        stuck = self._stuck_blocks
+        trusted = not stuck or not any(start in stuck for start, _, _ in self._blocks[-need:])
+        estimate = self._estimate_plan()
+        recent: list[float] = []
+        band = False
+        # the band criterion decides (method "band"), or is recorded until it first holds
+        if estimate is None or self._early is None or self._early.band_s is None:
+            recent = [m / NANO for _, _, m in self._blocks[-need:]]
+            band = len(recent) == need and not any(math.isnan(m) for m in recent) and trusted
+            band = band and band_settled(recent, settle)
         outcome: SettleOutcome | None = None
         waited_s = (w.end_ms - self._settle_start) / 1000
         if w.used and limit is None:  # (frames are used once the reference heading is known)
             assert self._ref is not None
             self._record.add(w.start_ms / 1000, w.end_ms / 1000, self._ref + w.mean_ndeg() / NANO)
-        estimate = self._estimate_plan()
         if estimate is None:
             if band:
                 assert self._ref is not None
