@@ -299,12 +299,14 @@ def main() -> None:
             f"{_headings(streams[protocol]) / run.seconds:>7,.0f} headings/s  "
             f"{'OK' if cpu_ratio >= 1.0 and not run.lost else 'BELOW'}"
         )
+    wall_ratio = rate / blf_logger
+    cpu_ratio = ours_run.cpu_rate / rows["can.Logger -> .blf (BLFWriter)"].cpu_rate
     print(
         f"target >= 180,000 frames/s: {'OK' if rate >= 180_000 else 'BELOW TARGET'}; "
         f"zero loss: {'OK' if ours_run.lost == 0 else 'FRAMES LOST'}; "
-        f">= 2x can.Logger -> .blf ({rate / blf_logger:.2f}x; in CPU time "
-        f"{ours_run.cpu_rate / rows['can.Logger -> .blf (BLFWriter)'].cpu_rate:.2f}x): "
-        f"{'OK' if rate >= 2 * blf_logger else 'BELOW TARGET'}; "
+        f">= 2x can.Logger -> .blf: wall time {wall_ratio:.2f}x "
+        f"{'OK' if wall_ratio >= 2 else 'BELOW TARGET'}, CPU time {cpu_ratio:.2f}x "
+        f"{'OK' if cpu_ratio >= 2 else 'BELOW TARGET'}; "
         f"live view attached <= 10 % less ({1 - live_rate / rate:.1%} less): "
         f"{'OK' if live_rate >= 0.9 * rate else 'BELOW TARGET'}"
     )
