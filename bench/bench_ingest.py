@@ -3,21 +3,20 @@ own `can.Logger` writing .db (SqliteWriter) and .blf for the same frames, frames
 
 The frames are a real campaign stream of the simulated stand (examples/paper.toml). For each
 consumer they are first queued on a python-can `virtual` bus (untimed), then the consumer drains
-that backlog (gyrostand: its own reception thread, `acquisition.bus.Reception`, as a campaign
-does; `can.Logger`: a `can.Notifier`, as python-can users log) and the clock runs until the
-consumer has the last frame. The process is pinned to one CPU. Targets: >= 180 000 frames/s
-(issue 37; twenty times a saturated 1 Mbit/s bus), zero loss, at least twice `can.Logger` -> .blf
-(each the best of `--repeats` runs), and with the station's live view attached (the live file, a
-page watching) at most 10 % less. `--profile`: the top five costs per frame of the path with the
-raw BLF, from cProfile, instead, of the campaign thread and of the reception thread
-(`--protocol`: of that heading source's stream). Then the raw BLF writers alone (ours,
-python-can's) on the same frames, without a bus. Last, the same campaign with its compass
-speaking NMEA 2000 (PGN 127250/127251/127257 decoded by the heading source, `devices`), then read
-by a CiA 406 encoder (TPDO1, heartbeat): frames/s and headings/s of each, taken in turn with
-gyrostand's own heading frame `--repeats` times (the best run of each: the machine is shared),
-and each one's ratio to gyrostand's in wall time and in the process's CPU time (target, issue 31:
-at or above 1.00, none lost; judged on CPU time, which other jobs on the shared core do not
-inflate).
+that backlog (gyrostand: its own reception thread, `acquisition.bus.Reception`, as a campaign does;
+`can.Logger`: a `can.Notifier`, as python-can users log) and the clock runs until the consumer has
+the last frame. The process is pinned to one CPU. Targets: >= 180 000 frames/s (issue 37; twenty
+times a saturated 1 Mbit/s bus), zero loss, at least twice `can.Logger` -> .blf (each the best of
+`--repeats` runs, taken in turn; told in wall and in CPU time), and with the station's live view
+attached (the live file, a page watching) at most 10 % less. `--profile`: the top five costs per
+frame of the path with the raw BLF, from cProfile, instead, of the campaign thread and of the
+reception thread (`--protocol`: of that heading source's stream). Then the raw BLF writers alone
+(ours, python-can's) on the same frames, without a bus. Last, the same campaign with its compass
+speaking NMEA 2000 (PGN 127250/127251/127257 decoded by the heading source, `devices`), then read by
+a CiA 406 encoder (TPDO1, heartbeat): frames/s and headings/s of each, taken in turn with
+gyrostand's own heading frame `--repeats` times (the best run of each: the machine is shared), and
+each one's ratio to gyrostand's in wall time and in the process's CPU time (target, issue 31: at or
+above 1.00, none lost; judged on CPU time, which other jobs on the shared core do not inflate).
 """
 
 from __future__ import annotations
