@@ -61,6 +61,7 @@ from gyrostand.analysis.transient import (
     Windows,
     compensated_mean_se,
     contradicts,
+    design,
     fit_transient,
     fit_transient_free,
     well_determined,
@@ -110,6 +111,11 @@ class TransientRecord:
     def __init__(self) -> None:
         self._segments: list[_Segment] = []
         self._branch: float | None = None
+        # the kept segments' windows and their design at the last fit: a block's fit extends
+        # them by its new windows (the same numbers as building them anew, 0.8 -> 0.25 ms a
+        # fit of ~500 windows; bench_ingest, issue 37)
+        self._kept: tuple[Segments, Windows] | None = None
+        self._design: tuple[TransientModel, Segments, np.ndarray] | None = None
 
     @property
     def chained(self) -> bool:
@@ -137,12 +143,50 @@ class TransientRecord:
         """The fit of the kept segments and the current segment's index in it; None while it
         cannot be fitted (too short, degenerate). ``free``: the period and damping ratio are
         estimated too, from ``model``'s (`fit_transient_free`)."""
-        seg, data = self._data(self._segments if free else self._segments[-KEEP_SEGMENTS:])
+        seg, data = self._data(self._segments) if free else self._kept_data()
         try:
-            fitter = fit_transient_free if free else fit_transient
-            return fitter(model, seg, data), len(seg.step_s) - 1
+            if free:
+                fit = fit_transient_free(model, seg, data)
+            else:
+                fit = fit_transient(model, seg, data, self._rows(model, seg, data))
         except AnalysisError:
             return None
+        return fit, len(seg.step_s) - 1
+
+    def _kept_data(self) -> tuple[Segments, Windows]:
+        """`_data` of the last KEEP_SEGMENTS segments, extended from the last call's when only
+        windows were added since (to the last segment: the only one `add` appends to)."""
+        kept = self._segments[-KEEP_SEGMENTS:]
+        seg = Segments(tuple(s.step_s for s in kept), (True, *(s.free for s in kept[1:])))
+        if self._kept is None or self._kept[0] != seg:
+            self._kept = self._data(kept)
+            return self._kept
+        data, rows = self._kept[1], kept[-1].rows
+        new = len(rows) - (len(data.segment) - sum(len(s.rows) for s in kept[:-1]))
+        if new:
+            more = Windows.of([(len(kept) - 1, *row) for row in rows[-new:]])
+            data = Windows(
+                np.concatenate((data.segment, more.segment)),
+                np.concatenate((data.mid_s, more.mid_s)),
+                np.concatenate((data.width_s, more.width_s)),
+                np.concatenate((data.value_deg, more.value_deg)),
+            )
+            self._kept = seg, data
+        return self._kept
+
+    def _rows(self, model: TransientModel, seg: Segments, data: Windows) -> np.ndarray:
+        """`design` of the kept windows (`_kept_data`): the last call's rows extended by those
+        of the new windows when the model and segments are the same (a row depends on its own
+        window only)."""
+        rows = np.empty((0, seg.n_params))
+        if self._design is not None and self._design[:2] == (model, seg):
+            rows = self._design[2]
+        done = len(rows)
+        if done < len(data.segment):
+            new = design(model, seg, data.segment[done:], data.mid_s[done:], data.width_s[done:])
+            rows = np.concatenate((rows, new))
+            self._design = model, seg, rows
+        return rows
 
     @staticmethod
     def _data(kept: list[_Segment]) -> tuple[Segments, Windows]:
@@ -332,7 +376,8 @@ class EarlySettle:
         self.n_obs = n_obs
         self._estimates: list[float] = []
         self._blocks = 0
-        self.last: SettleCheck | None = None
+        self._last: SettleCheck | None = None
+        self._unbounded: np.ndarray | None = None  # `_last`'s windows, its bound not yet taken
         self.stable: SettleCheck | None = None  # first check meeting conditions 1-2
         self.fit: tuple[TransientFit, int] | None = None
         self.band_s: float | None = None  # first block end where the band criterion held
@@ -344,8 +389,9 @@ class EarlySettle:
         if band and self.band_s is None:
             self.band_s = since
         self._blocks += 1
-        r, se, spread, transient = None, math.inf, math.inf, math.inf
+        r, se, spread = None, math.inf, math.inf
         self.fit = self.record.fit(self.plan.model) if self._blocks >= MIN_BLOCKS else None
+        self._unbounded = None
         if self.fit is not None:
             fit, j = self.fit
             r, se = fit.settle_point(j)
@@ -353,12 +399,27 @@ class EarlySettle:
             recent = self._estimates[-self.plan.stable_estimates :]
             if len(recent) == self.plan.stable_estimates:
                 spread = max(recent) - min(recent)
-            mids = end_s + self.window_s / 2 + self.step_s * np.arange(self.n_obs)
-            transient = fit.bound(j, mids, self.window_s)
-        self.last = SettleCheck(since, r, se, spread, transient, self.plan, self.record.chained)
-        if self.last.stable and self.stable is None:
-            self.stable = self.last
-        return self.last
+            self._unbounded = end_s + self.window_s / 2 + self.step_s * np.arange(self.n_obs)
+        check = SettleCheck(since, r, se, spread, math.inf, self.plan, self.record.chained)
+        # the transient's bound (a third of a check) only where it can decide (conditions 1-2
+        # met), or when asked for (`last`)
+        self._last = check
+        if check.stable:
+            check = self.last
+            assert check is not None
+            if self.stable is None:
+                self.stable = check
+        return check
+
+    @property
+    def last(self) -> SettleCheck | None:
+        """The last check, its transient bound taken if it was not."""
+        if self._unbounded is not None and self._last is not None and self.fit is not None:
+            fit, j = self.fit
+            bound = fit.bound(j, self._unbounded, self.window_s)
+            self._last = replace(self._last, transient_deg=bound)
+            self._unbounded = None
+        return self._last
 
     def outcome(
         self, reference_deg: float, means_deg: Sequence[float], settle: SettlePlan

@@ -193,6 +193,10 @@ class Sink(Protocol):
         j: int | None = None,
         t_ms: int | None = None,
     ) -> None: ...
+    def flush(self) -> None:
+        """Make the writes so far durable (an observation is at once): the engine calls it at
+        the end of each of its calls and before it waits for the operator."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -406,6 +410,7 @@ class Engine:
         self._last_status_text = ""
         self._settle_durations: list[int] = []
         self._next_trial()
+        self.sink.flush()
 
     # --------------------------------------------------------------------------- trial sequence
     def _next_trial(self) -> None:
@@ -424,6 +429,7 @@ class Engine:
         """The prompts before the next trial: the engine (and, in virtual time, the stand clock:
         nothing is granted meanwhile) waits for the answers at this point of the stream."""
         assert self.operator is not None and self._trial is not None
+        self.sink.flush()
         stopped = self.operator.before_trial(self._trial.index)
         if stopped is None:
             self._start_trial()
@@ -505,15 +511,18 @@ class Engine:
             return
         self._batch_no += 1
         self._batch_started()
-        while self.phase is not Phase.DONE:
-            if self.phase is Phase.PROMPT:
-                self._ask()
-            elif not self._left():
-                break
-            elif self.phase in (Phase.SETTLE, Phase.OBSERVE):
-                self._bulk()
-            else:
-                self._step()
+        try:
+            while self.phase is not Phase.DONE:
+                if self.phase is Phase.PROMPT:
+                    self._ask()
+                elif not self._left():
+                    break
+                elif self.phase in (Phase.SETTLE, Phase.OBSERVE):
+                    self._bulk()
+                else:
+                    self._step()
+        finally:
+            self.sink.flush()
         self._batch_ended()
 
     def _left(self) -> bool:
@@ -589,16 +598,17 @@ class Engine:
             if last:
                 self.sink.event(kind, "error", reason, self._tidx, None, self.now_ms)
                 self._pause()
-            return
-        j = self._j if self.phase in (Phase.SETTLE, Phase.OBSERVE) else None
-        self.sink.event(kind, "error", reason, self._tidx, j, self.now_ms)
-        self.sink.trial_failed(self._trial.index, j, reason)
-        self._stopped = False
-        self._trial = None
-        if last or self.plan.on_trial_failure == "pause":
-            self._pause()
         else:
-            self._next_trial()
+            j = self._j if self.phase in (Phase.SETTLE, Phase.OBSERVE) else None
+            self.sink.event(kind, "error", reason, self._tidx, j, self.now_ms)
+            self.sink.trial_failed(self._trial.index, j, reason)
+            self._stopped = False
+            self._trial = None
+            if last or self.plan.on_trial_failure == "pause":
+                self._pause()
+            else:
+                self._next_trial()
+        self.sink.flush()
 
     def _pause(self) -> None:
         self.outcome = "paused"
@@ -621,6 +631,7 @@ class Engine:
             self._stop_stand()
             self.outcome = "stopped"
             self.phase = Phase.DONE
+            self.sink.flush()
 
     # ------------------------------------------------------------ one frame at a time (waiting)
     def _step(self) -> None:
@@ -1264,16 +1275,21 @@ class Engine:
             where = f"settle block {w.start_ms / 1000:g}-{w.end_ms / 1000:g} s"
             self._tell_stuck(w, where, limit, "; the series does not settle on it")
         # a hold with a stuck block is no sign of settling: the series waits for one without
-        trusted = not any(start in self._stuck_blocks for start, _, _ in self._blocks[-need:])
-        recent = [m / NANO for _, _, m in self._blocks[-need:]]
-        band = len(recent) == need and not any(math.isnan(m) for m in recent) and trusted
-        band = band and band_settled(recent, settle)
+        stuck = self._stuck_blocks
+        trusted = not stuck or not any(start in stuck for start, _, _ in self._blocks[-need:])
+        estimate = self._estimate_plan()
+        recent: list[float] = []
+        band = False
+        # the band criterion decides (method "band"), or is recorded until it first holds
+        if estimate is None or self._early is None or self._early.band_s is None:
+            recent = [m / NANO for _, _, m in self._blocks[-need:]]
+            band = len(recent) == need and not any(math.isnan(m) for m in recent) and trusted
+            band = band and band_settled(recent, settle)
         outcome: SettleOutcome | None = None
         waited_s = (w.end_ms - self._settle_start) / 1000
         if w.used and limit is None:  # (frames are used once the reference heading is known)
             assert self._ref is not None
             self._record.add(w.start_ms / 1000, w.end_ms / 1000, self._ref + w.mean_ndeg() / NANO)
-        estimate = self._estimate_plan()
         if estimate is None:
             if band:
                 assert self._ref is not None

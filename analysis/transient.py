@@ -23,6 +23,7 @@ transient left in a series whatever criterion started it.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -91,8 +92,10 @@ class Segments:
         return len(self.step_s) + 2 * sum(self.free)
 
 
+@functools.lru_cache(maxsize=8)  # the online settle check asks for the same ones per block
 def _state_maps(model: TransientModel, seg: Segments) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per segment, x_j and v_j as linear forms in theta (carried over the steps)."""
+    """Per segment, x_j and v_j as linear forms in theta (carried over the steps; read-only,
+    shared by the calls with equal arguments)."""
     s = len(seg.step_s)
     maps: list[tuple[np.ndarray, np.ndarray]] = []
     extra = s
@@ -108,6 +111,7 @@ def _state_maps(model: TransientModel, seg: Segments) -> list[tuple[np.ndarray, 
             x[j - 1] += 1.0  # the position y(s_j) = R_(j-1) + x a + v b ...
             x[j] -= 1.0  # ... measured from the new equilibrium R_j
             v = px * da + pv * db
+        x.flags.writeable = v.flags.writeable = False
         maps.append((x, v))
     return maps
 
@@ -199,16 +203,20 @@ class TransientFit:
 
 
 def _weighted_rows(
-    model: TransientModel, seg: Segments, data: Windows
+    model: TransientModel, seg: Segments, data: Windows, rows: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     sw = np.sqrt(data.width_s / np.mean(data.width_s))
-    rows = design(model, seg, data.segment, data.mid_s, data.width_s)
+    if rows is None:
+        rows = design(model, seg, data.segment, data.mid_s, data.width_s)
     return rows * sw[:, None], data.value_deg * sw
 
 
-def fit_transient(model: TransientModel, seg: Segments, data: Windows) -> TransientFit:
-    """Weighted least squares of the window means on the transient model."""
-    rows, y = _weighted_rows(model, seg, data)
+def fit_transient(
+    model: TransientModel, seg: Segments, data: Windows, rows: np.ndarray | None = None
+) -> TransientFit:
+    """Weighted least squares of the window means on the transient model; ``rows``: their
+    `design` if already known (the online check extends it by the new windows)."""
+    rows, y = _weighted_rows(model, seg, data, rows)
     n, p = rows.shape
     if n <= p:
         raise SingularDesignError(f"transient fit needs more than {p} window means, got {n}")

@@ -3,21 +3,20 @@ own `can.Logger` writing .db (SqliteWriter) and .blf for the same frames, frames
 
 The frames are a real campaign stream of the simulated stand (examples/paper.toml). For each
 consumer they are first queued on a python-can `virtual` bus (untimed), then the consumer drains
-that backlog (gyrostand: its own reception thread, `acquisition.bus.Reception`, as a campaign
-does; `can.Logger`: a `can.Notifier`, as python-can users log) and the clock runs until the
-consumer has the last frame. The process is pinned to one CPU. Targets: >= 180 000 frames/s
-(issue 37; twenty times a saturated 1 Mbit/s bus), zero loss, at least twice `can.Logger` -> .blf
-(each the best of `--repeats` runs), and with the station's live view attached (the live file, a
-page watching) at most 10 % less. `--profile`: the top five costs per frame of the path with the
-raw BLF, from cProfile, instead, of the campaign thread and of the reception thread
-(`--protocol`: of that heading source's stream). Then the raw BLF writers alone (ours,
-python-can's) on the same frames, without a bus. Last, the same campaign with its compass
-speaking NMEA 2000 (PGN 127250/127251/127257 decoded by the heading source, `devices`), then read
-by a CiA 406 encoder (TPDO1, heartbeat): frames/s and headings/s of each, taken in turn with
-gyrostand's own heading frame `--repeats` times (the best run of each: the machine is shared),
-and each one's ratio to gyrostand's in wall time and in the process's CPU time (target, issue 31:
-at or above 1.00, none lost; judged on CPU time, which other jobs on the shared core do not
-inflate).
+that backlog (gyrostand: its own reception thread, `acquisition.bus.Reception`, as a campaign does;
+`can.Logger`: a `can.Notifier`, as python-can users log) and the clock runs until the consumer has
+the last frame. The process is pinned to one CPU. Targets: >= 180 000 frames/s (issue 37; twenty
+times a saturated 1 Mbit/s bus), zero loss, at least twice `can.Logger` -> .blf (each the best of
+`--repeats` runs, taken in turn; told in wall and in CPU time), and with the station's live view
+attached (the live file, a page watching) at most 10 % less. `--profile`: the top five costs per
+frame of the path with the raw BLF, from cProfile, instead, of the campaign thread and of the
+reception thread (`--protocol`: of that heading source's stream). Then the raw BLF writers alone
+(ours, python-can's) on the same frames, without a bus. Last, the same campaign with its compass
+speaking NMEA 2000 (PGN 127250/127251/127257 decoded by the heading source, `devices`), then read by
+a CiA 406 encoder (TPDO1, heartbeat): frames/s and headings/s of each, taken in turn with
+gyrostand's own heading frame `--repeats` times (the best run of each: the machine is shared), and
+each one's ratio to gyrostand's in wall time and in the process's CPU time (target, issue 31: at or
+above 1.00, none lost; judged on CPU time, which other jobs on the shared core do not inflate).
 """
 
 from __future__ import annotations
@@ -51,6 +50,7 @@ from gyrostand.stand.protocol import Codec
 
 DRAIN = 50_000  # frames drained (and logged) at a time
 TPDO = 0x185  # the CiA 406 encoder's TPDO1 (node 5, acquisition_stream.ENCODER)
+LOGGER = "can.Logger -> .blf"  # (its runs' key among the heading sources' in `by_protocol`)
 
 
 @dataclass(frozen=True)
@@ -194,13 +194,15 @@ def _headings(frames: list[can.Message]) -> int:
 
 
 def by_protocol(streams: dict[str, list[can.Message]], tmp: Path, repeats: int) -> dict[str, Run]:
-    """`ours` (with the raw BLF) on each heading source's stream, the sources taken in turn
-    `repeats` times so that a spell of load on the shared machine hits them alike: the fastest
-    run of each (wall and CPU time apart), and the most frames any run lost."""
+    """`ours` (with the raw BLF) on each heading source's stream, then `can.Logger` -> .blf on
+    gyrostand's (as LOGGER), all taken in turn `repeats` times so that a spell of load on the
+    shared machine hits them alike: the fastest run of each (wall and CPU time apart), and the
+    most frames any run lost."""
     best: dict[str, Run] = {}
-    for _ in range(repeats):
-        for protocol, frames in streams.items():
-            run = ours(frames, tmp, True, protocol)
+    for i in range(repeats):
+        runs = [(p, ours(frames, tmp, True, p)) for p, frames in streams.items()]
+        runs.append((LOGGER, python_can_logger(streams["gyrostand"], tmp / f"logger-{i}.blf")))
+        for protocol, run in runs:
             if protocol in best:
                 was = best[protocol]
                 run = Run(
@@ -265,11 +267,9 @@ def main() -> None:
             ),
             "gyrostand (decode, check, aggregate, SQLite)": ours(frames, tmp, False),
             "can.Logger -> .db (SqliteWriter)": python_can_logger(frames, tmp / "logger.db"),
-            # the best of as many runs as ours had: the ratio is not one run's luck on a shared core
-            "can.Logger -> .blf (BLFWriter)": min(
-                (python_can_logger(frames, tmp / f"logger-{i}.blf") for i in range(args.repeats)),
-                key=lambda run: run.seconds,
-            ),
+            # the best of as many runs as ours had, in turn with them: the ratio is not one
+            # run's luck (or one spell of load) on a shared core
+            "can.Logger -> .blf (BLFWriter)": best[LOGGER],
         }
         ours_alone, theirs_alone = writers_alone(frames, tmp)
     width = max(map(len, rows))
@@ -299,12 +299,14 @@ def main() -> None:
             f"{_headings(streams[protocol]) / run.seconds:>7,.0f} headings/s  "
             f"{'OK' if cpu_ratio >= 1.0 and not run.lost else 'BELOW'}"
         )
+    wall_ratio = rate / blf_logger
+    cpu_ratio = ours_run.cpu_rate / rows["can.Logger -> .blf (BLFWriter)"].cpu_rate
     print(
         f"target >= 180,000 frames/s: {'OK' if rate >= 180_000 else 'BELOW TARGET'}; "
         f"zero loss: {'OK' if ours_run.lost == 0 else 'FRAMES LOST'}; "
-        f">= 2x can.Logger -> .blf ({rate / blf_logger:.2f}x; in CPU time "
-        f"{ours_run.cpu_rate / rows['can.Logger -> .blf (BLFWriter)'].cpu_rate:.2f}x): "
-        f"{'OK' if rate >= 2 * blf_logger else 'BELOW TARGET'}; "
+        f">= 2x can.Logger -> .blf: wall time {wall_ratio:.2f}x "
+        f"{'OK' if wall_ratio >= 2 else 'BELOW TARGET'}, CPU time {cpu_ratio:.2f}x "
+        f"{'OK' if cpu_ratio >= 2 else 'BELOW TARGET'}; "
         f"live view attached <= 10 % less ({1 - live_rate / rate:.1%} less): "
         f"{'OK' if live_rate >= 0.9 * rate else 'BELOW TARGET'}"
     )

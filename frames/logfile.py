@@ -417,15 +417,20 @@ class BatchBLFWriter(BinaryIOMessageWriter):
             lo = row + 1
         self._pending += objs[lo:].tobytes()
         self.object_count += n
-        if len(self._pending) >= self.max_container_size:
-            while len(self._pending) >= self.max_container_size:
-                self._write_container(self.max_container_size)
+        size = self.max_container_size
+        if len(self._pending) >= size:
+            # containers compressed from a view, the bytes they took dropped once: copying and
+            # shifting the rest for each 128 KiB was 0.05 us a frame at 50 000-frame batches
+            done = 0
+            with memoryview(self._pending) as view:
+                while len(view) - done >= size:
+                    self._write_container(view[done : done + size])
+                    done += size
+            del self._pending[:done]
             self.file.flush()
 
-    def _write_container(self, size: int) -> None:
-        """The first `size` pending bytes as one zlib LOG_CONTAINER (objects may span two)."""
-        chunk = bytes(self._pending[:size])
-        del self._pending[:size]
+    def _write_container(self, chunk: bytes | memoryview) -> None:
+        """`chunk` (pending objects; one may span two containers) as one zlib LOG_CONTAINER."""
         payload = zlib.compress(chunk, self.compression_level)
         self.file.write(_container_object(_ZLIB_DEFLATE, payload, len(chunk)))
         self.uncompressed_size += _OBJ_HEADER_BASE.size + _LOG_CONTAINER.size + len(chunk)
@@ -435,7 +440,7 @@ class BatchBLFWriter(BinaryIOMessageWriter):
         if self.file.closed:
             return
         if self._pending:
-            self._write_container(len(self._pending))
+            self._write_container(bytes(self._pending))
         file_size = self.file.tell()
         self.file.seek(0)
         self.file.write(

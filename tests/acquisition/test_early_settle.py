@@ -21,6 +21,7 @@ import pytest
 from sqlalchemy import select
 
 from gyrostand.acquisition.early_settle import (
+    KEEP_SEGMENTS,
     MIN_BLOCKS,
     EarlySettle,
     SettleCheck,
@@ -33,7 +34,9 @@ from gyrostand.acquisition.early_settle import (
 from gyrostand.acquisition.engine import Engine
 from gyrostand.acquisition.lockstep import Lockstep
 from gyrostand.acquisition.store import CampaignStore
+from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.settle import SettleOutcome
+from gyrostand.analysis.transient import TransientModel, fit_transient
 from gyrostand.db.models import Event, Observation, Series, Trial
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.frames.batch import BatchDecoder, RawFrames
@@ -94,6 +97,50 @@ def test_exact_record_gives_the_settle_point_and_the_first_safe_block() -> None:
     safe = [e for e in WINDOW_S * np.arange(1, 200) if transient_over_windows(e) <= TOL_DEG]
     assert check.t_s == safe[0] > 2000.0  # ~40 minutes: the reading, not the estimate, decides
     assert check.transient_deg == pytest.approx(transient_over_windows(check.t_s), abs=1e-9)
+
+
+def test_the_fit_per_block_extends_the_last_and_equals_a_fit_anew() -> None:
+    """The online fit reuses the last block's windows and design (`TransientRecord.fit`): the
+    same numbers to the bit as fitting the kept segments anew, across steps (one dropped empty,
+    one beyond the KEEP_SEGMENTS kept), a new model between blocks, and noisy means."""
+    rng = np.random.default_rng(3)
+    record, plan_model = TransientRecord(), ESTIMATE.model
+    other = TransientModel(plan_model.undamped_period_s * 1.1, 0.6)
+    steps = {30: "step", 45: "step", 46: "step", 70: "step", 95: "step", 120: "step"}
+    fitted = 0
+    for k in range(1, 150):
+        start, end = (k - 1) * WINDOW_S, k * WINDOW_S
+        if steps.get(k):
+            record.step(start)
+        if k == 46:  # (the step at 45 got no window: dropped, its successor starts free)
+            record.step(start)
+        record.add(start, end, block_mean_deg(start, end) + rng.normal(0, 0.002))
+        for model in (plan_model, other) if k % 7 == 0 else (plan_model,):
+            got = record.fit(model)
+            seg, data = TransientRecord._data(record._segments[-KEEP_SEGMENTS:])
+            try:
+                anew = fit_transient(model, seg, data)
+            except AnalysisError:
+                assert got is None
+                continue
+            assert got is not None and got[1] == len(seg.step_s) - 1
+            assert np.array_equal(got[0].theta, anew.theta)
+            assert np.array_equal(got[0].covariance, anew.covariance)
+            fitted += 1
+    assert fitted > 120
+
+
+def test_the_bound_is_taken_when_asked_for_if_it_could_not_decide() -> None:
+    """A check whose settle point is not yet known (conditions 1-2) does not need the transient
+    bound to decide; `last` still states it (the settle timeout message)."""
+    record, early = exact_rule()
+    for k in range(1, MIN_BLOCKS + 1):  # the first fit: the spread of 3 estimates not known yet
+        feed(record, early, k)
+    returned = early.check(round(MIN_BLOCKS * WINDOW_S * 1000), band=False)
+    assert not returned.stable and not returned.ready
+    fit, j = early.fit
+    mids = MIN_BLOCKS * WINDOW_S + WINDOW_S / 2 + WINDOW_S * np.arange(N_OBS)
+    assert early.last.transient_deg == fit.bound(j, mids, WINDOW_S) > 0
 
 
 def test_compensated_rule_starts_once_the_settle_point_is_known() -> None:

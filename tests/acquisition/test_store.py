@@ -17,7 +17,7 @@ from gyrostand.acquisition.store import CampaignStore, ReRunMismatch
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.cli import app
 from gyrostand.db.lease import CampaignBusy, held_elsewhere
-from gyrostand.db.models import Event, Observation, Trial
+from gyrostand.db.models import Campaign, Event, Observation, Trial
 from gyrostand.db.queries import ResumePoint, campaign_summary, first_incomplete_series
 from gyrostand.db.session import open_database
 from gyrostand.plan.model import parse_plan
@@ -39,7 +39,37 @@ def killed_after_trial_2(url: str) -> CampaignStore:
             if trial == 1:
                 store.series_completed(trial, j)
     store.trial_completed(1, None)
+    store.flush()  # (as the engine's call that wrote it ends)
     return store
+
+
+def test_writes_are_held_until_an_observation_or_flush_and_stored_in_order(db_url: str) -> None:
+    """An observation commits at once, with the writes held back before it; the others wait
+    for it or for `flush`: what is stored is always a prefix of the engine's writes."""
+    sessions = open_database(db_url)
+    store = CampaignStore.create(sessions, parse_plan(plan_text(THREE)))
+
+    def stored() -> tuple[int, list[str], int]:
+        with sessions() as session:
+            writes = session.scalar(select(Campaign.engine_writes))
+            kinds = session.scalars(select(Event.kind).order_by(Event.id)).all()
+            return writes, list(kinds), session.scalar(select(func.count(Observation.id)))
+
+    store.trial_started(1)
+    store.event("command", "info", "stop", 1)
+    assert stored() == (0, [], 0)  # held
+    store.observation(ObservationResult(1, 1, 1, 100.0, 0, 1, 10, 0, ""))
+    assert stored() == (3, ["command"], 1)
+    store.event("frame gap", "warning", "1 frame", 1, 1)
+    store.series_completed(1, 1)
+    assert stored() == (3, ["command"], 1)
+    store.run_event("raw log", "info", "a run's event")  # after the held ones, in order
+    assert stored() == (5, ["command", "frame gap", "raw log"], 1)
+    store.event("command", "info", "start", 1)
+    store.flush()
+    assert stored() == (6, ["command", "frame gap", "raw log", "command"], 1)
+    with sessions() as session:
+        assert session.scalar(select(Trial.status).where(Trial.index == 1)) == "running"
 
 
 class Sent:
@@ -99,6 +129,7 @@ def stopped_in_trial_2(url: str, criterion: str) -> CampaignStore:
             if trial == 1:
                 store.series_completed(trial, j)
     store.trial_completed(1, None)
+    store.flush()  # (as the engine's call that wrote it ends)
     return store
 
 
