@@ -195,7 +195,8 @@ class Sink(Protocol):
     ) -> None: ...
     def flush(self) -> None:
         """Make the writes so far durable (an observation is at once): the engine calls it at
-        the end of each of its calls and before it waits for the operator."""
+        the end of each of its calls, before a command goes out and before it waits for the
+        operator."""
         ...
 
 
@@ -476,6 +477,7 @@ class Engine:
         self._sent = False
         self._phase_start_ms = self.now_ms  # (until it shows up in the stream)
         self.sink.event("command", "info", command.describe(), self._tidx, None, self.now_ms)
+        self.sink.flush()  # write-ahead: a command's event is stored before the stand gets it
         try:
             self.commander.issue(command, self.now_ms)
         except CommandNotSent as exc:
@@ -619,6 +621,7 @@ class Engine:
     def _stop_stand(self) -> None:
         """Best effort on the way out: nothing waits for this ack."""
         self.sink.event("command", "info", "stop", self._tidx, None, self.now_ms)
+        self.sink.flush()
         try:
             self.commander.issue(Command("stop"), self.now_ms)
         except CommandNotSent as exc:

@@ -97,6 +97,21 @@ def test_status_resume_point_and_engine_agree(db_url: str) -> None:
     assert [c.kind for c in sent.commands] == ["stop"]  # trial 3 starts from still, series 1
 
 
+def test_a_commands_event_is_stored_before_the_stand_gets_it(db_url: str) -> None:
+    """Write-ahead: killed just after a command went out, the database still says it was sent."""
+    store = killed_after_trial_2(db_url)
+    seen: list[list[str]] = []
+
+    class Reading:
+        def issue(self, command, now_ms: int) -> None:  # noqa: ANN001
+            with store.sessions() as session:  # another session: only what is committed
+                found = select(Event.message).where(Event.kind == "command")
+                seen.append(list(session.scalars(found).all()))
+
+    Engine(parse_plan(plan_text(THREE)), store, Reading(), store.progress())
+    assert seen == [["stop"]]
+
+
 def test_resume_completes_the_acquired_trial_with_an_event(db_url: str) -> None:
     """(what a resume that restarts the stand does first: `run_live`)"""
     store = killed_after_trial_2(db_url)
