@@ -14,6 +14,7 @@ import os
 from pathlib import Path
 
 from sqlalchemy import Connection, text
+from sqlalchemy.exc import DBAPIError
 from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand.db.url import shown_url
@@ -46,8 +47,15 @@ class Lease:
             os.close(self._fd)  # closing the file drops the flock
             self._fd = None
         if self._connection is not None:
-            # ending the session drops the advisory lock: the DBAPI connection is closed, not
-            # returned to the pool (where its session, and the lock, would live on)
+            # unlocked first: the server drops a closed session's locks only once its backend
+            # has noticed, a moment later, and a taker (or held_elsewhere just after) would
+            # find it still held; then the DBAPI connection is closed, not returned to the pool
+            with contextlib.suppress(DBAPIError):  # a lost connection has dropped the lock
+                self._connection.execute(
+                    text("SELECT pg_advisory_unlock(:a, :b)"),
+                    {"a": _ADVISORY_NAMESPACE, "b": self._key[1]},
+                )
+                self._connection.commit()
             self._connection.invalidate()
             self._connection = None
 
