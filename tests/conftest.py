@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import signal
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -116,6 +117,14 @@ SLOW_FILES = frozenset(
         "validation/test_end_to_end.py",
     }
 )
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Ctrl-C as a user's terminal delivers it: a shell without job control starts a command
+    put in the background (`.ci/run &`) with SIGINT ignored, which its children inherit, and
+    the tests of Ctrl-C would then test nothing."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
