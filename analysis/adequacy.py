@@ -143,13 +143,16 @@ def judge_controls(
     *,
     s_e: float,
     dof_e: int,
+    variance_deg2: np.ndarray | None = None,
 ) -> tuple[ControlResult, ...]:
-    """Predict each control trial and judge its residual."""
+    """Predict each control trial and judge its residual; ``variance_deg2``: the residuals'
+    variances when they are not eq 2.10's (a generalised fit: `analysis.gls.control_variances`)."""
     from scipy import stats
 
     if not indices:
         return ()
     p = predictor.predict(conditions)
+    half_widths = p.half_width_deg if variance_deg2 is None else p.t * np.sqrt(variance_deg2)
     bound = float(stats.t.ppf(1 - predictor.q / 2, dof_e)) * s_e
     results = []
     for i, index in enumerate(indices):
@@ -166,8 +169,8 @@ def judge_controls(
                 residual_over_s_e=residual / s_e,
                 s_e_bound_deg=bound,
                 within_s_e_bound=abs(residual) <= bound,
-                half_width_deg=float(p.half_width_deg[i]),
-                within_interval=abs(residual) <= float(p.half_width_deg[i]),
+                half_width_deg=float(half_widths[i]),
+                within_interval=abs(residual) <= float(half_widths[i]),
             )
         )
     return tuple(results)

@@ -98,6 +98,7 @@ from gyrostand.analysis.forecast import (
 from gyrostand.analysis.gls import (
     Series,
     SharedError,
+    control_variances,
     fit_generalised,
     shared_covariance,
     trial_covariance,
@@ -368,8 +369,15 @@ def analyze_campaign(
     _check_design(model, x, theta0)
     y = [s.delta_deg for s in fit_stats]
     var_mean = [float(s.var_mean_deg2) for s in fit_stats]  # type: ignore[arg-type]
+    control_stats = [s for s in stats if s.role == "control"]
     shared_part = shared_covariance(shared or {}, labels)
     covariance = None if shared_part is None else trial_covariance(var_mean, shared_part)
+    full_covariance = None  # V of the fit trials and the controls, for the controls' intervals
+    control_var_mean = [s.var_mean_deg2 for s in control_stats]
+    if covariance is not None and control_stats and None not in control_var_mean:
+        everyone = shared_covariance(shared or {}, labels + [s.index for s in control_stats])
+        full_covariance = trial_covariance(var_mean + control_var_mean, everyone)  # type: ignore[arg-type, operator]
+        full_covariance[: len(labels), : len(labels)] = covariance  # the fit's own
     options: dict[str, Any] = {
         "jacobian": model.jacobian,
         "bounds": PHYSICAL_BOUNDS,
@@ -407,14 +415,19 @@ def analyze_campaign(
         q=q,
         n_repeat=n_repeat or Counter(s.n_under for s in fit_stats).most_common(1)[0][0],
     )
-    control_stats = [s for s in stats if s.role == "control"]
+    x_control = _conditions(control_stats)
+    control_var = None
+    if full_covariance is not None:
+        x_c = model.jacobian(x_control, **fit.estimates)
+        control_var = control_variances(fit.jacobian, x_c, full_covariance, fit.xtx_inv, fit.s2)
     controls = judge_controls(
         predictor,
-        _conditions(control_stats),
+        x_control,
         np.array([s.delta_deg for s in control_stats]),
         [s.index for s in control_stats],
         s_e=cochran.s_e,
         dof_e=dof_e,
+        variance_deg2=control_var,
     )
     assumptions = (
         normality_check(trials, q),

@@ -127,6 +127,30 @@ def trial_covariance(var_mean: Sequence[float], shared: np.ndarray) -> np.ndarra
     return v
 
 
+def control_variances(
+    x_fit: np.ndarray,
+    x_control: np.ndarray,
+    covariance: np.ndarray,
+    xtx_inv: np.ndarray,
+    s2: float,
+) -> np.ndarray:
+    """Var(<delta_c> - alpha(x_c, theta)) of each control trial c about the generalised fit
+    (deg^2): S^2 [V_cc / v + x_c^T A x_c - 2 x_c^T A X^T W V_fc / v] with W = (V_ff / v)^-1,
+    A = (X^T W X)^-1 (`fit_generalised`), v the mean of diag V_ff; eq 2.10 with the control's
+    own variance for the 1 and its covariance with the fit trials (Goldberger 1962: the shared
+    period and damping error moves a compensated control with the fit trials). ``covariance``
+    is V over the n fit trials then the controls."""
+    n = x_fit.shape[0]
+    v_ff, v_fc = covariance[:n, :n], covariance[:n, n:]
+    v = float(np.mean(np.diag(v_ff)))
+    a = np.asarray(xtx_inv, dtype=float)
+    gain = a @ x_fit.T @ np.linalg.solve(v_ff / v, v_fc / v)  # d theta / d(control's error)
+    own = np.diag(covariance)[n:] / v
+    leverage = np.einsum("ci,ij,cj->c", x_control, a, x_control)
+    cross = np.einsum("ci,ic->c", x_control, gain)
+    return s2 * (own + leverage - 2 * cross)  # eq 2.10 generalised
+
+
 def fit_generalised(
     model: Callable[..., np.ndarray],
     x: Any,

@@ -206,7 +206,9 @@ GENERALISED = (
     "generalised least squares: the compensated trial means share the error of the period and "
     "damping their compensations used (Bezvesilna & Gura), so eqs 1.6 and 1.9-1.10 take "
     "Xᵀ(V/v)⁻¹X for XᵀX and rᵀ(V/v)⁻¹r for rᵀr, V the trial means' covariance, v its mean "
-    "variance (S² stays in deg²; intervals and Fₚ from this S², ν = n − m as before)"
+    "variance (S² stays in deg²; intervals and Fₚ from this S², ν = n − m as before); a "
+    "control trial's prediction variance takes its own variance for eq 2.10's 1, less twice "
+    "its covariance with the estimates through V"
 )
 
 
