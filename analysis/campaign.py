@@ -32,7 +32,9 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
   shared period and damping error, and the fit, rss, s2 and covariance are generalised least
   squares on it: `analysis.gls`);
 - ``adequacy``: s2_r, dof_r, s2_e, dof_e, f_p, f_critical, p_value, adequate, s2_e_mean, f_p_mean,
-  p_value_mean, adequate_mean_basis, q (see `analysis.adequacy`);
+  p_value_mean, adequate_mean_basis, q, dof_e_mean (of s2_e_mean: dof_e, or under a generalised
+  fit its Welch-Satterthwaite dof, null when infinite: V known), f_critical_mean (the decision's
+  F_T) (see `analysis.adequacy`);
 - ``error_agreement``: f_p (S^2_r over S^2_e/N), dof_r, dof_e, p_low (its lower tail), q,
   too_small (the residual variance implausibly small: a warning says so);
 - ``controls``: per control trial index, direction_deg, amplitude_cm, period_s, observed_deg,
@@ -55,6 +57,7 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
   compensation_se_deg, left_deg, standard_error_deg, bound_deg.
 """
 
+import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields, is_dataclass
@@ -68,7 +71,9 @@ from gyrostand.analysis.adequacy import (
     ControlResult,
     ErrorAgreement,
     adequacy_test,
+    dof_text,
     error_agreement,
+    generalised_dof,
     judge_controls,
 )
 from gyrostand.analysis.assumptions import (
@@ -292,6 +297,21 @@ def _fit_trials(stats: tuple[TrialStats, ...]) -> list[TrialStats]:
     return fit
 
 
+def _own_part(s: TrialStats) -> tuple[float, float]:
+    """The part of a trial's variance of the mean estimated from its own observations (S^2 /
+    N_eff of each series whose mean has no variance of its own: not compensated) and its
+    degrees of freedom: eq 2.4 with N_eff for two series, N_eff - 1 for one."""
+    series = [(x, n) for x, n in ((s.before, s.n_eff_before), (s.under, s.n_eff_under)) if x]
+    if not series:  # a trial as printed: its variance is its own, nu by eq 2.4
+        return float(s.var_mean_deg2), float(s.dof)  # type: ignore[arg-type]
+    known = sum(x.var_mean_deg2 for x, _ in series if x.var_mean_deg2 is not None)
+    own = [x.n if n is None else n for x, n in series if x.var_mean_deg2 is None]
+    part = float(s.var_mean_deg2) - known  # type: ignore[arg-type]
+    if len(own) == 2:
+        return part, float(s.dof)  # type: ignore[arg-type]
+    return (part, max(own[0] - 1.0, 1.0)) if own else (0.0, math.inf)
+
+
 def _conditions(stats: Sequence[TrialStats]) -> Conditions:
     return Conditions(
         direction_deg=np.array([s.direction_deg for s in stats]),
@@ -395,6 +415,10 @@ def analyze_campaign(
 
     s2_e = cochran.pooled_variance  # eq 2.6
     dof_e = sum(dofs) // 2  # n (N - 1), as the paper's example (N_eff for N when correlated)
+    dof_e_mean = None  # the independent means: S^2_e / N, nu_e
+    if covariance is not None:
+        parts = [_own_part(s) for s in fit_stats]
+        dof_e_mean = generalised_dof(parts, float(np.trace(covariance)))
     adequacy = adequacy_test(
         fit.s2,  # eq 2.7 = eq 1.9 at the solution
         fit.dof,
@@ -404,6 +428,7 @@ def analyze_campaign(
         q=q,
         homogeneous=cochran.homogeneous,
         generalised=covariance is not None,
+        dof_e_mean=dof_e_mean,
     )
     predictor = Predictor(
         constants=constants,
@@ -496,7 +521,7 @@ def _warnings(
     if adequacy.decision is False:
         found.append(
             f"the model is NOT adequate on the trial means (F_p = {adequacy.f_p_mean:.3g} >= "
-            f"F_T = {adequacy.f_critical:.3g})"
+            f"F_T = {adequacy.f_critical_mean:.3g})"
             + (
                 f"; the paper's single-observation basis would accept it (F_p = {adequacy.f_p:.3g})"
                 if adequacy.adequate
@@ -507,8 +532,9 @@ def _warnings(
         found.append(
             f"the residual variance is implausibly small: S^2_r = {adequacy.s2_r:.3g} is "
             f"{agreement.f_p:.3g} times the error of the trial means S^2_e/N = "
-            f"{adequacy.s2_e_mean:.3g} deg^2 (P(F({agreement.dof_r}, {agreement.dof_e}) <= "
-            f"{agreement.f_p:.3g}) = {agreement.p_low:.2g} < q = {agreement.q:g}): the two "
+            f"{adequacy.s2_e_mean:.3g} deg^2 (P(F({agreement.dof_r}, "
+            f"{dof_text(agreement.dof_e)}) <= {agreement.f_p:.3g}) = {agreement.p_low:.2g} "
+            f"< q = {agreement.q:g}): the two "
             f"estimates of error disagree, and the t({agreement.dof_r}) intervals, which rest "
             "on S^2_r, may be too narrow"
         )

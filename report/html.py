@@ -10,7 +10,7 @@ from importlib.resources import files
 from jinja2 import Environment, FileSystemBytecodeCache, PackageLoader, StrictUndefined
 from markupsafe import Markup, escape
 
-from gyrostand.analysis.adequacy import ADEQUACY_BASIS_TEXT
+from gyrostand.analysis.adequacy import ADEQUACY_BASIS_TEXT, dof_text
 from gyrostand.analysis.forecast import SIGN_CONVENTION
 from gyrostand.report import plots
 from gyrostand.report.build import COURSE_STEP_DEG, Report
@@ -179,6 +179,7 @@ def environment() -> Environment:
         notation=notation,
         file_names=file_names,
         without_comments=without_comments,
+        dof=dof_text,
     )
     return env
 

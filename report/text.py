@@ -7,6 +7,7 @@ written in plain-text notation (nu_e, <delta_i>, S^2, +/-)."""
 import re
 from collections.abc import Sequence
 
+from gyrostand.analysis.adequacy import dof_text
 from gyrostand.analysis.campaign import VARIANCE_BASIS, CampaignAnalysis
 from gyrostand.analysis.forecast import SIGN_CONVENTION
 
@@ -218,8 +219,9 @@ def adequacy_section(a: CampaignAnalysis) -> list[str]:
         "ADEQUACY (eqs 2.7-2.8)",
         f"Sᵣ² = {d.s2_r:.4g} deg² (νᵣ = {d.dof_r}), Sₑ² = {d.s2_e:.4g} deg² "
         f"(νₑ = {d.dof_e}), F_T(1 − {d.q}; {d.dof_r}, {d.dof_e}) = {d.f_critical:.3f}",
-        f"the decision, on the trial means (Sₑ²/N = {d.s2_e_mean:.4g} deg²): Fₚ = "
-        f"{d.f_p_mean:.3f} (p-value {d.p_value_mean:.3g}): "
+        f"the decision, on the trial means (Sₑ²/N = {d.s2_e_mean:.4g} deg², ν = "
+        f"{dof_text(d.dof_e_mean)}): Fₚ = {d.f_p_mean:.3f} against F_T = "
+        f"{d.f_critical_mean:.3f} (p-value {d.p_value_mean:.3g}): "
         + _verdict(d.decision, "adequate", "NOT adequate"),
         f"for comparison, the paper's basis (eq 2.8): Fₚ = {d.f_p:.3f} "
         f"(p-value {d.p_value:.3g}): "

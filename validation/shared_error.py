@@ -35,7 +35,7 @@ from gyrostand.analysis.campaign import analyze_campaign
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.gls import SharedError
 from gyrostand.analysis.gyro_model import PARAMETERS, Conditions, KnownConstants, RollingErrorModel
-from gyrostand.analysis.trials import TrialInput
+from gyrostand.analysis.trials import SeriesSummary, TrialInput
 
 DATA = Path(__file__).resolve().parents[1] / "tests/analysis/data/shared_error_campaign.json"
 C_RANGE, T_RANGE = (3e7, 12e7), (0.4, 1.4)  # as validation/end_to_end.py draws them
@@ -91,12 +91,17 @@ class Structure:
                 index=r["index"],
                 role=r["role"],
                 **{k: r[k] for k in _CONDITIONS},
-                delta_mean_deg=float(a + e),
-                delta_var_deg2=r["var_mean_deg2"] * r["n"],
-                n_obs=r["n"],
+                before=self._series(r, 1, 0.0),
+                under=self._series(r, 2, float(a + e)),
             )
             for r, a, e in zip(self.trials, alpha, errors, strict=True)
         ]
+
+    def _series(self, trial: dict[str, Any], j: int, mean: float) -> SeriesSummary:
+        """Half the trial's variances to each series; a compensated one's mean has its own."""
+        half = trial["var_mean_deg2"] / 2
+        own = half if (trial["index"], j) in self.shared else None
+        return SeriesSummary(mean, half * trial["n"], trial["n"], var_mean_deg2=own)
 
 
 _CONDITIONS = ("direction_deg", "amplitude_cm", "period_s")

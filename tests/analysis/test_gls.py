@@ -4,13 +4,16 @@ and damping error (issue 34, `analysis.gls`)."""
 from __future__ import annotations
 
 import importlib.util
+import math
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from gyrostand.analysis import paper_example as paper
+from gyrostand.analysis.adequacy import generalised_dof
 from gyrostand.analysis.campaign import analyze_campaign
 from gyrostand.analysis.csv_input import read_trials_csv
 from gyrostand.analysis.errors import AnalysisError
@@ -148,7 +151,7 @@ def test_generalised_fit_states_its_spread_where_the_independent_one_does_not() 
         c, t = float(rng.uniform(*h.C_RANGE)), float(rng.uniform(*h.T_RANGE))
         trials = [structure.inputs(c, t, structure.errors(rng))[k] for k in fit]
         x = Conditions(*(np.array([getattr(r, k) for r in trials]) for k in h._CONDITIONS))
-        y = [r.delta_mean_deg for r in trials]
+        y = [r.under.mean_deg - r.before.mean_deg for r in trials]
         for method, result in (
             ("independent", fit_nonlinear(model, x, y, theta0, jacobian=model.jacobian)),
             ("generalised", fit_generalised(model, x, y, theta0, v, jacobian=model.jacobian)),
@@ -213,3 +216,33 @@ def test_a_compensated_campaigns_controls_are_judged_on_their_own_variance() -> 
     )
     widths = np.array([c.half_width_deg for c in a.controls])
     assert len(widths) == 2 and not np.allclose(widths, p.half_width_deg, rtol=0.05)
+
+
+def test_the_generalised_fishers_test_rejects_a_true_model_at_its_level() -> None:
+    """validation/shared_error.py's draws (600 of seed 4; model 1.1 true, V right): Fisher's
+    test on the trial means rejects at q = 5 % within binomial noise. Its denominator v (the
+    mean variance of V) comes from the compensations' fits of the whole record, not from
+    S^2_e's nu_e = 16: against F(2, 16) it rejected 2.6 % of 2000 such draws."""
+    h = harness()
+    structure = h.Structure.load()
+    rng = np.random.default_rng(4)
+    rejected, old_rule, dofs = [], [], set()
+    for _ in range(600):
+        c, t = float(rng.uniform(*h.C_RANGE)), float(rng.uniform(*h.T_RANGE))
+        trials = structure.inputs(c, t, structure.errors(rng))
+        a = analyze_campaign(
+            trials, structure.constants, start=structure.start, shared=structure.shared
+        ).adequacy
+        rejected.append(a.decision is False)
+        old_rule.append(a.f_p_mean >= stats.f.ppf(0.95, a.dof_r, a.dof_e))
+        dofs.add(round(a.dof_e_mean, -3))
+    assert 0.035 <= np.mean(rejected) <= 0.07, np.mean(rejected)
+    assert np.mean(old_rule) < np.mean(rejected) - 0.01, (np.mean(old_rule), np.mean(rejected))
+    assert min(dofs) > 1000, dofs  # trial 1's own S^2 (8 dof) is 2 % of V's trace
+
+
+def test_generalised_dof_by_hand() -> None:
+    """Welch-Satterthwaite over the estimated parts: (sum V_ii)^2 / sum P_i^2 / nu_i."""
+    assert generalised_dof([(1.0, 8.0), (0.0, math.inf)], 4.0) == pytest.approx(16 / (1 / 8))
+    assert generalised_dof([(1.0, 8.0), (2.0, 4.0)], 5.0) == pytest.approx(25 / (1 / 8 + 1))
+    assert math.isinf(generalised_dof([(0.0, math.inf)], 3.0))
