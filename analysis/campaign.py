@@ -57,7 +57,6 @@ or stalling hands the fit to the bounded trust-region path, and the result says 
   compensation_se_deg, left_deg, standard_error_deg, bound_deg.
 """
 
-import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields, is_dataclass
@@ -297,21 +296,6 @@ def _fit_trials(stats: tuple[TrialStats, ...]) -> list[TrialStats]:
     return fit
 
 
-def _own_part(s: TrialStats) -> tuple[float, float]:
-    """The part of a trial's variance of the mean estimated from its own observations (S^2 /
-    N_eff of each series whose mean has no variance of its own: not compensated) and its
-    degrees of freedom: eq 2.4 with N_eff for two series, N_eff - 1 for one."""
-    series = [(x, n) for x, n in ((s.before, s.n_eff_before), (s.under, s.n_eff_under)) if x]
-    if not series:  # a trial as printed: its variance is its own, nu by eq 2.4
-        return float(s.var_mean_deg2), float(s.dof)  # type: ignore[arg-type]
-    known = sum(x.var_mean_deg2 for x, _ in series if x.var_mean_deg2 is not None)
-    own = [x.n if n is None else n for x, n in series if x.var_mean_deg2 is None]
-    part = float(s.var_mean_deg2) - known  # type: ignore[arg-type]
-    if len(own) == 2:
-        return part, float(s.dof)  # type: ignore[arg-type]
-    return (part, max(own[0] - 1.0, 1.0)) if own else (0.0, math.inf)
-
-
 def _conditions(stats: Sequence[TrialStats]) -> Conditions:
     return Conditions(
         direction_deg=np.array([s.direction_deg for s in stats]),
@@ -417,7 +401,7 @@ def analyze_campaign(
     dof_e = sum(dofs) // 2  # n (N - 1), as the paper's example (N_eff for N when correlated)
     dof_e_mean = None  # the independent means: S^2_e / N, nu_e
     if covariance is not None:
-        parts = [_own_part(s) for s in fit_stats]
+        parts = [s.own_variance for s in fit_stats]
         dof_e_mean = generalised_dof(parts, float(np.trace(covariance)))
     adequacy = adequacy_test(
         fit.s2,  # eq 2.7 = eq 1.9 at the solution

@@ -18,6 +18,7 @@ sigma1^2 f1/N1 + sigma2^2 f2/N2 (N_eff = N/f in place of N) and dof = N_eff1 + N
 (rounded down); ``paper_var_mean_deg2`` keeps S1^2/N1 + S2^2/N2 beside it.
 """
 
+import math
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -198,6 +199,37 @@ class TrialStats:
     n_eff_before: float | None = None  # N/f when the observations are correlated, else None
     n_eff_under: float | None = None
     paper_var_mean_deg2: float | None = None  # S1^2/N1 + S2^2/N2 (eq 2.3 / N) when corrected
+
+    @property
+    def own_variance(self) -> tuple[float, float]:
+        """The part of ``var_mean_deg2`` estimated from the trial's own few observations (S^2 /
+        N_eff of each series whose mean has no variance of its own: not compensated) and its
+        degrees of freedom: eq 2.4 with N_eff for two series, N_eff - 1 for one; (0, inf) when
+        both series are compensated (their variances come from fits of the whole record)."""
+        series = [
+            (x, n)
+            for x, n in ((self.before, self.n_eff_before), (self.under, self.n_eff_under))
+            if x
+        ]
+        var_mean = float(self.var_mean_deg2)  # type: ignore[arg-type]
+        if not series:  # a trial as printed: its variance is its own, nu by eq 2.4
+            return var_mean, float(self.dof)  # type: ignore[arg-type]
+        known = sum(x.var_mean_deg2 for x, _ in series if x.var_mean_deg2 is not None)
+        own = [x.n if n is None else n for x, n in series if x.var_mean_deg2 is None]
+        if len(own) == 2:
+            return var_mean - known, float(self.dof)  # type: ignore[arg-type]
+        return (var_mean - known, max(own[0] - 1.0, 1.0)) if own else (0.0, math.inf)
+
+    @property
+    def mean_dof(self) -> float:
+        """Degrees of freedom of ``var_mean_deg2`` (what an interval of <delta_i> takes):
+        Welch-Satterthwaite with the compensated series' parts known, nu (V / P)^2 for the
+        estimated part P with nu dof (`own_variance`); eq 2.4's when no series is compensated,
+        inf when both are."""
+        part, dof = self.own_variance
+        if part <= 0:
+            return math.inf
+        return dof * (float(self.var_mean_deg2) / part) ** 2  # type: ignore[arg-type]
 
 
 def _from_summaries(

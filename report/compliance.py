@@ -45,6 +45,7 @@ from importlib.resources import files
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from gyrostand.analysis.adequacy import dof_text
 from gyrostand.analysis.quantiles import t_quantile
 from gyrostand.report import SHIPPED, SHIPPED_PROFILES
 from gyrostand.report.errors import ReportError
@@ -677,7 +678,8 @@ def _rolling_error_stand(req: Requirement, e: Evidence) -> Finding:
         f"largest |<delta_i>| over trials {', '.join(str(t.index) for t in inside)} "
         f"(trial {worst.index}), one axis rocked per trial{left_out if outside else ''}{how}",
         u[worst.index],
-        f"U = t(0.975, nu = {dof}) sqrt(S^2/N) = {_t975(dof):.3f} \u00d7 {math.sqrt(var):.4f} deg, "
+        f"U = t(0.975, nu = {dof_text(dof)}) sqrt(S^2/N) = {_t975(dof):.3f} \u00d7 "
+        f"{math.sqrt(var):.4f} deg, "
         f"{how_u}",
     )
 
@@ -712,13 +714,17 @@ def _rolling_procedure(e: Evidence) -> Finding:
     )
 
 
-def _mean_variance(trial: Any, analysis: CampaignAnalysis) -> tuple[float, int, str] | None:
+def _mean_variance(trial: Any, analysis: CampaignAnalysis) -> tuple[float, float, str] | None:
     """The variance of a trial's mean difference <delta_i>, its degrees of freedom and where
-    they come from: the trial's own S1^2/N1 + S2^2/N2 with nu of eq 2.4, or, for a trial given
-    without a variance, the pooled S^2_e / N with nu_e (eq 2.6) when Cochran found the
-    variances homogeneous (None otherwise)."""
+    they come from: the trial's own (`TrialStats.mean_dof`: eq 2.4, with a compensated
+    series' part known), or, for a trial given without a variance, the pooled S^2_e / N with
+    nu_e (eq 2.6) when Cochran found the variances homogeneous (None otherwise)."""
     if trial.var_mean_deg2 is not None and trial.dof:
-        return trial.var_mean_deg2, int(trial.dof), "the trial's own variance (nu by eq 2.4)"
+        return (
+            trial.var_mean_deg2,
+            trial.mean_dof,
+            "the trial's own variance (nu by eq 2.4; a compensated series' part known)",
+        )
     if not analysis.cochran.homogeneous:
         return None
     a = analysis.adequacy

@@ -254,7 +254,7 @@ def _analysis(analysis: Any, draw: Draw) -> dict[str, Any]:
             "index": t.index,
             "error_deg": t.delta_deg - float(a),
             "se_deg": math.sqrt(t.var_mean_deg2) if t.var_mean_deg2 is not None else None,
-            "dof": t.dof,
+            "dof": t.mean_dof,  # of var_mean: its interval's (inf: both series compensated)
             "delta_deg": t.delta_deg,  # and the conditions: the fit can be redone from the row
             "conditions": [t.direction_deg, t.amplitude_cm, t.period_s],
         }

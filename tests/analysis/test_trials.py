@@ -1,5 +1,7 @@
 """Trial statistics (eqs 2.1-2.4) in all three input forms, against direct numpy/pandas sums."""
 
+import math
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -13,6 +15,7 @@ from gyrostand.analysis.errors import (
 from gyrostand.analysis.trials import (
     SeriesSummary,
     TrialInput,
+    TrialStats,
     difference_statistics,
     trial_statistics,
 )
@@ -94,3 +97,24 @@ def test_bad_trials_name_the_trial() -> None:
         TrialInput(7, "fitted", 30, 20, 6, delta_mean_deg=0.1)
     with pytest.raises(AnalysisError, match="negative"):
         trial(delta_mean_deg=0.1, delta_var_deg2=-1e-4, n_obs=5)
+
+
+def test_the_dof_of_a_compensated_trials_mean_variance() -> None:
+    """`TrialStats.mean_dof`: eq 2.4 for two plain series; Welch-Satterthwaite with a
+    compensated series' variance known, nu (V / P)^2; infinite with both compensated (their
+    variances come from fits of the whole record, issue 34)."""
+
+    def stats(before_own: float | None, under_own: float | None) -> TrialStats:
+        return trial_statistics(
+            trial(
+                before=SeriesSummary(0.0, 0.0005, 5, var_mean_deg2=before_own),
+                under=SeriesSummary(0.1, 0.0005, 5, var_mean_deg2=under_own),
+            )
+        )
+
+    plain = stats(None, None)
+    assert plain.mean_dof == plain.dof == 8
+    one = stats(None, 0.0003)  # S^2/N = 0.0001 estimated with 4 dof, 0.0003 known
+    assert one.own_variance == pytest.approx((0.0001, 4.0))
+    assert one.mean_dof == pytest.approx(4.0 * (0.0004 / 0.0001) ** 2)
+    assert math.isinf(stats(0.0002, 0.0003).mean_dof)
