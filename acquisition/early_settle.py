@@ -59,6 +59,7 @@ from gyrostand.analysis.transient import (
     TransientFit,
     TransientModel,
     Windows,
+    compensated_covariances,
     compensated_mean_se,
     contradicts,
     design,
@@ -207,6 +208,21 @@ class TransientRecord:
         seg, data = self._data(self._segments)
         j = len(seg.step_s) - 1
         return compensated_mean_se(fit, data, j, t_s, width_s, correlation_time_s)
+
+    def earlier_covariances(
+        self,
+        fit: TransientFit,
+        t_s: np.ndarray,
+        width_s: np.ndarray,
+        n_obs: int,
+        correlation_time_s: float | None = None,
+    ) -> tuple[float, ...]:
+        """Cov of the current series' compensated mean (`compensation_se`) with the mean of the
+        last ``n_obs`` windows of each series before it, the latest first
+        (`compensated_covariances`)."""
+        seg, data = self._data(self._segments)
+        j = len(seg.step_s) - 1
+        return compensated_covariances(fit, data, j, t_s, width_s, n_obs, correlation_time_s)
 
     def sensitivity(
         self, model: TransientModel, t_s: np.ndarray, width_s: np.ndarray

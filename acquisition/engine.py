@@ -1527,6 +1527,7 @@ class Engine:
         values, _ = fit.transient(j, t_s, width_s)
         first_k = self.plan.n_obs - len(self._windows) + 1
         d_period, d_ratio, previous = self._record.sensitivity(fit.model, t_s, width_s)
+        tau_k = self.plan.observation.correlation_time_s  # the reading's (None: not stated)
         assert fit.pd_covariance is not None
         shared = SharedError(
             (-d_period, -d_ratio),  # the compensated mean is the observations' less the transient
@@ -1534,9 +1535,9 @@ class Engine:
             round(self._record.start_s * 1000),
             self.now_ms,
             previous,
+            self._record.earlier_covariances(fit, t_s, width_s, self.plan.n_obs, tau_k),
         )
         values_deg = tuple(float(v) for v in values)
-        tau_k = self.plan.observation.correlation_time_s  # the reading's (None: not stated)
         se = self._record.compensation_se(fit, t_s, width_s, tau_k)  # of the compensated mean
         return SeriesCompensation(first_k, values_deg, se, shared)
 

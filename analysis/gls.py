@@ -50,6 +50,8 @@ class SharedError:
     record_ms: int
     at_ms: int
     previous_deg2: float = 0.0  # Cov(its settle point, the previous series') at fixed (P, ratio)
+    # Cov(its compensated mean, the plain mean of the series 1, 2, ... before it in its record)
+    earlier_deg2: tuple[float, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -58,6 +60,7 @@ class SharedError:
             "record_ms": self.record_ms,
             "at_ms": self.at_ms,
             "previous_deg2": self.previous_deg2,
+            "earlier_deg2": list(self.earlier_deg2),
         }
 
     @classmethod
@@ -67,7 +70,8 @@ class SharedError:
         if len(g) != 2 or len(cov) != 2 or any(len(row) != 2 for row in cov):
             raise AnalysisError(f"a shared error needs 2 sensitivities, a 2x2 covariance: {data}")
         previous = float(data.get("previous_deg2", 0.0))
-        return cls(g, cov, int(data["record_ms"]), int(data["at_ms"]), previous)  # type: ignore[arg-type]
+        earlier = tuple(float(v) for v in data.get("earlier_deg2", ()))
+        return cls(g, cov, int(data["record_ms"]), int(data["at_ms"]), previous, earlier)  # type: ignore[arg-type]
 
 
 def shared_covariance(
@@ -96,7 +100,27 @@ def shared_covariance(
             a = keys.index(before)
             carried[a, b] = carried[b, a] = errors[b].previous_deg2
     covariance = shared_g @ pd_covariance(errors) @ shared_g.T + signs @ carried @ signs.T
-    return covariance - np.diag(signs**2 @ own)
+    return covariance - np.diag(signs**2 @ own) + _with_uncompensated(shared, trials)
+
+
+def _with_uncompensated(shared: Mapping[Series, SharedError], trials: Sequence[int]) -> np.ndarray:
+    """Cov of the trial means through each compensated series' covariance with the plain means
+    of the uncompensated series before it in its record (``earlier_deg2``; one record segment a
+    series, trials run in index order): both are linear in that record's readings."""
+    out = np.zeros((len(trials), len(trials)))
+    for a, i in enumerate(trials):
+        for b, k in enumerate(trials):
+            for j in (1, 2):
+                for m in (1, 2):
+                    if (i, j) not in shared or (k, m) in shared or (k, m) >= (i, j):
+                        continue
+                    back = 2 * (i - k) + j - m - 1  # series between them, controls too
+                    earlier = shared[i, j].earlier_deg2
+                    if back < len(earlier):
+                        sign = (1.0 if j == 2 else -1.0) * (1.0 if m == 2 else -1.0)
+                        out[a, b] += sign * earlier[back]
+                        out[b, a] += sign * earlier[back]
+    return out
 
 
 def pd_covariance(errors: Sequence[SharedError]) -> np.ndarray:

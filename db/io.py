@@ -56,7 +56,7 @@ OBS_FIELDS = (
 )
 # per series, repeated on each of its observation rows
 SERIES_FIELDS = ("compensation_se_deg", "compensation_shared")
-SHARED_KEYS = {"sensitivity", "covariance", "record_ms", "at_ms", "previous_deg2"}
+SHARED_KEYS = {"sensitivity", "covariance", "record_ms", "at_ms", "previous_deg2", "earlier_deg2"}
 OBSERVATION_EXTRAS = OBS_FIELDS[2:] + SERIES_FIELDS  # optional columns of the observations form
 MAX_REPORTED = 10
 
@@ -186,9 +186,10 @@ def shared_error_json(value: Any) -> str:
     """A compensated series' share in the shared period and damping error, as canonical JSON
     text: the layout of `analysis.gls.SharedError.to_dict` (db imports no analysis; a test
     checks the two agree): two sensitivities, a 2x2 covariance, record_ms, at_ms and
-    previous_deg2, every number finite."""
+    previous_deg2, earlier_deg2 (a list; absent in files exported before it: empty), every
+    number finite."""
     data = json.loads(str(value))
-    if not isinstance(data, dict) or set(data) != SHARED_KEYS:
+    if not isinstance(data, dict) or set(data) | {"earlier_deg2"} != SHARED_KEYS:
         raise ValueError
     g, cov = data["sensitivity"], data["covariance"]
     if len(g) != 2 or len(cov) != 2 or any(len(row) != 2 for row in cov):
@@ -199,6 +200,7 @@ def shared_error_json(value: Any) -> str:
         "record_ms": _to_int(data["record_ms"]),
         "at_ms": _to_int(data["at_ms"]),
         "previous_deg2": _to_float(data["previous_deg2"]),
+        "earlier_deg2": [_to_float(v) for v in data.get("earlier_deg2", [])],
     }
     return json.dumps(shared, sort_keys=True)
 
@@ -249,7 +251,8 @@ FIELDS: dict[str, Field] = {
     "compensation_se_deg": Field(_to_float, NUMBER, lambda v: v >= 0, ">= 0", optional=True),
     "compensation_shared": Field(
         shared_error_json,
-        "a shared error (JSON: sensitivity, covariance, record_ms, at_ms, previous_deg2)",
+        "a shared error (JSON: sensitivity, covariance, record_ms, at_ms, previous_deg2, "
+        "earlier_deg2)",
         _shared_ok,
         "its variances and times >= 0",
         optional=True,
