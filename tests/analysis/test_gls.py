@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib.util
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +61,25 @@ def test_shared_covariance_by_hand() -> None:
     expected[1, 1] = -2 * q(s22, s21, s22) - 2 * c22  # var(m22 - m21) less both own parts
     np.testing.assert_allclose(cov, expected, rtol=1e-12, atol=1e-17)
     assert shared_covariance({}, [1, 2]) is None
+
+
+def test_uncompensated_series_covary_with_the_later_compensations() -> None:
+    """Issue 34: trial 1 is never compensated, but each compensation stores its covariance with
+    the plain means of the series before it in its record (earlier_deg2, the latest first).
+    Trials 1 and 3 fitted, control 2 between them (its series are in the record too):
+    <delta_1> = m12 - m11, <delta_3> = m32 - m31, so Cov = C(m32, m12) - C(m32, m11) -
+    C(m31, m12) + C(m31, m11); (3, 2)'s first entry is (3, 1), compensated: not used."""
+    zero = (0.0, 0.0)
+    s31 = replace(shared(zero, (1.0, 1.0), 5), earlier_deg2=(9.0, 9.0, 2e-6, 3e-6))
+    s32 = replace(shared(zero, (1.0, 1.0), 6), earlier_deg2=(7.0, 9.0, 9.0, 5e-6, 7e-6))
+    cov = shared_covariance({(3, 1): s31, (3, 2): s32}, [1, 3])
+    assert cov is not None
+    expected = 5e-6 - 7e-6 - 2e-6 + 3e-6
+    np.testing.assert_allclose(cov, [[0.0, expected], [expected, 0.0]], rtol=1e-12, atol=1e-20)
+    # a record that begins after trial 1 (a second run): its entries stop before it
+    s31 = replace(s31, earlier_deg2=(9.0, 9.0))
+    s32 = replace(s32, earlier_deg2=(7.0, 9.0, 9.0))
+    assert not np.any(shared_covariance({(3, 1): s31, (3, 2): s32}, [1, 3]))
 
 
 def test_independent_means_are_the_papers_fit_to_every_digit() -> None:
