@@ -15,7 +15,10 @@ compensation's SE^2, `analysis.transient.compensated_mean_se`, from the joint co
 includes the period and damping's), plus the covariance of
 adjacent series' settle points at fixed period and damping (the state carried over a step
 couples them: correlation about -0.5, so neighbouring trial means covary by about +0.35),
-stored as the later one's ``previous_deg2`` (the later fit's, by the same nesting argument).
+stored as the later one's ``previous_deg2`` (the later fit's, by the same nesting argument),
+plus each compensated mean's covariance with the plain means of the uncompensated series before
+it in its record (trial 1's: its windows fix every compensation's period, damping and carried
+state), stored as ``earlier_deg2`` (`analysis.transient.compensated_covariances`).
 Model 1.1 is fitted by Gauss-Newton on the whitened problem: V / v = L L^T (v the mean of
 diag V, so the residual variance stays in deg^2 as the paper's S^2), L^-1 y against L^-1 f,
 L^-1 X (Aitken 1935).
