@@ -604,6 +604,7 @@ class Engine:
             j = self._j if self.phase in (Phase.SETTLE, Phase.OBSERVE) else None
             self.sink.event(kind, "error", reason, self._tidx, j, self.now_ms)
             self.sink.trial_failed(self._trial.index, j, reason)
+            self._record.forget(self._trial.index)  # a retry is another attempt, another run
             self._stopped = False
             self._trial = None
             if last or self.plan.on_trial_failure == "pause":
@@ -1472,7 +1473,10 @@ class Engine:
             self._window = _Window(start, start + (w.end_ms - w.start_ms))
             return
         motion = self._series_motion(trial) if self._j == 2 else ()
-        self.sink.series_completed(trial.index, self._j, self._compensation(), motion)
+        compensation = self._compensation()
+        if compensation is None and self._windows:  # its mean covaries with later ones
+            self._record.observed((trial.index, self._j), np.array(self._windows) / 1000)
+        self.sink.series_completed(trial.index, self._j, compensation, motion)
         applied = preferred(motion)
         problem = self._motion.tracking_problem(trial, applied)
         if problem is not None:

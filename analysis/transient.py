@@ -302,21 +302,26 @@ def compensated_covariances(
     j: int,
     t_s: np.ndarray,
     width_s: np.ndarray,
+    means_mid_s: Sequence[np.ndarray],
     n_obs: int,
     correlation_time_s: float | None = None,
 ) -> tuple[float, ...]:
-    """Cov (deg^2) of the compensated mean of `compensated_mean_se` with the plain mean of the
-    last ``n_obs`` windows (a series' observations) of each earlier segment j - 1, j - 2, ...,
-    0 of ``data``: both are linear in the record's window means, c^T y_w and b^T y_w, so Cov =
-    sigma^2 c^T K b (issue 34: an uncompensated series' windows are in the record that fixes
-    every later compensation's period, damping and carried state)."""
+    """Cov (deg^2) of the compensated mean of `compensated_mean_se` with each plain mean of
+    ``n_obs`` observations whose windows in ``data`` have the middles ``means_mid_s`` (the
+    others not in this record: independent of it): both are linear in the record's window
+    means, c^T y_w and b^T y_w, so Cov = sigma^2 c^T K b (issue 34: an uncompensated series'
+    windows are in the record that fixes every later compensation's period, damping and
+    carried state)."""
     c, k, sigma2 = _compensation_form(fit, data, j, t_s, width_s, correlation_time_s)
     sw = np.sqrt(data.width_s / np.mean(data.width_s))
     out = []
-    for earlier in range(j - 1, -1, -1):
-        where = np.flatnonzero(data.segment == earlier)[-n_obs:]
+    for mids in means_mid_s:
+        match = np.abs(data.mid_s[None, :] - np.asarray(mids, dtype=float)[:, None]) < 1e-6
+        if not np.all(match.sum(axis=1) == 1):
+            raise ValueError("the windows of an earlier mean are not all in the record")
+        where = np.flatnonzero(match.any(axis=0))
         b = np.zeros(data.segment.size)
-        b[where] = 1.0 / (where.size * sw[where])  # the plain mean of the unweighted values
+        b[where] = 1.0 / (n_obs * sw[where])  # the plain mean of the unweighted values
         out.append(sigma2 * float(c @ k @ b))
     return tuple(out)
 

@@ -215,6 +215,7 @@ def one_draw(st: Structure, rng: np.random.Generator, f: dict) -> dict[tuple[int
         if s.compensated:
             c = compensate(record, st.model, s, v)
         else:
+            record.observed((s.trial, s.j), s.windows[s.observed])  # as the engine labels it
             c = {"values": v[s.observed], "settle_se": None, "se": None, "shared": None}
         c |= {"err": float(c["values"].mean() - st.theta[s.segment]), "f": f[s.trial, s.j]}
         out[s.trial, s.j] = c
@@ -361,13 +362,13 @@ def earlier(st: Structure, ds: list[dict], rng: np.random.Generator) -> None:
         if not s.compensated:
             continue
         e_s = np.array([x[s.trial, s.j]["err"] for x in ds])
-        stored = np.array([x[s.trial, s.j]["shared"].earlier_deg2 for x in ds])
+        stored = [dict(x[s.trial, s.j]["shared"].earlier_deg2) for x in ds]
         parts = []
         for u in st.series:
             if u.compensated or u.segment >= s.segment:
                 continue
             e_u = np.array([x[u.trial, u.j]["err"] for x in ds])
-            pred = float(stored[:, s.segment - u.segment - 1].mean()) / (e_s.std() * e_u.std())
+            pred = float(np.mean([x[u.trial, u.j] for x in stored])) / (e_s.std() * e_u.std())
             boot = []
             for _ in range(BOOTSTRAP // 5):
                 k = rng.integers(0, e_s.size, e_s.size)

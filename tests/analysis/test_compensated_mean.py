@@ -45,6 +45,9 @@ THETA = np.array([0.0, 0.3, 0.5, -0.2])  # R_0, R_1 (deg), x_0, v_0 of the first
 CLEAN = design(MODEL, SEGMENTS, SEGMENT, MIDS, WIDTH_S) @ THETA
 
 
+FIRST = MIDS[np.flatnonzero(SEGMENT == 0)[-N:]]  # the first series' "observations": its last N
+
+
 def _record(rng: np.random.Generator) -> Windows:
     noisy = CLEAN + NOISE_DEG * rng.standard_normal(MIDS.size)
     return Windows(SEGMENT, MIDS, np.full(MIDS.size, WIDTH_S), noisy)
@@ -169,10 +172,28 @@ def test_the_compensation_covaries_with_the_series_before_it_as_predicted() -> N
         )
         fit = fitter(data)
         for tau_k, k in ((None, np.eye(MIDS.size)), (20.0, correlated)):
-            (cov,) = compensated_covariances(fit, data, 1, OBS, WIDTH_S, N, tau_k)
+            (cov,) = compensated_covariances(fit, data, 1, OBS, WIDTH_S, [FIRST], N, tau_k)
             var = compensated_mean_se(fit, data, 1, OBS, WIDTH_S, tau_k) ** 2
             expected = float(d @ k @ b) / float(d @ k @ d)
             assert cov / var == pytest.approx(expected, rel=rel)
-    (cov,) = compensated_covariances(fit, data, 1, OBS, WIDTH_S, N)  # the free fit, white
+    (cov,) = compensated_covariances(fit, data, 1, OBS, WIDTH_S, [FIRST], N)  # free fit, white
     se = compensated_mean_se(fit, data, 1, OBS, WIDTH_S)
     assert cov / (se * NOISE_DEG / math.sqrt(N)) > 0.1  # correlation 0.14: not negligible
+
+
+def test_a_series_partly_in_the_record_covaries_through_its_windows_there() -> None:
+    """A series resumed after a restart has only its last observations in the record that
+    compensates a later one: its mean over all N covaries with the compensation through those
+    alone, 1/N each (the others are in another run's record: independent). The named windows,
+    not the segment's last N, whatever else the segment holds; a window not in the record is
+    refused rather than silently dropped."""
+    data = _record(np.random.default_rng(7))
+    fit = fit_transient_free(MODEL, SEGMENTS, data)
+    one = compensated_covariances(fit, data, 1, OBS, WIDTH_S, [[m] for m in FIRST], 1, 20.0)
+    both = compensated_covariances(fit, data, 1, OBS, WIDTH_S, [FIRST, FIRST[2:]], N, 20.0)
+    assert both == pytest.approx((sum(one) / N, sum(one[2:]) / N), rel=1e-12)
+    early = MIDS[:N]  # the segment's first windows: another covariance (the transient's start)
+    (other,) = compensated_covariances(fit, data, 1, OBS, WIDTH_S, [early], N, 20.0)
+    assert abs(other - both[0]) > 0.1 * abs(both[0])
+    with pytest.raises(ValueError, match="not all in the record"):
+        compensated_covariances(fit, data, 1, OBS, WIDTH_S, [FIRST + 1.0], N, 20.0)

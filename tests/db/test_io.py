@@ -440,7 +440,10 @@ SHARED = {
     "record_ms": 7_200_000,
     "at_ms": 3_600_000,
     "previous_deg2": -2e-6,
-    "earlier_deg2": [3e-7, -1e-7, 2e-8],
+    "earlier_deg2": [
+        {"deg2": 3e-7, "j": 1, "trial": 1},  # Cov with the plain means of the series it names
+        {"deg2": -1e-7, "j": 2, "trial": 1},
+    ],
 }
 
 
@@ -541,6 +544,18 @@ def test_the_import_reads_the_shared_error_the_analysis_writes() -> None:
             "variances and times >= 0",
         ),
         (json.dumps({**SHARED, "at_ms": "soon"}), "is not a shared error"),
+        # earlier_deg2 names each series (a bare list of numbers said nothing of which)
+        (json.dumps({**SHARED, "earlier_deg2": [3e-7, -1e-7]}), "is not a shared error"),
+        (json.dumps({**SHARED, "earlier_deg2": 3e-7}), "is not a shared error"),
+        (
+            json.dumps({**SHARED, "earlier_deg2": [{"trial": 1, "j": 3, "deg2": 0.0}]}),
+            "is not a shared error",
+        ),
+        (
+            json.dumps({**SHARED, "earlier_deg2": [{"trial": 1, "j": 1, "deg2": "NaN"}]}),
+            "is not a shared error",
+        ),
+        (json.dumps({**SHARED, "earlier_deg2": [{"trial": 1, "j": 1}]}), "is not a shared error"),
     ],
 )
 def test_a_malformed_shared_error_is_refused(tmp_path: Path, shared: str, problem: str) -> None:
