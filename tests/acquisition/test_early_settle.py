@@ -247,9 +247,14 @@ drift_deg = 0.006
 BAND_SETTLE = "[settle]\ndrift_deg = 0.006\n"
 
 
-def scaled_plan(settle: str, database: str = "runs/test.sqlite") -> str:
-    """Two trials (steps of +0.41 and -0.47 deg), band 0.03 deg held 420 s (1800 s scaled)."""
-    text = plan_text(n_obs=4, hold_s=420.0, database=database)
+def scaled_plan(
+    settle: str,
+    database: str = "runs/test.sqlite",
+    trials: list[tuple[float, float, float, str]] | None = None,
+) -> str:
+    """Two trials (steps of +0.41 and -0.47 deg) unless told, band 0.03 deg held 420 s (1800 s
+    scaled)."""
+    text = plan_text(trials, n_obs=4, hold_s=420.0, database=database)
     return text.replace("band_deg = 0.05", "band_deg = 0.03").replace("[settle]\n", settle)
 
 
@@ -389,6 +394,32 @@ def test_a_compensation_names_the_uncompensated_series_it_covaries_with(compensa
         earlier = done[key].shared.earlier_deg2
         assert [name for name, _ in earlier] == [(1, 1), (1, 2)]
         assert all(value != 0.0 for _, value in earlier)
+
+
+def test_a_control_trial_between_fit_trials_is_named_and_left_out_of_v(tmp_path: Path) -> None:
+    """Fit, control, fit as stored: trial 3's compensations name trial 1's series (the control's
+    are compensated themselves), and V's term between trials 1 and 3 is the named covariances
+    with the trial means' signs, by hand: <delta> = m2 - m1, so +C(m32, m12) - C(m32, m11)
+    - C(m31, m12) + C(m31, m11); nothing else of V moves."""
+    path = tmp_path / "control.sqlite"
+    trials = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "control"), (135.0, 22.0, 5.5, "fit")]
+    sessions = open_database(sqlite_url(path))
+    plan = parse_plan(scaled_plan(COMPENSATED_SETTLE, str(path), trials))
+    store = CampaignStore.create(sessions, plan)
+    sim = Lockstep(scaled_config())
+    engine = Engine(plan, store, sim, store.progress())
+    sim.run(engine)
+    with sessions() as session:
+        shared = stored_inputs(load_campaign(session, store.campaign_id)).shared
+    assert shared.keys() == {(2, 1), (2, 2), (3, 1), (3, 2)}
+    named = {key: dict(e.earlier_deg2) for key, e in shared.items()}
+    assert all(list(n) == [(1, 1), (1, 2)] for n in named.values())
+    sign = {1: -1.0, 2: 1.0}
+    by_hand = sum(sign[j] * sign[m] * named[3, j][1, m] for j in (1, 2) for m in (1, 2))
+    bare = {key: dataclasses.replace(e, earlier_deg2=()) for key, e in shared.items()}
+    term = shared_covariance(shared, [1, 3]) - shared_covariance(bare, [1, 3])
+    np.testing.assert_allclose(term, [[0.0, by_hand], [by_hand, 0.0]], rtol=1e-12, atol=0.0)
+    assert by_hand != 0.0
 
 
 def _silent_in(sink: Recorder, trial: int, j: int, k: int) -> SimConfig:
