@@ -59,6 +59,7 @@ from gyrostand.analysis.transient import (
     TransientFit,
     TransientModel,
     Windows,
+    compensated_covariances,
     compensated_mean_se,
     contradicts,
     design,
@@ -104,9 +105,10 @@ class _Segment:
 
 class TransientRecord:
     """Window means (stand seconds, headings) and the steps of the equilibrium since the engine
-    started; the last KEEP_SEGMENTS segments are fitted on every block (so the work per block
-    stays bounded over a campaign), the whole record once per series to identify the period
-    and damping (`identify`)."""
+    started, and which are the observations of each uncompensated series (`observed`); the
+    last KEEP_SEGMENTS segments are fitted on every block (so the work per block stays bounded
+    over a campaign), the whole record once per series to identify the period and damping
+    (`identify`)."""
 
     def __init__(self) -> None:
         self._segments: list[_Segment] = []
@@ -116,6 +118,8 @@ class TransientRecord:
         # fit of ~500 windows; bench_ingest, issue 37)
         self._kept: tuple[Segments, Windows] | None = None
         self._design: tuple[TransientModel, Segments, np.ndarray] | None = None
+        # the uncompensated series' observation windows (middles, s): `observed`
+        self._observed: dict[tuple[int, int], np.ndarray] = {}
 
     @property
     def chained(self) -> bool:
@@ -207,6 +211,37 @@ class TransientRecord:
         seg, data = self._data(self._segments)
         j = len(seg.step_s) - 1
         return compensated_mean_se(fit, data, j, t_s, width_s, correlation_time_s)
+
+    def observed(self, series: tuple[int, int], windows_s: np.ndarray) -> None:
+        """Series (trial index, j) ended uncompensated; ``windows_s`` (n, 2): the [start, end)
+        stand seconds of its observation windows in this record (a series resumed after a
+        restart has the others in another run's: independent of this one). Every later
+        compensation stores its covariance with the series' plain mean
+        (`earlier_covariances`)."""
+        self._observed[series] = np.asarray(windows_s, dtype=float).mean(axis=1)
+
+    def forget(self, trial: int) -> None:
+        """Trial ``trial`` failed: what its series observed here is not what the analysis
+        will use (nothing, or a retry's attempt, acquired in a later run)."""
+        self._observed = {key: mids for key, mids in self._observed.items() if key[0] != trial}
+
+    def earlier_covariances(
+        self,
+        fit: TransientFit,
+        t_s: np.ndarray,
+        width_s: np.ndarray,
+        n_obs: int,
+        correlation_time_s: float | None = None,
+    ) -> tuple[tuple[tuple[int, int], float], ...]:
+        """Cov of the current series' compensated mean (`compensation_se`) with the plain mean
+        (of ``n_obs`` observations) of each uncompensated series in this record (`observed`),
+        named (trial index, j), in the order they ended (`compensated_covariances`)."""
+        seg, data = self._data(self._segments)
+        j = len(seg.step_s) - 1
+        keys = list(self._observed)
+        mids = [self._observed[key] for key in keys]
+        cov = compensated_covariances(fit, data, j, t_s, width_s, mids, n_obs, correlation_time_s)
+        return tuple(zip(keys, cov, strict=True))
 
     def sensitivity(
         self, model: TransientModel, t_s: np.ndarray, width_s: np.ndarray

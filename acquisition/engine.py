@@ -604,6 +604,7 @@ class Engine:
             j = self._j if self.phase in (Phase.SETTLE, Phase.OBSERVE) else None
             self.sink.event(kind, "error", reason, self._tidx, j, self.now_ms)
             self.sink.trial_failed(self._trial.index, j, reason)
+            self._record.forget(self._trial.index)  # a retry is another attempt, another run
             self._stopped = False
             self._trial = None
             if last or self.plan.on_trial_failure == "pause":
@@ -1472,7 +1473,10 @@ class Engine:
             self._window = _Window(start, start + (w.end_ms - w.start_ms))
             return
         motion = self._series_motion(trial) if self._j == 2 else ()
-        self.sink.series_completed(trial.index, self._j, self._compensation(), motion)
+        compensation = self._compensation()
+        if compensation is None and self._windows:  # its mean covaries with later ones
+            self._record.observed((trial.index, self._j), np.array(self._windows) / 1000)
+        self.sink.series_completed(trial.index, self._j, compensation, motion)
         applied = preferred(motion)
         problem = self._motion.tracking_problem(trial, applied)
         if problem is not None:
@@ -1527,6 +1531,7 @@ class Engine:
         values, _ = fit.transient(j, t_s, width_s)
         first_k = self.plan.n_obs - len(self._windows) + 1
         d_period, d_ratio, previous = self._record.sensitivity(fit.model, t_s, width_s)
+        tau_k = self.plan.observation.correlation_time_s  # the reading's (None: not stated)
         assert fit.pd_covariance is not None
         shared = SharedError(
             (-d_period, -d_ratio),  # the compensated mean is the observations' less the transient
@@ -1534,9 +1539,9 @@ class Engine:
             round(self._record.start_s * 1000),
             self.now_ms,
             previous,
+            self._record.earlier_covariances(fit, t_s, width_s, self.plan.n_obs, tau_k),
         )
         values_deg = tuple(float(v) for v in values)
-        tau_k = self.plan.observation.correlation_time_s  # the reading's (None: not stated)
         se = self._record.compensation_se(fit, t_s, width_s, tau_k)  # of the compensated mean
         return SeriesCompensation(first_k, values_deg, se, shared)
 

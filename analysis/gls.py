@@ -15,7 +15,11 @@ compensation's SE^2, `analysis.transient.compensated_mean_se`, from the joint co
 includes the period and damping's), plus the covariance of
 adjacent series' settle points at fixed period and damping (the state carried over a step
 couples them: correlation about -0.5, so neighbouring trial means covary by about +0.35),
-stored as the later one's ``previous_deg2`` (the later fit's, by the same nesting argument).
+stored as the later one's ``previous_deg2`` (the later fit's, by the same nesting argument),
+plus each compensated mean's covariance with the plain means of the uncompensated series before
+it in its record (trial 1's: its windows fix every compensation's period, damping and carried
+state), stored as ``earlier_deg2``, each naming its series (`analysis.transient.
+compensated_covariances`).
 Model 1.1 is fitted by Gauss-Newton on the whitened problem: V / v = L L^T (v the mean of
 diag V, so the residual variance stays in deg^2 as the paper's S^2), L^-1 y against L^-1 f,
 L^-1 X (Aitken 1935).
@@ -43,13 +47,19 @@ class SharedError:
     """A compensated series' share in the period and damping error: ``sensitivity`` =
     d(compensated mean) / d(period s, damping ratio) in deg/s and deg, ``covariance`` of
     (period, ratio) the compensation's fit gave, ``record_ms`` the stand ms of its record's
-    first window (one run of the acquisition), ``at_ms`` when it was computed (series end)."""
+    first window (one run of the acquisition), ``at_ms`` when it was computed (series end).
+    ``earlier_deg2``: its covariance with the plain mean of each uncompensated series whose
+    observation windows are in the same record, named by that series' (trial index, j); JSON
+    [{"trial": k, "j": m, "deg2": v}, ...] (absent before issue 34's fix: none). Only the
+    series of the trial attempts acquired in that run are named (a failed trial's are not: a
+    retry's attempt is acquired in another run)."""
 
     sensitivity: tuple[float, float]
     covariance: tuple[tuple[float, float], tuple[float, float]]
     record_ms: int
     at_ms: int
     previous_deg2: float = 0.0  # Cov(its settle point, the previous series') at fixed (P, ratio)
+    earlier_deg2: tuple[tuple[Series, float], ...] = ()  # ((trial, j), Cov(its mean, theirs))
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -58,6 +68,7 @@ class SharedError:
             "record_ms": self.record_ms,
             "at_ms": self.at_ms,
             "previous_deg2": self.previous_deg2,
+            "earlier_deg2": [{"trial": k, "j": m, "deg2": v} for (k, m), v in self.earlier_deg2],
         }
 
     @classmethod
@@ -67,7 +78,16 @@ class SharedError:
         if len(g) != 2 or len(cov) != 2 or any(len(row) != 2 for row in cov):
             raise AnalysisError(f"a shared error needs 2 sensitivities, a 2x2 covariance: {data}")
         previous = float(data.get("previous_deg2", 0.0))
-        return cls(g, cov, int(data["record_ms"]), int(data["at_ms"]), previous)  # type: ignore[arg-type]
+        try:
+            earlier = tuple(
+                ((int(e["trial"]), int(e["j"])), float(e["deg2"]))
+                for e in data.get("earlier_deg2", ())
+            )
+        except (TypeError, KeyError, ValueError) as exc:
+            raise AnalysisError(
+                f"a shared error's earlier_deg2 needs {{trial, j, deg2}} entries: {data}"
+            ) from exc
+        return cls(g, cov, int(data["record_ms"]), int(data["at_ms"]), previous, earlier)  # type: ignore[arg-type]
 
 
 def shared_covariance(
@@ -96,7 +116,27 @@ def shared_covariance(
             a = keys.index(before)
             carried[a, b] = carried[b, a] = errors[b].previous_deg2
     covariance = shared_g @ pd_covariance(errors) @ shared_g.T + signs @ carried @ signs.T
-    return covariance - np.diag(signs**2 @ own)
+    return covariance - np.diag(signs**2 @ own) + _with_uncompensated(shared, trials)
+
+
+def _with_uncompensated(shared: Mapping[Series, SharedError], trials: Sequence[int]) -> np.ndarray:
+    """Cov of the trial means through each compensated series' covariance with the plain means
+    of the uncompensated series it names (``earlier_deg2``): both are linear in that record's
+    readings. A named series that is not one of ``trials``' uncompensated series (a control
+    trial's, a trial left out) adds nothing."""
+    out = np.zeros((len(trials), len(trials)))
+    where = {i: a for a, i in enumerate(trials)}
+    for (i, j), error in shared.items():
+        if i not in where:
+            continue
+        for (k, m), cov in error.earlier_deg2:
+            if k not in where or (k, m) in shared:
+                continue
+            a, b = where[i], where[k]
+            value = (1.0 if j == 2 else -1.0) * (1.0 if m == 2 else -1.0) * cov  # <d> = m2 - m1
+            out[a, b] += value
+            out[b, a] += value
+    return out
 
 
 def pd_covariance(errors: Sequence[SharedError]) -> np.ndarray:

@@ -292,6 +292,50 @@ def compensated_mean_se(
     (neighbours correlated ~0.2-0.4) with observations 30 s apart (~0.05), which one inflation
     factor for the whole record cannot describe. Without it: the fit's own covariance and
     inflation, Var = SE(R_j)^2 + s^2 f a^T (I - H) a (residuals _|_ estimates)."""
+    c, k, sigma2 = _compensation_form(fit, data, j, t_s, width_s, correlation_time_s)
+    return math.sqrt(sigma2 * float(c @ k @ c))  # Var(m) = s^2 c^T K c
+
+
+def compensated_covariances(
+    fit: TransientFit,
+    data: Windows,
+    j: int,
+    t_s: np.ndarray,
+    width_s: np.ndarray,
+    means_mid_s: Sequence[np.ndarray],
+    n_obs: int,
+    correlation_time_s: float | None = None,
+) -> tuple[float, ...]:
+    """Cov (deg^2) of the compensated mean of `compensated_mean_se` with each plain mean of
+    ``n_obs`` observations whose windows in ``data`` have the middles ``means_mid_s`` (the
+    others not in this record: independent of it): both are linear in the record's window
+    means, c^T y_w and b^T y_w, so Cov = sigma^2 c^T K b (issue 34: an uncompensated series'
+    windows are in the record that fixes every later compensation's period, damping and
+    carried state)."""
+    c, k, sigma2 = _compensation_form(fit, data, j, t_s, width_s, correlation_time_s)
+    sw = np.sqrt(data.width_s / np.mean(data.width_s))
+    out = []
+    for mids in means_mid_s:
+        match = np.abs(data.mid_s[None, :] - np.asarray(mids, dtype=float)[:, None]) < 1e-6
+        if not np.all(match.sum(axis=1) == 1):
+            raise ValueError("the windows of an earlier mean are not all in the record")
+        where = np.flatnonzero(match.any(axis=0))
+        b = np.zeros(data.segment.size)
+        b[where] = 1.0 / (n_obs * sw[where])  # the plain mean of the unweighted values
+        out.append(sigma2 * float(c @ k @ b))
+    return tuple(out)
+
+
+def _compensation_form(
+    fit: TransientFit,
+    data: Windows,
+    j: int,
+    t_s: np.ndarray,
+    width_s: np.ndarray,
+    correlation_time_s: float | None,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """c, K, sigma^2 with the compensated mean - E = c^T (y_w - E y_w), Cov(y_w) = sigma^2 K
+    (`compensated_mean_se`; without a correlation time K = I and sigma^2 = s^2 f)."""
     mid = np.atleast_1d(np.asarray(t_s, dtype=float))
     width = np.broadcast_to(np.asarray(width_s, dtype=float), mid.shape)
     match = (data.segment[None, :] == j) & (np.abs(data.mid_s[None, :] - mid[:, None]) < 1e-6)
@@ -306,17 +350,16 @@ def compensated_mean_se(
     a = match.sum(axis=0) / (mid.size * sw)  # mean of the unweighted residuals r_w / sw
     pinv = np.linalg.pinv(jac)
     resid = y - rows @ fit.theta
+    c = pinv[j] + a - jac @ (pinv @ a)  # m - E[m] = c^T (y_w - E[y_w])
     if correlation_time_s is None:
-        f = variance_inflation(resid)
-        var_rbar = fit.residual_sd_deg**2 * f * float(a @ (a - jac @ (pinv @ a)))  # s^2 f a'(I-H)a
-        return math.sqrt(fit.covariance[j, j] + max(var_rbar, 0.0))  # Var(R_j) + Var(r_bar)
+        # s^2 f c^T c = Var(R_j) + s^2 f a'(I-H)a: the fit's own covariance and inflation
+        return c, np.eye(y.size), fit.residual_sd_deg**2 * variance_inflation(resid)
     half = data.width_s / 2
     k = window_means_covariance(data.mid_s - half, data.mid_s + half, correlation_time_s)
     k *= np.outer(sw, sw)  # of the weighted window means
     hk = jac @ (pinv @ k)
     sigma2 = float(resid @ resid) / float(np.trace(k) - np.trace(hk))  # E[r'r] = s^2 tr((I-H)K)
-    c = pinv[j] + a - jac @ (pinv @ a)  # m - E[m] = c^T (y_w - E[y_w])
-    return math.sqrt(sigma2 * float(c @ k @ c))  # Var(m) = s^2 c^T K c
+    return c, k, sigma2
 
 
 def _model_columns(

@@ -56,7 +56,8 @@ OBS_FIELDS = (
 )
 # per series, repeated on each of its observation rows
 SERIES_FIELDS = ("compensation_se_deg", "compensation_shared")
-SHARED_KEYS = {"sensitivity", "covariance", "record_ms", "at_ms", "previous_deg2"}
+SHARED_KEYS = {"sensitivity", "covariance", "record_ms", "at_ms", "previous_deg2", "earlier_deg2"}
+EARLIER_KEYS = {"trial", "j", "deg2"}  # one entry of earlier_deg2: the series it names, the value
 OBSERVATION_EXTRAS = OBS_FIELDS[2:] + SERIES_FIELDS  # optional columns of the observations form
 MAX_REPORTED = 10
 
@@ -185,10 +186,12 @@ def _to_str(value: Any) -> str:
 def shared_error_json(value: Any) -> str:
     """A compensated series' share in the shared period and damping error, as canonical JSON
     text: the layout of `analysis.gls.SharedError.to_dict` (db imports no analysis; a test
-    checks the two agree): two sensitivities, a 2x2 covariance, record_ms, at_ms and
-    previous_deg2, every number finite."""
+    checks the two agree): two sensitivities, a 2x2 covariance, record_ms, at_ms,
+    previous_deg2 and earlier_deg2, a list of {"trial": k >= 1, "j": 1 or 2, "deg2": v}, one
+    per uncompensated series it covaries with (absent in files exported before it: empty);
+    every number finite."""
     data = json.loads(str(value))
-    if not isinstance(data, dict) or set(data) != SHARED_KEYS:
+    if not isinstance(data, dict) or set(data) | {"earlier_deg2"} != SHARED_KEYS:
         raise ValueError
     g, cov = data["sensitivity"], data["covariance"]
     if len(g) != 2 or len(cov) != 2 or any(len(row) != 2 for row in cov):
@@ -199,8 +202,19 @@ def shared_error_json(value: Any) -> str:
         "record_ms": _to_int(data["record_ms"]),
         "at_ms": _to_int(data["at_ms"]),
         "previous_deg2": _to_float(data["previous_deg2"]),
+        "earlier_deg2": [_earlier(e) for e in data.get("earlier_deg2", [])],
     }
     return json.dumps(shared, sort_keys=True)
+
+
+def _earlier(entry: Any) -> dict[str, Any]:
+    """One entry of a shared error's earlier_deg2 (`shared_error_json`)."""
+    if not isinstance(entry, dict) or set(entry) != EARLIER_KEYS:
+        raise ValueError
+    trial, j = _to_int(entry["trial"]), _to_int(entry["j"])
+    if trial < 1 or j not in (1, 2):
+        raise ValueError
+    return {"trial": trial, "j": j, "deg2": _to_float(entry["deg2"])}
 
 
 def _shared_ok(text: str) -> bool:
@@ -249,7 +263,8 @@ FIELDS: dict[str, Field] = {
     "compensation_se_deg": Field(_to_float, NUMBER, lambda v: v >= 0, ">= 0", optional=True),
     "compensation_shared": Field(
         shared_error_json,
-        "a shared error (JSON: sensitivity, covariance, record_ms, at_ms, previous_deg2)",
+        "a shared error (JSON: sensitivity, covariance, record_ms, at_ms, previous_deg2, "
+        "earlier_deg2 [{trial, j, deg2}])",
         _shared_ok,
         "its variances and times >= 0",
         optional=True,

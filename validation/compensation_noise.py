@@ -53,7 +53,7 @@ DT_S = 0.1  # the simulated compass's heading rate, 10 Hz (stand.simconfig)
 QUANTUM_DEG = 360.0 / 65536  # its 16-bit encoder
 C_RANGE, T_RANGE = (3e7, 12e7), (0.4, 1.4)  # as validation/end_to_end.py draws them
 BOOTSTRAP = 1000
-METHODS = ("before", "scalar", "after")
+METHODS = ("before", "scalar", "no trial-1 cov", "after")
 TAU_K = 20.0  # the shipped plan's correlation_time_s (the simulator's 1 / mu)
 
 
@@ -173,6 +173,7 @@ def compensate(record: TransientRecord, model: TransientModel, s: Series, values
         0,
         round(w[-1, 1] * 1000),
         previous,
+        record.earlier_covariances(fit, t_s, width_s, len(w), TAU_K),
     )
     return {
         "values": values[s.observed] - transient,
@@ -214,6 +215,7 @@ def one_draw(st: Structure, rng: np.random.Generator, f: dict) -> dict[tuple[int
         if s.compensated:
             c = compensate(record, st.model, s, v)
         else:
+            record.observed((s.trial, s.j), s.windows[s.observed])  # as the engine labels it
             c = {"values": v[s.observed], "settle_se": None, "se": None, "shared": None}
         c |= {"err": float(c["values"].mean() - st.theta[s.segment]), "f": f[s.trial, s.j]}
         out[s.trial, s.j] = c
@@ -257,6 +259,8 @@ def analyse(st: Structure, draw: dict, method: str, rng: np.random.Generator) ->
         before = replace(before, mean_deg=before.mean_deg - st_theta(st, i, 1))
         inputs.append(TrialInput(index=i, **st.trials[i], before=before, under=under))
     shared = {k: x["shared"] for k, x in draw.items() if x["shared"] is not None}
+    if method != "after":  # without the compensations' covariance with uncompensated series
+        shared = {k: replace(x, earlier_deg2=()) for k, x in shared.items()}
     infl = {i: (draw[i, 1]["f"], draw[i, 2]["f"]) for i in idx}
     an = analyze_campaign(inputs, st.constants, start=st.start, inflation=infl, shared=shared)
     fits = list(an.fit_indices)
@@ -328,17 +332,57 @@ def report(structures: list[Structure], draws: list[list[dict]], rows: dict[str,
                 f"      d mean / d (period, ratio): stored G {g[0]:+.2e} deg/s, {g[1]:+.4f} deg;"
                 f" regression over the draws {coef[0]:+.2e}, {coef[1]:+.4f}"
             )
+    for st, ds in zip(structures, draws, strict=True):
+        earlier(st, ds, rng)
     for method in METHODS:
         rs = rows[method]
         err = np.array([r["trial_err"] for r in rs])
         v = np.array([r["V"] for r in rs])
         se = np.sqrt(np.array([np.diag(x) for x in v]))
         print(f"  {method}: fit trials' means SD/SE {ratio(err.ravel(), se.ravel(), rng)}")
+        corr = np.mean([x / np.outer(d, d) for x, d in zip(v, se, strict=True)], axis=0)
+        sim = np.corrcoef(err.T)
+        print(
+            "    first fit trial's mean with the others, correlation in V / simulated: "
+            + ", ".join(f"{corr[0, k]:+.2f} / {sim[0, k]:+.2f}" for k in range(1, len(sim)))
+        )
         for name, short in (("C_gcm2s2", "C"), ("T_s", "T")):
             e = np.array([r[name][0] for r in rs])
             s = np.array([r[name][1] for r in rs])
             cover = 100 * np.mean([r[name][2] for r in rs])
             print(f"    {short}: SD/SE {ratio(e, s, rng)}, coverage {cover:.1f} % (93-97 %)")
+
+
+def earlier(st: Structure, ds: list[dict], rng: np.random.Generator) -> None:
+    """Each uncompensated series' mean against each later compensated one in its record:
+    the covariance the compensation stores (``earlier_deg2``, mean over the draws) beside the
+    one over the draws (bootstrap 95 %), as correlations (the simulated SDs)."""
+    print("  uncompensated series vs later compensations, correlation predicted / simulated:")
+    for s in st.series:
+        if not s.compensated:
+            continue
+        e_s = np.array([x[s.trial, s.j]["err"] for x in ds])
+        stored = [dict(x[s.trial, s.j]["shared"].earlier_deg2) for x in ds]
+        parts = []
+        for u in st.series:
+            if u.compensated or u.segment >= s.segment:
+                continue
+            e_u = np.array([x[u.trial, u.j]["err"] for x in ds])
+            pred = float(np.mean([x[u.trial, u.j] for x in stored])) / (e_s.std() * e_u.std())
+            boot = []
+            for _ in range(BOOTSTRAP // 5):
+                k = rng.integers(0, e_s.size, e_s.size)
+                boot.append(np.corrcoef(e_s[k], e_u[k])[0, 1])
+            lo, hi = np.percentile(boot, [2.5, 97.5])
+            sim = np.corrcoef(e_s, e_u)[0, 1]
+            parts.append(f"({u.trial},{u.j}) {pred:+.2f} / {sim:+.2f} [{lo:+.2f}, {hi:+.2f}]")
+        print(f"    trial {s.trial} series {s.j}: " + ", ".join(parts))
+    idx = sorted({s.trial for s in st.series})
+    err = {i: np.array([x[i, 2]["err"] - x[i, 1]["err"] for x in ds]) for i in idx}
+    print(
+        "    trial 1's mean vs trial i's, simulated correlation: "
+        + ", ".join(f"{i}: {np.corrcoef(err[idx[0]], err[i])[0, 1]:+.2f}" for i in idx[1:])
+    )
 
 
 def _campaign(i: int, folder: Path) -> Path:

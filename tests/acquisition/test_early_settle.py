@@ -12,9 +12,11 @@
 - Plan validation of the new keys: one clear error each, with its field path.
 """
 
+import dataclasses
 import math
 import re
 from pathlib import Path
+from unittest.mock import ANY
 
 import numpy as np
 import pytest
@@ -33,18 +35,22 @@ from gyrostand.acquisition.early_settle import (
 )
 from gyrostand.acquisition.engine import Engine
 from gyrostand.acquisition.lockstep import Lockstep
+from gyrostand.acquisition.retry import RetriedTrial, retry_trials
+from gyrostand.acquisition.runner import resume_store
 from gyrostand.acquisition.store import CampaignStore
 from gyrostand.analysis.errors import AnalysisError
+from gyrostand.analysis.gls import shared_covariance
 from gyrostand.analysis.settle import SettleOutcome
 from gyrostand.analysis.transient import TransientModel, fit_transient
 from gyrostand.db.models import Event, Observation, Series, Trial
+from gyrostand.db.queries import load_campaign
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.frames.batch import BatchDecoder, RawFrames
 from gyrostand.plan.model import EstimatePlan, PlanError, load_plan, parse_plan
 from gyrostand.report.compliance import load_profile
-from gyrostand.report.stored import campaign_report
+from gyrostand.report.stored import campaign_report, stored_inputs
 from gyrostand.stand.protocol import Codec
-from gyrostand.stand.simconfig import CompassParams, SimConfig
+from gyrostand.stand.simconfig import CompassParams, FaultParams, SimConfig
 
 from .harness import ROOT, NoCommands, Recorder, plan_text
 
@@ -241,9 +247,14 @@ drift_deg = 0.006
 BAND_SETTLE = "[settle]\ndrift_deg = 0.006\n"
 
 
-def scaled_plan(settle: str, database: str = "runs/test.sqlite") -> str:
-    """Two trials (steps of +0.41 and -0.47 deg), band 0.03 deg held 420 s (1800 s scaled)."""
-    text = plan_text(n_obs=4, hold_s=420.0, database=database)
+def scaled_plan(
+    settle: str,
+    database: str = "runs/test.sqlite",
+    trials: list[tuple[float, float, float, str]] | None = None,
+) -> str:
+    """Two trials (steps of +0.41 and -0.47 deg) unless told, band 0.03 deg held 420 s (1800 s
+    scaled)."""
+    text = plan_text(trials, n_obs=4, hold_s=420.0, database=database)
     return text.replace("band_deg = 0.05", "band_deg = 0.03").replace("[settle]\n", settle)
 
 
@@ -371,6 +382,120 @@ def test_a_compensation_states_its_share_in_the_period_and_damping_error(compens
         assert np.all(np.linalg.eigvalsh(cov) > 0)
         own = float(g @ cov @ g)
         assert 0.05 * comp.standard_error_deg**2 < own < comp.standard_error_deg**2
+
+
+def test_a_compensation_names_the_uncompensated_series_it_covaries_with(compensated) -> None:
+    """Issue 34: each compensation stores its covariance with the plain mean of each
+    uncompensated series whose observations are in its record, naming it (trial, j): trial 1's
+    two (the run's first, and the one before the record determined the period), not (2, 1),
+    compensated itself."""
+    done = {(a[0], a[1]): a[2] for a in compensated[0].of("series_completed")}
+    for key in ((2, 1), (2, 2)):
+        earlier = done[key].shared.earlier_deg2
+        assert [name for name, _ in earlier] == [(1, 1), (1, 2)]
+        assert all(value != 0.0 for _, value in earlier)
+
+
+def test_a_control_trial_between_fit_trials_is_named_and_left_out_of_v(tmp_path: Path) -> None:
+    """Fit, control, fit as stored: trial 3's compensations name trial 1's series (the control's
+    are compensated themselves), and V's term between trials 1 and 3 is the named covariances
+    with the trial means' signs, by hand: <delta> = m2 - m1, so +C(m32, m12) - C(m32, m11)
+    - C(m31, m12) + C(m31, m11); nothing else of V moves."""
+    path = tmp_path / "control.sqlite"
+    trials = [(45.0, 24.0, 6.0, "fit"), (315.0, 20.0, 5.0, "control"), (135.0, 22.0, 5.5, "fit")]
+    sessions = open_database(sqlite_url(path))
+    plan = parse_plan(scaled_plan(COMPENSATED_SETTLE, str(path), trials))
+    store = CampaignStore.create(sessions, plan)
+    sim = Lockstep(scaled_config())
+    engine = Engine(plan, store, sim, store.progress())
+    sim.run(engine)
+    with sessions() as session:
+        shared = stored_inputs(load_campaign(session, store.campaign_id)).shared
+    assert shared.keys() == {(2, 1), (2, 2), (3, 1), (3, 2)}
+    named = {key: dict(e.earlier_deg2) for key, e in shared.items()}
+    assert all(list(n) == [(1, 1), (1, 2)] for n in named.values())
+    sign = {1: -1.0, 2: 1.0}
+    by_hand = sum(sign[j] * sign[m] * named[3, j][1, m] for j in (1, 2) for m in (1, 2))
+    bare = {key: dataclasses.replace(e, earlier_deg2=()) for key, e in shared.items()}
+    term = shared_covariance(shared, [1, 3]) - shared_covariance(bare, [1, 3])
+    np.testing.assert_allclose(term, [[0.0, by_hand], [by_hand, 0.0]], rtol=1e-12, atol=0.0)
+    assert by_hand != 0.0
+
+
+def _silent_in(sink: Recorder, trial: int, j: int, k: int) -> SimConfig:
+    """The scaled stand of `compensated` with the bus silent for 20 s from 5 s into its
+    observation window (trial, j, k): that trial fails there (the same frames before it)."""
+    (obs,) = [o for o in sink.observations if (o.trial, o.j, o.k) == (trial, j, k)]
+    silence = FaultParams(silence_at_s=obs.window_start_ms / 1000 + 5.0, silence_for_s=20.0)
+    return dataclasses.replace(scaled_config(), faults=silence)
+
+
+def test_a_failed_trial_s_series_are_not_named_nor_its_retry_s(tmp_path: Path, compensated):
+    """Trial 1 fails in its rocking series after its still series ended uncompensated; trial 2
+    is compensated in the same run. Its compensations name nothing of trial 1: the analysis
+    never uses that attempt (a retry, acquired in another run, is the trial 1 it uses, and its
+    windows are not in trial 2's record). Then `campaign retry` and a resume: the analysis gets
+    trial 1's new attempt and no covariance of it with trial 2 (by position it would have taken
+    the failed attempt's still series for the new one)."""
+    path = tmp_path / "retry.sqlite"
+    sessions = open_database(sqlite_url(path))
+    plan = parse_plan(scaled_plan(COMPENSATED_SETTLE, database=str(path)))
+    store = CampaignStore.create(sessions, plan)
+    sim = Lockstep(_silent_in(compensated[0], 1, 2, 2))
+    engine = Engine(plan, store, sim, store.progress())
+    sim.run(engine)
+    store.set_status(engine.outcome)
+    assert retry_trials(sessions, store.campaign_id, [1]) == (RetriedTrial(1, 2, ANY),)
+    _, resumed = resume_store(sessions, store.campaign_id)
+    resumed.complete_acquired()
+    sim = Lockstep(scaled_config())
+    engine = Engine(plan, resumed, sim, resumed.progress())
+    sim.run(engine)
+    with sessions() as session:
+        campaign = load_campaign(session, store.campaign_id)
+        attempts = sorted((t.index, t.attempt, t.status) for t in campaign.trials)
+        shared = stored_inputs(campaign).shared
+    assert attempts == [(1, 1, "failed"), (1, 2, "completed"), (2, 1, "completed")]
+    assert shared.keys() == {(2, 1), (2, 2)}
+    assert all(e.earlier_deg2 == () for e in shared.values())
+    bare = {key: dataclasses.replace(e, earlier_deg2=()) for key, e in shared.items()}
+    assert np.array_equal(shared_covariance(shared, [1, 2]), shared_covariance(bare, [1, 2]))
+
+
+def test_a_resumed_series_is_named_with_its_windows_of_this_run(tmp_path: Path, compensated):
+    """A run stopped in trial 1's rocking series after 2 of its 4 observations; the resume
+    observes 3 and 4 in a new record. Trial 2's compensations there name (1, 2) alone ((1, 1)
+    is in the first run's record: independent) and through those two windows only (the
+    analysis' mean is over all 4: each 1/4), not the segment's last 4 (settle blocks too)."""
+    path = tmp_path / "resume.sqlite"
+    sessions = open_database(sqlite_url(path))
+    plan = parse_plan(scaled_plan(COMPENSATED_SETTLE, database=str(path)))
+    store = CampaignStore.create(sessions, plan)
+    sim = Lockstep(scaled_config())
+    engine = Engine(plan, store, sim, store.progress())
+    (second,) = [o for o in compensated[0].observations if (o.trial, o.j, o.k) == (1, 2, 2)]
+    for _ in sim.steps(engine):
+        if sim.stand.stand_time_s * 1000 >= second.window_end_ms + 5000:
+            engine.interrupt("test: stopped after observation 2")
+    store.set_status(engine.outcome)
+    _, resumed = resume_store(sessions, store.campaign_id)
+    resumed.complete_acquired()
+    sim = Lockstep(scaled_config())
+    engine = Engine(plan, resumed, sim, resumed.progress())
+    sim.run(engine)
+    with sessions() as session:
+        campaign = load_campaign(session, store.campaign_id)
+        (t1,) = [t for t in campaign.trials if t.index == 1]
+        (s12,) = [s for s in t1.series if s.j == 2]
+        windows = {o.k: (o.window_start_ms, o.window_end_ms) for o in s12.observations}
+        shared = stored_inputs(campaign).shared
+    assert s12.compensation_shared is None and sorted(windows) == [1, 2, 3, 4]
+    # the record labels (1, 2) with the windows of its observations 3 and 4, of this run
+    mids = np.array([windows[3], windows[4]], dtype=float).mean(axis=1) / 1000
+    np.testing.assert_array_equal(engine._record._observed[1, 2], mids)
+    assert shared
+    for e in shared.values():
+        assert [name for name, _ in e.earlier_deg2] == [(1, 2)]
 
 
 def test_the_outcome_records_estimate_and_time_saved(band, compensated) -> None:

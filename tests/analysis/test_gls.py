@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +65,53 @@ def test_shared_covariance_by_hand() -> None:
     expected[1, 1] = -2 * q(s22, s21, s22) - 2 * c22  # var(m22 - m21) less both own parts
     np.testing.assert_allclose(cov, expected, rtol=1e-12, atol=1e-17)
     assert shared_covariance({}, [1, 2]) is None
+
+
+def test_uncompensated_series_covary_with_the_later_compensations() -> None:
+    """Issue 34: trial 1 is never compensated, but each compensation stores its covariance with
+    the plain mean of each uncompensated series in its record, naming it (earlier_deg2).
+    Trials 1 and 3 fitted, control 2 between them (its series are in the record too, and named:
+    not in V): <delta_1> = m12 - m11, <delta_3> = m32 - m31, so Cov = C(m32, m12) - C(m32, m11)
+    - C(m31, m12) + C(m31, m11). The order of the entries does not matter; a compensated series
+    named (3, 1) adds nothing; nor does a series of a trial the analysis does not have (trial 4,
+    failed, or 5: the record named a series before the attempt the analysis uses)."""
+    zero = (0.0, 0.0)
+    s31 = replace(
+        shared(zero, (1.0, 1.0), 5),
+        earlier_deg2=(((2, 2), 9.0), ((1, 1), 3e-6), ((1, 2), 2e-6), ((2, 1), 9.0)),
+    )
+    s32 = replace(
+        shared(zero, (1.0, 1.0), 6),
+        earlier_deg2=(((1, 2), 5e-6), ((1, 1), 7e-6), ((3, 1), 9.0), ((4, 1), 9.0)),
+    )
+    cov = shared_covariance({(3, 1): s31, (3, 2): s32, (5, 1): s31}, [1, 3])
+    assert cov is not None
+    expected = 5e-6 - 7e-6 - 2e-6 + 3e-6
+    np.testing.assert_allclose(cov, [[0.0, expected], [expected, 0.0]], rtol=1e-12, atol=1e-20)
+    # a record without trial 1's windows (a second run, a retry's): no entry names them
+    s31 = replace(s31, earlier_deg2=(((2, 1), 9.0), ((2, 2), 9.0)))
+    s32 = replace(s32, earlier_deg2=(((2, 1), 9.0), ((2, 2), 9.0)))
+    assert not np.any(shared_covariance({(3, 1): s31, (3, 2): s32}, [1, 3]))
+    # within one trial: (3, 2) compensated after (3, 1) was not: Var(m32 - m31) gets -2 Cov
+    s32 = replace(s32, earlier_deg2=(((3, 1), 4e-6),))
+    cov = shared_covariance({(3, 2): s32}, [1, 3])
+    assert cov is not None
+    np.testing.assert_allclose(cov, [[0.0, 0.0], [0.0, -8e-6]], rtol=1e-12, atol=1e-20)
+
+
+def test_earlier_covariances_name_their_series_in_json() -> None:
+    """earlier_deg2 round-trips as [{"trial", "j", "deg2"}]; a stored shared error without it
+    (before issue 34's fix) has none; entries that name no series are refused."""
+    e = replace(shared((1e-4, 0.2), (4.0, 4e-4), 7), earlier_deg2=(((1, 2), -3e-7),))
+    data = e.to_dict()
+    assert data["earlier_deg2"] == [{"trial": 1, "j": 2, "deg2": -3e-7}]
+    assert SharedError.from_dict(data) == e
+    assert SharedError.from_dict({**data, "earlier_deg2": []}).earlier_deg2 == ()
+    del data["earlier_deg2"]
+    assert SharedError.from_dict(data).earlier_deg2 == ()
+    for bad in ([3e-7], [{"trial": 1, "deg2": 3e-7}], [{"trial": "x", "j": 1, "deg2": 0.0}]):
+        with pytest.raises(AnalysisError, match="earlier_deg2 needs"):
+            SharedError.from_dict({**data, "earlier_deg2": bad})
 
 
 def test_independent_means_are_the_papers_fit_to_every_digit() -> None:

@@ -440,6 +440,10 @@ SHARED = {
     "record_ms": 7_200_000,
     "at_ms": 3_600_000,
     "previous_deg2": -2e-6,
+    "earlier_deg2": [
+        {"deg2": 3e-7, "j": 1, "trial": 1},  # Cov with the plain means of the series it names
+        {"deg2": -1e-7, "j": 2, "trial": 1},
+    ],
 }
 
 
@@ -465,6 +469,8 @@ def test_compensation_survives_export_and_import(
         ]
         summaries = {(t.index, s.j): series_summary(s) for t in trials for s in t.series}
     assert shared == [(2, 1, SHARED)]
+    older = {k: v for k, v in SHARED.items() if k != "earlier_deg2"}  # exported before it
+    assert json.loads(shared_error_json(json.dumps(older)))["earlier_deg2"] == []
     # the variance of a compensated mean is the compensation's SE^2 (issue 34), not S^2/N + SE^2
     assert summaries[2, 1].var_mean_deg2 == 0.003**2
     assert summaries[2, 2].var_mean_deg2 is None
@@ -523,7 +529,7 @@ def test_the_import_reads_the_shared_error_the_analysis_writes() -> None:
     text = shared_error_json(json.dumps(shared.to_dict()))
     assert json.loads(text) == shared.to_dict() == SHARED
     assert SharedError.from_dict(json.loads(text)) == shared
-    for key in SHARED:  # each key is needed
+    for key in set(SHARED) - {"earlier_deg2"}:  # each key is needed (that one: not before it)
         with pytest.raises(ValueError):
             shared_error_json(json.dumps({k: v for k, v in SHARED.items() if k != key}))
 
@@ -538,6 +544,18 @@ def test_the_import_reads_the_shared_error_the_analysis_writes() -> None:
             "variances and times >= 0",
         ),
         (json.dumps({**SHARED, "at_ms": "soon"}), "is not a shared error"),
+        # earlier_deg2 names each series (a bare list of numbers said nothing of which)
+        (json.dumps({**SHARED, "earlier_deg2": [3e-7, -1e-7]}), "is not a shared error"),
+        (json.dumps({**SHARED, "earlier_deg2": 3e-7}), "is not a shared error"),
+        (
+            json.dumps({**SHARED, "earlier_deg2": [{"trial": 1, "j": 3, "deg2": 0.0}]}),
+            "is not a shared error",
+        ),
+        (
+            json.dumps({**SHARED, "earlier_deg2": [{"trial": 1, "j": 1, "deg2": "NaN"}]}),
+            "is not a shared error",
+        ),
+        (json.dumps({**SHARED, "earlier_deg2": [{"trial": 1, "j": 1}]}), "is not a shared error"),
     ],
 )
 def test_a_malformed_shared_error_is_refused(tmp_path: Path, shared: str, problem: str) -> None:
