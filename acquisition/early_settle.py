@@ -65,6 +65,7 @@ from gyrostand.analysis.transient import (
     design,
     fit_transient,
     fit_transient_free,
+    plain_mean_variances,
     well_determined,
 )
 from gyrostand.plan.model import EstimatePlan, SettlePlan
@@ -242,6 +243,23 @@ class TransientRecord:
         mids = [self._observed[key] for key in keys]
         cov = compensated_covariances(fit, data, j, t_s, width_s, mids, n_obs, correlation_time_s)
         return tuple(zip(keys, cov, strict=True))
+
+    def earlier_variances(
+        self,
+        fit: TransientFit,
+        t_s: np.ndarray,
+        width_s: np.ndarray,
+        n_obs: int,
+        correlation_time_s: float | None = None,
+    ) -> tuple[tuple[tuple[int, int], float], ...]:
+        """The variance of the plain mean of each uncompensated series wholly in this record
+        (`observed`) from the record's noise level (`plain_mean_variances`), named."""
+        seg, data = self._data(self._segments)
+        j = len(seg.step_s) - 1
+        keys = list(self._observed)
+        mids = [self._observed[key] for key in keys]
+        var = plain_mean_variances(fit, data, j, t_s, width_s, mids, n_obs, correlation_time_s)
+        return tuple((key, v) for key, v in zip(keys, var, strict=True) if v is not None)
 
     def sensitivity(
         self, model: TransientModel, t_s: np.ndarray, width_s: np.ndarray

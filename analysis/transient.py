@@ -313,6 +313,34 @@ def compensated_covariances(
     windows are in the record that fixes every later compensation's period, damping and
     carried state)."""
     c, k, sigma2 = _compensation_form(fit, data, j, t_s, width_s, correlation_time_s)
+    return tuple(sigma2 * float(c @ k @ b) for b in _plain_means(data, means_mid_s, n_obs))
+
+
+def plain_mean_variances(
+    fit: TransientFit,
+    data: Windows,
+    j: int,
+    t_s: np.ndarray,
+    width_s: np.ndarray,
+    means_mid_s: Sequence[np.ndarray],
+    n_obs: int,
+    correlation_time_s: float | None = None,
+) -> tuple[float | None, ...]:
+    """Var (deg^2) of each plain mean of `compensated_covariances` from the same fit, sigma^2
+    b^T K b: the record's noise level, fitted to all its windows (hundreds of dof), in place of
+    the series' own S^2 / N_eff (N - 1 dof), whose sampling noise in the weight of the one
+    plain fit trial of a compensated campaign made C over-confident (issue 34). None for a
+    mean with windows outside this record (a resumed series)."""
+    _, k, sigma2 = _compensation_form(fit, data, j, t_s, width_s, correlation_time_s)
+    return tuple(
+        sigma2 * float(b @ k @ b) if len(mids) == n_obs else None  # Var(b^T y_w) = s^2 b'Kb
+        for mids, b in zip(means_mid_s, _plain_means(data, means_mid_s, n_obs), strict=True)
+    )
+
+
+def _plain_means(data: Windows, means_mid_s: Sequence[np.ndarray], n_obs: int) -> list[np.ndarray]:
+    """b with b^T y_w the plain mean of ``n_obs`` observations, of which those with window
+    middles ``means_mid_s`` are in ``data`` (y_w: the weighted window means)."""
     sw = np.sqrt(data.width_s / np.mean(data.width_s))
     out = []
     for mids in means_mid_s:
@@ -322,8 +350,8 @@ def compensated_covariances(
         where = np.flatnonzero(match.any(axis=0))
         b = np.zeros(data.segment.size)
         b[where] = 1.0 / (n_obs * sw[where])  # the plain mean of the unweighted values
-        out.append(sigma2 * float(c @ k @ b))
-    return tuple(out)
+        out.append(b)
+    return out
 
 
 def _compensation_form(

@@ -394,6 +394,10 @@ def test_a_compensation_names_the_uncompensated_series_it_covaries_with(compensa
         earlier = done[key].shared.earlier_deg2
         assert [name for name, _ in earlier] == [(1, 1), (1, 2)]
         assert all(value != 0.0 for _, value in earlier)
+        # and their plain means' variances from the record's noise level (both wholly in it)
+        variances = done[key].shared.plain_var_deg2
+        assert [name for name, _ in variances] == [(1, 1), (1, 2)]
+        assert all(var > abs(cov) for (_, var), (_, cov) in zip(variances, earlier, strict=True))
 
 
 def test_a_control_trial_between_fit_trials_is_named_and_left_out_of_v(tmp_path: Path) -> None:
@@ -410,8 +414,13 @@ def test_a_control_trial_between_fit_trials_is_named_and_left_out_of_v(tmp_path:
     engine = Engine(plan, store, sim, store.progress())
     sim.run(engine)
     with sessions() as session:
-        shared = stored_inputs(load_campaign(session, store.campaign_id)).shared
+        inputs = stored_inputs(load_campaign(session, store.campaign_id))
+    shared = inputs.shared
     assert shared.keys() == {(2, 1), (2, 2), (3, 1), (3, 2)}
+    # trial 1's plain means take their variances from the latest compensation's noise level
+    latest = dict(shared[3, 2].plain_var_deg2)
+    (first,) = [t for t in inputs.trials if t.index == 1]
+    assert (first.before.var_mean_deg2, first.under.var_mean_deg2) == (latest[1, 1], latest[1, 2])
     named = {key: dict(e.earlier_deg2) for key, e in shared.items()}
     assert all(list(n) == [(1, 1), (1, 2)] for n in named.values())
     sign = {1: -1.0, 2: 1.0}
@@ -496,6 +505,7 @@ def test_a_resumed_series_is_named_with_its_windows_of_this_run(tmp_path: Path, 
     assert shared
     for e in shared.values():
         assert [name for name, _ in e.earlier_deg2] == [(1, 2)]
+        assert e.plain_var_deg2 == ()  # half its windows are in another record: its own S^2
 
 
 def test_the_outcome_records_estimate_and_time_saved(band, compensated) -> None:

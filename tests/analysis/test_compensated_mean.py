@@ -32,6 +32,7 @@ from gyrostand.analysis.transient import (
     design,
     fit_transient,
     fit_transient_free,
+    plain_mean_variances,
 )
 from gyrostand.analysis.trials import SeriesSummary, TrialInput, trial_statistics
 
@@ -197,3 +198,31 @@ def test_a_series_partly_in_the_record_covaries_through_its_windows_there() -> N
     assert abs(other - both[0]) > 0.1 * abs(both[0])
     with pytest.raises(ValueError, match="not all in the record"):
         compensated_covariances(fit, data, 1, OBS, WIDTH_S, [FIRST + 1.0], N, 20.0)
+
+
+def test_an_uncompensated_means_variance_from_the_records_noise_level() -> None:
+    """Issue 34: the plain mean of an uncompensated series has the variance sigma^2 b^T K b
+    from the record's noise level (`plain_mean_variances`: 120 windows behind it here), in
+    place of its own S^2/N_eff from N = 5 observations. 500 records with the reading's
+    exponential correlation (tau_k 20 s, exact window-mean covariance): SD of the first
+    series' mean over the RMS reported SE 0.96 (within 6 % of 1), its relative spread from
+    record to record 7 % (S^2/N's: 36 %, the noise that over-weighted the one plain fit trial
+    of a compensated campaign). A series with windows outside the record: None."""
+    tau_k = 20.0
+    half = WIDTH_S / 2
+    root = np.linalg.cholesky(window_means_covariance(MIDS - half, MIDS + half, tau_k))
+    first = np.flatnonzero(SEGMENT == 0)[-N:]
+    rng = np.random.default_rng(9)
+    errors, se, own = [], [], []
+    for _ in range(500):
+        noise = NOISE_DEG * root @ rng.standard_normal(MIDS.size)
+        data = Windows(SEGMENT, MIDS, np.full(MIDS.size, WIDTH_S), CLEAN + noise)
+        fit = fit_transient(MODEL, SEGMENTS, data)
+        (var,) = plain_mean_variances(fit, data, 1, OBS, WIDTH_S, [FIRST], N, tau_k)
+        errors.append(float(noise[first].mean()))
+        se.append(math.sqrt(var))
+        own.append(math.sqrt(noise[first].var(ddof=1) / N))
+    assert 0.94 <= _ratio(errors, se) <= 1.06
+    assert np.std(se) / np.mean(se) < 0.1 < 0.25 < np.std(own) / np.mean(own)
+    partial = plain_mean_variances(fit, data, 1, OBS, WIDTH_S, [FIRST, FIRST[2:]], N, tau_k)
+    assert partial[0] == pytest.approx(var) and partial[1] is None
