@@ -194,10 +194,3 @@ def judge_controls(
             )
         )
     return tuple(results)
-
-
-def dof_text(dof: float) -> str:
-    """Degrees of freedom as printed: "∞" when infinite, one decimal below 100 unless whole."""
-    if math.isinf(dof):
-        return "∞"
-    return f"{dof:.0f}" if float(dof).is_integer() or dof >= 100 else f"{dof:.1f}"

@@ -70,7 +70,6 @@ from gyrostand.analysis.adequacy import (
     ControlResult,
     ErrorAgreement,
     adequacy_test,
-    dof_text,
     error_agreement,
     generalised_dof,
     judge_controls,
@@ -109,7 +108,7 @@ from gyrostand.analysis.gls import (
 )
 from gyrostand.analysis.gyro_model import PARAMETERS, Conditions, KnownConstants, RollingErrorModel
 from gyrostand.analysis.nlsq import COND_LIMIT, FitResult, fit_nonlinear
-from gyrostand.analysis.quantiles import t_quantile
+from gyrostand.analysis.quantiles import dof_text, t_quantile
 from gyrostand.analysis.transient import TransientCheck
 from gyrostand.analysis.trials import TrialInput, TrialStats, trial_statistics
 

@@ -54,3 +54,10 @@ def chi2_quantile(p: float, dof: float) -> float:
     from scipy.special import gammaincinv
 
     return 2.0 * float(gammaincinv(dof / 2.0, p))  # χ²_p = 2 P⁻¹(ν/2, p), P the regularised Γ
+
+
+def dof_text(dof: float) -> str:
+    """Degrees of freedom as printed: "∞" when infinite, one decimal below 100 unless whole."""
+    if math.isinf(dof):
+        return "∞"
+    return f"{dof:.0f}" if float(dof).is_integer() or dof >= 100 else f"{dof:.1f}"

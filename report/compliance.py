@@ -45,8 +45,7 @@ from importlib.resources import files
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gyrostand.analysis.adequacy import dof_text
-from gyrostand.analysis.quantiles import t_quantile
+from gyrostand.analysis.quantiles import dof_text, t_quantile
 from gyrostand.report import SHIPPED, SHIPPED_PROFILES
 from gyrostand.report.errors import ReportError
 

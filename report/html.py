@@ -10,8 +10,9 @@ from importlib.resources import files
 from jinja2 import Environment, FileSystemBytecodeCache, PackageLoader, StrictUndefined
 from markupsafe import Markup, escape
 
-from gyrostand.analysis.adequacy import ADEQUACY_BASIS_TEXT, dof_text
+from gyrostand.analysis.adequacy import ADEQUACY_BASIS_TEXT
 from gyrostand.analysis.forecast import SIGN_CONVENTION
+from gyrostand.analysis.quantiles import dof_text
 from gyrostand.report import plots
 from gyrostand.report.build import COURSE_STEP_DEG, Report
 from gyrostand.report.compliance import (

@@ -7,9 +7,9 @@ written in plain-text notation (nu_e, <delta_i>, S^2, +/-)."""
 import re
 from collections.abc import Sequence
 
-from gyrostand.analysis.adequacy import dof_text
 from gyrostand.analysis.campaign import VARIANCE_BASIS, CampaignAnalysis
 from gyrostand.analysis.forecast import SIGN_CONVENTION
+from gyrostand.analysis.quantiles import dof_text
 
 GREEK = {
     "alpha": "\u03b1",
