@@ -65,11 +65,11 @@ from gyrostand.analysis.transient import (
     design,
     fit_transient,
     fit_transient_free,
-    plain_mean_variances,
     well_determined,
 )
 from gyrostand.plan.model import EstimatePlan, SettlePlan
 
+Named = tuple[tuple[tuple[int, int], float], ...]  # ((trial index, j), value) per series
 MIN_BLOCKS = 6  # window means of the series before its first estimate
 KEEP_SEGMENTS = 4  # the record fitted: this series and the three before (older ones add little)
 
@@ -233,33 +233,23 @@ class TransientRecord:
         width_s: np.ndarray,
         n_obs: int,
         correlation_time_s: float | None = None,
-    ) -> tuple[tuple[tuple[int, int], float], ...]:
+    ) -> tuple[
+        tuple[tuple[tuple[int, int], float], ...], tuple[tuple[tuple[int, int], float], ...]
+    ]:
         """Cov of the current series' compensated mean (`compensation_se`) with the plain mean
         (of ``n_obs`` observations) of each uncompensated series in this record (`observed`),
-        named (trial index, j), in the order they ended (`compensated_covariances`)."""
+        named (trial index, j), in the order they ended; and the variances of those plain means
+        wholly in this record (`compensated_covariances`)."""
         seg, data = self._data(self._segments)
         j = len(seg.step_s) - 1
         keys = list(self._observed)
         mids = [self._observed[key] for key in keys]
-        cov = compensated_covariances(fit, data, j, t_s, width_s, mids, n_obs, correlation_time_s)
-        return tuple(zip(keys, cov, strict=True))
-
-    def earlier_variances(
-        self,
-        fit: TransientFit,
-        t_s: np.ndarray,
-        width_s: np.ndarray,
-        n_obs: int,
-        correlation_time_s: float | None = None,
-    ) -> tuple[tuple[tuple[int, int], float], ...]:
-        """The variance of the plain mean of each uncompensated series wholly in this record
-        (`observed`) from the record's noise level (`plain_mean_variances`), named."""
-        seg, data = self._data(self._segments)
-        j = len(seg.step_s) - 1
-        keys = list(self._observed)
-        mids = [self._observed[key] for key in keys]
-        var = plain_mean_variances(fit, data, j, t_s, width_s, mids, n_obs, correlation_time_s)
-        return tuple((key, v) for key, v in zip(keys, var, strict=True) if v is not None)
+        found = compensated_covariances(fit, data, j, t_s, width_s, mids, n_obs, correlation_time_s)
+        pairs = list(zip(keys, found, strict=True))
+        return (
+            tuple((key, cov) for key, (cov, _) in pairs),
+            tuple((key, var) for key, (_, var) in pairs if var is not None),
+        )
 
     def sensitivity(
         self, model: TransientModel, t_s: np.ndarray, width_s: np.ndarray

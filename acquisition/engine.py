@@ -1539,8 +1539,7 @@ class Engine:
             round(self._record.start_s * 1000),
             self.now_ms,
             previous,
-            self._record.earlier_covariances(fit, t_s, width_s, self.plan.n_obs, tau_k),
-            self._record.earlier_variances(fit, t_s, width_s, self.plan.n_obs, tau_k),
+            *self._record.earlier_covariances(fit, t_s, width_s, self.plan.n_obs, tau_k),
         )
         values_deg = tuple(float(v) for v in values)
         se = self._record.compensation_se(fit, t_s, width_s, tau_k)  # of the compensated mean

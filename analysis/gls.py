@@ -54,7 +54,7 @@ class SharedError:
     series of the trial attempts acquired in that run are named (a failed trial's are not: a
     retry's attempt is acquired in another run). ``plain_var_deg2``: the variance of those
     plain means wholly in the record, from the record's noise level (`analysis.transient.
-    plain_mean_variances`; JSON: "var_deg2" in the same entries; absent: unknown).
+    compensated_covariances`; JSON: "var_deg2" in the same entries; absent: unknown).
     """
 
     sensitivity: tuple[float, float]

@@ -266,7 +266,7 @@ def series_summary(series: Series, var_mean: float | None = None) -> SeriesSumma
     stored before issue 34's fix: the settle point's SE alone, which errs ~3 % low), and s_c,
     common to all N of them, is added to the variance as N s_c^2 (eq 2.2's basis for Cochran's
     test and S_e, as before). An uncompensated one's mean has ``var_mean`` when given (from the
-    record's noise level, `analysis.transient.plain_mean_variances`)."""
+    record's noise level, `analysis.transient.compensated_covariances`)."""
     if len(series.observations) >= 2:
         values = np.array([o.corrected_deg for o in series.observations])
         mean, var = (float(x) for x in series_moments(values))

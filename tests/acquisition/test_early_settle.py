@@ -21,6 +21,7 @@ from unittest.mock import ANY
 import numpy as np
 import pytest
 from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
 
 from gyrostand.acquisition.early_settle import (
     KEEP_SEGMENTS,
@@ -46,7 +47,7 @@ from gyrostand.db.models import Event, Observation, Series, Trial
 from gyrostand.db.queries import load_campaign
 from gyrostand.db.session import open_database, sqlite_url
 from gyrostand.frames.batch import BatchDecoder, RawFrames
-from gyrostand.plan.model import EstimatePlan, PlanError, load_plan, parse_plan
+from gyrostand.plan.model import EstimatePlan, Plan, PlanError, load_plan, parse_plan
 from gyrostand.report.compliance import load_profile
 from gyrostand.report.stored import campaign_report, stored_inputs
 from gyrostand.stand.protocol import Codec
@@ -439,6 +440,16 @@ def _silent_in(sink: Recorder, trial: int, j: int, k: int) -> SimConfig:
     return dataclasses.replace(scaled_config(), faults=silence)
 
 
+def _resume(sessions: sessionmaker[Session], plan: Plan, campaign_id: int) -> Engine:
+    """`campaign resume` of a stored campaign on the scaled stand, run to its end."""
+    _, resumed = resume_store(sessions, campaign_id)
+    resumed.complete_acquired()
+    sim = Lockstep(scaled_config())
+    engine = Engine(plan, resumed, sim, resumed.progress())
+    sim.run(engine)
+    return engine
+
+
 def test_a_failed_trial_s_series_are_not_named_nor_its_retry_s(tmp_path: Path, compensated):
     """Trial 1 fails in its rocking series after its still series ended uncompensated; trial 2
     is compensated in the same run. Its compensations name nothing of trial 1: the analysis
@@ -455,11 +466,7 @@ def test_a_failed_trial_s_series_are_not_named_nor_its_retry_s(tmp_path: Path, c
     sim.run(engine)
     store.set_status(engine.outcome)
     assert retry_trials(sessions, store.campaign_id, [1]) == (RetriedTrial(1, 2, ANY),)
-    _, resumed = resume_store(sessions, store.campaign_id)
-    resumed.complete_acquired()
-    sim = Lockstep(scaled_config())
-    engine = Engine(plan, resumed, sim, resumed.progress())
-    sim.run(engine)
+    _resume(sessions, plan, store.campaign_id)
     with sessions() as session:
         campaign = load_campaign(session, store.campaign_id)
         attempts = sorted((t.index, t.attempt, t.status) for t in campaign.trials)
@@ -487,11 +494,7 @@ def test_a_resumed_series_is_named_with_its_windows_of_this_run(tmp_path: Path, 
         if sim.stand.stand_time_s * 1000 >= second.window_end_ms + 5000:
             engine.interrupt("test: stopped after observation 2")
     store.set_status(engine.outcome)
-    _, resumed = resume_store(sessions, store.campaign_id)
-    resumed.complete_acquired()
-    sim = Lockstep(scaled_config())
-    engine = Engine(plan, resumed, sim, resumed.progress())
-    sim.run(engine)
+    engine = _resume(sessions, plan, store.campaign_id)
     with sessions() as session:
         campaign = load_campaign(session, store.campaign_id)
         (t1,) = [t for t in campaign.trials if t.index == 1]
