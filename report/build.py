@@ -17,7 +17,7 @@ from gyrostand.analysis.forecast import (
     acceleration_direction_deg,
     forecast_grid,
 )
-from gyrostand.analysis.quantiles import t_quantile
+from gyrostand.analysis.quantiles import dof_text, t_quantile
 from gyrostand.report.compliance import (
     INCONCLUSIVE,
     NOT_ASSESSED,
@@ -176,6 +176,13 @@ def degrees_of_freedom(analysis: CampaignAnalysis) -> DegreesOfFreedom:
         f"prediction interval t(1 - q/2; nu_r) = t({1 - q / 2:g}; {a.dof_r}) = {t_pred:.3f}, "
         f"S_e bound t(1 - q/2; nu_e) = t({1 - q / 2:g}; {a.dof_e}) = {t_bound:.3f}"
     )
+    if analysis.trial_covariance is not None:  # the generalised fit's decision (`adequacy`)
+        text += (
+            f". The decision's error variance, the mean variance of V, has nu = "
+            f"{dof_text(a.dof_e_mean)} (Welch-Satterthwaite over the parts a trial estimates "
+            "from its own observations; a compensation's variance comes from the fit of the "
+            "whole record and counts as known)"
+        )
     return DegreesOfFreedom(
         nu, n_obs, analysis.cochran.k, analysis.fit.n, m, a.dof_r, a.dof_e, q, t_pred, t_bound, text
     )
