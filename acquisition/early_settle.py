@@ -219,12 +219,12 @@ class TransientRecord:
         restart has the others in another run's: independent of this one). Every later
         compensation stores its covariance with the series' plain mean
         (`earlier_covariances`)."""
-        self._observed[series] = np.asarray(windows_s, dtype=float).mean(axis=1)
+        self._observed[series] = np.asarray(windows_s, dtype=float).reshape(-1, 2)
 
     def forget(self, trial: int) -> None:
         """Trial ``trial`` failed: what its series observed here is not what the analysis
         will use (nothing, or a retry's attempt, acquired in a later run)."""
-        self._observed = {key: mids for key, mids in self._observed.items() if key[0] != trial}
+        self._observed = {key: w for key, w in self._observed.items() if key[0] != trial}
 
     def earlier_covariances(
         self,
@@ -233,23 +233,16 @@ class TransientRecord:
         width_s: np.ndarray,
         n_obs: int,
         correlation_time_s: float | None = None,
-    ) -> tuple[
-        tuple[tuple[tuple[int, int], float], ...], tuple[tuple[tuple[int, int], float], ...]
-    ]:
+    ) -> Named:
         """Cov of the current series' compensated mean (`compensation_se`) with the plain mean
         (of ``n_obs`` observations) of each uncompensated series in this record (`observed`),
-        named (trial index, j), in the order they ended; and the variances of those plain means
-        wholly in this record (`compensated_covariances`)."""
+        named (trial index, j), in the order they ended (`compensated_covariances`)."""
         seg, data = self._data(self._segments)
         j = len(seg.step_s) - 1
         keys = list(self._observed)
-        mids = [self._observed[key] for key in keys]
-        found = compensated_covariances(fit, data, j, t_s, width_s, mids, n_obs, correlation_time_s)
-        pairs = list(zip(keys, found, strict=True))
-        return (
-            tuple((key, cov) for key, (cov, _) in pairs),
-            tuple((key, var) for key, (_, var) in pairs if var is not None),
-        )
+        mids = [self._observed[key].mean(axis=1) for key in keys]
+        cov = compensated_covariances(fit, data, j, t_s, width_s, mids, n_obs, correlation_time_s)
+        return tuple(zip(keys, cov, strict=True))
 
     def sensitivity(
         self, model: TransientModel, t_s: np.ndarray, width_s: np.ndarray
@@ -260,18 +253,61 @@ class TransientRecord:
         (`analysis.gls`); and the covariance of its settle point with the previous series' at
         ``model``'s period and damping (the state carried over the step couples them; 0 when
         the series starts free)."""
+        j = len(self._data(self._segments)[0].step_s) - 1
+        return self._sensitivities(model, [(j, t_s, width_s)])[0]
+
+    def _sensitivities(
+        self, model: TransientModel, targets: Sequence[tuple[int, np.ndarray, np.ndarray]]
+    ) -> list[tuple[float, float, float]]:
+        """`sensitivity` of the windows (t_s, width_s) of segment j, for each (j, t_s, width_s)
+        of ``targets`` (the record refitted once at each step for all)."""
         seg, data = self._data(self._segments)
-        j = len(seg.step_s) - 1
-        chained = j > 0 and not seg.free[j]
-        previous = float(fit_transient(model, seg, data).covariance[j, j - 1]) if chained else 0.0
-        out = []
+        at = fit_transient(model, seg, data)
+        fits = []
         for dp, dr in ((1e-4 * model.undamped_period_s, 0.0), (0.0, 1e-4)):
             up = TransientModel(model.undamped_period_s + dp, model.damping_ratio + dr)
             down = TransientModel(model.undamped_period_s - dp, model.damping_ratio - dr)
-            high = fit_transient(up, seg, data).mean_transient(j, t_s, width_s)[0]
-            low = fit_transient(down, seg, data).mean_transient(j, t_s, width_s)[0]
-            out.append((high - low) / (2 * (dp + dr)))
-        return out[0], out[1], previous
+            fits.append((fit_transient(up, seg, data), fit_transient(down, seg, data), dp + dr))
+        out = []
+        for j, t_s, width_s in targets:
+            chained = j > 0 and not seg.free[j]
+            previous = float(at.covariance[j, j - 1]) if chained else 0.0
+            d = [
+                (high.mean_transient(j, t_s, width_s)[0] - low.mean_transient(j, t_s, width_s)[0])
+                / (2 * step)
+                for high, low, step in fits
+            ]
+            out.append((d[0], d[1], previous))
+        return out
+
+    def late_compensations(
+        self, fit: TransientFit, n_obs: int, correlation_time_s: float | None = None
+    ) -> list[tuple[tuple[int, int], np.ndarray, float, tuple[float, float], float]]:
+        """Each uncompensated series wholly in this record (`observed`: trial 1's, the first of
+        a run, and any the record could not yet compensate) compensated now by ``fit``, the
+        free fit of the whole record (issue 34: they waited for the transient bound computed
+        with the plan's period and damping, which left trial 1 biased by -0.47 SE when the plan
+        states a period 10 % short or a damping 0.05 low): per series, (trial index, j), the
+        fitted transient over its windows (deg each), the SE of its compensated mean
+        (`compensated_mean_se`), the sensitivity d/d(period, ratio) and the covariance with the
+        previous series' settle point (`sensitivity`)."""
+        seg, data = self._data(self._segments)
+        targets = []
+        for key, windows in self._observed.items():
+            if len(windows) != n_obs:
+                continue  # partly in another run's record (a resumed series): its own S^2
+            mids, widths = windows.mean(axis=1), windows[:, 1] - windows[:, 0]
+            match = np.abs(data.mid_s[None, :] - mids[:, None]) < 1e-6
+            targets.append((key, int(data.segment[np.argmax(match[0])]), mids, widths))
+        sens = self._sensitivities(fit.model, [(j, t, w) for _, j, t, w in targets])
+        out = []
+        for (key, j, mids, widths), (d_period, d_ratio, previous) in zip(
+            targets, sens, strict=True
+        ):
+            values, _ = fit.transient(j, mids, widths)
+            se = compensated_mean_se(fit, data, j, mids, widths, correlation_time_s)
+            out.append((key, values, se, (d_period, d_ratio), previous))
+        return out
 
     @property
     def start_s(self) -> float:

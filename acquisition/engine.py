@@ -182,6 +182,10 @@ class Sink(Protocol):
         compensation: SeriesCompensation | None = None,
         motion: tuple[MeasuredMotion, ...] = (),
     ) -> None: ...
+    def series_compensated(self, trial: int, j: int, compensation: SeriesCompensation) -> None:
+        """A completed series of the trial's current attempt compensated later (replaces)."""
+        ...
+
     def trial_completed(self, trial: int, measured: Measured | None) -> None: ...
     def trial_failed(self, trial: int, j: int | None, reason: str) -> None: ...
     def event(
@@ -400,6 +404,7 @@ class Engine:
         self._coarse_told = False
         self._settle_start: int | None = None
         self._early: EarlySettle | None = None  # settle.method = "estimate" / "compensated"
+        self._late_compensations: list[tuple[tuple[int, int], SeriesCompensation]] = []
         self._record = TransientRecord()  # window means and equilibrium steps of this run
         self._identified: Identified | None = None  # the record's period, damping (`identify`)
         self._contradiction_told = False
@@ -1477,6 +1482,9 @@ class Engine:
         if compensation is None and self._windows:  # its mean covaries with later ones
             self._record.observed((trial.index, self._j), np.array(self._windows) / 1000)
         self.sink.series_completed(trial.index, self._j, compensation, motion)
+        for (index, j), late in self._late_compensations:  # by this record's fit, later
+            self.sink.series_compensated(index, j, late)
+        self._late_compensations = []
         applied = preferred(motion)
         problem = self._motion.tracking_problem(trial, applied)
         if problem is not None:
@@ -1539,10 +1547,29 @@ class Engine:
             round(self._record.start_s * 1000),
             self.now_ms,
             previous,
-            *self._record.earlier_covariances(fit, t_s, width_s, self.plan.n_obs, tau_k),
+            self._record.earlier_covariances(fit, t_s, width_s, self.plan.n_obs, tau_k),
         )
         values_deg = tuple(float(v) for v in values)
         se = self._record.compensation_se(fit, t_s, width_s, tau_k)  # of the compensated mean
+        self._late_compensations = [
+            (
+                key,
+                SeriesCompensation(
+                    1,
+                    tuple(float(v) for v in late),
+                    late_se,
+                    replace(
+                        shared,
+                        sensitivity=(-g[0], -g[1]),
+                        previous_deg2=previous,
+                        earlier_deg2=(),
+                    ),
+                ),
+            )
+            for key, late, late_se, g, previous in self._record.late_compensations(
+                fit, self.plan.n_obs, tau_k
+            )
+        ]
         return SeriesCompensation(first_k, values_deg, se, shared)
 
     def _trial_completed(self) -> None:

@@ -421,15 +421,16 @@ class CampaignStore:
                 )
             )
             session.add(MeasuredMotionRow(series_id=series.id, **dataclasses.asdict(m)))
-        if compensation is None:
-            return
-        series.compensation_se_deg = compensation.standard_error_deg
-        shared = compensation.shared
-        series.compensation_shared = None if shared is None else shared.to_dict()
-        ks = range(compensation.first_k, compensation.first_k + len(compensation.transient_deg))
-        by_k = dict(zip(ks, compensation.transient_deg, strict=True))
-        for obs in session.scalars(select(Observation).where(Observation.series_id == series.id)):
-            obs.compensation_deg = by_k.get(obs.k)
+        if compensation is not None:
+            _compensate(session, series, compensation)
+
+    @_engine_write
+    def series_compensated(
+        self, session: Session, trial: int, j: int, compensation: SeriesCompensation
+    ) -> None:
+        """A completed uncompensated series compensated by a later fit of its record (the
+        latest replaces: `acquisition.early_settle.TransientRecord.late_compensations`)."""
+        _compensate(session, self._series(session, trial, j), compensation)
 
     @_engine_write
     def trial_completed(self, session: Session, trial: int, measured: Measured | None) -> None:
@@ -479,3 +480,14 @@ class CampaignStore:
         )
 
     event = _engine_write(_add_event)  # the engine's events (`Sink.event`)
+
+
+def _compensate(session: Session, series: Series, compensation: SeriesCompensation) -> None:
+    """Store a series' compensation: its SE, shared error and each observation's transient."""
+    series.compensation_se_deg = compensation.standard_error_deg
+    shared = compensation.shared
+    series.compensation_shared = None if shared is None else shared.to_dict()
+    ks = range(compensation.first_k, compensation.first_k + len(compensation.transient_deg))
+    by_k = dict(zip(ks, compensation.transient_deg, strict=True))
+    for obs in session.scalars(select(Observation).where(Observation.series_id == series.id)):
+        obs.compensation_deg = by_k.get(obs.k)

@@ -52,10 +52,7 @@ class SharedError:
     observation windows are in the same record, named by that series' (trial index, j); JSON
     [{"trial": k, "j": m, "deg2": v}, ...] (absent before issue 34's fix: none). Only the
     series of the trial attempts acquired in that run are named (a failed trial's are not: a
-    retry's attempt is acquired in another run). ``plain_var_deg2``: the variance of those
-    plain means wholly in the record, from the record's noise level (`analysis.transient.
-    compensated_covariances`; JSON: "var_deg2" in the same entries; absent: unknown).
-    """
+    retry's attempt is acquired in another run)."""
 
     sensitivity: tuple[float, float]
     covariance: tuple[tuple[float, float], tuple[float, float]]
@@ -63,20 +60,15 @@ class SharedError:
     at_ms: int
     previous_deg2: float = 0.0  # Cov(its settle point, the previous series') at fixed (P, ratio)
     earlier_deg2: tuple[tuple[Series, float], ...] = ()  # ((trial, j), Cov(its mean, theirs))
-    plain_var_deg2: tuple[tuple[Series, float], ...] = ()  # ((trial, j), Var(their mean))
 
     def to_dict(self) -> dict[str, Any]:
-        var = dict(self.plain_var_deg2)
         return {
             "sensitivity": list(self.sensitivity),
             "covariance": [list(row) for row in self.covariance],
             "record_ms": self.record_ms,
             "at_ms": self.at_ms,
             "previous_deg2": self.previous_deg2,
-            "earlier_deg2": [
-                {"trial": k, "j": m, "deg2": v} | _variance(var.get((k, m)))
-                for (k, m), v in self.earlier_deg2
-            ],
+            "earlier_deg2": [{"trial": k, "j": m, "deg2": v} for (k, m), v in self.earlier_deg2],
         }
 
     @classmethod
@@ -87,30 +79,15 @@ class SharedError:
             raise AnalysisError(f"a shared error needs 2 sensitivities, a 2x2 covariance: {data}")
         previous = float(data.get("previous_deg2", 0.0))
         try:
-            entries = [((int(e["trial"]), int(e["j"])), e) for e in data.get("earlier_deg2", ())]
-            earlier = tuple((key, float(e["deg2"])) for key, e in entries)
-            var = tuple((key, float(e["var_deg2"])) for key, e in entries if "var_deg2" in e)
+            earlier = tuple(
+                ((int(e["trial"]), int(e["j"])), float(e["deg2"]))
+                for e in data.get("earlier_deg2", ())
+            )
         except (TypeError, KeyError, ValueError) as exc:
             raise AnalysisError(
                 f"a shared error's earlier_deg2 needs {{trial, j, deg2}} entries: {data}"
             ) from exc
-        return cls(g, cov, int(data["record_ms"]), int(data["at_ms"]), previous, earlier, var)  # type: ignore[arg-type]
-
-
-def _variance(value: float | None) -> dict[str, float]:
-    return {} if value is None else {"var_deg2": value}
-
-
-def plain_variances(shared: Mapping[Series, SharedError]) -> dict[Series, float]:
-    """Per uncompensated series named by a compensation, the variance of its plain mean from
-    the record's noise level as the latest compensation naming it gave it (the most windows
-    behind its noise level)."""
-    out: dict[Series, tuple[int, float]] = {}
-    for error in shared.values():
-        for key, var in error.plain_var_deg2:
-            if key not in out or error.at_ms > out[key][0]:
-                out[key] = (error.at_ms, var)
-    return {key: var for key, (_, var) in out.items()}
+        return cls(g, cov, int(data["record_ms"]), int(data["at_ms"]), previous, earlier)  # type: ignore[arg-type]
 
 
 def shared_covariance(

@@ -305,22 +305,15 @@ def compensated_covariances(
     means_mid_s: Sequence[np.ndarray],
     n_obs: int,
     correlation_time_s: float | None = None,
-) -> tuple[tuple[float, float | None], ...]:
-    """Per plain mean of ``n_obs`` observations whose windows in ``data`` have the middles
-    ``means_mid_s`` (the others not in this record: independent of it): its Cov (deg^2) with
-    the compensated mean of `compensated_mean_se`, and its own variance. Both are linear in
-    the record's window means, c^T y_w and b^T y_w, so Cov = sigma^2 c^T K b (issue 34: an
-    uncompensated series' windows are in the record that fixes every later compensation's
-    period, damping and carried state) and Var = sigma^2 b^T K b: the record's noise level,
-    fitted to all its windows, in place of the series' own S^2 / N_eff (N - 1 dof), whose
-    sampling noise in the weight of the one plain fit trial of a compensated campaign made C
-    over-confident. The variance is None for a mean with windows outside this record (a
-    resumed series)."""
+) -> tuple[float, ...]:
+    """Cov (deg^2) of the compensated mean of `compensated_mean_se` with each plain mean of
+    ``n_obs`` observations whose windows in ``data`` have the middles ``means_mid_s`` (the
+    others not in this record: independent of it): both are linear in the record's window
+    means, c^T y_w and b^T y_w, so Cov = sigma^2 c^T K b (issue 34: an uncompensated series'
+    windows are in the record that fixes every later compensation's period, damping and
+    carried state)."""
     c, k, sigma2 = _compensation_form(fit, data, j, t_s, width_s, correlation_time_s)
-    return tuple(
-        (sigma2 * float(c @ k @ b), sigma2 * float(b @ k @ b) if len(mids) == n_obs else None)
-        for mids, b in zip(means_mid_s, _plain_means(data, means_mid_s, n_obs), strict=True)
-    )
+    return tuple(sigma2 * float(c @ k @ b) for b in _plain_means(data, means_mid_s, n_obs))
 
 
 def _plain_means(data: Windows, means_mid_s: Sequence[np.ndarray], n_obs: int) -> list[np.ndarray]:

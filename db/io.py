@@ -208,19 +208,13 @@ def shared_error_json(value: Any) -> str:
 
 
 def _earlier(entry: Any) -> dict[str, Any]:
-    """One entry of a shared error's earlier_deg2 (`shared_error_json`), its var_deg2 (the
-    plain mean's variance) optional and >= 0."""
-    if not isinstance(entry, dict) or set(entry) - {"var_deg2"} != EARLIER_KEYS:
+    """One entry of a shared error's earlier_deg2 (`shared_error_json`)."""
+    if not isinstance(entry, dict) or set(entry) != EARLIER_KEYS:
         raise ValueError
     trial, j = _to_int(entry["trial"]), _to_int(entry["j"])
     if trial < 1 or j not in (1, 2):
         raise ValueError
-    out = {"trial": trial, "j": j, "deg2": _to_float(entry["deg2"])}
-    if "var_deg2" in entry:
-        out["var_deg2"] = _to_float(entry["var_deg2"])
-        if out["var_deg2"] < 0:
-            raise ValueError
-    return out
+    return {"trial": trial, "j": j, "deg2": _to_float(entry["deg2"])}
 
 
 def _shared_ok(text: str) -> bool:
@@ -270,7 +264,7 @@ FIELDS: dict[str, Field] = {
     "compensation_shared": Field(
         shared_error_json,
         "a shared error (JSON: sensitivity, covariance, record_ms, at_ms, previous_deg2, "
-        "earlier_deg2 [{trial, j, deg2[, var_deg2]}])",
+        "earlier_deg2 [{trial, j, deg2}])",
         _shared_ok,
         "its variances and times >= 0",
         optional=True,

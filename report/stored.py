@@ -23,7 +23,7 @@ import functools
 import hashlib
 import json
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
@@ -43,7 +43,7 @@ from gyrostand.analysis.campaign import (
 )
 from gyrostand.analysis.errors import AnalysisError
 from gyrostand.analysis.gls import Series as SeriesKey
-from gyrostand.analysis.gls import SharedError, plain_variances
+from gyrostand.analysis.gls import SharedError
 from gyrostand.analysis.gyro_model import KnownConstants
 from gyrostand.analysis.measured_motion import PREFERENCE
 from gyrostand.analysis.procedures import PROGRESS, ProcedureResults
@@ -225,11 +225,9 @@ def applied_conditions(trial: Trial) -> dict[str, object]:
     }
 
 
-def trial_input(trial: Trial, plain: Mapping[SeriesKey, float] | None = None) -> TrialInput | str:
+def trial_input(trial: Trial) -> TrialInput | str:
     """The analysis input of one stored trial, or why it cannot be analysed. K, A and tau are
-    the applied values (measured, else commanded: `applied_motion`); ``plain``: the variance of
-    an uncompensated series' mean from the record's noise level where a compensation gave it
-    (`analysis.gls.plain_variances`)."""
+    the applied values (measured, else commanded: `applied_motion`)."""
     if trial.status == "failed":
         return f"trial failed: {trial.failure_reason}"
     if trial.status != "completed":
@@ -237,15 +235,10 @@ def trial_input(trial: Trial, plain: Mapping[SeriesKey, float] | None = None) ->
     common = {"index": trial.index} | applied_conditions(trial)
     series = {s.j: s for s in trial.series}
     values = {j: tuple(o.corrected_deg for o in s.observations) for j, s in series.items()}
-    own = {j: (plain or {}).get((trial.index, j)) for j in series}
     compensated = any(s.compensation_se_deg is not None for s in series.values())
-    if (
-        all(len(values.get(j, ())) >= 2 for j in (1, 2))
-        and not compensated
-        and not any(own.values())
-    ):
+    if all(len(values.get(j, ())) >= 2 for j in (1, 2)) and not compensated:
         return TrialInput(**common, before_deg=values[1], under_deg=values[2])
-    summaries = {j: series_summary(s, own[j]) for j, s in series.items()}
+    summaries = {j: series_summary(s) for j, s in series.items()}
     if all(summaries.get(j) is not None for j in (1, 2)):
         return TrialInput(**common, before=summaries[1], under=summaries[2])
     if trial.summary_delta_mean_deg is not None:
@@ -258,21 +251,20 @@ def trial_input(trial: Trial, plain: Mapping[SeriesKey, float] | None = None) ->
     return "no observations or summaries stored for both series"
 
 
-def series_summary(series: Series, var_mean: float | None = None) -> SeriesSummary | None:
+def series_summary(series: Series) -> SeriesSummary | None:
     """Mean (eq 2.1), variance (eq 2.2) and N of a stored series: of its observations, else as
     imported pre-averaged (None: neither). A compensated series' observations are corrected by
     their compensation; the variance of their mean is the compensation's SE^2, s_c^2 (the
     settle point fitted to these same observations, `analysis.transient.compensated_mean_se`;
     stored before issue 34's fix: the settle point's SE alone, which errs ~3 % low), and s_c,
     common to all N of them, is added to the variance as N s_c^2 (eq 2.2's basis for Cochran's
-    test and S_e, as before). An uncompensated one's mean has ``var_mean`` when given (from the
-    record's noise level, `analysis.transient.compensated_covariances`)."""
+    test and S_e, as before)."""
     if len(series.observations) >= 2:
         values = np.array([o.corrected_deg for o in series.observations])
         mean, var = (float(x) for x in series_moments(values))
         n, s_c = values.size, series.compensation_se_deg
         if s_c is None:
-            return SeriesSummary(mean, var, n, var_mean_deg2=var_mean)
+            return SeriesSummary(mean, var, n)
         return SeriesSummary(mean, var + n * s_c**2, n, var_mean_deg2=s_c**2)
     if series.summary_mean_deg is not None:
         return SeriesSummary(
@@ -306,12 +298,11 @@ def trial_inputs(campaign: Campaign) -> tuple[tuple[TrialInput, ...], tuple[Left
     """The analysis inputs of a loaded campaign's trials (their latest attempts), and every
     attempt left out with why: failed, not acquired, or superseded by a retry."""
     latest = {t.index: t.attempt for t in current_trials(campaign.trials)}
-    plain = plain_variances(shared_errors(campaign))
     inputs, left_out = [], []
     for trial in campaign.trials:
         newer = latest[trial.index] if trial.attempt < latest[trial.index] else None
         if newer is None:
-            found = trial_input(trial, plain)
+            found = trial_input(trial)
         else:
             found = f"superseded by attempt {newer} (retry); it failed: {trial.failure_reason}"
         if isinstance(found, str):

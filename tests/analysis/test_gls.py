@@ -7,7 +7,6 @@ import importlib.util
 import math
 import sys
 from dataclasses import replace
-from dataclasses import replace as dataclasses_replace
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +22,6 @@ from gyrostand.analysis.gls import (
     SharedError,
     control_variances,
     fit_generalised,
-    plain_variances,
     shared_covariance,
     trial_covariance,
 )
@@ -296,18 +294,3 @@ def test_generalised_dof_by_hand() -> None:
     assert generalised_dof([(1.0, 8.0), (0.0, math.inf)], 4.0) == pytest.approx(16 / (1 / 8))
     assert generalised_dof([(1.0, 8.0), (2.0, 4.0)], 5.0) == pytest.approx(25 / (1 / 8 + 1))
     assert math.isinf(generalised_dof([(0.0, math.inf)], 3.0))
-
-
-def test_a_plain_means_variance_comes_from_the_latest_compensation_naming_it() -> None:
-    """`plain_variances`: the latest compensation (largest at_ms) that gives a variance for an
-    uncompensated series wins; the JSON round trip keeps covariances and variances apart."""
-    early = SharedError(
-        (0.0, 0.0), ((1.0, 0.0), (0.0, 1.0)), 0, 100, 0.0, (((1, 1), 1e-7),), (((1, 1), 3e-5),)
-    )
-    late = dataclasses_replace(early, at_ms=200, plain_var_deg2=(((1, 1), 2e-5), ((1, 2), 4e-5)))
-    assert plain_variances({(2, 1): late, (2, 2): early}) == {(1, 1): 2e-5, (1, 2): 4e-5}
-    data = late.to_dict()
-    assert data["earlier_deg2"] == [{"trial": 1, "j": 1, "deg2": 1e-7, "var_deg2": 2e-5}]
-    assert SharedError.from_dict(data) == dataclasses_replace(
-        late, plain_var_deg2=(((1, 1), 2e-5),)
-    )

@@ -442,7 +442,7 @@ SHARED = {
     "previous_deg2": -2e-6,
     "earlier_deg2": [
         {"deg2": 3e-7, "j": 1, "trial": 1},  # Cov with the plain means of the series it names
-        {"deg2": -1e-7, "j": 2, "trial": 1, "var_deg2": 2e-5},  # and that mean's variance
+        {"deg2": -1e-7, "j": 2, "trial": 1},
     ],
 }
 
@@ -556,12 +556,6 @@ def test_the_import_reads_the_shared_error_the_analysis_writes() -> None:
             "is not a shared error",
         ),
         (json.dumps({**SHARED, "earlier_deg2": [{"trial": 1, "j": 1}]}), "is not a shared error"),
-        (
-            json.dumps(
-                {**SHARED, "earlier_deg2": [{"trial": 1, "j": 1, "deg2": 0.0, "var_deg2": -1.0}]}
-            ),
-            "is not a shared error",
-        ),
     ],
 )
 def test_a_malformed_shared_error_is_refused(tmp_path: Path, shared: str, problem: str) -> None:
