@@ -298,6 +298,8 @@ class TransientRecord:
                 continue  # partly in another run's record (a resumed series): its own S^2
             mids, widths = windows.mean(axis=1), windows[:, 1] - windows[:, 0]
             match = np.abs(data.mid_s[None, :] - mids[:, None]) < 1e-6
+            if not match.any(axis=1).all():
+                raise ValueError(f"series {key}: its windows are not all in the record")
             targets.append((key, int(data.segment[np.argmax(match[0])]), mids, widths))
         sens = self._sensitivities(fit.model, [(j, t, w) for _, j, t, w in targets])
         out = []
