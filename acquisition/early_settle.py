@@ -281,8 +281,16 @@ class TransientRecord:
         return out
 
     def late_compensations(
-        self, fit: TransientFit, n_obs: int, correlation_time_s: float | None = None
-    ) -> list[tuple[tuple[int, int], np.ndarray, float, tuple[float, float], float]]:
+        self,
+        fit: TransientFit,
+        t_s: np.ndarray,
+        width_s: np.ndarray,
+        n_obs: int,
+        correlation_time_s: float | None = None,
+    ) -> tuple[
+        tuple[float, float, float],
+        list[tuple[tuple[int, int], np.ndarray, float, tuple[float, float], float]],
+    ]:
         """Each uncompensated series wholly in this record (`observed`: trial 1's, the first of
         a run, and any the record could not yet compensate) compensated now by ``fit``, the
         free fit of the whole record (issue 34: they waited for the transient bound computed
@@ -290,7 +298,8 @@ class TransientRecord:
         states a period 10 % short or a damping 0.05 low): per series, (trial index, j), the
         fitted transient over its windows (deg each), the SE of its compensated mean
         (`compensated_mean_se`), the sensitivity d/d(period, ratio) and the covariance with the
-        previous series' settle point (`sensitivity`)."""
+        previous series' settle point (`sensitivity`); first, the current series' `sensitivity`
+        at its windows ``t_s``, ``width_s`` (one set of refits for all)."""
         seg, data = self._data(self._segments)
         targets = []
         for key, windows in self._observed.items():
@@ -301,7 +310,10 @@ class TransientRecord:
             if not match.any(axis=1).all():
                 raise ValueError(f"series {key}: its windows are not all in the record")
             targets.append((key, int(data.segment[np.argmax(match[0])]), mids, widths))
-        sens = self._sensitivities(fit.model, [(j, t, w) for _, j, t, w in targets])
+        current = (len(seg.step_s) - 1, t_s, width_s)
+        own, *sens = self._sensitivities(
+            fit.model, [current, *((j, t, w) for _, j, t, w in targets)]
+        )
         out = []
         for (key, j, mids, widths), (d_period, d_ratio, previous) in zip(
             targets, sens, strict=True
@@ -309,7 +321,7 @@ class TransientRecord:
             values, _ = fit.transient(j, mids, widths)
             se = compensated_mean_se(fit, data, j, mids, widths, correlation_time_s)
             out.append((key, values, se, (d_period, d_ratio), previous))
-        return out
+        return own, out
 
     @property
     def start_s(self) -> float:

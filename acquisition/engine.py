@@ -1538,8 +1538,9 @@ class Engine:
         t_s, width_s = ms.mean(axis=1) / 1000, (ms[:, 1] - ms[:, 0]) / 1000
         values, _ = fit.transient(j, t_s, width_s)
         first_k = self.plan.n_obs - len(self._windows) + 1
-        d_period, d_ratio, previous = self._record.sensitivity(fit.model, t_s, width_s)
         tau_k = self.plan.observation.correlation_time_s  # the reading's (None: not stated)
+        own, lates = self._record.late_compensations(fit, t_s, width_s, self.plan.n_obs, tau_k)
+        d_period, d_ratio, previous = own
         assert fit.pd_covariance is not None
         shared = SharedError(
             (-d_period, -d_ratio),  # the compensated mean is the observations' less the transient
@@ -1566,9 +1567,7 @@ class Engine:
                     ),
                 ),
             )
-            for key, late, late_se, g, previous in self._record.late_compensations(
-                fit, self.plan.n_obs, tau_k
-            )
+            for key, late, late_se, g, previous in lates
         ]
         return SeriesCompensation(first_k, values_deg, se, shared)
 
