@@ -423,9 +423,10 @@ def continue_campaign(
         start = resume_start(store, stored, checked)
         with sessions() as session:
             trials = trial_progress(session, campaign_id)
-        acquired = all(t.acquired for t in trials)  # the one resume rule: nothing left
-        # a re-run also finishes the trials acquired but not marked (with the stand's motion)
-        if acquired and not (start == "continued" and not all(t.finished for t in trials)):
+        # the one resume rule: nothing left. A re-run (a simulation killed at every run) goes on
+        # all the same: it finishes the trials acquired but not marked (with the stand's motion)
+        # and derives again the raw log's frames the killed run had not written out
+        if all(t.acquired for t in trials) and start != "continued":
             store.complete_acquired()
             store.set_status("completed")
             _out().print(f"campaign {campaign_id}: nothing left to acquire")

@@ -2,11 +2,15 @@
 then a last resume; compared with an uninterrupted run of the same plan (used by
 tests/acquisition/test_kill_resume.py and validation/kill_resume.py).
 
-The moments: the campaign's n-th engine write committed (n drawn at random, so that a kill finds
-something new to lose), then a random wait of up to 20 ms (into the next write, a commit, or the
-re-run of what is stored). The runs are forked from this process (imports done once) and killed
-with SIGKILL: no cleanup runs in them. The databases are SQLite files in the folder unless
-`kill_and_resume` is given two (empty) database URLs, e.g. on PostgreSQL."""
+The moments: a run's k-th engine write of its own committed (k drawn at random for each run,
+counted from what the database held when the run began, so that a kill finds something new to
+lose; k = 0: as soon as it runs, in its start-up or its re-run of what is stored), then a random
+wait of up to 20 ms (into the next write or a commit). Counted in the run's own writes, a loaded
+machine moves a moment in wall time, never in the campaign: a run killed after two writes of its
+own has gone past what the earlier logs hold and logged frames. The runs are forked from this
+process (imports done once) and killed with SIGKILL: no cleanup runs in them. The databases are
+SQLite files in the folder unless `kill_and_resume` is given two (empty) database URLs, e.g. on
+PostgreSQL."""
 
 from __future__ import annotations
 
@@ -198,6 +202,7 @@ class KillRun:
     kills: int
     problems: tuple[str, ...]  # every way the killed-and-resumed campaign differs
     segments: tuple[Segment, ...]
+    advanced: tuple[int, ...]  # the segments of runs killed after two writes of their own
     seconds: float
 
 
@@ -223,18 +228,21 @@ def kill_and_resume(
     problems: list[str] = []
     reference_plan = write_plan(reference, ref_db, seed, compass, **plan)
     if forked(["campaign", "run", str(reference_plan), "--quiet", *answered]) != 0:
-        return KillRun(0, ("the uninterrupted run failed",), (), time.monotonic() - t0)
+        return KillRun(0, ("the uninterrupted run failed",), (), (), time.monotonic() - t0)
     expected = snapshot(ref_db)
     rng = random.Random(seed)
-    moments = sorted(rng.randrange(-1, expected["campaign"][0][3]) for _ in range(kills))
+    most = max(1, (expected["campaign"][0][3] - 1) // kills)  # k at most: all kills come
+    steps = [rng.randrange(0, most + 1) for _ in range(kills)]
     killed_plan = write_plan(killed, db, seed, compass, **plan)
     writes_now = Writes(db)
     before = snapshot(db)
     done = 0
-    for moment in moments:
+    advanced: list[int] = []
+    for step in steps:
         args = ["campaign", "resume", campaign_id(db), "--db", db] if before["campaign"] else []
         args = args or ["campaign", "run", str(killed_plan)]
         delay = rng.uniform(0.0, 0.02)
+        moment = (before["campaign"][0][3] if before["campaign"] else 0) + step
 
         def due(moment: int = moment, delay: float = delay) -> bool:
             if writes_now() < moment:
@@ -254,6 +262,8 @@ def kill_and_resume(
             if code != 0:
                 problems.append(f"{' '.join(args[:2])} ended with exit code {code}")
             break  # finished before the kill came
+        if step >= 2:  # its segment is the last one: it committed writes
+            advanced.append(len(segments(db)) - 1)
         done += 1
     if forked(["campaign", "resume", campaign_id(db), "--db", db, "--quiet", *answered]) != 0:
         problems.append("the last resume failed")
@@ -272,7 +282,7 @@ def kill_and_resume(
         problems.append("the segments read in order differ from the uninterrupted raw log")
     if serial_pieces(logs) != serial_pieces(segments(ref_db)):
         problems.append("the serial logs read in order differ from the uninterrupted one")
-    return KillRun(done, tuple(problems), tuple(logs), time.monotonic() - t0)
+    return KillRun(done, tuple(problems), tuple(logs), tuple(advanced), time.monotonic() - t0)
 
 
 def serial_pieces(logs: list[Segment]) -> list[Received]:
