@@ -388,7 +388,7 @@ def _characterise(reading: ReadingRecord) -> tuple[float, NoiseCharacterisation]
     t = np.arange(n) * reading.dt_s
     slope, intercept = np.polyfit(t, reading.reading_deg, 1)
     residual = reading.reading_deg - (slope * t + intercept)
-    return float(slope * 3600.0), characterise_noise(residual, reading.dt_s)
+    return float(slope * 3600.0), characterise_noise(residual, reading.dt_s, trend_degree=1)
 
 
 def signal_section(

@@ -212,11 +212,13 @@ def test_per_parameter_options_must_name_every_parameter() -> None:
 
 def test_lanczos2_stationary_at_round_off_is_converged() -> None:
     """Lanczos2 from start 1 reaches the certified answer with a relative offset far below 1e-5,
-    but its Gauss-Newton steps there are round-off that never meets (1.8): converged, and the
-    reason says the rule was waived (it was once reported "not converged")."""
+    where its Gauss-Newton steps are round-off that may never meet (1.8): converged, and when
+    the rule was waived the reason says so (it was once reported "not converged"). Whether the
+    polish steps meet (1.8) is round-off itself: with numpy 2.4.6 and scipy 1.17.1 they did
+    after 28 steps, with the versions before they never did."""
     fit, estimates = nist_start1("Lanczos2")
     assert fit.converged, fit.reason
-    assert "(1.8) waived" in fit.reason and "round-off" in fit.reason
+    assert "(1.8) met" in fit.reason or ("(1.8) waived" in fit.reason and "round-off" in fit.reason)
     offset = float(fit.reason.split("relative offset ")[1].split()[0])
     assert offset <= nlsq.OFFSET_TOL
     assert lre(estimates, np.array(NIST["Lanczos2"]["certified"])) >= 8

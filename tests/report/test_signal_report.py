@@ -61,7 +61,7 @@ def test_the_record_is_the_longest_still_series(
     assert section.record.reading_deg == pytest.approx(heading, abs=1e-9)  # far from north
     # the characterisation is that of the detrended record
     x = heading - np.polyval(np.polyfit((t - t[0]) / 1000, heading, 1), (t - t[0]) / 1000)
-    direct = characterise_noise(x, 0.1)
+    direct = characterise_noise(x, 0.1, trend_degree=1)
     assert section.noise.exponential.decay_per_s == pytest.approx(
         direct.exponential.decay_per_s, rel=1e-6
     )
