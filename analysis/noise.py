@@ -5,6 +5,7 @@ sampled every ``dt_s`` seconds; values keep the reading's unit (deg for heading)
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -21,7 +22,7 @@ def _lists(obj: object) -> dict:
         if isinstance(value, np.ndarray):
             value = value.tolist()
         elif isinstance(value, tuple):
-            value = [v.to_dict() for v in value]
+            value = [v.to_dict() if hasattr(v, "to_dict") else v for v in value]
         elif hasattr(value, "to_dict"):
             value = value.to_dict()
         out[name] = value
@@ -36,37 +37,58 @@ BIAS_ITERATIONS = 50  # fits of `fit_correlation`: 4-14 were needed on simulated
 @dataclass(frozen=True)
 class CorrelationEstimate:
     """K^(tau) at lags ``lag_s`` (unit^2), from ``n`` readings every ``dt_s`` from which the
-    polynomial of degree ``trend_degree`` in time was removed (0: the mean)."""
+    polynomial of degree ``trend_degree`` in time was removed (0: the mean); ``lengths``: the
+    readings of each record when several were pooled (empty: one record of ``n``)."""
 
     lag_s: np.ndarray
     covariance: np.ndarray
     dt_s: float
     n: int
     trend_degree: int = 0
+    lengths: tuple[int, ...] = ()
+
+    @property
+    def records(self) -> tuple[int, ...]:
+        """The readings of each record behind the estimate."""
+        return self.lengths or (self.n,)
 
     def to_dict(self) -> dict:
         return _lists(self)
 
 
 def correlation_function(
-    reading: np.ndarray, dt_s: float, max_lag_s: float | None = None, trend_degree: int = 0
+    reading: np.ndarray,
+    dt_s: float,
+    max_lag_s: float | None = None,
+    trend_degree: int = 0,
+    others: Sequence[np.ndarray] = (),
 ) -> CorrelationEstimate:
     """K^(l dt) = 1/(N - l) sum_j r_j r_(j+l) (seed 004 eq 8.92, the sampled form of 8.93), by
     FFT, r the reading less its least-squares polynomial of degree ``trend_degree`` (0: the
     mean x_mean, as in 8.92). Default lags up to a tenth of the record, where it is still
-    steady."""
+    steady. ``others``: further records of the same stationary reading (every ``dt_s``, each
+    less its own trend), pooled: sum over the records of sum_j r_j r_(j+l), over the sum of
+    their N - l (a correlation function is an average over realisations, 8.92 the time average
+    standing in for it; a record shorter than a lag adds nothing there)."""
     from scipy import signal
 
-    x = np.asarray(reading, dtype=float).reshape(-1)
-    n = x.size
+    records = [np.asarray(x, dtype=float).reshape(-1) for x in (reading, *others)]
+    n = records[0].size
     max_lag = n // 10 if max_lag_s is None else int(round(max_lag_s / dt_s))
     if not 1 <= max_lag < n:
         raise ValueError(f"max lag of {max_lag} readings needs 1 <= lag < {n}")
-    basis = _trend_basis(n, trend_degree)
-    xc = x - basis @ (basis.T @ x)
-    full = signal.correlate(xc, xc, mode="full", method="fft")[n - 1 : n + max_lag]
     lags = np.arange(max_lag + 1)
-    return CorrelationEstimate(lags * dt_s, full / (n - lags), float(dt_s), n, trend_degree)
+    products, pairs = np.zeros(max_lag + 1), np.zeros(max_lag + 1)
+    for x in records:
+        basis = _trend_basis(x.size, trend_degree)
+        xc = x - basis @ (basis.T @ x)
+        full = signal.correlate(xc, xc, mode="full", method="fft")[x.size - 1 :]
+        products[: min(full.size, lags.size)] += full[: lags.size]
+        pairs += np.maximum(x.size - lags, 0)
+    lengths = tuple(x.size for x in records) if others else ()
+    return CorrelationEstimate(
+        lags * dt_s, products / pairs, float(dt_s), sum(map(len, records)), trend_degree, lengths
+    )
 
 
 def _trend_basis(n: int, degree: int) -> np.ndarray:
@@ -83,30 +105,40 @@ def expected_covariance(model: CorrelationModel, est: CorrelationEstimate) -> np
 
         E[r_j r_(j+l)] = K(l dt) - (Q P^T + P Q^T - Q (Q^T P) Q^T)_(j, j+l),
 
-    summed over j and divided by N - l as in eq 8.92. The removed part matters over a record a
-    few correlation times long: on 420 s of an exponential reading with 1/mu = 20 s, less the
-    line, K^ at 20 s came out 0.27 sigma^2 where K is 0.37 sigma^2 (fitted mu 0.087 for 0.05).
-    Fitting this expectation, not K itself, to K^ (as the debiased Whittle likelihood of
-    Sykulski et al. 2019 fits the expected periodogram) removes that bias."""
+    summed over j and divided by N - l as in eq 8.92 (pooled records: each record's sums over
+    the sum of their N - l, as `correlation_function` pools them). The removed part matters
+    over a record a few correlation times long: on 420 s of an exponential reading with
+    1/mu = 20 s, less the line, K^ at 20 s came out 0.27 sigma^2 where K is 0.37 sigma^2
+    (fitted mu 0.087 for 0.05). Fitting this expectation, not K itself, to K^ (as the debiased
+    Whittle likelihood of Sykulski et al. 2019 fits the expected periodogram) removes that
+    bias."""
     from scipy import signal
     from scipy.linalg import matmul_toeplitz
 
-    n, last = est.n, est.lag_s.size
-    q = _trend_basis(n, est.trend_degree)
-    column = model(np.arange(n) * est.dt_s)
-    column[0] += model.white_variance
-    p = matmul_toeplitz(column, q)  # Sigma Q: Sigma is Toeplitz (a stationary reading)
-    qg = q @ (q.T @ p)
+    last = est.lag_s.size
+    lags = np.arange(last)
+    total, pairs = np.zeros(last), np.zeros(last)
+    for n in sorted(set(est.records)):
+        q = _trend_basis(n, est.trend_degree)
+        column = model(np.arange(n) * est.dt_s)
+        column[0] += model.white_variance
+        p = matmul_toeplitz(column, q)  # Sigma Q: Sigma is Toeplitz (a stationary reading)
+        qg = q @ (q.T @ p)
 
-    def lagged(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """sum_j a_j b_(j+l) for l = 0 .. last - 1."""
-        return signal.correlate(b, a, mode="full", method="fft")[n - 1 : n - 1 + last]
+        def lagged(a: np.ndarray, b: np.ndarray, n: int = n) -> np.ndarray:
+            """sum_j a_j b_(j+l) for l = 0 .. last - 1 (0 beyond the record)."""
+            full = signal.correlate(b, a, mode="full", method="fft")[n - 1 :]
+            return np.pad(full, (0, max(last - full.size, 0)))[:last]
 
-    removed = sum(
-        lagged(q[:, c], p[:, c]) + lagged(p[:, c], q[:, c]) - lagged(qg[:, c], q[:, c])
-        for c in range(q.shape[1])
-    )
-    return column[:last] - removed / (n - np.arange(last))
+        removed = sum(
+            lagged(q[:, c], p[:, c]) + lagged(p[:, c], q[:, c]) - lagged(qg[:, c], q[:, c])
+            for c in range(q.shape[1])
+        )
+        count = est.records.count(n)
+        within = np.maximum(n - lags, 0)
+        total += count * (np.pad(column, (0, max(last - n, 0)))[:last] * within - removed)
+        pairs += count * within
+    return total / pairs
 
 
 @dataclass(frozen=True)
@@ -238,7 +270,8 @@ def fit_correlation(est: CorrelationEstimate, smooth: bool = False) -> Correlati
             "removed trend"
         )
     excess = float(est.covariance[0] - expected_covariance(fitted, lags)[0])
-    white = max(excess / (1.0 - (est.trend_degree + 1) / est.n), 0.0)
+    kept = 1.0 - len(est.records) * (est.trend_degree + 1) / est.n  # the trends took the rest
+    white = max(excess / kept, 0.0)
     return CorrelationModel(
         fitted.variance, fitted.decay_per_s, fitted.frequency_rad_s, white_variance=white
     )
@@ -514,14 +547,17 @@ def characterise_noise(
     variance_factor: float = 1.1,
     observation_interval_s: float | None = None,
     trend_degree: int = 0,
+    others: Sequence[np.ndarray] = (),
 ) -> NoiseCharacterisation:
     """Correlation (8.92), harmonics (8.90-8.91; their a^2/2 cos(nu tau) is removed from K^
     before the models are fitted), exponential and smooth models (8.89), Allan deviation and
     sampling advice (8.94) for one stationary, uniformly sampled reading; ``trend_degree``: the
     polynomial in time removed from it (1: the reading was detrended), which K^ removes again
-    and the models' fit allows for (`expected_covariance`)."""
+    and the models' fit allows for (`expected_covariance`); ``others``: further records of the
+    same reading, which K^ and so the models pool (the spectrum, harmonics, Allan deviation and
+    sampling advice are of ``reading``)."""
     x = np.asarray(reading, dtype=float).reshape(-1)
-    corr = correlation_function(x, dt_s, trend_degree=trend_degree)
+    corr = correlation_function(x, dt_s, trend_degree=trend_degree, others=others)
     search = find_harmonics(x, dt_s, false_alarm, correlation=corr)
     residual = corr.covariance.copy()
     for h in search.harmonics:

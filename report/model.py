@@ -187,7 +187,9 @@ class ReadingRecord:
     """A stretch of the compass reading for the noise analysis (section 10), resampled on a
     uniform grid: ``reading_deg`` (unwrapped, trend kept) every ``dt_s`` from stand time
     ``start_ms``; ``frames`` valid heading frames behind it, ``filled`` grid points that had no
-    frame and were interpolated linearly."""
+    frame and were interpolated linearly; ``others``: further stretches of the same stationary
+    reading on the same grid interval (a campaign's other still series), which the correlation
+    function pools (`analysis.noise.correlation_function`)."""
 
     source: str  # which stretch, e.g. "trial 2, still series (j = 1): first to last window"
     start_ms: float
@@ -195,6 +197,7 @@ class ReadingRecord:
     reading_deg: np.ndarray
     frames: int
     filled: int
+    others: tuple[np.ndarray, ...] = ()
 
     @property
     def duration_s(self) -> float:

@@ -381,14 +381,22 @@ class SignalSection:
 
 def _characterise(reading: ReadingRecord) -> tuple[float, NoiseCharacterisation]:
     """Trend (deg/h) and the characterisation of the detrended record (a settled compass still
-    creeps: a leftover of the damped transient, seed 003, would pass for correlated noise)."""
+    creeps: a leftover of the damped transient, seed 003, would pass for correlated noise); its
+    correlation function pools the record's ``others``, each less its own line."""
     n = reading.reading_deg.size
     if n < MIN_READINGS:
         raise AnalysisError(f"{n} readings: too short for the noise analysis (need {MIN_READINGS})")
-    t = np.arange(n) * reading.dt_s
-    slope, intercept = np.polyfit(t, reading.reading_deg, 1)
-    residual = reading.reading_deg - (slope * t + intercept)
-    return float(slope * 3600.0), characterise_noise(residual, reading.dt_s, trend_degree=1)
+    slope, residual = _detrended(reading.reading_deg, reading.dt_s)
+    others = tuple(_detrended(x, reading.dt_s)[1] for x in reading.others)
+    noise = characterise_noise(residual, reading.dt_s, trend_degree=1, others=others)
+    return slope * 3600.0, noise
+
+
+def _detrended(x: np.ndarray, dt_s: float) -> tuple[float, np.ndarray]:
+    """The slope (unit/s) of a reading's least-squares line, and the reading less the line."""
+    t = np.arange(x.size) * dt_s
+    slope, intercept = np.polyfit(t, x, 1)
+    return float(slope), x - (slope * t + intercept)
 
 
 def signal_section(
@@ -424,8 +432,16 @@ def signal_section(
             verdict, acceptance_note = excursion_verdict(noise.smooth, acceptance), RICE_NOTE
         except (AnalysisError, ValueError) as exc:
             acceptance_note = f"Not assessed: {exc}"
+    longest_lag_s = float(noise.correlation.lag_s[-1])
+    if noise.exponential.correlation_time_s >= longest_lag_s * (1 - 1e-6):  # `fit_correlation`
+        note += (
+            f" The fitted correlation time is the longest lag estimated ({longest_lag_s:.4g} s): "
+            "the record cannot tell a longer one, so the observations may be more correlated "
+            "than stated."
+        )
     return replace(
         unassessed,
+        record_note=note,
         noise=noise,
         observations=observation_correlations(
             noise.exponential, records, reading.dt_s, noise.sampling.max_correlation

@@ -255,6 +255,7 @@ def _analysis(analysis: Any, draw: Draw) -> dict[str, Any]:
             "error_deg": t.delta_deg - float(a),
             "se_deg": math.sqrt(t.var_mean_deg2) if t.var_mean_deg2 is not None else None,
             "dof": t.mean_dof,  # of var_mean: its interval's (inf: both series compensated)
+            "n_eff": [t.n_eff_before, t.n_eff_under],  # from the fitted correlation (or None)
             "delta_deg": t.delta_deg,  # and the conditions: the fit can be redone from the row
             "conditions": [t.direction_deg, t.amplitude_cm, t.period_s],
         }

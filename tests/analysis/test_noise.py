@@ -64,6 +64,32 @@ def test_expected_covariance_is_the_mean_of_the_estimate_by_matrices() -> None:
         assert expected_covariance(model, est) == pytest.approx(direct, rel=1e-9, abs=1e-12)
 
 
+def test_pooled_records_estimate_and_expectation_by_matrices() -> None:
+    """Records of 300, 300, 250 and 15 readings (the last shorter than the longest lags)
+    pooled: K^ is the records' sums of products over their pairs, and its expectation the same
+    sums of tr(S_l M Sigma M) of each, by dense matrices."""
+    dt, degree = 0.5, 1
+    model = CorrelationModel(variance=2.0, decay_per_s=0.1, white_variance=0.3)
+    rng = np.random.default_rng(3)
+    records = [rng.normal(size=n) for n in (300, 300, 250, 15)]
+    est = correlation_function(records[0], dt, 20.0, degree, others=records[1:])
+    assert est.records == (300, 300, 250, 15) and est.n == 865
+    products, pairs, expected = np.zeros(41), np.zeros(41), np.zeros(41)
+    for x in records:
+        n = x.size
+        q = np.linalg.qr(np.vander(np.linspace(-1, 1, n), degree + 1))[0]
+        m = np.eye(n) - q @ q.T
+        r = m @ x
+        lags = np.abs(np.subtract.outer(np.arange(n), np.arange(n))) * dt
+        msm = m @ (model(lags) + model.white_variance * np.eye(n)) @ m
+        for lag in range(min(41, n)):
+            products[lag] += r[: n - lag] @ r[lag:]
+            expected[lag] += np.trace(msm, offset=lag)
+            pairs[lag] += n - lag
+    assert est.covariance == pytest.approx(products / pairs, rel=1e-9, abs=1e-12)
+    assert expected_covariance(model, est) == pytest.approx(expected / pairs, rel=1e-9)
+
+
 def test_fit_allows_for_the_removed_line_on_a_short_record() -> None:
     """420 s of exponential (1/mu = 20 s) plus white readings less their line, as the report's
     still series: K^ is biased low by what the line took (a tenth of the variance and more), and

@@ -59,12 +59,28 @@ def test_the_record_is_the_longest_still_series(
     assert section.record.frames == t.size == section.record.reading_deg.size  # no frame lost
     assert section.record.start_ms == t[0] and section.record.dt_s == 0.1
     assert section.record.reading_deg == pytest.approx(heading, abs=1e-9)  # far from north
-    # the characterisation is that of the detrended record
-    x = heading - np.polyval(np.polyfit((t - t[0]) / 1000, heading, 1), (t - t[0]) / 1000)
-    direct = characterise_noise(x, 0.1, trend_degree=1)
-    assert section.noise.exponential.decay_per_s == pytest.approx(
-        direct.exponential.decay_per_s, rel=1e-6
+
+    # the characterisation is that of the detrended record, its correlation function pooling
+    # the other still series (each less its own line)
+    def detrended(index: int) -> np.ndarray:
+        t, heading = decoded(simulated, still_span(simulated_report, index))
+        return heading - np.polyval(np.polyfit((t - t[0]) / 1000, heading, 1), (t - t[0]) / 1000)
+
+    others = [detrended(i) for i in sorted(counts) if i != longest]
+    direct = characterise_noise(detrended(longest), 0.1, trend_degree=1, others=others)
+    assert section.noise.correlation.records == (counts[longest], *(x.size for x in others))
+    assert "pool the 3 other still series" in section.record_note
+    # 120 s still series of a reading whose correlation time is 20 s: at the longest lag, 12 s
+    assert section.noise.exponential.correlation_time_s == pytest.approx(12.0)
+    assert "correlation time is the longest lag estimated (12 s)" in section.record_note
+    assert section.noise.correlation.covariance == pytest.approx(
+        direct.correlation.covariance, rel=1e-9
     )
+    for fitted in ("exponential", "smooth"):
+        got, want = getattr(section.noise, fitted), getattr(direct, fitted)
+        assert (got.variance, got.decay_per_s, got.white_variance) == pytest.approx(
+            (want.variance, want.decay_per_s, want.white_variance), rel=1e-6
+        )
     assert section.noise.allan.deviation == pytest.approx(direct.allan.deviation, rel=1e-9)
 
 
