@@ -210,6 +210,19 @@ def test_per_parameter_options_must_name_every_parameter() -> None:
         fit_nonlinear(model, np.arange(4.0), np.arange(4.0), {"a": 0.0, "b": 0.0}, eps={"a": 1})
 
 
+def test_a_stopping_rule_below_round_off_is_waived_at_the_stationary_point() -> None:
+    """Lanczos2 from start 1 with (1.8)'s thresholds 1e-25 absolute, far below what steps at
+    round-off can meet, whatever the library versions: the stationary point of least RSS is
+    verified, and the reason says (1.8) was waived and why."""
+    eps = {f"b{i}": 1e-25 for i in range(1, 7)}
+    fit, estimates = nist_start1("Lanczos2", eps=eps)
+    assert fit.converged, fit.reason
+    assert "(1.8) waived" in fit.reason and "round-off" in fit.reason
+    offset = float(fit.reason.split("relative offset ")[1].split()[0])
+    assert offset <= nlsq.OFFSET_TOL
+    assert lre(estimates, np.array(NIST["Lanczos2"]["certified"])) >= 8
+
+
 def test_lanczos2_stationary_at_round_off_is_converged() -> None:
     """Lanczos2 from start 1 reaches the certified answer with a relative offset far below 1e-5,
     where its Gauss-Newton steps are round-off that may never meet (1.8): converged, and when
