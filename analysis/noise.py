@@ -225,8 +225,9 @@ def fit_correlation(est: CorrelationEstimate, smooth: bool = False) -> Correlati
     K^ at lags dt .. 5/mu, allowing for the share of K that the removed mean or trend took
     (`expected_covariance`): K is fitted to K^ plus that share at the previous fit until the
     model repeats, where K^ equals its expectation under the model. (Fitting the expectation
-    itself gave the same estimates over 200 simulated records, at 15x the cost on long
-    records: the expectation is a pass over the whole record, needed here once an iteration.)
+    itself did as well over 200 simulated 420 s records, median mu 0.057 against 0.056 here,
+    at 15x the cost on a 10 h record: the expectation is a pass over the whole record, needed
+    here once an iteration.)
     The correlation time is at most the longest lag estimated: beyond it a slow component is
     not told from the trend removed. Lag 0 is left out: its excess over the fit is
     ``white_variance`` (of which the removed trend took (degree + 1) / N)."""

@@ -231,7 +231,7 @@ def kill_and_resume(
         return KillRun(0, ("the uninterrupted run failed",), (), (), time.monotonic() - t0)
     expected = snapshot(ref_db)
     rng = random.Random(seed)
-    most = max(1, (expected["campaign"][0][3] - 1) // kills)  # k at most: all kills come
+    most = max(1, (expected["campaign"][0][3] - 1) // kills)  # the kills come before the end
     steps = [rng.randrange(0, most + 1) for _ in range(kills)]
     killed_plan = write_plan(killed, db, seed, compass, **plan)
     writes_now = Writes(db)
