@@ -29,7 +29,7 @@ def _lists(obj: object) -> dict:
     return out
 
 
-BIAS_ITERATIONS = 50  # fits of `fit_correlation`: 4-14 were needed on simulated records
+BIAS_ITERATIONS = 50  # fits of `fit_correlation`: 4-20 were needed on simulated records
 
 # --- correlation function ------------------------------------------------------------------
 
