@@ -261,7 +261,8 @@ def fit_correlation(est: CorrelationEstimate, smooth: bool = False) -> Correlati
             raise AnalysisError("the correlation model did not converge from any start value")
         params = min(fits, key=lambda f: f[0])[1]
         fitted = CorrelationModel(*(float(p) for p in params))
-        removed = fitted(lags.lag_s) - expected_covariance(fitted, lags)
+        expected = expected_covariance(fitted, lags)
+        removed = fitted(lags.lag_s) - expected
         if previous is not None and np.allclose(params, previous, rtol=1e-4, atol=0.0):
             break
         previous, starts = params, [tuple(params)]
@@ -270,7 +271,7 @@ def fit_correlation(est: CorrelationEstimate, smooth: bool = False) -> Correlati
             f"the correlation model did not settle in {BIAS_ITERATIONS} fits allowing for the "
             "removed trend"
         )
-    excess = float(est.covariance[0] - expected_covariance(fitted, lags)[0])
+    excess = float(est.covariance[0] - expected[0])  # the fit's: its white part is 0
     kept = 1.0 - len(est.records) * (est.trend_degree + 1) / est.n  # the trends took the rest
     white = max(excess / kept, 0.0)
     return CorrelationModel(
